@@ -1,0 +1,74 @@
+"""Where things live in a compiled monoped: addresses, limits and lengths by name.
+
+A `Layout` holds only Python scalars and tuples, so it is hashable and can be a
+static argument of compiled functions, like MJX's own NumPy model structure.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import mujoco
+import numpy as np
+
+from hopper_mjx.model.loader import FLOOR_GEOM, FOOT_GEOM, JOINTS, ROOT_JOINT
+
+
+@dataclass(frozen=True)
+class Layout:
+    nq: int
+    nv: int
+    nu: int
+    timestep: float  # s
+    joint_qpos: tuple[int, ...]  # qpos address of haa, hfe, kfe
+    joint_dof: tuple[int, ...]  # qvel address of haa, hfe, kfe
+    joint_range: tuple[tuple[float, float], ...]  # rad
+    effort_limit: tuple[float, ...]  # N·m, one per actuator, in JOINTS order
+    actuator_of_joint: tuple[int, ...]  # actuator index driving haa, hfe, kfe
+    foot_geom: int
+    floor_geom: int
+    foot_radius: float  # m
+    total_mass: float  # kg
+    hip_below_base: float  # m, base origin -> hfe axis at zero haa (haa drop + hip offset)
+    thigh: float  # m, hfe -> kfe
+    shank: float  # m, kfe -> foot centre
+
+    @classmethod
+    def of(cls, m: mujoco.MjModel) -> "Layout":
+        if m.jnt_type[0] != mujoco.mjtJoint.mjJNT_FREE or m.joint(0).name != ROOT_JOINT:
+            raise ValueError("the first joint must be the free base joint added by hopper_mjx.model.load")
+        joints = [m.joint(name) for name in JOINTS]
+        act = []
+        for j in joints:
+            driving = np.flatnonzero((m.actuator_trnid[:, 0] == j.id) & (m.actuator_trntype == 0))
+            if len(driving) != 1:
+                raise ValueError(f"joint '{j.name}' must be driven by exactly one motor")
+            act.append(int(driving[0]))
+        foot = m.geom(FOOT_GEOM)
+        if len({int(j.bodyid[0]) for j in joints} | {int(foot.bodyid[0])}) != 4:
+            raise ValueError("haa, hfe, kfe and the foot must sit on four distinct bodies")
+        # Lengths are measured at the reference pose, between consecutive joint anchors.
+        d = mujoco.MjData(m)
+        mujoco.mj_kinematics(m, d)
+        anchor = [d.xanchor[j.id] for j in joints]
+        foot_centre = d.geom_xpos[foot.id]
+        base_pos = d.xpos[m.jnt_bodyid[0]]
+        ctrl_range = m.actuator_ctrlrange[act] * m.actuator_gear[act, :1]
+        return cls(
+            nq=m.nq,
+            nv=m.nv,
+            nu=m.nu,
+            timestep=float(m.opt.timestep),
+            joint_qpos=tuple(int(j.qposadr[0]) for j in joints),
+            joint_dof=tuple(int(j.dofadr[0]) for j in joints),
+            joint_range=tuple((float(j.range[0]), float(j.range[1])) for j in joints),
+            effort_limit=tuple(float(v) for v in ctrl_range[:, 1]),
+            actuator_of_joint=tuple(act),
+            foot_geom=int(foot.id),
+            floor_geom=int(m.geom(FLOOR_GEOM).id),
+            foot_radius=float(foot.size[0]),
+            total_mass=float(m.body_mass.sum()),
+            hip_below_base=float(np.linalg.norm(anchor[1] - base_pos)),
+            thigh=float(np.linalg.norm(anchor[2] - anchor[1])),
+            shank=float(np.linalg.norm(foot_centre - anchor[2])),
+        )

@@ -1,0 +1,274 @@
+"""URDF -> MjSpec -> MjModel: the seed monoped (or any URDF with its joint names).
+
+The URDF is first checked here, so that a bad file fails with a message that
+names the problem; MuJoCo's own URDF parser then builds an `MjSpec`, to which
+the simulation-only parts are added: a free-floating base, a ground plane,
+explicit foot/base-ground contact pairs, an IMU site, native MuJoCo sensors
+(for users of the exported MJCF) and one torque motor per transmission.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import xml.etree.ElementTree as ET
+from dataclasses import dataclass
+from pathlib import Path
+
+import mujoco
+import numpy as np
+
+DEFAULT_URDF = Path(__file__).with_name("monoped.urdf")
+JOINTS = ("haa_joint", "hfe_joint", "kfe_joint")
+DEFAULT_TIMESTEP = 1e-3  # s; the Gazebo original ran its physics at 1 kHz
+
+# Names of the elements the loader adds; downstream code finds them by name.
+ROOT_JOINT = "root"
+FLOOR_GEOM = "floor"
+FOOT_GEOM = "foot"
+IMU_SITE = "imu"
+FOOT_SITE = "foot_site"
+
+FOOT_FRICTION = 1.0  # rubber on concrete is 0.6-1.0
+
+
+class URDFError(ValueError):
+    """The URDF cannot describe a monoped that this toolkit can simulate."""
+
+
+@dataclass(frozen=True)
+class Transmission:
+    joint: str
+    actuator: str
+    reduction: float
+    effort: float  # N·m at the joint, from <limit effort>
+
+
+@dataclass(frozen=True)
+class LegDescription:
+    """What the loader needs to know from the URDF, checked before MuJoCo sees it."""
+
+    base_link: str
+    contact_links: tuple[str, ...]  # the shank and everything fixed to it
+    foot_link: str
+    foot_radius: float
+    transmissions: tuple[Transmission, ...]
+
+
+def _floats(text: str | None, n: int, where: str) -> np.ndarray:
+    try:
+        values = np.array([float(v) for v in (text or "").split()])
+    except ValueError:
+        raise URDFError(f"{where}: expected {n} numbers, got {text!r}") from None
+    if values.shape != (n,) or not np.all(np.isfinite(values)):
+        raise URDFError(f"{where}: expected {n} finite numbers, got {text!r}")
+    return values
+
+
+def _number(element: ET.Element | None, attr: str, where: str) -> float:
+    if element is None or element.get(attr) is None:
+        raise URDFError(f"{where}: missing '{attr}'")
+    try:
+        value = float(element.get(attr))
+    except ValueError:
+        raise URDFError(f"{where}: '{attr}' is not a number: {element.get(attr)!r}") from None
+    if not math.isfinite(value):
+        raise URDFError(f"{where}: '{attr}' is not finite")
+    return value
+
+
+def _check_inertial(link: ET.Element) -> None:
+    name = link.get("name")
+    inertial = link.find("inertial")
+    if inertial is None:
+        raise URDFError(
+            f"link '{name}' has no <inertial>: every link of a simulated monoped "
+            "needs a mass and an inertia"
+        )
+    mass = _number(inertial.find("mass"), "value", f"link '{name}' <mass>")
+    if mass <= 0:
+        raise URDFError(f"link '{name}' has mass {mass}: masses must be positive")
+    inertia = inertial.find("inertia")
+    if inertia is None:
+        raise URDFError(f"link '{name}' has no <inertia> in its <inertial>")
+    diag = [_number(inertia, k, f"link '{name}' <inertia>") for k in ("ixx", "iyy", "izz")]
+    if min(diag) <= 0:
+        raise URDFError(f"link '{name}' has a non-positive principal inertia {diag}")
+
+
+def describe(urdf_text: str, source: str = "<string>") -> LegDescription:
+    """Checks a monoped URDF and extracts the facts the loader relies on."""
+    try:
+        robot = ET.fromstring(urdf_text)
+    except ET.ParseError as err:
+        raise URDFError(f"{source} is not well-formed XML: {err}") from None
+    if robot.tag != "robot":
+        raise URDFError(f"{source}: the root element is <{robot.tag}>, not <robot>")
+
+    links = {link.get("name"): link for link in robot.findall("link")}
+    joints = {joint.get("name"): joint for joint in robot.findall("joint")}
+    missing = [name for name in JOINTS if name not in joints]
+    if missing:
+        raise URDFError(
+            f"{source} lacks the joint(s) {missing}; a monoped needs {list(JOINTS)} "
+            f"(found {sorted(j for j in joints if j)})"
+        )
+    for link in links.values():
+        _check_inertial(link)
+
+    def parent_child(name: str) -> tuple[str, str]:
+        joint = joints[name]
+        parent, child = joint.find("parent"), joint.find("child")
+        if parent is None or child is None:
+            raise URDFError(f"joint '{name}' needs a <parent> and a <child>")
+        for end in (parent.get("link"), child.get("link")):
+            if end not in links:
+                raise URDFError(f"joint '{name}' names the unknown link '{end}'")
+        return parent.get("link"), child.get("link")
+
+    chain = [parent_child(name) for name in JOINTS]
+    for (_, child), (parent, _), name in zip(chain, chain[1:], JOINTS[1:]):
+        if parent != child:
+            raise URDFError(f"'{name}' must hang from the child of the joint before it ('{child}')")
+    for name in JOINTS:
+        if joints[name].get("type") != "revolute":
+            raise URDFError(f"'{name}' must be revolute, not {joints[name].get('type')!r}")
+
+    base_link = chain[0][0]
+    children = {link: [] for link in links}
+    for joint in joints.values():
+        p, c = parent_child(joint.get("name"))
+        children[p].append((c, joint.get("type")))
+    if any(c == base_link for kids in children.values() for c, _ in kids):
+        raise URDFError(f"the link above haa_joint ('{base_link}') must be the root of the tree")
+
+    contact_links = [chain[2][1]]
+    for link in contact_links:  # grows while walking the fixed joints below the shank
+        contact_links += [c for c, kind in children[link] if kind == "fixed"]
+    feet = [
+        (link, _number(c.find("geometry/sphere"), "radius", f"link '{link}' sphere"))
+        for link in contact_links
+        for c in links[link].findall("collision")
+        if c.find("geometry/sphere") is not None
+    ]
+    if len(feet) != 1:
+        raise URDFError(
+            f"expected exactly one <sphere> collision (the foot) on {contact_links}, found {len(feet)}"
+        )
+
+    transmissions = []
+    for trans in robot.findall("transmission"):
+        joint = trans.find("joint")
+        jname = None if joint is None else joint.get("name")
+        if jname not in joints:
+            raise URDFError(f"transmission '{trans.get('name')}' drives the unknown joint {jname!r}")
+        interfaces = " ".join(h.text or "" for h in trans.iter("hardwareInterface"))
+        if "EffortJointInterface" not in interfaces:
+            raise URDFError(
+                f"transmission '{trans.get('name')}' is not an EffortJointInterface; "
+                "only torque-driven joints are supported"
+            )
+        actuator = trans.find("actuator")
+        reduction = actuator.findtext("mechanicalReduction") if actuator is not None else None
+        effort = _number(joints[jname].find("limit"), "effort", f"joint '{jname}' <limit>")
+        if effort <= 0:
+            raise URDFError(f"joint '{jname}' has effort limit {effort}: it must be positive")
+        transmissions.append(
+            Transmission(
+                joint=jname,
+                actuator=(actuator.get("name") if actuator is not None else None) or f"{jname}_motor",
+                reduction=float(reduction) if reduction else 1.0,
+                effort=effort,
+            )
+        )
+    undriven = [name for name in JOINTS if name not in {t.joint for t in transmissions}]
+    if undriven:
+        raise URDFError(f"no EffortJointInterface <transmission> drives {undriven}")
+
+    return LegDescription(
+        base_link=base_link,
+        contact_links=tuple(contact_links),
+        foot_link=feet[0][0],
+        foot_radius=feet[0][1],
+        transmissions=tuple(transmissions),
+    )
+
+
+def build_spec(urdf: str | os.PathLike | None = None, *, timestep: float = DEFAULT_TIMESTEP) -> mujoco.MjSpec:
+    """The monoped as an editable `MjSpec`, with everything the simulation adds."""
+    path = Path(urdf) if urdf is not None else DEFAULT_URDF
+    if not (isinstance(timestep, (int, float)) and math.isfinite(timestep) and 0 < timestep <= 0.01):
+        raise ValueError(f"timestep must be in (0, 0.01] s, got {timestep!r}")
+    try:
+        text = path.read_text()
+    except OSError as err:
+        raise URDFError(f"cannot read URDF {path}: {err.strerror}") from None
+    leg = describe(text, str(path))
+    try:
+        spec = mujoco.MjSpec.from_file(str(path))
+    except ValueError as err:
+        raise URDFError(f"MuJoCo could not parse {path}: {err}") from None
+
+    spec.compiler.fusestatic = False  # keep the foot link; the contact sensor names it
+    spec.compiler.discardvisual = False  # keep the non-colliding link geoms for pictures
+    spec.option.timestep = timestep
+    spec.option.integrator = mujoco.mjtIntegrator.mjINT_EULER  # semi-implicit, as Gazebo/ODE
+
+    base = spec.body(leg.base_link)
+    base.add_freejoint(name=ROOT_JOINT)
+    base.add_site(name=IMU_SITE, pos=[0, 0, 0])
+
+    world = spec.worldbody
+    world.add_light(name="sun", pos=[0, 0, 4], dir=[0, 0, -1], type=mujoco.mjtLightType.mjLIGHT_DIRECTIONAL)
+    world.add_geom(
+        name=FLOOR_GEOM, type=mujoco.mjtGeom.mjGEOM_PLANE, size=[0, 0, 0.05], contype=0, conaffinity=0
+    )
+
+    # Robot geoms collide only through explicit pairs: foot-floor while hopping,
+    # base-floor after a fall. The leg links never reach the floor before the base does.
+    for geom in spec.geoms:
+        if geom.name != FLOOR_GEOM:
+            geom.contype = geom.conaffinity = 0
+    foot_body = spec.body(leg.foot_link)
+    foot = next(g for g in foot_body.geoms if g.type == mujoco.mjtGeom.mjGEOM_SPHERE)
+    foot.name = FOOT_GEOM
+    spec.add_pair(geomname1=FLOOR_GEOM, geomname2=FOOT_GEOM, condim=3,
+                  friction=[FOOT_FRICTION, FOOT_FRICTION, 0.005, 1e-4, 1e-4])
+    for i, geom in enumerate(base.geoms):
+        geom.name = geom.name or f"{leg.base_link}_collision{i}"
+        spec.add_pair(geomname1=FLOOR_GEOM, geomname2=geom.name, condim=3)
+    foot_body.add_site(name=FOOT_SITE, pos=foot.pos, size=[leg.foot_radius * 1.1, 0, 0],
+                       type=mujoco.mjtGeom.mjGEOM_SPHERE)
+
+    obj = {"objtype": mujoco.mjtObj.mjOBJ_SITE, "objname": IMU_SITE}
+    for name, kind in (
+        ("imu_quat", mujoco.mjtSensor.mjSENS_FRAMEQUAT),
+        ("imu_gyro", mujoco.mjtSensor.mjSENS_GYRO),
+        ("imu_accel", mujoco.mjtSensor.mjSENS_ACCELEROMETER),
+        ("odom_pos", mujoco.mjtSensor.mjSENS_FRAMEPOS),
+        ("odom_linvel", mujoco.mjtSensor.mjSENS_FRAMELINVEL),
+        ("odom_angvel", mujoco.mjtSensor.mjSENS_FRAMEANGVEL),
+    ):
+        spec.add_sensor(name=name, type=kind, **obj)
+    spec.add_sensor(name="foot_touch", type=mujoco.mjtSensor.mjSENS_TOUCH,
+                    objtype=mujoco.mjtObj.mjOBJ_SITE, objname=FOOT_SITE)
+
+    for t in leg.transmissions:
+        spec.add_actuator(
+            name=t.actuator,
+            target=t.joint,
+            trntype=mujoco.mjtTrn.mjTRN_JOINT,
+            gear=[t.reduction, 0, 0, 0, 0, 0],
+            ctrllimited=True,
+            ctrlrange=[-t.effort / t.reduction, t.effort / t.reduction],
+        )
+    return spec
+
+
+def load(urdf: str | os.PathLike | None = None, *, timestep: float = DEFAULT_TIMESTEP) -> mujoco.MjModel:
+    """Compiles a monoped URDF (default: the shipped seed monoped) to an `MjModel`."""
+    spec = build_spec(urdf, timestep=timestep)
+    try:
+        return spec.compile()
+    except ValueError as err:
+        raise URDFError(f"MuJoCo could not compile {urdf or DEFAULT_URDF}: {err}") from None

@@ -1,0 +1,160 @@
+"""IMU, odometry and foot-contact signals of one monoped, read from MJX data.
+
+The functions here take one instance's `mjx.Data` *after* `mjx.forward` and
+before integration, so that positions, velocities, accelerations and contact
+forces all belong to the same instant. The batched core vmaps them over all
+instances. They compute from the state directly rather than through MuJoCo's
+sensor stage, which MJX would otherwise evaluate every physics step; the native
+sensors the loader adds give the same numbers and a test holds them equal.
+
+Frames: world z is up; quaternions are [w, x, y, z] (MuJoCo's order).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+from brax import math as bmath
+from mujoco import mjx
+from mujoco.mjx._src import support  # contact_force: decodes MJX's pyramidal/elliptic efc rows
+
+from hopper_mjx.model.layout import Layout
+
+
+class Imu(NamedTuple):
+    """Like gazebo_ros_imu on the base: orientation in the world, rates in the body."""
+
+    quat: jax.Array  # (4,) [w, x, y, z], body -> world
+    gyro: jax.Array  # (3,) rad/s, body frame
+    accel: jax.Array  # (3,) m/s², specific force (acceleration minus gravity), body frame
+
+
+class Odometry(NamedTuple):
+    """Like gazebo_ros_p3d on the base: everything in the world frame."""
+
+    pos: jax.Array  # (3,) m
+    quat: jax.Array  # (4,) [w, x, y, z]
+    linvel: jax.Array  # (3,) m/s
+    angvel: jax.Array  # (3,) rad/s
+
+
+class Contact(NamedTuple):
+    """The foot/lower-leg contact sensor."""
+
+    flag: jax.Array  # () bool, foot penetrating the floor
+    force: jax.Array  # (3,) N, floor on foot, world frame
+    pos: jax.Array  # (3,) m, contact point, world frame (zeros when not in contact)
+
+
+class Signals(NamedTuple):
+    imu: Imu
+    odom: Odometry
+    contact: Contact
+    qpos: jax.Array
+    qvel: jax.Array
+
+
+def imu(layout: Layout, d: mjx.Data, gravity: jax.Array) -> Imu:
+    del layout  # the IMU sits at the origin of the free base, whose qpos/qvel come first
+    rot = bmath.quat_to_3x3(d.qpos[3:7])
+    # qacc[:3] is the world acceleration of the base origin over this step.
+    return Imu(quat=d.qpos[3:7], gyro=d.qvel[3:6], accel=rot.T @ (d.qacc[:3] - gravity))
+
+
+def odometry(layout: Layout, d: mjx.Data) -> Odometry:
+    del layout
+    quat = d.qpos[3:7]
+    return Odometry(pos=d.qpos[:3], quat=quat, linvel=d.qvel[:3], angvel=bmath.rotate(d.qvel[3:6], quat))
+
+
+def contact(layout: Layout, m: mjx.Model, d: mjx.Data) -> Contact:
+    con = d._impl.contact
+    touching = (con.geom == layout.foot_geom).any(axis=-1) & (con.dist < 0)
+    # The contact normal points from the floor (geom1) to the foot (geom2).
+    forces = jnp.stack(
+        [support.contact_force(m, d, i, to_world_frame=True)[:3] for i in range(con.dist.shape[0])]
+    )
+    force = jnp.where(touching[:, None], forces, 0.0).sum(axis=0)
+    weight = touching / jnp.maximum(touching.sum(), 1)
+    return Contact(flag=touching.any(), force=force, pos=weight @ con.pos)
+
+
+def measure(layout: Layout, m: mjx.Model, d: mjx.Data, gravity: jax.Array) -> Signals:
+    return Signals(
+        imu=imu(layout, d, gravity),
+        odom=odometry(layout, d),
+        contact=contact(layout, m, d),
+        qpos=d.qpos,
+        qvel=d.qvel,
+    )
+
+
+@dataclasses.dataclass(frozen=True)
+class SensorConfig:
+    """Rates (Hz) and Gaussian noise standard deviations (SI units) of the streams.
+
+    Every rate must divide the physics rate. Defaults follow the seed: its
+    gazebo_ros_imu plugin ran at 50 Hz with zero noise.
+    """
+
+    imu_rate: float = 50.0
+    gyro_noise: float = 0.0  # rad/s
+    accel_noise: float = 0.0  # m/s²
+    orientation_noise: float = 0.0  # rad, as a small random rotation
+    odom_rate: float = 50.0
+    odom_pos_noise: float = 0.0  # m
+    odom_vel_noise: float = 0.0  # m/s and rad/s
+    contact_rate: float = 50.0
+    state_rate: float = 50.0  # qpos/qvel
+
+    @classmethod
+    def uniform(cls, rate: float, **noise) -> "SensorConfig":
+        return cls(imu_rate=rate, odom_rate=rate, contact_rate=rate, state_rate=rate, **noise)
+
+    def periods(self, timestep: float) -> dict[str, int]:
+        """Each stream's period in physics steps."""
+        out = {}
+        for name in ("imu", "odom", "contact", "state"):
+            rate = getattr(self, f"{name}_rate")
+            steps = 1.0 / (rate * timestep) if rate > 0 else 0.0
+            if not (rate > 0 and steps >= 1 and abs(steps - round(steps)) < 1e-6):
+                raise ValueError(
+                    f"{name}_rate={rate} Hz must divide the physics rate {1 / timestep:g} Hz"
+                )
+            out[name] = int(round(steps))
+        for field in dataclasses.fields(self):
+            if field.name.endswith("noise") and not getattr(self, field.name) >= 0:
+                raise ValueError(f"{field.name} must be a non-negative standard deviation")
+        return out
+
+
+def _gauss(key, x, std):
+    return x if std == 0 else x + std * jax.random.normal(key, x.shape, x.dtype)
+
+
+def _perturb_quat(key, quat, std):
+    if std == 0:
+        return quat
+    angle = std * jax.random.normal(key, quat.shape[:-1] + (3,), quat.dtype)
+    small = jnp.concatenate([jnp.ones_like(angle[..., :1]), 0.5 * angle], axis=-1)
+    noisy = jax.vmap(bmath.quat_mul)(quat.reshape(-1, 4), small.reshape(-1, 4)).reshape(quat.shape)
+    return noisy / jnp.linalg.norm(noisy, axis=-1, keepdims=True)
+
+
+def add_noise(cfg: SensorConfig, key: jax.Array, imu_: Imu, odom: Odometry) -> tuple[Imu, Odometry]:
+    """Measurement noise for one instance's recorded streams; exact when every std is 0."""
+    k = jax.random.split(key, 6)
+    imu_ = Imu(
+        quat=_perturb_quat(k[0], imu_.quat, cfg.orientation_noise),
+        gyro=_gauss(k[1], imu_.gyro, cfg.gyro_noise),
+        accel=_gauss(k[2], imu_.accel, cfg.accel_noise),
+    )
+    odom = odom._replace(
+        pos=_gauss(k[3], odom.pos, cfg.odom_pos_noise),
+        linvel=_gauss(k[4], odom.linvel, cfg.odom_vel_noise),
+        angvel=_gauss(k[5], odom.angvel, cfg.odom_vel_noise),
+    )
+    return imu_, odom

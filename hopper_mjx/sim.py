@@ -1,0 +1,291 @@
+"""The batched core: N monopeds, each under its own gravity, stepped by MJX.
+
+    sim = Sim(model.load())
+    state = sim.reset(gravity_vectors(...), key=0)
+    state, traj = sim.rollout(state, controller, steps=2000)
+
+Batching is laid out for CPU hosts: the instance axis is sharded over every
+local device with `shard_map` (XLA does not spread these small ops over cores
+by itself), and on each device the instances are processed in chunks with
+`lax.map`, each chunk a `vmap` over instances of a `lax.scan` over time (a
+plain `vmap` over >= 1024 instances was seen to deadlock XLA's CPU runtime on
+jax 0.10.2). The batch is padded to a whole number of chunks per device.
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+from typing import Any, NamedTuple
+
+import jax
+import jax.numpy as jnp
+import mujoco
+import numpy as np
+from jax.sharding import Mesh, NamedSharding, PartitionSpec
+from mujoco import mjx
+
+from hopper_mjx import signals
+from hopper_mjx.control.base import Controller, zero_torque
+from hopper_mjx.model.layout import Layout
+
+AXIS = "instances"
+STANCE_HFE = 0.5  # rad: hip flexion of the default crouched stance
+CLEARANCE = 0.05  # m between the foot and the floor in the default initial state
+DIVERGED_SPEED = 1e6  # rad/s or m/s: beyond this a state is taken as diverged
+
+_INTEGRATORS = {
+    mujoco.mjtIntegrator.mjINT_EULER: mjx.euler,
+    mujoco.mjtIntegrator.mjINT_IMPLICITFAST: mjx.implicit,
+    mujoco.mjtIntegrator.mjINT_RK4: mjx.rungekutta4,
+}
+
+
+class State(NamedTuple):
+    """The batch's state; every leaf has the instance axis first."""
+
+    data: mjx.Data
+    gravity: jax.Array  # (N, 3) m/s², world frame
+    key: jax.Array  # (N, 2) uint32, per-instance PRNG key for sensor noise
+    cstate: Any  # controller state (with per-instance parameters)
+    diverged: jax.Array  # (N,) bool, the instance's state went non-finite
+
+
+class Trajectory(NamedTuple):
+    """Recorded streams, each (N, T_stream, ...) with its own time axis (s)."""
+
+    imu: signals.Imu
+    odom: signals.Odometry
+    contact: signals.Contact
+    qpos: jax.Array
+    qvel: jax.Array
+    time: dict  # stream name -> (T_stream,) seconds
+
+
+def gravity_vectors(magnitudes) -> np.ndarray:
+    """(N,) magnitudes in m/s², pointing down -> (N, 3) vectors; rejects bad values."""
+    g = np.asarray(magnitudes, dtype=float).reshape(-1)
+    if g.size == 0:
+        raise ValueError("no gravity values: need at least one instance")
+    if not np.all(np.isfinite(g)):
+        raise ValueError(f"gravity must be finite, got {g[~np.isfinite(g)][:3]}")
+    if np.any(g < 0):
+        raise ValueError(f"gravity magnitudes point down and must be >= 0, got {g[g < 0][:3]}")
+    return np.stack([np.zeros_like(g), np.zeros_like(g), -g], axis=1)
+
+
+def _check_gravity(gravity) -> np.ndarray:
+    g = np.asarray(gravity, dtype=float)
+    if g.ndim != 2 or g.shape[1] != 3:
+        raise ValueError(f"gravity must be (N, 3) vectors, got shape {g.shape}")
+    if g.shape[0] == 0:
+        raise ValueError("N=0: need at least one instance")
+    if not np.all(np.isfinite(g)):
+        raise ValueError("gravity contains NaN or infinite values")
+    if np.any(g[:, 2] > 0):
+        raise ValueError(f"gravity must not point up (g_z > 0): {g[g[:, 2] > 0][:3].tolist()}")
+    return g
+
+
+class Sim:
+    """A compiled monoped model batched over instances and local devices."""
+
+    def __init__(self, mj_model: mujoco.MjModel, *, chunk: int = 256, devices=None):
+        if chunk < 1:
+            raise ValueError("chunk must be >= 1")
+        self.mj_model = mj_model
+        self.layout = Layout.of(mj_model)
+        # Signals are computed from the state (see signals.py): MuJoCo's sensor
+        # stage would be dead weight in every MJX step.
+        self._mjx_source = _without_sensors(mj_model)
+        self.integrate = _INTEGRATORS[mujoco.mjtIntegrator(mj_model.opt.integrator)]
+        self.devices = tuple(devices or jax.local_devices())
+        self.mesh = Mesh(np.array(self.devices), (AXIS,))
+        self.model = jax.device_put(mjx.put_model(self._mjx_source), NamedSharding(self.mesh, PartitionSpec()))
+        self.chunk = chunk
+        self._compiled = {}
+
+    # -- state ----------------------------------------------------------------
+    def stance_qpos(self, clearance: float = CLEARANCE, hfe: float = STANCE_HFE) -> np.ndarray:
+        """qpos upright at rest: hip flexed by `hfe`, the knee bent so that the whole-robot
+        centre of mass sits straight above the foot, the foot `clearance` m above the floor."""
+        m, lay = self.mj_model, self.layout
+        d = mujoco.MjData(m)
+
+        def com_ahead_of_foot(kfe: float) -> float:
+            d.qpos[:] = m.qpos0
+            d.qpos[list(lay.joint_qpos)] = (0.0, hfe, kfe)
+            mujoco.mj_kinematics(m, d)
+            mujoco.mj_comPos(m, d)
+            return d.subtree_com[0, 0] - d.geom_xpos[lay.foot_geom, 0]
+
+        lo, hi = lay.joint_range[2]
+        if com_ahead_of_foot(lo) * com_ahead_of_foot(hi) > 0:
+            raise ValueError(f"no knee angle puts the centre of mass above the foot at hfe={hfe}")
+        for _ in range(60):  # bisection on the knee angle
+            mid = 0.5 * (lo + hi)
+            if com_ahead_of_foot(lo) * com_ahead_of_foot(mid) <= 0:
+                hi = mid
+            else:
+                lo = mid
+        com_ahead_of_foot(0.5 * (lo + hi))
+        d.qpos[2] += clearance - (d.geom_xpos[lay.foot_geom, 2] - lay.foot_radius)
+        return d.qpos.copy()
+
+    def reset(
+        self,
+        gravity,
+        *,
+        key: int | jax.Array = 0,
+        controller: Controller | None = None,
+        params: Any = None,
+        qpos=None,
+        qvel=None,
+    ) -> State:
+        """Initial state for N = len(gravity) instances.
+
+        gravity: (N, 3) m/s²; qpos/qvel: (nq,) or (N, nq) / (nv,) or (N, nv),
+        default upright at rest with the foot `CLEARANCE` above the floor;
+        params: per-instance controller parameters (leading axis N) or None.
+        """
+        g = _check_gravity(gravity)
+        n = g.shape[0]
+        qpos = self.stance_qpos() if qpos is None else qpos
+        qvel = np.zeros(self.layout.nv) if qvel is None else qvel
+        qpos = np.broadcast_to(np.asarray(qpos, dtype=np.float32), (n, self.layout.nq))
+        qvel = np.broadcast_to(np.asarray(qvel, dtype=np.float32), (n, self.layout.nv))
+        if not (np.isfinite(qpos).all() and np.isfinite(qvel).all()):
+            raise ValueError("initial qpos/qvel must be finite")
+        data0 = mjx.make_data(self._mjx_source)
+        data = jax.tree_util.tree_map(lambda x: jnp.broadcast_to(x, (n,) + x.shape), data0)
+        data = data.replace(qpos=jnp.asarray(qpos), qvel=jnp.asarray(qvel))
+        if not isinstance(key, jax.Array):
+            key = jax.random.PRNGKey(key)
+        controller = controller or zero_torque(self.layout)
+        cstate = jax.vmap(controller.init, in_axes=(0, None if params is None else 0))(data, params)
+        return State(
+            data=data,
+            gravity=jnp.asarray(g, dtype=jnp.float32),
+            key=jax.random.split(key, n),
+            cstate=cstate,
+            diverged=jnp.zeros(n, dtype=bool),
+        )
+
+    # -- rollout --------------------------------------------------------------
+    def rollout(
+        self,
+        state: State,
+        controller: Controller | None = None,
+        *,
+        steps: int,
+        sensors: signals.SensorConfig = signals.SensorConfig(),
+    ) -> tuple[State, Trajectory]:
+        """Steps every instance `steps` times with `controller` inside the compiled loop.
+
+        Records each stream at its own rate; the first sample is the initial
+        state (t = state time). `steps` must be a multiple of every stream period.
+        """
+        controller = controller or zero_torque(self.layout)
+        periods = sensors.periods(self.layout.timestep)
+        tick = math.gcd(*periods.values())
+        if steps < 1 or any(steps % p for p in periods.values()):
+            raise ValueError(f"steps={steps} must be a positive multiple of the stream periods {periods}")
+        n = state.gravity.shape[0]
+        per_device = -(-n // len(self.devices))
+        chunk = min(self.chunk, per_device)
+        padded = -(-per_device // chunk) * chunk * len(self.devices)
+        fn = self._compiled_rollout(controller, steps, tick, periods, sensors, chunk)
+        padded_state = jax.device_put(_pad(state, padded), NamedSharding(self.mesh, PartitionSpec(AXIS)))
+        final, traj = fn(self.model, padded_state)
+        final, traj = jax.tree_util.tree_map(lambda x: x[:n], (final, traj))
+        t0 = state.data.time[0]
+        dt = self.layout.timestep
+        times = {k: t0 + dt * np.arange(0, steps, p) for k, p in periods.items()}
+        return final, Trajectory(*traj, time=times)
+
+    def _compiled_rollout(self, controller, steps, tick, periods, sensors, chunk):
+        cache_key = (controller, steps, tick, tuple(periods.items()), sensors, chunk)
+        if cache_key not in self._compiled:
+            one = _instance_rollout(self.layout, self.integrate, controller, steps, tick, periods, sensors)
+
+            def per_device(model, state):
+                n_local = state.gravity.shape[0]
+                chunks = jax.tree_util.tree_map(
+                    lambda x: x.reshape((n_local // chunk, chunk) + x.shape[1:]), state
+                )
+                out = jax.lax.map(jax.vmap(lambda s: one(model, s)), chunks)
+                return jax.tree_util.tree_map(lambda x: x.reshape((n_local,) + x.shape[2:]), out)
+
+            sharded = jax.shard_map(
+                per_device,
+                mesh=self.mesh,
+                in_specs=(PartitionSpec(), PartitionSpec(AXIS)),
+                out_specs=PartitionSpec(AXIS),
+                check_vma=False,
+            )
+            self._compiled[cache_key] = jax.jit(sharded)
+        return self._compiled[cache_key]
+
+
+def _without_sensors(m: mujoco.MjModel) -> mujoco.MjModel:
+    m = copy.deepcopy(m)
+    m.opt.disableflags |= mujoco.mjtDisableBit.mjDSBL_SENSOR
+    return m
+
+
+def _pad(state: State, size: int) -> State:
+    n = state.gravity.shape[0]
+    if n == size:
+        return state
+    return jax.tree_util.tree_map(
+        lambda x: jnp.concatenate([x, jnp.broadcast_to(x[:1], (size - n,) + x.shape[1:])]), state
+    )
+
+
+def _instance_rollout(layout, integrate, controller, steps, tick, periods, sensors):
+    """One instance's rollout: `steps` physics steps, a record every `tick` steps."""
+
+    def physics_step(model, state, record):
+        m = model.replace(opt=model.opt.replace(gravity=state.gravity))
+        d = state.data
+        ctrl, cstate = controller.act(state.cstate, d, state.gravity)
+        d1 = mjx.forward(m, d.replace(ctrl=ctrl))
+        sig = signals.measure(layout, m, d1, state.gravity) if record else None
+        d1 = integrate(m, d1)
+        finite = (
+            jnp.isfinite(d1.qpos).all()
+            & jnp.isfinite(d1.qvel).all()
+            & (jnp.abs(d1.qvel) < DIVERGED_SPEED).all()
+        )
+        bad = state.diverged | ~finite
+        # A diverged instance is frozen at its last finite state; the others never see it.
+        keep = lambda new, old: jnp.where(bad, old, new)
+        d1 = d1.replace(
+            qpos=keep(d1.qpos, d.qpos),
+            qvel=keep(d1.qvel, d.qvel),
+            act=keep(d1.act, d.act),
+            qacc_warmstart=keep(d1.qacc_warmstart, d.qacc_warmstart),
+        )
+        cstate = jax.tree_util.tree_map(keep, cstate, state.cstate)
+        return state._replace(data=d1, cstate=cstate, diverged=bad), sig
+
+    def one_tick(carry, _):
+        model, state = carry
+        state, sig = physics_step(model, state, record=True)
+        if tick > 1:
+            state = jax.lax.fori_loop(
+                0, tick - 1, lambda _, s: physics_step(model, s, record=False)[0], state
+            )
+        return (model, state), sig
+
+    def run(model, state):
+        (_, state), sig = jax.lax.scan(one_tick, (model, state), None, length=steps // tick)
+        every = {k: p // tick for k, p in periods.items()}
+        decimate = lambda tree, stream: jax.tree_util.tree_map(lambda x: x[:: every[stream]], tree)
+        imu, odom = signals.add_noise(sensors, state.key, decimate(sig.imu, "imu"), decimate(sig.odom, "odom"))
+        contact = decimate(sig.contact, "contact")
+        key = jax.random.split(state.key)[0]  # fresh noise for the next rollout
+        traj = (imu, odom, contact, sig.qpos[:: every["state"]], sig.qvel[:: every["state"]])
+        return state._replace(key=key), traj
+
+    return run
