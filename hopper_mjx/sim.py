@@ -198,7 +198,7 @@ class Sim:
         padded_state = jax.device_put(_pad(state, padded), NamedSharding(self.mesh, PartitionSpec(AXIS)))
         final, traj = fn(self.model, padded_state)
         final, traj = jax.tree_util.tree_map(lambda x: x[:n], (final, traj))
-        t0 = state.data.time[0]
+        t0 = float(state.data.time[0])
         dt = self.layout.timestep
         times = {k: t0 + dt * np.arange(0, steps, p) for k, p in periods.items()}
         return final, Trajectory(*traj, time=times)

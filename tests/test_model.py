@@ -1,0 +1,128 @@
+"""The robot description: URDF facts survive compilation, bad URDFs fail clearly."""
+
+import re
+import subprocess
+import sys
+
+import mujoco
+import numpy as np
+import pytest
+
+from hopper_mjx import model
+from hopper_mjx.model.layout import Layout
+
+SEED_URDF = model.DEFAULT_URDF.read_text()
+
+
+def _variant(text: str, **replace) -> str:
+    for old, new in replace.values():
+        assert old in text, old
+        text = text.replace(old, new, 1)
+    return text
+
+
+def test_seed_geometry_and_masses(mj_model):
+    lay = Layout.of(mj_model)
+    assert lay.hip_below_base == pytest.approx(0.15 + 0.08)
+    assert lay.thigh == pytest.approx(0.35) and lay.shank == pytest.approx(0.35)
+    assert lay.foot_radius == pytest.approx(0.03)
+    assert lay.total_mass == pytest.approx(5.0 + 0.5 + 0.8 + 0.4 + 0.1)
+    assert lay.joint_range == ((-1.6, 1.6), (-1.6, 1.6), (-1.6, 0.0))
+    assert lay.effort_limit == (40.0, 80.0, 80.0)
+    assert mj_model.opt.timestep == 1e-3
+    # The base is the 0.20 x 0.20 x 0.30 box of the seed, with the inertia of a solid box.
+    base = mj_model.body("base")
+    assert base.mass[0] == 5.0
+    np.testing.assert_allclose(base.inertia, 5.0 / 12 * np.array([0.04 + 0.09, 0.04 + 0.09, 0.08]), rtol=1e-5)
+
+
+def test_shipped_inertias_are_those_of_the_collision_solids(mj_model):
+    # hipassembly, upperleg, lowerleg are solid cylinders along z; the foot a solid sphere.
+    for body, r, h in (("hipassembly", 0.04, 0.08), ("upperleg", 0.025, 0.35), ("lowerleg", 0.02, 0.35)):
+        b = mj_model.body(body)
+        m = b.mass[0]
+        np.testing.assert_allclose(b.inertia, [m * (3 * r**2 + h**2) / 12] * 2 + [m * r**2 / 2], rtol=1e-5)
+    foot = mj_model.body("foot")
+    np.testing.assert_allclose(foot.inertia, [0.4 * foot.mass[0] * 0.03**2] * 3, rtol=1e-5)
+
+
+def test_second_urdf_compiles_with_its_own_lengths_and_masses(tmp_path):
+    text = _variant(
+        SEED_URDF,
+        thigh=('<origin xyz="0 0 -0.35" rpy="0 0 0"/>\n    <parent link="upperleg"/>',
+               '<origin xyz="0 0 -0.42" rpy="0 0 0"/>\n    <parent link="upperleg"/>'),
+        shank=('<origin xyz="0 0 -0.35" rpy="0 0 0"/>\n    <parent link="lowerleg"/>',
+               '<origin xyz="0 0 -0.28" rpy="0 0 0"/>\n    <parent link="lowerleg"/>'),
+        hip=('<origin xyz="0 0 -0.08" rpy="0 0 0"/>', '<origin xyz="0 0 -0.10" rpy="0 0 0"/>'),
+        base_mass=('<mass value="5.0"/>', '<mass value="8.25"/>'),
+        shank_mass=('<mass value="0.4"/>', '<mass value="0.65"/>'),
+    )
+    path = tmp_path / "long_thigh.urdf"
+    path.write_text(text)
+    lay = Layout.of(model.load(path))
+    assert lay.thigh == pytest.approx(0.42)
+    assert lay.shank == pytest.approx(0.28)
+    assert lay.hip_below_base == pytest.approx(0.15 + 0.10)
+    assert lay.total_mass == pytest.approx(8.25 + 0.5 + 0.8 + 0.65 + 0.1)
+    m = model.load(path)
+    assert m.body("base").mass[0] == pytest.approx(8.25)
+    assert m.body("lowerleg").mass[0] == pytest.approx(0.65)
+
+
+def test_exported_mjcf_loads_in_plain_mujoco(tmp_path):
+    out = tmp_path / "monoped.xml"
+    done = subprocess.run([sys.executable, "-m", "hopper_mjx.model", "--export", str(out)],
+                          capture_output=True, text=True, check=True)
+    assert "3 motors" in done.stdout
+    m = mujoco.MjModel.from_xml_path(str(out))
+    hinges = [m.joint(i).name for i in range(m.njnt) if m.jnt_type[i] == mujoco.mjtJoint.mjJNT_HINGE]
+    assert hinges == list(model.JOINTS)
+    assert m.jnt_type[0] == mujoco.mjtJoint.mjJNT_FREE
+    sensors = {m.sensor(i).name for i in range(m.nsensor)}
+    assert {"imu_quat", "imu_gyro", "imu_accel", "odom_pos", "odom_linvel", "odom_angvel", "foot_touch"} <= sensors
+    assert m.nu == 3 and m.opt.timestep == 1e-3
+
+
+def test_timestep_is_configurable():
+    assert model.load(timestep=2e-3).opt.timestep == 2e-3
+    for bad in (0.0, -1e-3, float("nan"), 0.5):
+        with pytest.raises(ValueError, match="timestep"):
+            model.load(timestep=bad)
+
+
+@pytest.mark.parametrize(
+    "edit, message",
+    [
+        (lambda t: t.replace("</robot>", ""), "not well-formed XML"),
+        (lambda t: t.replace('name="kfe_joint" type', 'name="knee" type'), r"lacks the joint\(s\) \['kfe_joint'\]"),
+        (lambda t: re.sub(r"<inertial>.*?</inertial>", "", t, count=1, flags=re.S), "link 'base' has no <inertial>"),
+        (lambda t: t.replace('<mass value="0.8"/>', '<mass value="-0.8"/>'), "link 'upperleg' has mass -0.8"),
+        (lambda t: t.replace('<sphere radius="0.03"/>', '<box size="0.03 0.03 0.03"/>'), "one <sphere> collision"),
+        (lambda t: re.sub(r'<transmission name="hfe_joint_trans">.*?</transmission>', "", t, flags=re.S),
+         r"no EffortJointInterface <transmission> drives \['hfe_joint'\]"),
+        (lambda t: t.replace('<limit effort="80" lower="-1.6" upper="0"', '<limit effort="abc" lower="-1.6" upper="0"'),
+         "'effort' is not a number"),
+        (lambda t: t.replace('<joint name="hfe_joint" type="revolute">', '<joint name="hfe_joint" type="prismatic">'),
+         "'hfe_joint' must be revolute"),
+    ],
+    ids=["xml", "missing-joint", "no-inertia", "negative-mass", "no-foot", "no-transmission", "bad-effort", "prismatic"],
+)
+def test_bad_urdf_is_rejected_with_a_clear_message(tmp_path, edit, message):
+    path = tmp_path / "bad.urdf"
+    path.write_text(edit(SEED_URDF))
+    with pytest.raises(model.URDFError, match=message):
+        model.load(path)
+
+
+def test_missing_file_is_a_urdf_error(tmp_path):
+    with pytest.raises(model.URDFError, match="cannot read URDF"):
+        model.load(tmp_path / "nope.urdf")
+
+
+def test_export_cli_reports_bad_urdf_without_traceback(tmp_path):
+    path = tmp_path / "bad.urdf"
+    path.write_text("<robot name='x'><link name='base'/></robot>")
+    done = subprocess.run([sys.executable, "-m", "hopper_mjx.model", "--export", str(tmp_path / "o.xml"),
+                           "--urdf", str(path)], capture_output=True, text=True)
+    assert done.returncode == 2
+    assert "error:" in done.stderr and "Traceback" not in done.stderr
