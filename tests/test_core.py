@@ -207,3 +207,29 @@ def test_simulate_cli_writes_the_documented_arrays(tmp_path, rest):
 def test_simulate_cli_rejects_bad_input(capsys, args, message):
     assert simulate.main(args + ["--out", "/nonexistent/x.npz"]) == 2
     assert message in capsys.readouterr().err
+
+
+def test_signals_equal_mujoco_native_sensors(mj_model, fall):
+    """The core's state-derived IMU/odometry equal MuJoCo C's own sensors at the same state."""
+    _, _, traj = fall
+    m = copy.deepcopy(mj_model)
+    d = mujoco.MjData(m)
+    checked_contact = 0
+    for i, g in enumerate(G):
+        m.opt.gravity[:] = (0, 0, -g)
+        for k in range(0, traj.time["imu"].size, 7):
+            step = k * 10  # the IMU runs at a tenth of the state rate here
+            d.qpos[:], d.qvel[:] = traj.qpos[i, step], traj.qvel[i, step]
+            mujoco.mj_forward(m, d)
+            sensor = lambda name: d.sensor(name).data
+            np.testing.assert_allclose(traj.imu.quat[i, k], sensor("imu_quat"), atol=1e-6)
+            np.testing.assert_allclose(traj.imu.gyro[i, k], sensor("imu_gyro"), atol=1e-5)
+            np.testing.assert_allclose(traj.imu.accel[i, k], sensor("imu_accel"), atol=0.02 * g + 0.02)
+            np.testing.assert_allclose(traj.odom.pos[i, step // 2], sensor("odom_pos"), atol=1e-6)
+            np.testing.assert_allclose(traj.odom.linvel[i, step // 2], sensor("odom_linvel"), atol=1e-5)
+            np.testing.assert_allclose(traj.odom.angvel[i, step // 2], sensor("odom_angvel"), atol=1e-5)
+            if traj.contact.flag[i, step]:
+                checked_contact += 1
+                touch = sensor("foot_touch")[0]
+                assert abs(traj.contact.force[i, step, 2] - touch) <= 0.02 * touch + 0.05
+    assert checked_contact >= 3
