@@ -29,13 +29,25 @@ def parse_floats(text: str, what: str) -> list[float]:
 
 def build_controller(name: str, layout, args):
     """(controller, per-instance params or None) for a --controller value."""
-    from hopper_mjx.control import base
+    from hopper_mjx.control import base, pid, raibert
 
     if name == "none":
         return base.zero_torque(layout), None
     if name == "hold":
         return base.hold(layout), None
-    raise ValueError(f"unknown controller {name!r}; choose from: none, hold")
+    if name == "pid":
+        return pid.pid(layout), None  # seed gains (monoped.yaml), holding the initial joint angles
+    if name == "raibert":
+        from hopper_mjx import model
+        from hopper_mjx.control.kinematics import LegGeometry
+
+        leg = LegGeometry.of(model.load(args.urdf, timestep=args.timestep)) if args.urdf else None
+        if len(args.speed) != 2:
+            raise ValueError(f"--speed needs two values VX,VY in m/s, got {args.speed}")
+        n = args.num * len(args.gravity)
+        params = raibert.raibert_params(n, height=args.height, speed=args.speed)
+        return raibert.raibert(layout, leg=leg), params
+    raise ValueError(f"unknown controller {name!r}; choose from: none, hold, pid, raibert")
 
 
 def run(args) -> dict[str, np.ndarray]:
@@ -89,7 +101,13 @@ def parser() -> argparse.ArgumentParser:
                    help="gravity magnitudes in m/s², pointing down (default: Earth, Mars, Moon)")
     p.add_argument("--num", type=int, default=1, help="instances per gravity value")
     p.add_argument("--duration", type=float, default=2.0, help="simulated time, s")
-    p.add_argument("--controller", default="hold", help="none (limp) or hold (keep initial joint angles)")
+    p.add_argument("--controller", default="hold",
+                   help="none (limp), hold (keep initial joint angles), pid (the seed's joint position "
+                        "controllers, holding them) or raibert (hop)")
+    p.add_argument("--height", type=float, default=0.10,
+                   help="raibert: commanded apex rise of the base above its standing height, m")
+    p.add_argument("--speed", type=lambda s: parse_floats(s, "--speed"), default=[0.0, 0.0],
+                   help="raibert: commanded horizontal speed VX,VY in m/s")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--rate", type=float, default=100.0, help="Hz of the saved signals")
     p.add_argument("--gyro-noise", type=float, default=0.0, help="IMU angular-rate noise std, rad/s")
