@@ -1,0 +1,90 @@
+"""python -m hopper_mjx.sweep gravity | gains — Raibert hopping across gravity (and a gain).
+
+    python -m hopper_mjx.sweep gravity                          # the main job, ~1000 monopeds
+    python -m hopper_mjx.sweep gains --param speed_gain --values 0.1,0.3,0.6 --gravity 1.62,3.71,9.81
+
+Rerunning with the same --out resumes an interrupted sweep; finished chunks are not recomputed.
+Several processes (hosts) share one sweep with --coordinator HOST:PORT --num-processes P --process-id I.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from datetime import datetime, timezone
+from pathlib import Path
+
+from hopper_mjx import runtime
+from hopper_mjx.simulate import parse_floats
+from hopper_mjx.sweep.grid import DEFAULT_GRAVITY, KICK
+
+
+def parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="python -m hopper_mjx.sweep", description=__doc__,
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    sub = p.add_subparsers(dest="kind", required=True)
+    for kind, gravity, num, duration in (("gravity", DEFAULT_GRAVITY, 112, 10.0), ("gains", (1.62, 3.71, 9.81), 32, 10.0)):
+        s = sub.add_parser(kind, help=f"sweep {kind}")
+        flag = "--values" if kind == "gravity" else "--gravity"
+        s.add_argument(flag, dest="gravity", type=lambda t: parse_floats(t, flag), default=list(gravity),
+                       help=f"gravity values in m/s² (default: {','.join(map(str, gravity))})")
+        if kind == "gains":
+            s.add_argument("--param", required=True, help="Raibert gain to sweep (a RaibertConfig field)")
+            s.add_argument("--values", type=lambda t: parse_floats(t, "--values"), required=True, help="its values")
+        s.add_argument("--num", type=int, default=num, help=f"replicates per grid point (default {num})")
+        s.add_argument("--duration", type=float, default=duration, help="simulated seconds per instance")
+        s.add_argument("--height", type=float, default=0.10, help="commanded apex rise over standing height, m")
+        s.add_argument("--speed", type=lambda t: parse_floats(t, "--speed"), default=[0.0, 0.0], help="VX,VY m/s")
+        s.add_argument("--kick", type=float, default=KICK, help="std of the random initial velocity, m/s and rad/s")
+        s.add_argument("--seed", type=int, default=0)
+        s.add_argument("--chunk", type=int, default=256, help="instances per compiled call")
+        s.add_argument("--out", type=Path, default=None, help="output folder (default runs/<kind>-<UTC time>)")
+        s.add_argument("--no-progress", action="store_true")
+        s.add_argument("--coordinator", default=None, help="HOST:PORT of process 0, for a multi-process sweep")
+        s.add_argument("--num-processes", type=int, default=1)
+        s.add_argument("--process-id", type=int, default=0)
+    return p
+
+
+def main(argv=None) -> int:
+    args = parser().parse_args(argv)
+    runtime.configure()
+    from hopper_mjx.sweep import report, runner
+    from hopper_mjx.sweep.grid import SweepSpec
+
+    try:
+        spec = SweepSpec(kind=args.kind, gravity=tuple(args.gravity), num=args.num, duration=args.duration,
+                         height=args.height, speed=tuple(args.speed), seed=args.seed, kick=args.kick,
+                         chunk=args.chunk, param=getattr(args, "param", None),
+                         values=tuple(args.values) if args.kind == "gains" else ())
+    except ValueError as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 2
+    if args.coordinator:
+        import jax
+
+        jax.distributed.initialize(args.coordinator, num_processes=args.num_processes, process_id=args.process_id)
+    out = args.out or Path("runs") / f"{args.kind}-{datetime.now(timezone.utc):%Y%m%d-%H%M%S}"
+    start = time.perf_counter()
+    try:
+        instances, table, facts = runner.run(spec, out, progress=not args.no_progress)
+    except runner.ManifestMismatch as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"\ninterrupted: finished chunks are saved in {out}; rerun the same command to resume",
+              file=sys.stderr)
+        return 130
+    facts["total_wall_s"] = time.perf_counter() - start
+    if facts["processes"] > 1 and args.process_id != 0:
+        return 0
+    text = report.write(out, spec, instances, table, runner.COLUMNS, facts)
+    print(text)
+    rate = f", {facts['steps_per_s']:,.0f} steps/s" if facts["steps_per_s"] else " (all chunks were already done)"
+    print(f"\n{len(instances)} instances x {spec.duration:g} s in {facts['total_wall_s']:.0f} s{rate}; outputs in {out}/")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,98 @@
+"""What a sweep simulates: its arguments, and the instances they expand to.
+
+A `SweepSpec` holds every argument that changes results; it is saved as the
+run's manifest, so a rerun into the same folder can tell a resume from a
+different experiment. Instances are ordered gain-major, then gravity, then
+replicate, and chunked in that order.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+PLANETS = {1.62: "Moon", 3.71: "Mars", 9.81: "Earth"}
+DEFAULT_GRAVITY = (0.5, 1.0, 1.62, 2.5, 3.71, 5.0, 7.5, 9.81, 12.0)  # m/s²
+KICK = 0.1  # m/s and rad/s: std of the random initial base velocity (x, y, roll and pitch rates)
+
+
+@dataclass(frozen=True)
+class SweepSpec:
+    kind: str  # "gravity" or "gains"
+    gravity: tuple[float, ...]  # m/s², pointing down
+    num: int  # replicates per grid point
+    duration: float  # s of simulated time
+    height: float  # m, commanded apex rise over standing height
+    speed: tuple[float, float]  # m/s commanded (vx, vy)
+    seed: int
+    kick: float = KICK
+    chunk: int = 256  # instances per compiled call; fixed so every chunk reuses one compile
+    param: str | None = None  # Raibert gain swept by `gains`
+    values: tuple[float, ...] = ()
+
+    def __post_init__(self):
+        if self.kind not in ("gravity", "gains"):
+            raise ValueError(f"unknown sweep kind {self.kind!r}; use gravity or gains")
+        if not self.gravity:
+            raise ValueError("no gravity values given")
+        bad = [g for g in self.gravity if not (math.isfinite(g) and g > 0)]
+        if bad:
+            raise ValueError(f"gravity values must be finite and > 0 m/s², got {bad}")
+        if self.num < 1:
+            raise ValueError(f"--num must be >= 1, got {self.num}")
+        if not (math.isfinite(self.duration) and self.duration > 0):
+            raise ValueError(f"--duration must be > 0 s, got {self.duration}")
+        if not (math.isfinite(self.height) and self.height >= 0):
+            raise ValueError(f"--height must be >= 0 m, got {self.height}")
+        if len(self.speed) != 2 or not all(math.isfinite(v) for v in self.speed):
+            raise ValueError(f"--speed must be two finite numbers VX,VY, got {self.speed}")
+        if not (math.isfinite(self.kick) and self.kick >= 0):
+            raise ValueError(f"--kick must be >= 0, got {self.kick}")
+        if self.chunk < 1:
+            raise ValueError(f"--chunk must be >= 1, got {self.chunk}")
+        if self.kind == "gains":
+            from hopper_mjx.control.raibert import GAINS
+
+            if self.param not in GAINS:
+                raise ValueError(f"unknown gain {self.param!r}; choose from {', '.join(GAINS)}")
+            if not self.values or not all(math.isfinite(v) for v in self.values):
+                raise ValueError("--values must be one or more finite numbers")
+
+    def to_json(self) -> dict:
+        return dataclasses.asdict(self)
+
+    @classmethod
+    def from_json(cls, data: dict) -> "SweepSpec":
+        data = dict(data)
+        for key in ("gravity", "speed", "values"):
+            data[key] = tuple(data[key])
+        return cls(**data)
+
+
+@dataclass(frozen=True)
+class Instances:
+    """The expanded grid, one row per simulated monoped."""
+
+    gravity: np.ndarray  # (n,) m/s²
+    replicate: np.ndarray  # (n,) int
+    value: np.ndarray  # (n,) swept gain value (NaN for a gravity sweep)
+    qvel: np.ndarray  # (n, nv) initial velocity: the random kick
+
+    def __len__(self) -> int:
+        return len(self.gravity)
+
+
+def expand(spec: SweepSpec, nv: int) -> Instances:
+    values = spec.values if spec.kind == "gains" else (math.nan,)
+    value, gravity, replicate = (
+        a.ravel() for a in np.meshgrid(values, spec.gravity, np.arange(spec.num), indexing="ij")
+    )
+    # Common random numbers: replicate r gets the same kick at every gravity and gain value,
+    # so differences along the grid are not sampling noise; nor do they depend on chunking.
+    kicks = np.array([np.random.default_rng([spec.seed, r]).normal(0.0, spec.kick, 4) for r in range(spec.num)])
+    qvel = np.zeros((len(gravity), nv))
+    qvel[:, [0, 1, 3, 4]] = kicks[replicate.astype(int)]  # vx, vy, roll rate, pitch rate
+    return Instances(gravity=gravity, replicate=replicate.astype(int), value=value, qvel=qvel)

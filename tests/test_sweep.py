@@ -1,0 +1,121 @@
+"""The sweep: outputs, physics of its numbers, resume after a kill, and a two-process run."""
+
+import csv
+import json
+import signal
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from hopper_mjx.sweep.__main__ import main
+
+# Tiny but real: 2 gravities x 3 replicates, 3 chunks of 2 (one compile), 3 s of hopping.
+TINY = ["--values", "3.71,9.81", "--num", "3", "--duration", "3", "--chunk", "2", "--seed", "5", "--no-progress"]
+EXPECTED_COLUMNS = ["gravity", "replicate", "seed", "apex_height", "flight_time", "stance_time", "hop_period",
+                    "duty_factor", "mean_speed", "tracking_error", "max_roll", "max_pitch", "hops", "fell",
+                    "diverged", "cost_of_transport"]
+
+
+def _sweep_cmd(out, *extra):
+    return [sys.executable, "-m", "hopper_mjx.sweep", "gravity", *TINY, "--out", str(out), *extra]
+
+
+@pytest.fixture(scope="module")
+def tiny(tmp_path_factory):
+    out = tmp_path_factory.mktemp("sweep") / "tiny"
+    assert main(["gravity", *TINY, "--out", str(out)]) == 0
+    return out
+
+
+def _read(out):
+    with open(out / "results.csv") as f:
+        return list(csv.DictReader(f))
+
+
+def test_tiny_sweep_writes_every_output(tiny):
+    for name in ("results.csv", "summary.json", "gravity.png", "table.txt", "manifest.json"):
+        assert (tiny / name).stat().st_size > 0, name
+    rows = _read(tiny)
+    assert len(rows) == 6
+    assert set(EXPECTED_COLUMNS) <= set(rows[0])
+    assert sorted({float(r["gravity"]) for r in rows}) == [3.71, 9.81]
+    summary = json.loads((tiny / "summary.json").read_text())
+    assert [g["gravity"] for g in summary["groups"]] == [3.71, 9.81]
+    assert summary["groups"][0]["label"] == "Mars" and summary["groups"][1]["label"] == "Earth"
+    assert summary["versions"]["mujoco"] == summary["versions"]["mujoco-mjx"]
+    assert summary["run"]["steps_per_s"] > 0
+    for r in rows:
+        assert r["fell"] in ("0", "1") and r["diverged"] == "0"
+        assert int(r["hops"]) >= 0
+        assert abs(float(r["max_roll"])) < np.pi and abs(float(r["max_pitch"])) < np.pi
+
+
+def test_sweep_numbers_are_physical(tiny):
+    """Hopping instances fly ballistically: flight time follows the apex rise over lift-off and g."""
+    rows = [r for r in _read(tiny) if int(r["hops"]) >= 2 and r["fell"] == "0"]
+    assert len(rows) >= 4, "most of the tiny sweep must hop"
+    for r in rows:
+        g = float(r["gravity"])
+        flight, period = float(r["flight_time"]), float(r["hop_period"])
+        assert 0 < flight < period
+        assert float(r["duty_factor"]) == pytest.approx(1 - flight / period, abs=0.05)
+    # Lower gravity, longer flights for the same commanded rise.
+    by_g = {g: np.mean([float(r["flight_time"]) for r in rows if float(r["gravity"]) == g]) for g in (3.71, 9.81)}
+    assert by_g[3.71] > by_g[9.81] * 1.3
+
+
+def test_rerun_with_other_arguments_is_refused(tiny, capsys):
+    assert main(["gravity", *TINY[:-3], "--no-progress", "--seed", "6", "--out", str(tiny)]) == 2
+    assert "holds a different sweep" in capsys.readouterr().err
+
+
+def test_killed_sweep_resumes_to_identical_results(tiny, tmp_path):
+    out = tmp_path / "killed"
+    proc = subprocess.Popen(_sweep_cmd(out), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    deadline = time.time() + 600
+    while not (out / "chunks" / "00000.npy").exists():
+        assert proc.poll() is None, "the sweep ended before it could be killed"
+        assert time.time() < deadline
+        time.sleep(0.2)
+    proc.send_signal(signal.SIGKILL)
+    proc.wait()
+    done_before = sorted(p.name for p in (out / "chunks").glob("*.npy"))
+    assert 1 <= len(done_before) < 3
+    assert main(["gravity", *TINY, "--out", str(out)]) == 0
+    assert (out / "results.csv").read_bytes() == (tiny / "results.csv").read_bytes()
+
+
+def test_two_processes_give_the_rows_of_one(tiny, tmp_path):
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    out = tmp_path / "distributed"
+    # Each process keeps the one-process run's local devices, so it runs the very same program.
+    procs = [subprocess.Popen(_sweep_cmd(out, "--coordinator", f"127.0.0.1:{port}", "--num-processes", "2",
+                                         "--process-id", str(i)), stdout=subprocess.PIPE,
+                              stderr=subprocess.STDOUT, text=True) for i in range(2)]
+    logs = [p.communicate(timeout=900)[0] for p in procs]
+    assert [p.returncode for p in procs] == [0, 0], logs
+    assert (out / "results.csv").read_bytes() == (tiny / "results.csv").read_bytes()
+
+
+@pytest.mark.parametrize(
+    "args, message",
+    [(["gravity", "--values", ""], "empty"), (["gravity", "--values", "1,abc"], "comma-separated numbers"),
+     (["gravity", "--values", "0,9.81"], "> 0"), (["gravity", "--values", "-3.7"], "> 0"),
+     (["gains", "--param", "bogus", "--values", "1,2"], "unknown gain 'bogus'"),
+     (["gravity", "--num", "0"], "--num")],
+)
+def test_bad_input_gets_a_clear_error(args, message, capsys, tmp_path):
+    try:
+        code = main(args + ["--out", str(tmp_path / "x")])
+    except SystemExit as exit_:  # argparse rejects unparsable values itself
+        code = exit_.code
+    assert code == 2
+    assert message in capsys.readouterr().err
+    assert not (tmp_path / "x").exists()
