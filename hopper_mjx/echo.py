@@ -102,10 +102,12 @@ def format_message(msg, indent: str = "", ros1: bool = True) -> str:
     )
 
 
-def echo(path: str | Path, topic: str, count: int | None = None, out=sys.stdout) -> int:
-    """Prints up to `count` messages (all when None) of `topic`; returns how many were printed."""
+def echo(path: str | Path, topic: str, count: int | None = None, out=None) -> int:
+    """Prints up to `count` messages (all when None) of `topic` to `out` (default stdout);
+    returns how many were printed."""
     if count is not None and count < 1:
         raise ValueError(f"-n must be >= 1, got {count}")
+    out = out or sys.stdout
     printed = 0
     with open_bag(path) as reader:
         for _, msg in messages(reader, topic):

@@ -1,0 +1,129 @@
+"""python -m hopper_mjx.plots BAG: PNG plots of a recording's IMU, odometry and contact signals.
+
+    python -m hopper_mjx.plots monoped.bag --out signals.png
+    python -m hopper_mjx.plots run.bag --instances 0,2 --out signals.png   # a multi-robot bag
+
+The plots show what the bag holds (as the seed's figures 5.2-5.4 showed the
+published topics), read back with rosbags, one column per recorded robot.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from hopper_mjx import echo, record
+
+AXES = ("x", "y", "z")
+
+
+def _xyz(vector) -> list[float]:
+    return [vector.x, vector.y, vector.z]
+
+
+def _stamp(msg) -> float:
+    return msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
+
+
+def read_signals(path: str | Path, instance: int | None = None) -> dict[str, np.ndarray]:
+    """One robot's streams from a bag written by `record`, as arrays with their own stamps (s)."""
+    topics = record.topic_names(instance)
+    out: dict[str, list] = {k: [] for k in ("imu_t", "gyro", "accel", "odom_t", "pos", "linvel",
+                                            "contact_t", "contact", "force")}
+    with echo.open_bag(path) as reader:
+        for _, msg in echo.messages(reader, topics["imu"]):
+            out["imu_t"].append(_stamp(msg))
+            out["gyro"].append(_xyz(msg.angular_velocity))
+            out["accel"].append(_xyz(msg.linear_acceleration))
+        for _, msg in echo.messages(reader, topics["odom"]):
+            out["odom_t"].append(_stamp(msg))
+            out["pos"].append(_xyz(msg.pose.pose.position))
+            out["linvel"].append(_xyz(msg.twist.twist.linear))
+        for _, msg in echo.messages(reader, topics["contact"]):
+            out["contact_t"].append(_stamp(msg))
+            out["contact"].append(bool(msg.states))
+            forces = [_xyz(s.total_wrench.force) for s in msg.states]
+            out["force"].append(np.sum(forces, axis=0) if forces else np.zeros(3))
+    return {k: np.asarray(v, dtype=float) for k, v in out.items()}
+
+
+def _contact_shading(ax, t, touching) -> None:
+    """Grey bands where the foot touches the floor."""
+    edges = np.diff(np.concatenate([[0], touching.astype(int), [0]]))
+    dt = np.median(np.diff(t)) if len(t) > 1 else 0.0
+    for start, stop in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)):
+        ax.axvspan(t[start], t[stop - 1] + dt, color="0.85", lw=0)
+
+
+def figure(signals: list[tuple[str, dict]]):
+    """A matplotlib figure: rows IMU rate, IMU specific force, position, velocity, contact force;
+    one column per (title, signals) pair."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    rows = (
+        ("imu_t", "gyro", "IMU angular velocity\n(body) [rad/s]"),
+        ("imu_t", "accel", "IMU specific force\n(body) [m/s²]"),
+        ("odom_t", "pos", "odometry position\n(world) [m]"),
+        ("odom_t", "linvel", "odometry velocity\n(world) [m/s]"),
+        ("contact_t", "force", "contact force\nfloor on foot [N]"),
+    )
+    fig, axes = plt.subplots(len(rows), len(signals), sharex=True, squeeze=False,
+                             figsize=(4.2 * len(signals) + 1.2, 9.0))
+    for col, (title, sig) in enumerate(signals):
+        for row, (time_key, key, label) in enumerate(rows):
+            ax = axes[row, col]
+            _contact_shading(ax, sig["contact_t"], sig["contact"] > 0)
+            for i, axis in enumerate(AXES):
+                ax.plot(sig[time_key], sig[key][:, i], lw=1.2, label=axis)
+            ax.grid(alpha=0.3)
+            if col == 0:
+                ax.set_ylabel(label, fontsize=9)
+        axes[0, col].set_title(title, fontsize=10)
+        axes[-1, col].set_xlabel("simulation time [s]")
+    axes[0, 0].legend(loc="upper right", fontsize=8, ncol=3)
+    fig.text(0.99, 0.005, "grey: foot in contact", ha="right", va="bottom", fontsize=8, color="0.4")
+    fig.tight_layout()
+    return fig
+
+
+def plot_bag(path: str | Path, out: str | Path, instances: list[int] | None = None, dpi: int = 80) -> Path:
+    """Writes the PNG of the chosen robots of a bag (default: the single robot of the seed's topics)."""
+    if instances is None:
+        columns = [(record.topic_names(None)["imu"].rsplit("/imu", 1)[0], read_signals(path))]
+    else:
+        columns = [(f"/{record.ROBOT}_{i}", read_signals(path, i)) for i in instances]
+    fig = figure(columns)
+    fig.savefig(out, dpi=dpi)
+    return Path(out)
+
+
+def parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="python -m hopper_mjx.plots", description=__doc__,
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("bag", help="a bag written by python -m hopper_mjx.record (.bag file or MCAP folder)")
+    p.add_argument("--instances", type=record.parse_indices, default=None,
+                   help="robots of a multi-robot bag to plot, e.g. 0,2 (default: the single robot)")
+    p.add_argument("--out", default="signals.png", help="output PNG")
+    p.add_argument("--dpi", type=int, default=80)
+    return p
+
+
+def main(argv=None) -> int:
+    args = parser().parse_args(argv)
+    try:
+        path = plot_bag(args.bag, args.out, args.instances, args.dpi)
+    except ValueError as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 2
+    print(f"wrote {path}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,185 @@
+"""python -m hopper_mjx.render: pictures of the monoped with MuJoCo's offscreen renderer.
+
+    python -m hopper_mjx.render --still docs/img/monoped.png
+    python -m hopper_mjx.render --video hop.mp4 --gravity 1.62 --controller hold --duration 2
+
+The still shows the robot in its initial stance; the video (MP4 or GIF, by the
+file name) shows one instance simulated by the core. Headless machines render
+through EGL (software Mesa on a CPU-only box).
+MuJoCo picks its OpenGL backend when it is first imported, so this module sets
+MUJOCO_GL=egl by default before importing it (an explicit MUJOCO_GL wins).
+"""
+
+from __future__ import annotations
+
+import os
+
+os.environ.setdefault("MUJOCO_GL", "egl")
+
+import argparse  # noqa: E402 (MUJOCO_GL must be set before mujoco is imported)
+import sys  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import mujoco  # noqa: E402
+import numpy as np  # noqa: E402
+
+from hopper_mjx import model, runtime, simulate  # noqa: E402
+
+VIDEO_SUFFIXES = (".mp4", ".gif")
+TRACK_HEIGHT = 0.45  # m: the camera looks at the leg's middle, not at the base
+# The URDF has no colours; these tell the links apart (RGBA).
+LINK_COLOURS = {
+    "base": (0.20, 0.38, 0.65, 1),
+    "hipassembly": (0.85, 0.45, 0.10, 1),
+    "upperleg": (0.85, 0.85, 0.82, 1),
+    "lowerleg": (0.85, 0.45, 0.10, 1),
+    "foot": (0.12, 0.12, 0.12, 1),
+}
+
+
+def scene_model(urdf=None) -> mujoco.MjModel:
+    """The simulated monoped plus what only pictures need: a checkered floor and a sky."""
+    spec = model.build_spec(urdf)
+    spec.add_texture(name="checker", type=mujoco.mjtTexture.mjTEXTURE_2D, builtin=mujoco.mjtBuiltin.mjBUILTIN_CHECKER,
+                     rgb1=[0.82, 0.84, 0.86], rgb2=[0.62, 0.66, 0.70], width=256, height=256)
+    spec.add_texture(name="sky", type=mujoco.mjtTexture.mjTEXTURE_SKYBOX, builtin=mujoco.mjtBuiltin.mjBUILTIN_GRADIENT,
+                     rgb1=[0.55, 0.70, 0.90], rgb2=[0.95, 0.97, 1.0], width=256, height=256)
+    floor = spec.add_material(name="floor", texrepeat=[4, 4], texuniform=True)
+    floor.textures[mujoco.mjtTextureRole.mjTEXROLE_RGB] = "checker"
+    spec.geom(model.FLOOR_GEOM).material = "floor"
+    for body, rgba in LINK_COLOURS.items():
+        if spec.body(body) is not None:  # another URDF may name its links differently
+            for geom in spec.body(body).geoms:
+                geom.rgba = rgba
+    spec.visual.headlight.ambient = [0.4, 0.4, 0.4]
+    spec.visual.headlight.diffuse = [0.5, 0.5, 0.5]
+    spec.visual.global_.offwidth = 1920
+    spec.visual.global_.offheight = 1080
+    return spec.compile()
+
+
+def camera(base_pos, distance: float = 2.0, azimuth: float = 135.0, elevation: float = -12.0) -> mujoco.MjvCamera:
+    """A free camera following the base horizontally, looking at the leg's middle."""
+    cam = mujoco.MjvCamera()
+    cam.type = mujoco.mjtCamera.mjCAMERA_FREE
+    cam.lookat[:] = (base_pos[0], base_pos[1], TRACK_HEIGHT)
+    cam.distance, cam.azimuth, cam.elevation = distance, azimuth, elevation
+    return cam
+
+
+def _check_size(width: int, height: int) -> None:
+    if not (16 <= width <= 1920 and 16 <= height <= 1080):
+        raise ValueError(f"image size must be within 16x16..1920x1080 pixels, got {width}x{height}")
+
+
+def frames(m: mujoco.MjModel, qpos_sequence, *, width: int = 640, height: int = 480, segmentation: bool = False):
+    """Yields one (height, width, 3) uint8 image per qpos (nq,), the camera following the base.
+
+    With `segmentation`, each image is instead (height, width, 2) int32 of (object id, object type)
+    per pixel, as MuJoCo's segmentation rendering gives it (-1 where nothing is drawn).
+    """
+    _check_size(width, height)
+    d = mujoco.MjData(m)
+    renderer = mujoco.Renderer(m, height, width)
+    try:
+        if segmentation:
+            renderer.enable_segmentation_rendering()
+        for qpos in qpos_sequence:
+            d.qpos[:] = qpos
+            mujoco.mj_kinematics(m, d)
+            renderer.update_scene(d, camera=camera(d.qpos[:3]))
+            yield renderer.render().copy()
+    finally:
+        renderer.close()  # free the GL context now, not in a destructor at interpreter exit
+
+
+def still(m: mujoco.MjModel, qpos, **size) -> np.ndarray:
+    """One picture of the robot at `qpos`."""
+    return next(frames(m, [qpos], **size))
+
+
+def robot_pixels(m: mujoco.MjModel, qpos, **size) -> np.ndarray:
+    """(height, width) bool: the pixels that show a robot geom (any geom not on the world body)."""
+    seg = still(m, qpos, segmentation=True, **size)
+    geom = (seg[..., 1] == mujoco.mjtObj.mjOBJ_GEOM) & (seg[..., 0] >= 0)
+    robot_geom = m.geom_bodyid != 0
+    return geom & robot_geom[np.where(geom, seg[..., 0], 0)]
+
+
+def stance_qpos(urdf=None) -> np.ndarray:
+    """The core's default initial pose (upright, crouched, foot just above the floor)."""
+    from hopper_mjx.sim import Sim
+
+    return Sim(model.load(urdf)).stance_qpos()
+
+
+def simulate_qpos(args) -> np.ndarray:
+    """(T, nq) poses of instance --instance, simulated by the core as `simulate` does, at --fps.
+
+    The core runs the simulation model (`model.load`); the pictures' model adds only visuals."""
+    n = len(args.gravity) * args.num
+    if not 0 <= args.instance < n:
+        raise ValueError(f"--instance {args.instance} out of range: the batch has {n} (0..{n - 1})")
+    arrays = simulate.run(argparse.Namespace(**{**vars(args), "rate": args.fps}))
+    return arrays["qpos"][args.instance]
+
+
+def write_video(path: Path, images, fps: float) -> None:
+    import imageio.v2 as imageio
+
+    if path.suffix == ".gif":
+        # GIF frame times are whole centiseconds; loop=0 repeats forever.
+        writer = imageio.get_writer(path, mode="I", duration=1000.0 / fps, loop=0)
+    else:
+        writer = imageio.get_writer(path, fps=fps, codec="libx264", quality=7, macro_block_size=8)
+    with writer:
+        for image in images:
+            writer.append_data(image)
+
+
+def parser() -> argparse.ArgumentParser:
+    # Built on simulate's options, so that controller options added there work here too.
+    p = argparse.ArgumentParser(prog="python -m hopper_mjx.render", description=__doc__,
+                                formatter_class=argparse.RawDescriptionHelpFormatter,
+                                parents=[simulate.parser()], conflict_handler="resolve")
+    p.add_argument("--still", type=Path, default=None, help="PNG of the robot in its initial stance")
+    p.add_argument("--video", type=Path, default=None, help="MP4 or GIF of one simulated instance")
+    p.add_argument("--gravity", type=lambda s: simulate.parse_floats(s, "--gravity"), default=[9.81],
+                   help="gravity magnitudes of the simulated batch, m/s² (instances as in simulate)")
+    p.add_argument("--instance", type=int, default=0, help="which instance of the batch the video shows")
+    p.add_argument("--duration", type=float, default=2.0, help="simulated time of the video, s")
+    p.add_argument("--fps", type=float, default=25.0,
+                   help="video frames per simulated second; must divide the physics rate (1000 Hz)")
+    p.add_argument("--width", type=int, default=640)
+    p.add_argument("--height", type=int, default=480)
+    return p
+
+
+def main(argv=None) -> int:
+    args = parser().parse_args(argv)
+    if args.still is None and args.video is None:
+        parser().error("nothing to do: give --still PATH and/or --video PATH")
+    runtime.configure()
+    size = {"width": args.width, "height": args.height}
+    try:
+        if args.video is not None and args.video.suffix.lower() not in VIDEO_SUFFIXES:
+            raise ValueError(f"--video must end in {' or '.join(VIDEO_SUFFIXES)}, got {args.video}")
+        _check_size(**size)
+        m = scene_model(args.urdf)
+        if args.still is not None:
+            import imageio.v2 as imageio
+
+            imageio.imwrite(args.still, still(m, stance_qpos(args.urdf), **size))
+            print(f"wrote {args.still}")
+        if args.video is not None:
+            qpos = simulate_qpos(args)
+            write_video(args.video, frames(m, qpos, **size), args.fps)
+            print(f"wrote {args.video}: {len(qpos)} frames at {args.fps:g} fps")
+    except ValueError as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 2
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

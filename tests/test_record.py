@@ -1,0 +1,250 @@
+"""ROS recordings: bags written by `record` read back by independent readers, against `simulate`.
+
+One module-wide simulation (two robots, Earth and Moon, dropped 5 cm onto the floor
+under `hold`) is written as a ROS 1 bag, a ROS 2 MCAP bag and a single-robot bag;
+the same run through `simulate` is the reference for every value.
+"""
+
+import io
+from collections import defaultdict
+from pathlib import Path
+
+import matplotlib.image
+import numpy as np
+import pytest
+
+from hopper_mjx import echo, plots, record, simulate
+from hopper_mjx.model.layout import Layout
+
+GRAVITY = "9.81,1.62"
+DURATION = 0.4  # s: both robots touch down within it (Earth at ~0.1 s, Moon at ~0.25 s)
+RATES = {"imu": 100, "odom": 50, "contact": 100, "joint_states": 25}  # Hz, different on purpose
+REFERENCE_RATE = 100  # Hz of the simulate run; every recorded rate divides it
+KINDS = ("imu", "odom", "joint_states", "contact")
+TOL = 1e-6
+
+
+@pytest.fixture(scope="module")
+def recorded(tmp_path_factory):
+    args = record.parser().parse_args([
+        "--gravity", GRAVITY, "--duration", str(DURATION), "--controller", "hold",
+        "--imu-rate", str(RATES["imu"]), "--odom-rate", str(RATES["odom"]),
+        "--contact-rate", str(RATES["contact"]), "--joint-rate", str(RATES["joint_states"]),
+    ])
+    rec = record.simulate_batch(args)
+    folder = tmp_path_factory.mktemp("bags")
+    return {
+        "rec": rec,
+        "ros1": record.write(rec, folder / "both.bag", "ros1"),
+        "mcap": record.write(rec, folder / "both_mcap", "mcap"),
+        "single": record.write(rec, folder / "moon.bag", "ros1", instances=[1]),
+    }
+
+
+@pytest.fixture(scope="module")
+def saved():
+    """The same run as `python -m hopper_mjx.simulate` saves it."""
+    args = simulate.parser().parse_args([
+        "--gravity", GRAVITY, "--duration", str(DURATION), "--controller", "hold", "--rate", str(REFERENCE_RATE),
+    ])
+    return simulate.run(args)
+
+
+# -- independent readers: topic -> msgtype, topic -> [(log time ns, message)] ----------------
+def read_with_rosbags(path):
+    from rosbags.highlevel import AnyReader
+
+    messages = defaultdict(list)
+    with AnyReader([Path(path)]) as reader:
+        types = {c.topic: c.msgtype for c in reader.connections}
+        for connection, t, raw in reader.messages():
+            messages[connection.topic].append((t, reader.deserialize(raw, connection.msgtype)))
+    return types, messages
+
+
+def read_with_ros_rosbag(path):
+    """ROS's own Python rosbag library (genpy messages from the bag's embedded definitions)."""
+    import rosbag
+
+    messages = defaultdict(list)
+    with rosbag.Bag(str(path)) as bag:
+        types = {topic: info.msg_type for topic, info in bag.get_type_and_topic_info().topics.items()}
+        for topic, msg, t in bag.read_messages():
+            messages[topic].append((t.to_nsec(), msg))
+    return types, messages
+
+
+def read_with_mcap(path):
+    """The MCAP project's reader and ROS 2 CDR decoder, on the .mcap file inside the bag folder."""
+    from mcap.reader import make_reader
+    from mcap_ros2.decoder import DecoderFactory
+
+    (mcap_file,) = Path(path).glob("*.mcap")
+    types, messages = {}, defaultdict(list)
+    with open(mcap_file, "rb") as f:
+        for schema, channel, message, msg in make_reader(f, decoder_factories=[DecoderFactory()]).iter_decoded_messages():
+            types[channel.topic] = schema.name
+            messages[channel.topic].append((message.log_time, msg))
+    return types, messages
+
+
+READERS = {
+    "ros1-rosbags": ("ros1", read_with_rosbags),
+    "ros1-ros-rosbag": ("ros1", read_with_ros_rosbag),
+    "mcap-rosbags": ("mcap", read_with_rosbags),
+    "mcap-mcap_ros2": ("mcap", read_with_mcap),
+}
+
+
+def stamp_ns(stamp) -> int:
+    if hasattr(stamp, "secs"):  # genpy (ROS 1)
+        return stamp.secs * 1_000_000_000 + stamp.nsecs
+    return stamp.sec * 1_000_000_000 + stamp.nanosec
+
+
+def xyz(v):
+    return [v.x, v.y, v.z]
+
+
+def values(kind: str, msg) -> list[float]:
+    """A message's numbers in the order of `expected`."""
+    if kind == "imu":
+        q = msg.orientation
+        return [q.w, q.x, q.y, q.z] + xyz(msg.angular_velocity) + xyz(msg.linear_acceleration)
+    if kind == "odom":
+        q = msg.pose.pose.orientation
+        return (xyz(msg.pose.pose.position) + [q.w, q.x, q.y, q.z] + xyz(msg.twist.twist.linear)
+                + xyz(msg.twist.twist.angular))
+    if kind == "joint_states":
+        return list(msg.position) + list(msg.velocity)
+    state = msg.states[0] if msg.states else None
+    if state is None:
+        return [0.0] * 7
+    assert len(state.wrenches) == len(state.contact_positions) == len(state.contact_normals) == 1
+    return [1.0] + xyz(state.total_wrench.force) + xyz(state.contact_positions[0])
+
+
+def expected(kind: str, saved: dict, layout: Layout, i: int) -> np.ndarray:
+    """(T, k) reference values of instance i at the stream's own rate."""
+    stride = REFERENCE_RATE // RATES[kind]
+    pick = lambda name: np.asarray(saved[name][i, ::stride], dtype=float)
+    if kind == "imu":
+        columns = [pick("imu_quat"), pick("imu_gyro"), pick("imu_accel")]
+    elif kind == "odom":
+        columns = [pick("odom_pos"), pick("odom_quat"), pick("odom_linvel"), pick("odom_angvel")]
+    elif kind == "joint_states":
+        columns = [pick("qpos")[:, list(layout.joint_qpos)], pick("qvel")[:, list(layout.joint_dof)]]
+    else:
+        columns = [pick("contact")[:, None], pick("contact_force"), pick("contact_pos")]
+    return np.concatenate(columns, axis=1)
+
+
+# -- tests ---------------------------------------------------------------------------------
+@pytest.mark.parametrize("fmt", ["ros1", "mcap"])
+def test_every_topic_has_its_type_and_rate_times_duration_messages(recorded, fmt):
+    types, messages = read_with_rosbags(recorded[fmt])
+    want = {"/clock": (record.MSGTYPES["clock"], RATES["imu"] * DURATION)}  # /clock: the fastest stream
+    for i in (0, 1):
+        for kind, topic in record.topic_names(i).items():
+            want[topic] = (record.MSGTYPES[kind], RATES[kind] * DURATION)
+    assert set(types) == set(want)
+    for topic, (msgtype, count) in want.items():
+        assert types[topic] == msgtype, topic
+        assert len(messages[topic]) == round(count), topic
+
+
+def test_one_robot_is_published_under_the_seeds_names_and_frames(recorded):
+    types, messages = read_with_ros_rosbag(recorded["single"])
+    assert types == {
+        "/monoped/imu/data": "sensor_msgs/Imu",
+        "/odom": "nav_msgs/Odometry",
+        "/monoped/joint_states": "sensor_msgs/JointState",
+        "/lowerleg_contactsensor_state": "gazebo_msgs/ContactsState",
+        "/clock": "rosgraph_msgs/Clock",
+    }
+    imu, odom = messages["/monoped/imu/data"][0][1], messages["/odom"][0][1]
+    joints, contact = messages["/monoped/joint_states"][0][1], messages["/lowerleg_contactsensor_state"][0][1]
+    assert imu.header.frame_id == "base"
+    assert (odom.header.frame_id, odom.child_frame_id) == ("world", "base")
+    assert joints.name == ["haa_joint", "hfe_joint", "kfe_joint"]
+    assert contact.header.frame_id == "world"
+    assert [m.header.seq for _, m in messages["/monoped/imu/data"]] == list(range(int(RATES["imu"] * DURATION)))
+
+
+@pytest.mark.parametrize("reader", list(READERS))
+def test_values_and_stamps_equal_the_simulate_run(recorded, saved, mj_model, reader):
+    fmt, read = READERS[reader]
+    _, messages = read(recorded[fmt])
+    layout = Layout.of(mj_model)
+    for i in (0, 1):
+        for kind, topic in record.topic_names(i).items():
+            msgs = [m for _, m in messages[topic]]
+            want = expected(kind, saved, layout, i)
+            got = np.array([values(kind, m) for m in msgs])
+            assert got.shape == want.shape, topic
+            err = np.abs(got - want).max()
+            assert err <= TOL, f"{topic}: max |bag - simulate| = {err:g}"
+            stride = REFERENCE_RATE // RATES[kind]
+            want_ns = np.round(saved["time"][::stride] * 1e9).astype(np.int64)
+            assert [stamp_ns(m.header.stamp) for m in msgs] == want_ns.tolist(), topic
+            assert [t for t, _ in messages[topic]] == want_ns.tolist(), topic  # log time = stamp
+    # Not vacuous: both robots landed, carrying their weight along the floor's normal.
+    contact = saved["contact"][:, :: REFERENCE_RATE // RATES["contact"]]
+    assert contact[:, -5:].any(axis=1).all()
+    first_touch = [m for _, m in messages[record.topic_names(1)["contact"]] if m.states][0]
+    assert xyz(first_touch.states[0].contact_normals[0]) == [0.0, 0.0, 1.0]
+
+
+def test_earth_robot_standing_on_the_floor_reads_its_weight(recorded):
+    """Physics through the whole chain: settled Earth robot, IMU ≈ (0, 0, g), contact ≈ m·g."""
+    sig = plots.read_signals(recorded["mcap"], instance=0)
+    assert sig["accel"][-1] == pytest.approx([0, 0, 9.81], abs=0.3)
+    assert sig["force"][-1][2] == pytest.approx(6.8 * 9.81, rel=0.05)
+
+
+def test_echo_prints_each_topics_first_message_as_rostopic_does(recorded):
+    """For a ROS 1 bag the layout is compared with ROS's own genpy formatting (what rostopic echo prints)."""
+    _, messages = read_with_ros_rosbag(recorded["ros1"])
+    for topic, msgs in messages.items():
+        out = io.StringIO()
+        assert echo.echo(recorded["ros1"], topic, count=1, out=out) == 1
+        assert out.getvalue() == f"{msgs[0][1]}\n---\n", topic
+
+
+def test_echo_cli_on_an_mcap_bag(recorded, capsys):
+    _, messages = read_with_rosbags(recorded["mcap"])
+    for topic in messages:
+        assert echo.main([str(recorded["mcap"]), topic, "-n", "1"]) == 0
+        out = capsys.readouterr().out
+        assert out.count("\n---\n") == 1 and out.endswith("---\n"), topic
+    assert echo.main([str(recorded["mcap"]), "/monoped_0/imu/data", "-n", "1"]) == 0
+    out = capsys.readouterr().out
+    assert 'frame_id: "monoped_0/base"' in out and "nanosec:         0" not in out  # ROS 2 field names
+    assert "  stamp: \n    sec: 0\n    nanosec: 0\n" in out
+
+
+def test_signal_plot_png(recorded, tmp_path):
+    out = plots.plot_bag(recorded["ros1"], tmp_path / "signals.png", instances=[0, 1])
+    image = matplotlib.image.imread(out)
+    assert out.stat().st_size < 300_000
+    assert image.shape[1] > image.shape[0] * 0.8  # two columns
+    assert image[..., :3].std() > 0.05  # not blank
+
+
+def test_bad_requests_name_the_problem(recorded, tmp_path, capsys):
+    rec = recorded["rec"]
+    with pytest.raises(ValueError, match="out of range"):
+        record.write(rec, tmp_path / "x.bag", "ros1", instances=[2])
+    with pytest.raises(ValueError, match="unknown format"):
+        record.write(rec, tmp_path / "x.bag", "ros2")
+    with pytest.raises(ValueError, match="exists"):
+        record.write(rec, recorded["ros1"], "ros1")
+    with pytest.raises(ValueError, match="not in the bag; it has: /clock"):
+        echo.echo(recorded["ros1"], "/imu", count=1, out=io.StringIO())
+    with pytest.raises(ValueError, match="no such bag"):
+        echo.echo(tmp_path / "missing.bag", "/clock")
+    (tmp_path / "junk.bag").write_text("not a bag")
+    with pytest.raises(ValueError, match="cannot read"):
+        echo.echo(tmp_path / "junk.bag", "/clock")
+    assert record.main(["--out", str(recorded["ros1"])]) == 2  # refused before simulating
+    assert "exists" in capsys.readouterr().err

@@ -1,0 +1,96 @@
+"""Pictures rendered headless (EGL, software Mesa): not blank, and the robot stands out.
+
+MuJoCo chooses its OpenGL backend once, when it is first imported, and other test
+modules import it before this one; so rendering runs in fresh processes (the CLI,
+or a spawned worker) that import `hopper_mjx.render` first, which picks EGL.
+"""
+
+import os
+import subprocess
+import sys
+from concurrent.futures import ProcessPoolExecutor
+from multiprocessing import get_context
+
+import imageio.v3 as iio
+import numpy as np
+import pytest
+
+os.environ.setdefault("MUJOCO_GL", "egl")  # inherited by the rendering processes
+
+WIDTH, HEIGHT = 320, 240
+
+
+def run_cli(*args):
+    return subprocess.run([sys.executable, "-m", "hopper_mjx.render", *args],
+                          capture_output=True, text=True, timeout=300)
+
+
+def _in_fresh_process(fn, *args, **kwargs):
+    with ProcessPoolExecutor(1, mp_context=get_context("spawn")) as pool:
+        return pool.submit(fn, *args, **kwargs).result(timeout=300)
+
+
+def _still_and_robot_mask(width, height):
+    from hopper_mjx import render
+
+    m = render.scene_model()
+    qpos = render.stance_qpos()
+    return render.still(m, qpos, width=width, height=height), render.robot_pixels(m, qpos, width=width, height=height)
+
+
+def _write_video(path, heights, fps):
+    """A video of the stance pose lifted to each base height (the simulated poses of `--video`
+    come from `simulate.run`, tested elsewhere; compiling a rollout here would add ~30 s)."""
+    from hopper_mjx import render
+
+    m = render.scene_model()
+    poses = [render.stance_qpos() + np.r_[0, 0, dz, np.zeros(m.nq - 3)] for dz in heights]
+    render.write_video(path, render.frames(m, poses, width=160, height=120), fps=fps)
+
+
+def test_still_png_cli_is_not_blank(tmp_path):
+    path = tmp_path / "still.png"
+    done = run_cli("--still", str(path), "--width", str(WIDTH), "--height", str(HEIGHT))
+    assert done.returncode == 0, done.stderr[-3000:]
+    image = iio.imread(path)
+    assert image.shape[:2] == (HEIGHT, WIDTH)
+    assert image[..., :3].std() > 20  # sky, floor and robot, not one flat colour
+    assert len(np.unique(image[..., :3].reshape(-1, 3), axis=0)) > 100
+
+
+def test_robot_pixels_differ_from_the_background():
+    image, robot = _in_fresh_process(_still_and_robot_mask, WIDTH, HEIGHT)
+    assert robot.mean() > 0.02  # the robot fills a visible part of the frame
+    robot_colour = image[robot].mean(axis=0)
+    background_colour = image[~robot].mean(axis=0)
+    assert np.abs(robot_colour - background_colour).max() > 30
+    rows, cols = np.nonzero(robot)
+    # The camera tracks the robot: it sits near the middle of the picture.
+    assert abs(cols.mean() - WIDTH / 2) < WIDTH / 4 and abs(rows.mean() - HEIGHT / 2) < HEIGHT / 3
+
+
+@pytest.mark.parametrize("suffix", [".gif", ".mp4"])
+def test_video_frames_follow_the_poses(tmp_path, suffix):
+    path = tmp_path / f"lift{suffix}"
+    heights = [0.0, 0.05, 0.1, 0.15, 0.2]
+    _in_fresh_process(_write_video, path, heights, 10)
+    frames = np.stack(list(iio.imiter(path)))[..., :3]
+    assert len(frames) == len(heights)
+    assert frames.std() > 20
+    # The camera follows the base horizontally only, so the lifted robot moves up the frame.
+    assert np.abs(frames[-1].astype(int) - frames[0].astype(int)).mean() > 0.5
+
+
+def test_bad_requests_name_the_problem(tmp_path, capsys):
+    from hopper_mjx import render  # nothing below renders, so the backend this process has does not matter
+
+    for argv, message in (
+        (["--video", str(tmp_path / "x.avi")], "--video must end in .mp4 or .gif"),
+        (["--still", str(tmp_path / "x.png"), "--width", "5000"], "image size"),
+        (["--video", str(tmp_path / "x.gif"), "--gravity", "9.81,1.62", "--instance", "2"], "out of range"),
+    ):
+        assert render.main(argv) == 2
+        assert message in capsys.readouterr().err
+    assert not list(tmp_path.iterdir())
+    with pytest.raises(SystemExit):
+        render.main([])  # nothing to do
