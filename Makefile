@@ -6,7 +6,15 @@ PY := $(VENV)/bin/python
 .PHONY: install sweep test
 install: $(VENV)/.installed
 
+# Headless rendering (hopper_mjx.render): EGL with Mesa's software rasteriser, no display or GPU.
+RENDER_DEBS := libegl1 libopengl0 libgl1-mesa-dri
+
 $(VENV)/.installed: pyproject.toml
+	@if command -v dpkg >/dev/null && ! dpkg -s $(RENDER_DEBS) >/dev/null 2>&1; then \
+	  if [ "$$(id -u)" = 0 ]; then \
+	    apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends $(RENDER_DEBS) >/dev/null; \
+	  else echo "note: rendering needs: sudo apt-get install $(RENDER_DEBS)"; fi; \
+	fi
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install -q --upgrade pip
 	$(PY) -m pip install -q -e '.[test]'
