@@ -92,13 +92,15 @@ def figure(signals: list[tuple[str, dict]]):
     return fig
 
 
-def plot_bag(path: str | Path, out: str | Path, instances: list[int] | None = None, dpi: int = 80) -> Path:
-    """Writes the PNG of the chosen robots of a bag (default: the single robot of the seed's topics)."""
-    if instances is None:
-        columns = [(record.topic_names(None)["imu"].rsplit("/imu", 1)[0], read_signals(path))]
-    else:
-        columns = [(f"/{record.ROBOT}_{i}", read_signals(path, i)) for i in instances]
-    fig = figure(columns)
+def plot_bag(path: str | Path, out: str | Path, instances: list[int] | None = None, dpi: int = 80,
+             labels: list[str] | None = None) -> Path:
+    """Writes the PNG of the chosen robots of a bag (default: the single robot of the seed's topics),
+    each column titled by its namespace or by `labels`."""
+    chosen = [None] if instances is None else instances
+    names = [f"/{record.ROBOT}" if i is None else f"/{record.ROBOT}_{i}" for i in chosen]
+    if labels is not None and len(labels) != len(chosen):
+        raise ValueError(f"{len(labels)} labels for {len(chosen)} plotted robots")
+    fig = figure([(title, read_signals(path, i)) for title, i in zip(labels or names, chosen)])
     fig.savefig(out, dpi=dpi)
     return Path(out)
 
@@ -109,6 +111,8 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("bag", help="a bag written by python -m hopper_mjx.record (.bag file or MCAP folder)")
     p.add_argument("--instances", type=record.parse_indices, default=None,
                    help="robots of a multi-robot bag to plot, e.g. 0,2 (default: the single robot)")
+    p.add_argument("--labels", type=lambda s: s.split(","), default=None,
+                   help="comma-separated column titles, one per plotted robot (default: namespaces)")
     p.add_argument("--out", default="signals.png", help="output PNG")
     p.add_argument("--dpi", type=int, default=80)
     return p
@@ -117,7 +121,7 @@ def parser() -> argparse.ArgumentParser:
 def main(argv=None) -> int:
     args = parser().parse_args(argv)
     try:
-        path = plot_bag(args.bag, args.out, args.instances, args.dpi)
+        path = plot_bag(args.bag, args.out, args.instances, args.dpi, args.labels)
     except ValueError as err:
         print(f"error: {err}", file=sys.stderr)
         return 2

@@ -136,8 +136,8 @@ def simulate_batch(args) -> Recording:
     data = mujoco.MjData(mj_model)
     mujoco.mj_kinematics(mj_model, data)
     floor_normal = data.geom_xmat[sim.layout.floor_geom].reshape(3, 3)[:, 2].copy()  # a plane's normal is its z axis
-    tick = math.gcd(*periods.values())
-    clock_time = traj.time["state"][0] + sim.layout.timestep * np.arange(0, steps, tick)
+    # Every stream's times are t0 + timestep * (whole steps), so equal instants are equal floats.
+    clock_time = np.unique(np.concatenate(list(traj.time.values())))
     return Recording(
         traj=traj,
         gravity=gravity,
@@ -307,6 +307,9 @@ def write(rec: Recording, out: str | Path, fmt: str, instances: list[int] | None
     out = Path(out)
     if out.exists():
         raise ValueError(f"{out} exists; remove it or choose another --out")
+    if fmt == "mcap" and out.suffix == ".mcap":
+        raise ValueError(f"--format mcap writes a ROS 2 bag folder (holding the .mcap file): "
+                         f"give a folder name such as {out.stem}_mcap, not {out.name}")
     store = typestore(fmt)
     ros1 = fmt == "ros1"
     if ros1:

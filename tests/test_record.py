@@ -239,6 +239,8 @@ def test_bad_requests_name_the_problem(recorded, tmp_path, capsys):
         record.write(rec, tmp_path / "x.bag", "ros2")
     with pytest.raises(ValueError, match="exists"):
         record.write(rec, recorded["ros1"], "ros1")
+    with pytest.raises(ValueError, match="folder name such as run_mcap"):
+        record.write(rec, tmp_path / "run.mcap", "mcap")
     with pytest.raises(ValueError, match="not in the bag; it has: /clock"):
         echo.echo(recorded["ros1"], "/imu", count=1, out=io.StringIO())
     with pytest.raises(ValueError, match="no such bag"):
