@@ -1,0 +1,90 @@
+"""Hop metrics on synthetic trajectories whose hops are known exactly."""
+
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from hopper_mjx import metrics
+
+G = 9.81
+DT = 0.01  # s between samples
+STANCE, FLIGHT = 20, 40  # samples per phase: 0.2 s and 0.4 s
+STAND = 0.88  # m
+SPEED = 0.3  # m/s, forward
+
+
+def _trajectory(n_samples=1000):
+    """Instance 0 hops forever, 1 never leaves the floor, 2 falls (height) at 5 s, 3 tips over at 5 s."""
+    t = np.arange(n_samples) * DT
+    k = np.arange(n_samples) % (STANCE + FLIGHT)
+    stance = k < STANCE
+    s = (k - STANCE) * DT  # time into the flight
+    takeoff = G * FLIGHT * DT / 2
+    z = np.where(stance, STAND, STAND + takeoff * s - G * s * s / 2)
+    qpos = np.zeros((4, n_samples, 10))
+    qpos[:, :, 3] = 1.0  # upright
+    qpos[:, :, 2] = z
+    qpos[:, :, 0] = SPEED * t
+    qpos[1, :, 2] = STAND
+    qpos[1, :, 0] = 0.0
+    late = t >= 5.0
+    qpos[2, late, 2] = 0.2
+    angle = 1.0  # rad of pitch
+    qpos[3, late, 3:7] = [np.cos(angle / 2), 0, np.sin(angle / 2), 0]
+    flag = np.stack([stance, np.ones(n_samples, bool), stance, stance])
+    traj = SimpleNamespace(qpos=qpos, contact=SimpleNamespace(flag=flag), time={"state": t, "contact": t})
+    return traj, t
+
+
+def test_periodic_hops_are_measured_exactly():
+    traj, t = _trajectory()
+    work = np.full(4, 100.0)
+    m = metrics.hop_metrics(traj, np.full(4, G), command_speed=(SPEED, 0.0), standing_height=STAND,
+                            work=work, mass=6.8)
+    rise = G * (FLIGHT * DT / 2) ** 2 / 2  # v²/2g with v = g·T_f/2
+    assert m["apex_height"][0] == pytest.approx(rise, rel=1e-9)
+    assert m["flight_time"][0] == pytest.approx(FLIGHT * DT)
+    assert m["stance_time"][0] == pytest.approx(STANCE * DT)
+    assert m["hop_period"][0] == pytest.approx((STANCE + FLIGHT) * DT)
+    assert m["duty_factor"][0] == pytest.approx(STANCE / (STANCE + FLIGHT))
+    # 17 flights start in the 10 s; the first has no recorded touchdown before it, the last no landing.
+    assert m["hops"][0] == 15
+    assert m["mean_speed"][0] == pytest.approx(SPEED) and m["tracking_error"][0] == pytest.approx(0, abs=1e-9)
+    assert not m["fell"][0] and np.isnan(m["fall_time"][0])
+    assert m["max_pitch"][0] == 0 and m["max_roll"][0] == 0
+    travel = SPEED * t[-1]
+    assert m["cost_of_transport"][0] == pytest.approx(100.0 / (6.8 * G * travel))
+
+
+def test_no_hops_gives_nan_not_garbage():
+    traj, _ = _trajectory()
+    m = metrics.hop_metrics(traj, np.full(4, G), standing_height=STAND)
+    assert m["hops"][1] == 0 and not m["fell"][1]
+    for key in ("apex_height", "flight_time", "stance_time", "hop_period", "duty_factor", "cost_of_transport"):
+        assert np.isnan(m[key][1]), key
+    assert m["mean_speed"][1] == 0
+
+
+def test_falls_stop_the_count():
+    traj, _ = _trajectory()
+    m = metrics.hop_metrics(traj, np.stack([np.zeros(4), np.zeros(4), -np.full(4, G)], axis=1),
+                            standing_height=STAND)
+    assert m["fell"].tolist() == [False, False, True, True]
+    np.testing.assert_allclose(m["fall_time"][2:], 5.0)
+    assert np.all(m["hops_before_fall"][2:] == 7)  # touchdowns at 1.2, 1.8, ..., 4.8 s
+    assert m["apex_height"][2] == pytest.approx(m["apex_height"][0])
+    assert m["max_pitch"][3] == pytest.approx(1.0)  # up to and including the fall sample
+    assert m["mean_speed"][2] == pytest.approx(SPEED)  # over the 5 s before the fall
+
+
+def test_bad_arguments():
+    traj, _ = _trajectory()
+    with pytest.raises(ValueError, match="gravity"):
+        metrics.hop_metrics(traj, np.full(3, G), standing_height=STAND)
+    with pytest.raises(ValueError, match="mass"):
+        metrics.hop_metrics(traj, np.full(4, G), standing_height=STAND, work=np.ones(4))
+
+
+def test_standing_height_is_the_stance_with_the_foot_down(mj_model):
+    assert metrics.standing_height(mj_model) == pytest.approx(0.8823, abs=1e-3)
