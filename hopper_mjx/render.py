@@ -127,7 +127,7 @@ def simulate_qpos(args) -> np.ndarray:
 def write_video(path: Path, images, fps: float) -> None:
     import imageio.v2 as imageio
 
-    if path.suffix == ".gif":
+    if path.suffix.lower() == ".gif":
         # GIF frame times are whole centiseconds; loop=0 repeats forever.
         writer = imageio.get_writer(path, mode="I", duration=1000.0 / fps, loop=0)
     else:
@@ -135,6 +135,14 @@ def write_video(path: Path, images, fps: float) -> None:
     with writer:
         for image in images:
             writer.append_data(image)
+
+
+def parse_size(text: str) -> tuple[int, int]:
+    try:
+        width, height = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"--size must be WIDTHxHEIGHT, e.g. 640x480, got {text!r}") from None
+    return width, height
 
 
 def parser() -> argparse.ArgumentParser:
@@ -150,8 +158,9 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--duration", type=float, default=2.0, help="simulated time of the video, s")
     p.add_argument("--fps", type=float, default=25.0,
                    help="video frames per simulated second; must divide the physics rate (1000 Hz)")
-    p.add_argument("--width", type=int, default=640)
-    p.add_argument("--height", type=int, default=480)
+    p.add_argument("--size", type=parse_size, default=(640, 480), help="image WIDTHxHEIGHT in pixels")
+    for unused in ("--rate", "--out"):  # simulate's; --fps, --still and --video take their place
+        p.add_argument(unused, help=argparse.SUPPRESS)
     return p
 
 
@@ -160,7 +169,7 @@ def main(argv=None) -> int:
     if args.still is None and args.video is None:
         parser().error("nothing to do: give --still PATH and/or --video PATH")
     runtime.configure()
-    size = {"width": args.width, "height": args.height}
+    size = dict(zip(("width", "height"), args.size))
     try:
         if args.video is not None and args.video.suffix.lower() not in VIDEO_SUFFIXES:
             raise ValueError(f"--video must end in {' or '.join(VIDEO_SUFFIXES)}, got {args.video}")

@@ -250,3 +250,11 @@ def test_bad_requests_name_the_problem(recorded, tmp_path, capsys):
         echo.echo(tmp_path / "junk.bag", "/clock")
     assert record.main(["--out", str(recorded["ros1"])]) == 2  # refused before simulating
     assert "exists" in capsys.readouterr().err
+
+
+def test_simulate_options_reach_the_controller_unchanged():
+    defaults = vars(simulate.parser().parse_args([]))
+    ours = vars(record.parser().parse_args([]))
+    for name, value in defaults.items():
+        if name not in ("gravity", "rate", "out"):  # record's own defaults: one robot, 50 Hz, a bag
+            assert ours[name] == value, name

@@ -50,7 +50,7 @@ def _write_video(path, heights, fps):
 
 def test_still_png_cli_is_not_blank(tmp_path):
     path = tmp_path / "still.png"
-    done = run_cli("--still", str(path), "--width", str(WIDTH), "--height", str(HEIGHT))
+    done = run_cli("--still", str(path), "--size", f"{WIDTH}x{HEIGHT}")
     assert done.returncode == 0, done.stderr[-3000:]
     image = iio.imread(path)
     assert image.shape[:2] == (HEIGHT, WIDTH)
@@ -86,7 +86,7 @@ def test_bad_requests_name_the_problem(tmp_path, capsys):
 
     for argv, message in (
         (["--video", str(tmp_path / "x.avi")], "--video must end in .mp4 or .gif"),
-        (["--still", str(tmp_path / "x.png"), "--width", "5000"], "image size"),
+        (["--still", str(tmp_path / "x.png"), "--size", "5000x480"], "image size"),
         (["--video", str(tmp_path / "x.gif"), "--gravity", "9.81,1.62", "--instance", "2"], "out of range"),
     ):
         assert render.main(argv) == 2
@@ -94,3 +94,16 @@ def test_bad_requests_name_the_problem(tmp_path, capsys):
     assert not list(tmp_path.iterdir())
     with pytest.raises(SystemExit):
         render.main([])  # nothing to do
+
+
+def test_simulate_options_reach_the_controller_unchanged():
+    """render builds on simulate's parser: a controller option added there (e.g. raibert's --height)
+    must arrive as simulate parses it, not be taken by an image option."""
+    from hopper_mjx import render, simulate
+
+    defaults = vars(simulate.parser().parse_args([]))
+    ours = vars(render.parser().parse_args([]))
+    for name, value in defaults.items():
+        if name not in ("gravity", "rate", "out"):
+            assert ours[name] == value, name
+    assert render.parser().parse_args(["--size", "320x240"]).size == (320, 240)
