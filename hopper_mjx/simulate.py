@@ -47,6 +47,13 @@ def build_controller(name: str, layout, args):
         n = args.num * len(args.gravity)
         params = raibert.raibert_params(n, height=args.height, speed=args.speed)
         return raibert.raibert(layout, leg=leg), params
+    if name.startswith("policy:"):
+        from hopper_mjx import model
+        from hopper_mjx.control import policy
+
+        mj_model = model.load(args.urdf, timestep=args.timestep)
+        params = policy.policy_params(mj_model, args.num * len(args.gravity), height=args.height, speed=args.speed)
+        return policy.policy_controller(mj_model, name.removeprefix("policy:")), params
     raise ValueError(f"unknown controller {name!r}; choose from: none, hold, pid, raibert")
 
 
