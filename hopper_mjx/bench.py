@@ -1,0 +1,370 @@
+"""python -m hopper_mjx.bench: the batched MJX core against native multithreaded MuJoCo.
+
+    python -m hopper_mjx.bench --num 4096 --steps 1000 --json bench.json
+    python -m hopper_mjx.bench --scaling 64,256,1024,4096,16384 --steps 500 --plot scaling.png
+
+Both sides step the same compiled model, the same N instances for the same T
+steps from the same initial state, instance i under the same gravity:
+
+- MJX: `Sim.rollout` with the `hold` controller and the default 50 Hz signals,
+  i.e. the full core (physics, controller, signals, divergence guard), sharded
+  over every local device.
+- native: `mujoco.rollout` with one thread per device, per-instance gravity
+  given as a list of `MjModel`s. The `hold` law (PD to the initial joint angles,
+  saturated at the effort limits) runs inside MuJoCo's C step as affine-bias
+  servo actuators with a constant target, so native pays for the same
+  closed-loop control law without a Python callback. Native also computes its
+  native sensors and writes its full state every step.
+
+Timings interleave the two sides and keep each side's best of `--repeat`
+runs, because the cores are shared and noise only ever adds time. The ratio
+is MJX steps/s over native steps/s.
+"""
+
+from __future__ import annotations
+
+import argparse
+import copy
+import json
+import os
+import platform
+import resource
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from hopper_mjx import runtime
+
+DISTINCT_GRAVITIES = 64  # distinct values, tiled over the batch: one native MjModel each
+GRAVITY_SPAN = (1.62, 9.81)  # m/s², Moon to Earth
+NATIVE_BUFFER_STEPS = 1 << 18  # instance-steps of native output (state + sensors) held at once
+COMPILE_EVENTS = (
+    "/jax/core/compile/jaxpr_trace_duration",
+    "/jax/core/compile/jaxpr_to_mlir_module_duration",
+    "/jax/core/compile/backend_compile_duration",  # includes a persistent-cache read
+)
+
+
+def bench_gravities(num: int) -> np.ndarray:
+    """(num,) gravity magnitudes: `DISTINCT_GRAVITIES` values from Moon to Earth, tiled."""
+    if num < 1:
+        raise ValueError(f"--num must be >= 1, got {num}")
+    values = np.linspace(*GRAVITY_SPAN, min(num, DISTINCT_GRAVITIES))
+    return values[np.arange(num) % values.size]
+
+
+# -- native ---------------------------------------------------------------------
+
+
+def native_hold_model(mj_model, layout, p: float, d: float):
+    """A copy of `mj_model` whose motors are servos computing the `hold` law in C:
+    torque = clip(p (ctrl - q) - d qdot, effort limit), with ctrl the target angle."""
+    import mujoco
+
+    m = copy.deepcopy(mj_model)
+    for act in layout.actuator_of_joint:
+        gear = m.actuator_gear[act, 0]
+        m.actuator_gaintype[act] = mujoco.mjtGain.mjGAIN_FIXED
+        m.actuator_biastype[act] = mujoco.mjtBias.mjBIAS_AFFINE
+        m.actuator_gainprm[act, :3] = (p / gear, 0.0, 0.0)
+        m.actuator_biasprm[act, :3] = (0.0, -p / gear, -d / gear)
+        m.actuator_forcelimited[act] = True
+        m.actuator_forcerange[act] = m.actuator_ctrlrange[act]  # the motor's torque limits
+        m.actuator_ctrllimited[act] = False
+    return m
+
+
+class NativeRollout:
+    """`mujoco.rollout` of the batch with one thread per core and a model per gravity."""
+
+    def __init__(self, mj_model, gravity: np.ndarray, qpos0: np.ndarray, ctrl: np.ndarray, threads: int):
+        import mujoco
+        from mujoco import rollout
+
+        models = {}
+        for g in map(tuple, gravity):
+            if g not in models:
+                models[g] = copy.deepcopy(mj_model)
+                models[g].opt.gravity[:] = g
+        self.models = [models[g] for g in map(tuple, gravity)]
+        self.datas = [mujoco.MjData(mj_model) for _ in range(threads)]
+        d = mujoco.MjData(mj_model)
+        d.qpos[:] = qpos0
+        spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
+        state = np.empty(mujoco.mj_stateSize(mj_model, spec))
+        mujoco.mj_getState(mj_model, d, state, spec)
+        self.initial_state = state
+        self.ctrl = np.asarray(ctrl, dtype=float)
+        self.threads = threads
+        self.pool = rollout.Rollout(nthread=threads if threads > 1 else 0)
+
+    def run(self, steps: int) -> np.ndarray:
+        """Steps every instance `steps` times; returns the final qpos (N, nq)."""
+        n = len(self.models)
+        group = max(1, min(n, NATIVE_BUFFER_STEPS // steps))
+        final = []
+        for lo in range(0, n, group):
+            hi = min(n, lo + group)
+            state, _ = self.pool.rollout(
+                self.models[lo:hi],
+                self.datas,
+                initial_state=np.broadcast_to(self.initial_state, (hi - lo, self.initial_state.size)),
+                control=np.broadcast_to(self.ctrl, (hi - lo, 1, self.ctrl.size)),
+                nstep=steps,
+            )
+            final.append(state[:, -1].copy())
+        nq = self.models[0].nq
+        return np.concatenate(final)[:, 1 : 1 + nq]  # FULLPHYSICS: time, qpos, qvel, ...
+
+    def close(self) -> None:
+        self.pool.close()
+
+
+# -- MJX ------------------------------------------------------------------------
+
+
+class CompileClock:
+    """Seconds JAX spends tracing, lowering and compiling (or loading from the cache)."""
+
+    def __init__(self):
+        import jax
+
+        self.seconds = 0.0
+        self.cache_hits = 0
+        jax.monitoring.register_event_duration_secs_listener(self._on_duration)
+        jax.monitoring.register_event_listener(self._on_event)
+
+    def _on_duration(self, event: str, duration: float, **_):
+        if event in COMPILE_EVENTS:
+            self.seconds += duration
+
+    def _on_event(self, event: str, **_):
+        if event == "/jax/compilation_cache/cache_hits":
+            self.cache_hits += 1
+
+
+def controller_pair(name: str, sim):
+    """(MJX controller, params, native MjModel, native ctrl (nu,)) for a --controller value."""
+    from hopper_mjx.control import base
+
+    layout = sim.layout
+    if name == "hold":
+        gains = base.HOLD_GAINS
+        q0 = sim.stance_qpos()[list(layout.joint_qpos)]
+        ctrl = np.zeros(layout.nu)
+        ctrl[list(layout.actuator_of_joint)] = q0
+        return base.hold(layout), None, native_hold_model(sim.mj_model, layout, **gains), ctrl
+    if name == "none":
+        return base.zero_torque(layout), None, sim.mj_model, np.zeros(layout.nu)
+    raise ValueError(f"unknown controller {name!r}; choose from: hold, none")
+
+
+def timed(fn):
+    """(wall s, process CPU s, result): CPU time is the work done, whatever the background load."""
+    wall, cpu = time.perf_counter(), time.process_time()
+    result = fn()
+    return time.perf_counter() - wall, time.process_time() - cpu, result
+
+
+def peak_rss_mb() -> float:
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # Linux reports KiB
+
+
+def run(num: int, steps: int, *, controller: str = "hold", chunk: int = 256, repeat: int = 2,
+        threads: int | None = None, timestep: float = 1e-3, native: bool = True) -> dict:
+    """One side-by-side measurement; returns the JSON record."""
+    import jax
+
+    from hopper_mjx import model
+    from hopper_mjx.sim import Sim, gravity_vectors
+
+    if steps < 1 or repeat < 1:
+        raise ValueError(f"--steps and --repeat must be >= 1, got {steps} and {repeat}")
+    clock = CompileClock()
+    sim = Sim(model.load(timestep=timestep), chunk=chunk)
+    threads = threads or len(sim.devices)
+    gravity = gravity_vectors(bench_gravities(num))
+    mjx_controller, params, native_model, native_ctrl = controller_pair(controller, sim)
+    state0 = sim.reset(gravity, key=0, controller=mjx_controller, params=params)
+    jax.block_until_ready(state0)
+
+    def run_mjx():
+        final, traj = sim.rollout(state0, mjx_controller, steps=steps)
+        jax.block_until_ready((final, traj))
+        return final
+
+    first_s = timed(run_mjx)[0]
+    compile_s = clock.seconds
+    pool = NativeRollout(native_model, gravity, sim.stance_qpos(), native_ctrl, threads) if native else None
+    mjx_runs, native_runs = [], []
+    for _ in range(repeat):  # interleaved, so that both sides see the same background load
+        wall, cpu, final = timed(run_mjx)
+        mjx_runs.append((wall, cpu))
+        if pool:
+            wall, cpu, native_qpos = timed(lambda: pool.run(steps))
+            native_runs.append((wall, cpu))
+    if pool:
+        pool.close()
+    total = num * steps
+    mjx_s, native_s = [w for w, _ in mjx_runs], [w for w, _ in native_runs]
+    mjx_rate = total / min(mjx_s)
+    native_rate = total / min(native_s) if native_s else float("nan")
+    mjx_cpu = min(c for _, c in mjx_runs) / total * 1e6
+    native_cpu = min(c for _, c in native_runs) / total * 1e6 if native_runs else float("nan")
+    qpos = np.asarray(final.data.qpos)
+    record = {
+        "num": num,
+        "steps": steps,
+        "controller": controller,
+        "timestep": timestep,
+        "mjx_steps_per_s": mjx_rate,
+        "native_steps_per_s": native_rate,
+        "ratio": mjx_rate / native_rate,
+        "compile_s": compile_s,
+        "compile_cache_hits": clock.cache_hits,
+        "first_call_s": first_s,
+        "mjx_runs_s": mjx_s,
+        "native_runs_s": native_s,
+        "mjx_cpu_us_per_step": mjx_cpu,
+        "native_cpu_us_per_step": native_cpu,
+        "cpu_ratio": native_cpu / mjx_cpu,
+        "peak_rss_mb": peak_rss_mb(),
+        "devices": len(sim.devices),
+        "device_kind": sim.devices[0].platform,
+        "native_threads": threads,
+        "chunk": min(chunk, -(-num // len(sim.devices))),
+        "cpu_count": os.cpu_count(),
+        "diverged": int(np.asarray(final.diverged).sum()),
+        "mjx_final_base_height_m": float(np.median(qpos[:, 2])),
+        "jax": jax.__version__,
+        "python": platform.python_version(),
+    }
+    if native_s:
+        record["native_final_base_height_m"] = float(np.median(native_qpos[:, 2]))
+        record["max_final_qpos_gap"] = float(np.abs(native_qpos - qpos).max())
+    import mujoco
+
+    record["mujoco"] = mujoco.__version__
+    return record
+
+
+def format_table(record: dict) -> str:
+    rows = [
+        ("instances x steps", f"{record['num']} x {record['steps']}  (controller {record['controller']})"),
+        ("MJX steps/s", f"{record['mjx_steps_per_s']:,.0f}  on {record['devices']} {record['device_kind']} device(s)"),
+        ("native steps/s", f"{record['native_steps_per_s']:,.0f}  mujoco.rollout, {record['native_threads']} thread(s)"),
+        ("ratio MJX / native", f"{record['ratio']:.2f}"),
+        ("CPU us per step", f"MJX {record['mjx_cpu_us_per_step']:.2f}, native {record['native_cpu_us_per_step']:.2f}  "
+                            f"(ratio {record['cpu_ratio']:.2f})"),
+        ("compile", f"{record['compile_s']:.1f} s  ({record['compile_cache_hits']} persistent-cache hit(s))"),
+        ("peak RSS", f"{record['peak_rss_mb']:,.0f} MB"),
+        ("diverged instances", f"{record['diverged']}"),
+    ]
+    if "max_final_qpos_gap" in record:
+        rows.append(("final qpos, max |MJX - native|", f"{record['max_final_qpos_gap']:.2e}"))
+    width = max(len(k) for k, _ in rows)
+    return "\n".join(f"{k:<{width}}  {v}" for k, v in rows)
+
+
+# -- scaling --------------------------------------------------------------------
+
+
+def scaling(nums: list[int], steps: int, extra_args: list[str]) -> list[dict]:
+    """One fresh process per N, so that each peak RSS and compile time is that N's own."""
+    records = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for num in nums:
+            out = Path(tmp) / f"{num}.json"
+            cmd = [sys.executable, "-m", "hopper_mjx.bench", "--num", str(num), "--steps", str(steps),
+                   "--json", str(out), *extra_args]
+            subprocess.run(cmd, check=True)
+            records.append(json.loads(out.read_text()))
+    return records
+
+
+def markdown_table(records: list[dict]) -> str:
+    lines = [
+        "| N | MJX steps/s | native steps/s | ratio | compile s | peak RSS MB |",
+        "|---:|---:|---:|---:|---:|---:|",
+    ]
+    for r in records:
+        lines.append(
+            f"| {r['num']} | {r['mjx_steps_per_s']:,.0f} | {r['native_steps_per_s']:,.0f} | "
+            f"{r['ratio']:.2f} | {r['compile_s']:.1f} | {r['peak_rss_mb']:,.0f} |"
+        )
+    return "\n".join(lines)
+
+
+def plot_scaling(records: list[dict], path: str) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    nums = [r["num"] for r in records]
+    fig, (rate, ratio) = plt.subplots(1, 2, figsize=(10, 4))
+    rate.loglog(nums, [r["mjx_steps_per_s"] for r in records], "o-", label=f"MJX, {records[0]['devices']} devices")
+    rate.loglog(nums, [r["native_steps_per_s"] for r in records], "s-",
+                label=f"native mujoco.rollout, {records[0]['native_threads']} threads")
+    rate.set_xlabel("instances N")
+    rate.set_ylabel("steps/s")
+    rate.legend()
+    rate.grid(True, which="both", alpha=0.3)
+    ratio.semilogx(nums, [r["ratio"] for r in records], "o-")
+    ratio.axhline(1.0, color="gray", linestyle="--")
+    ratio.set_xlabel("instances N")
+    ratio.set_ylabel("MJX / native")
+    ratio.grid(True, which="both", alpha=0.3)
+    fig.suptitle(f"monoped, {records[0]['steps']} steps, controller {records[0]['controller']}")
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+
+
+def parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="python -m hopper_mjx.bench", description=__doc__,
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--num", type=int, default=4096, help="instances N")
+    p.add_argument("--steps", type=int, default=1000, help="physics steps T per instance (multiple of 20)")
+    p.add_argument("--controller", default="hold", help="hold (PD to the initial angles) or none")
+    p.add_argument("--chunk", type=int, default=256, help="instances per vmapped chunk on a device")
+    p.add_argument("--repeat", type=int, default=2, help="timed runs per side; the best counts")
+    p.add_argument("--threads", type=int, default=None, help="native threads (default: one per device)")
+    p.add_argument("--timestep", type=float, default=1e-3, help="physics step, s")
+    p.add_argument("--json", default=None, help="write the record (or the scaling records) here")
+    p.add_argument("--scaling", default=None, help="comma-separated N values: one bench process each")
+    p.add_argument("--plot", default=None, help="with --scaling: save the scaling plot (PNG) here")
+    return p
+
+
+def main(argv=None) -> int:
+    args = parser().parse_args(argv)
+    runtime.configure()
+    try:
+        if args.scaling:
+            nums = [int(v) for v in args.scaling.split(",") if v.strip()]
+            passed = ["--controller", args.controller, "--chunk", str(args.chunk), "--repeat", str(args.repeat),
+                      "--timestep", str(args.timestep)] + (["--threads", str(args.threads)] if args.threads else [])
+            records = scaling(nums, args.steps, passed)
+            print(markdown_table(records))
+            if args.plot:
+                plot_scaling(records, args.plot)
+            result = records
+        else:
+            result = run(args.num, args.steps, controller=args.controller, chunk=args.chunk,
+                         repeat=args.repeat, threads=args.threads, timestep=args.timestep)
+            print(format_table(result))
+    except ValueError as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 2
+    if args.json:
+        Path(args.json).write_text(json.dumps(result, indent=2) + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

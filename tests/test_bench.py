@@ -1,0 +1,74 @@
+"""bench at a tiny size: a well-formed, physically sensible record (never any timing assertion)."""
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from hopper_mjx import bench
+
+
+@pytest.fixture(scope="module")
+def record(tmp_path_factory):
+    path = tmp_path_factory.mktemp("bench") / "bench.json"
+    assert bench.main(["--num", "4", "--steps", "20", "--repeat", "1", "--json", str(path)]) == 0
+    return json.loads(path.read_text())
+
+
+def test_json_has_finite_positive_rates(record):
+    for key in ("mjx_steps_per_s", "native_steps_per_s", "ratio", "compile_s", "peak_rss_mb",
+                "mjx_cpu_us_per_step", "native_cpu_us_per_step", "cpu_ratio"):
+        assert math.isfinite(record[key]) and record[key] > 0, key
+    assert record["num"] == 4 and record["steps"] == 20
+    assert record["ratio"] == pytest.approx(record["mjx_steps_per_s"] / record["native_steps_per_s"])
+    assert record["devices"] >= 1 and record["native_threads"] >= 1
+    assert record["diverged"] == 0
+
+
+def test_mjx_and_native_step_the_same_physics(record):
+    # 20 ms of free fall from 5 cm: both sides must agree to float32 precision (MJX runs float32).
+    assert record["max_final_qpos_gap"] < 1e-4
+    assert record["native_final_base_height_m"] == pytest.approx(record["mjx_final_base_height_m"], abs=1e-5)
+
+
+def test_native_hold_model_is_the_hold_law(mj_model):
+    import mujoco
+
+    from hopper_mjx.control.base import HOLD_GAINS
+    from hopper_mjx.model.layout import Layout
+
+    layout = Layout.of(mj_model)
+    m = bench.native_hold_model(mj_model, layout, **HOLD_GAINS)
+    d = mujoco.MjData(m)
+    qadr, dadr = list(layout.joint_qpos), list(layout.joint_dof)
+    d.qpos[qadr] = (0.01, 0.3, -0.5)
+    d.qvel[dadr] = (0.2, -1.0, 0.5)
+    target = np.array([0.0, 0.32, -0.2])  # the knee error saturates its motor
+    d.ctrl[list(layout.actuator_of_joint)] = target
+    mujoco.mj_forward(m, d)
+    expected = np.clip(HOLD_GAINS["p"] * (target - d.qpos[qadr]) - HOLD_GAINS["d"] * d.qvel[dadr],
+                       -np.array(layout.effort_limit), layout.effort_limit)
+    np.testing.assert_allclose(d.actuator_force[list(layout.actuator_of_joint)], expected, rtol=1e-12)
+    assert np.any(np.abs(expected) == np.array(layout.effort_limit))  # the saturation is exercised
+
+
+def test_gravities_span_moon_to_earth():
+    g = bench.bench_gravities(200)
+    assert g.shape == (200,) and g.min() == pytest.approx(1.62) and g.max() == pytest.approx(9.81)
+    assert len(np.unique(g)) == bench.DISTINCT_GRAVITIES
+    with pytest.raises(ValueError, match="--num"):
+        bench.bench_gravities(0)
+
+
+def test_table_and_plot_from_records(record, tmp_path):
+    table = bench.markdown_table([record, record])
+    assert table.count("\n") == 3 and f"| {record['num']} |" in table
+    png = tmp_path / "scaling.png"
+    bench.plot_scaling([record, dict(record, num=8)], str(png))
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_bad_arguments_exit_with_a_message(capsys):
+    assert bench.main(["--num", "0", "--steps", "20"]) == 2
+    assert "--num" in capsys.readouterr().err
