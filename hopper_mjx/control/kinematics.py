@@ -34,7 +34,11 @@ class LegGeometry:
     shank: float  # kfe -> foot centre
     foot_radius: float
     standing_height: float  # base height at rest: default stance, foot on the floor
-    com_ahead_of_haa: float  # x of the whole-robot COM from the haa axis, standing (base frame)
+    # Mass (kg) and centre of mass (m, in the link's frame at zero angles, from its
+    # joint axis; for the base from the haa axis point) of base, hip, thigh, shank+foot.
+    link_mass: tuple[float, ...]
+    link_com: tuple[tuple[float, float, float], ...]
+    link_inertia: tuple[tuple[float, float, float], ...]  # kg·m², principal, about each link's COM
 
     @classmethod
     def of(cls, m: mujoco.MjModel) -> "LegGeometry":
@@ -42,21 +46,35 @@ class LegGeometry:
         from hopper_mjx.sim import Sim  # the stance pose is the core's definition
 
         layout = Layout.of(m)
-        stance = Sim(m).stance_qpos(clearance=0.0)
         d = mujoco.MjData(m)
-        d.qpos[:] = stance
-        mujoco.mj_kinematics(m, d)
-        mujoco.mj_comPos(m, d)
-        haa, hfe = (m.joint(name) for name in ("haa_joint", "hfe_joint"))
-        base = d.xpos[m.jnt_bodyid[0]]
+        mujoco.mj_kinematics(m, d)  # reference pose: every joint at zero, frames aligned
+        joints = [m.joint(name) for name in ("haa_joint", "hfe_joint", "kfe_joint")]
+        anchor = [d.xanchor[j.id].copy() for j in joints]
+        base = int(m.jnt_bodyid[0])
+        groups = [[base]] + [[int(j.bodyid[0])] for j in joints]
+        groups[-1] += [b for b in range(m.nbody) if b not in sum(groups, []) and m.body_rootid[b] == base]
+        mass = [float(m.body_mass[g].sum()) for g in groups]
+        com = [(m.body_mass[g][:, None] * d.xipos[g]).sum(axis=0) / mm for g, mm in zip(groups, mass)]
+        # Each group's inertia about its own COM (parallel-axis), frames aligned at zero angles.
+        inertia = []
+        for g, c in zip(groups, com):
+            total = np.zeros((3, 3))
+            for b in g:
+                rot = d.ximat[b].reshape(3, 3)
+                r = d.xipos[b] - c
+                total += rot @ np.diag(m.body_inertia[b]) @ rot.T + m.body_mass[b] * (r @ r * np.eye(3) - np.outer(r, r))
+            inertia.append(tuple(float(v) for v in np.diag(total)))
+        origin = [anchor[0]] + anchor  # the base's COM is taken from the haa axis point too
         return cls(
-            haa_below_base=float(np.linalg.norm(d.xanchor[haa.id] - base)),
-            hfe_below_haa=float(np.linalg.norm(d.xanchor[hfe.id] - d.xanchor[haa.id])),
+            haa_below_base=float(np.linalg.norm(anchor[0] - d.xpos[base])),
+            hfe_below_haa=float(np.linalg.norm(anchor[1] - anchor[0])),
             thigh=layout.thigh,
             shank=layout.shank,
             foot_radius=layout.foot_radius,
-            standing_height=float(stance[2]),
-            com_ahead_of_haa=float(d.subtree_com[0, 0] - d.xanchor[haa.id][0]),
+            standing_height=float(Sim(m).stance_qpos(clearance=0.0)[2]),
+            link_mass=tuple(mass),
+            link_com=tuple(tuple(float(v) for v in c - o) for c, o in zip(com, origin)),
+            link_inertia=tuple(inertia),
         )
 
     def matches(self, layout: Layout) -> bool:
@@ -103,12 +121,83 @@ def leg_length_rate(leg: LegGeometry, kfe: jax.Array, kfe_rate: jax.Array) -> ja
     return leg_length_gradient(leg, kfe) * kfe_rate
 
 
+def rot_x(angle: jax.Array, v: jax.Array) -> jax.Array:
+    c, s = jnp.cos(angle), jnp.sin(angle)
+    return jnp.stack([v[0], c * v[1] - s * v[2], s * v[1] + c * v[2]])
+
+
+def rot_y(angle: jax.Array, v: jax.Array) -> jax.Array:
+    c, s = jnp.cos(angle), jnp.sin(angle)
+    return jnp.stack([c * v[0] + s * v[2], v[1], -s * v[0] + c * v[2]])
+
+
+def _chain(leg: LegGeometry, q: jax.Array, thigh_point: jax.Array, shank_point: jax.Array):
+    """Points fixed in the thigh and shank (frames at their joint axes) -> base frame, from haa."""
+    hip = jnp.array([0.0, 0.0, -leg.hfe_below_haa])
+    knee = jnp.array([0.0, 0.0, -leg.thigh])
+    thigh = rot_x(q[0], hip + rot_y(q[1], thigh_point))
+    shank = rot_x(q[0], hip + rot_y(q[1], knee + rot_y(q[2], shank_point)))
+    return thigh, shank
+
+
 def foot_position(leg: LegGeometry, q: jax.Array) -> jax.Array:
     """Foot centre (3,) relative to the haa axis point, base frame; q = (haa, hfe, kfe)."""
-    haa, hfe, kfe = q[0], q[1], q[2]
-    x = -leg.thigh * jnp.sin(hfe) - leg.shank * jnp.sin(hfe + kfe)
-    z = -leg.hfe_below_haa - leg.thigh * jnp.cos(hfe) - leg.shank * jnp.cos(hfe + kfe)
-    return jnp.stack([x, -z * jnp.sin(haa), z * jnp.cos(haa)])
+    return _chain(leg, q, jnp.zeros(3), jnp.array([0.0, 0.0, -leg.shank]))[1]
+
+
+def _link_points(leg: LegGeometry, q: jax.Array) -> jax.Array:
+    """COMs (4, 3) of base, hip, thigh, shank+foot relative to the haa axis point, base frame."""
+    base, hip, thigh, shank = (jnp.asarray(c) for c in leg.link_com)
+    thigh, shank = _chain(leg, q, thigh, shank)
+    return jnp.stack([base, rot_x(q[0], hip), thigh, shank])
+
+
+def com_position(leg: LegGeometry, q: jax.Array) -> jax.Array:
+    """Whole-robot centre of mass (3,) relative to the haa axis point, base frame."""
+    mass = jnp.asarray(leg.link_mass)
+    return mass @ _link_points(leg, q) / mass.sum()
+
+
+def angular_momentum(leg: LegGeometry, q: jax.Array, qd: jax.Array, gyro: jax.Array) -> jax.Array:
+    """Whole-robot angular momentum (3,) about its COM, base frame (kg·m²/s).
+
+    q, qd: joint angles and rates (haa, hfe, kfe); gyro: base angular velocity, base frame.
+    This is what the robot keeps through a flight: with the joints held, it spins at
+    about H / (whole-robot inertia).
+    """
+    mass = jnp.asarray(leg.link_mass)
+    points, rates = jax.jvp(lambda a: _link_points(leg, a), (q,), (qd,))
+    com = mass @ points / mass.sum()
+    com_rate = mass @ rates / mass.sum()
+    # Velocities relative to the COM in the (rotating) base frame.
+    rel = points - com
+    vel = rates - com_rate + jnp.cross(gyro, rel)
+    orbital = (mass[:, None] * jnp.cross(rel, vel)).sum(axis=0)
+    ex, ey = jnp.array([1.0, 0.0, 0.0]), jnp.array([0.0, 1.0, 0.0])
+    hip_w = gyro + qd[0] * ex
+    side = rot_x(q[0], ey)
+    thigh_w = hip_w + qd[1] * side
+    shank_w = thigh_w + qd[2] * side
+    def spin(inertia, rotate, w):  # I·w for a link whose principal axes are turned by `rotate`
+        return rotate(inertia * rotate(w, inverse=True))
+
+    hip_axes = lambda v, inverse=False: rot_x(-q[0] if inverse else q[0], v)
+
+    def limb_axes(angle):
+        def rotate(v, inverse=False):
+            if inverse:
+                return rot_y(-angle, rot_x(-q[0], v))
+            return rot_x(q[0], rot_y(angle, v))
+        return rotate
+
+    inertia = [jnp.asarray(i) for i in leg.link_inertia]
+    spin_total = (
+        inertia[0] * gyro
+        + spin(inertia[1], hip_axes, hip_w)
+        + spin(inertia[2], limb_axes(q[1]), thigh_w)
+        + spin(inertia[3], limb_axes(q[1] + q[2]), shank_w)
+    )
+    return orbital + spin_total
 
 
 def jacobian(leg: LegGeometry, q: jax.Array) -> jax.Array:

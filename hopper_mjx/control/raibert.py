@@ -1,42 +1,47 @@
 """Raibert's three-part hopping controller for the articulated haa/hfe/kfe leg.
 
 The leg is treated as Raibert's telescopic leg through its *virtual leg* (hfe
-axis -> foot, see `kinematics`): its length is set by the knee alone, so a leg
-force f maps to joint torques by the Jacobian transpose, τ = f·∂L/∂q (knee only),
-and the hips stay free for attitude and foot placement. Every gravity-dependent
-quantity uses the instance's own g.
+axis -> foot, see `kinematics`): its length is set by the knee alone. In stance
+the desired floor push (along the foot -> COM line, so that it does not spin the
+robot) maps to joint torques through the Jacobian transpose, τ = -J^T·F.
 
 Phases (driven by foot contact and the virtual leg length L / rate L̇):
 
-    FLIGHT       joint PD (the seed's position controllers' p, d) to the IK target
-                 of the foot placement below; the leg is shortened by `retract`
-                 while the body rises, for ground clearance.
+    FLIGHT       joint PD (the shipped position controllers' p, d) to the IK
+                 target of the foot placement below.
     COMPRESSION  touchdown -> L̇ >= 0: a virtual spring-damper along the leg,
                  stiffness k = m·g/sag; hip torques servo body pitch and roll.
     THRUST       bottom -> L = leg_length: the spring plus a constant extra force
                  that supplies the energy still missing for the commanded apex.
-    UNLOADING    L = leg_length -> lift-off: no leg force, no hip torque.
+    UNLOADING    L = leg_length -> lift-off: the joints are braked, no push.
 
 Part 1, hop height: at the bottom the controller has m·g·z + ½m·ż² + ½k·ΔL²; the
-thrust force adds W = m·g·(z_apex - z) - ½m·ż² - ½k·ΔL² over the remaining stroke.
-The apex target is the standing height + command + a bias adapted hop by hop
-from the measured apex (it absorbs the energy lost when the unsprung leg is
-jerked off the floor and the body's share of the COM motion).
+thrust adds W = m·g·(z_apex - z) - ½m·ż² - ½k·ΔL² over the remaining stroke. The
+apex target is the standing height + command + a bias adapted hop by hop from
+the measured apex (it absorbs the energy lost when the leg is jerked off the floor).
 
-Part 2, speed: at touchdown the foot is placed (relative to the COM, world axes)
-at x_f = v·T_s/2 + k_v·(v - v_d) + x_i in x and y, with T_s the last measured stance
-time and k_v = speed_gain·L/(g·T_s): over one stance the COM's horizontal
-velocity changes by about -g·T_s·x/L, so `speed_gain` is the fraction of the
-speed error removed per hop at any gravity. x_i integrates the residual error
-hop by hop (`speed_integral`), absorbing the neutral-point model error.
-Lateral placement uses haa, so the robot balances in 3-D.
+Part 2, speed: the foot is placed (from the COM, in the heading frame) at
+x_f = v·T_s/2 + k_v·(v - v_ref) + x_i in x and y, with v the COM velocity, T_s the
+last measured stance time, k_v = speed_gain·L/(g·T_s) (over a stance the COM's
+speed changes by about -g·T_s·x_f/L, so `speed_gain` is the fraction of the error
+removed per hop), x_i a per-hop integral of the error, and v_ref a reference that
+ramps to the command by `speed_step` per hop. Lateral placement
+uses haa. The hip targets account for the body's tilt and for how the body
+will turn back as the leg swings (see `_placement_angles`): this leg is as heavy
+in rotation as the body, so a world-fixed target chased naively in flight swings
+the body away, and the target with it.
 
-Part 3, attitude: during compression and thrust, τ_hfe = kp·pitch + kd·ω_y and
-τ_haa = kp·roll + kd·ω_x (the joint pushes the body the other way).
+Part 3, attitude: in compression and thrust, τ_hfe = (g/9.81)·kp·pitch + kd·H_y/I_y
+and τ_haa likewise with roll, H being the whole robot's angular momentum about
+its COM and I its inertia at the default stance. Damping H rather than the body's
+rate matters because H at lift-off is how fast the robot tumbles through the
+flight. The stiffness scales with g: leveling the body pushes the robot
+sideways through the foot, and what undoes that push, leaning over the foot
+placed in flight, works in proportion to g.
 
-Contact is read inside `act` from the MJX contact rows of the foot (distance < 0),
-the same definition as `hopper_mjx.signals.contact`; like the controller's other
-sensors it is one physics step (1 ms) old.
+Every gravity-dependent quantity uses the instance's own g. Contact is read in
+`act` from the MJX contact rows of the foot (distance < 0), the definition of
+`hopper_mjx.signals.contact`; like the joint readings it is one step (1 ms) old.
 """
 
 from __future__ import annotations
@@ -59,7 +64,9 @@ from hopper_mjx.model.layout import Layout
 FLIGHT, COMPRESSION, THRUST, UNLOADING = 0, 1, 2, 3
 PHASES = ("flight", "compression", "thrust", "unloading")
 MIN_PHASE_TIME = 0.01  # s in flight / stance before contact may end it (debounce)
+EARTH_GRAVITY = 9.81  # m/s², where the attitude stiffness holds as given
 MIN_GRAVITY = 0.1  # m/s², floor under g in the formulas (g = 0 has no hops)
+STANCE_HFE, STANCE_KFE = 0.5, -0.95  # rad, the core's default stance (for the robot's inertia)
 MAX_PLACEMENT = 0.25  # m, bound on the foot placement from the COM
 
 
@@ -68,16 +75,18 @@ class RaibertConfig:
     """Gains of the three-part controller; all may be overridden per instance."""
 
     leg_length: float = 0.64  # m, virtual leg length at touchdown and lift-off
-    retract: float = 0.04  # m the leg is shortened while rising in flight
+    retract: float = 0.0  # m the leg is shortened while rising in flight
     sag: float = 0.025  # m, static compression of the virtual spring under m·g (k = m·g/sag)
     damping_ratio: float = 0.1  # of the virtual spring during compression
     height_adapt: float = 0.5  # fraction of the apex error added to the apex target per hop
-    speed_gain: float = 0.3  # fraction of the speed error removed per stance (see k_v)
+    speed_gain: float = 0.15  # fraction of the speed error removed per stance (sets k_v, see above)
+    swing_compensation: float = 0.0  # 0..1, how far flight hip targets allow for tilt and swing reaction
+    speed_step: float = 0.05  # m/s per hop: the speed reference ramps to the command at this rate
     speed_integral: float = 0.2  # fraction of k_v·(v - v_d) accumulated into the placement per hop
-    pitch_kp: float = 150.0  # N·m/rad, stance hfe servo on body pitch
-    pitch_kd: float = 12.0  # N·m·s/rad
-    roll_kp: float = 150.0  # N·m/rad, stance haa servo on body roll
-    roll_kd: float = 12.0  # N·m·s/rad
+    pitch_kp: float = 150.0  # N·m/rad at g = 9.81 (x g/9.81), stance hfe servo on body pitch
+    pitch_kd: float = 200.0  # N·m·s/rad, on the whole robot's pitch rate H_y / I_y
+    roll_kp: float = 150.0  # N·m/rad at g = 9.81 (x g/9.81), stance haa servo on body roll
+    roll_kd: float = 200.0  # N·m·s/rad, on H_x / I_x
 
 
 def default_config() -> RaibertConfig:
@@ -92,10 +101,11 @@ class RaibertState(NamedTuple):
     params: dict  # "height" () m, "speed" (2,) m/s, and every RaibertConfig field
     phase: jax.Array  # int32, one of FLIGHT..UNLOADING
     phase_start: jax.Array  # s, simulation time the phase began
-    stance_time: jax.Array  # s, last measured stance duration
+    stance_time: jax.Array  # s, last measured stance duration (0 before the first)
     apex: jax.Array  # m, highest base height of the current flight
     height_bias: jax.Array  # m added to the apex target (adapted per hop)
     speed_offset: jax.Array  # (2,) m, integral part of the foot placement
+    speed_reference: jax.Array  # (2,) m/s, ramping towards the commanded speed
     thrust_force: jax.Array  # N, the extra leg force of this thrust
     work: jax.Array  # J, ∫ Σ|τ·q̇| dt of the three motors (for the cost of transport)
 
@@ -159,6 +169,8 @@ def raibert(layout: Layout, config: RaibertConfig | None = None, *, leg: LegGeom
     qadr, dadr = jnp.asarray(layout.joint_qpos), jnp.asarray(layout.joint_dof)
     flight_gains = pid.gains_of()._replace(i=jnp.zeros(3))  # the seed's position controllers, PD only
     mass, dt = layout.total_mass, layout.timestep
+    stance = jnp.array([0.0, STANCE_HFE, STANCE_KFE])
+    robot_inertia = jax.vmap(lambda axis: kinematics.angular_momentum(leg, stance, jnp.zeros(3), axis))(jnp.eye(3)).diagonal()
     defaults = {k: v[0] for k, v in raibert_params(1, height=DEFAULT_HEIGHT, config=config).items()}
 
     def init(data, params):
@@ -168,10 +180,11 @@ def raibert(layout: Layout, config: RaibertConfig | None = None, *, leg: LegGeom
             params=params,
             phase=jnp.int32(FLIGHT),
             phase_start=jnp.asarray(data.time, dtype=jnp.float32),
-            stance_time=jnp.float32(math.pi) * jnp.sqrt(params["sag"] / 9.81),  # replaced after one hop
+            stance_time=jnp.float32(0.0),  # none measured yet
             apex=jnp.asarray(data.qpos[2], dtype=jnp.float32),
             height_bias=jnp.float32(0.0),
             speed_offset=jnp.zeros(2, dtype=jnp.float32),
+            speed_reference=jnp.zeros(2, dtype=jnp.float32),
             thrust_force=jnp.float32(0.0),
             work=jnp.float32(0.0),
         )
@@ -180,7 +193,12 @@ def raibert(layout: Layout, config: RaibertConfig | None = None, *, leg: LegGeom
         p = s.params
         g = jnp.maximum(jnp.linalg.norm(gravity), MIN_GRAVITY)
         q, qd = data.qpos[qadr], data.qvel[dadr]
-        z, zdot, v = data.qpos[2], data.qvel[2], data.qvel[:2]
+        z, zdot = data.qpos[2], data.qvel[2]
+        # Horizontal velocity of the COM (constant through a flight, unlike the base's).
+        gyro = data.qvel[3:6]
+        com, com_rate = jax.jvp(lambda a: kinematics.com_position(leg, a), (q,), (qd,))
+        from_base = com + jnp.array([0.0, 0.0, -leg.haa_below_base])
+        v = (data.qvel[:3] + bmath.rotate(jnp.cross(gyro, from_base) + com_rate, data.qpos[3:7]))[:2]
         roll, pitch = _tilt(data.qpos[3:7])
         length = kinematics.leg_length(leg, q[2])
         length_rate = kinematics.leg_length_rate(leg, q[2], qd[2])
@@ -211,35 +229,55 @@ def raibert(layout: Layout, config: RaibertConfig | None = None, *, leg: LegGeom
         thrust_force = jnp.where(bottom, jnp.maximum(needed, 0.0) / jnp.maximum(squeeze, 0.02), s.thrust_force)
 
         # Part 2 bookkeeping: stance time at lift-off, the placement integral at touchdown.
-        stance_time = jnp.where(liftoff, elapsed, s.stance_time)
+        # Before the first lift-off: half a period of the virtual spring-mass.
+        stance_time = jnp.where(s.stance_time > 0, s.stance_time, math.pi * jnp.sqrt(p["sag"] / g))
+        stance_time = jnp.where(liftoff, elapsed, stance_time)
         speed_gain = p["speed_gain"] * p["leg_length"] / (g * stance_time)
+        step = jnp.clip(p["speed"] - s.speed_reference, -p["speed_step"], p["speed_step"])
+        speed_reference = jnp.where(touchdown, s.speed_reference + step, s.speed_reference)
+        speed_error = v - speed_reference
         speed_offset = jnp.where(
             touchdown,
-            jnp.clip(s.speed_offset + p["speed_integral"] * speed_gain * (v - p["speed"]), -0.1, 0.1),
+            jnp.clip(s.speed_offset + p["speed_integral"] * speed_gain * speed_error, -0.1, 0.1),
             s.speed_offset,
         )
         apex = jnp.where(liftoff, z, jnp.where(phase == FLIGHT, jnp.maximum(s.apex, z), s.apex))
 
-        # -- stance: virtual leg force through J^T, hip attitude servo ---------
+        # -- stance: leg force through J^T, hip attitude servo -------------------
+        # The floor's push is aimed at the COM (not the hip), so that it does not
+        # spin the robot; the spring acts on the virtual leg length.
         spring = stiffness * (p["leg_length"] - length)
         damping = 2.0 * p["damping_ratio"] * jnp.sqrt(stiffness * mass) * length_rate
         leg_force = jnp.select(
             [phase == COMPRESSION, phase == THRUST], [spring - damping, spring + thrust_force], 0.0
         )
         leg_force = jnp.maximum(leg_force, 0.0)  # a foot can only push on the floor
+        foot = kinematics.foot_position(leg, q)
+        to_com = com - foot
+        floor_push = leg_force * to_com / jnp.linalg.norm(to_com)
         servo = (phase == COMPRESSION) | (phase == THRUST)
-        gyro = data.qvel[3:6]
-        stance_torque = jnp.stack([
-            jnp.where(servo, p["roll_kp"] * roll + p["roll_kd"] * gyro[0], 0.0),
-            jnp.where(servo, p["pitch_kp"] * pitch + p["pitch_kd"] * gyro[1], 0.0),
-            leg_force * kinematics.leg_length_gradient(leg, q[2]),
-        ])
+        # The damping acts on the whole robot's rotation rate H / I, not the body's:
+        # the leg carries as much angular momentum as the body, and what H is at
+        # lift-off is how fast the robot will tumble through the flight.
+        # The stiffness scales with g: leveling the body in stance pushes the robot
+        # sideways through the foot, and what undoes that push, the lean over the
+        # foot placed in flight, works in proportion to g.
+        spin = kinematics.angular_momentum(leg, q, qd, gyro) / robot_inertia
+        lean = g / EARTH_GRAVITY
+        attitude = jnp.stack([lean * p["roll_kp"] * roll + p["roll_kd"] * spin[0],
+                              lean * p["pitch_kp"] * pitch + p["pitch_kd"] * spin[1], 0.0])
+        brake = -flight_gains.d * qd  # unloading: let the joints coast to rest, no push
+        stance_torque = jnp.where(
+            phase == UNLOADING, brake,
+            -kinematics.jacobian(leg, q).T @ floor_push + jnp.where(servo, attitude, 0.0),
+        )
 
         # -- flight: foot placement by IK, joint PD -----------------------------
-        placement = v * stance_time / 2 + speed_gain * (v - p["speed"]) + speed_offset
+        placement = v * stance_time / 2 + speed_gain * speed_error + speed_offset
         placement = jnp.clip(placement, -MAX_PLACEMENT, MAX_PLACEMENT)
         flight_length = p["leg_length"] - jnp.where(zdot > 0, p["retract"], 0.0)
-        target = _placement_angles(leg, data.qpos[3:7], placement, flight_length)
+        target = _placement_angles(leg, data.qpos[3:7], q, placement, flight_length, com,
+                                   p["swing_compensation"])
         flight_torque, _ = pid.effort(flight_gains, target - q, -qd, jnp.zeros(3), dt)
 
         ctrl = clip_to_limits(layout, jnp.where(phase == FLIGHT, flight_torque, stance_torque))
@@ -252,6 +290,7 @@ def raibert(layout: Layout, config: RaibertConfig | None = None, *, leg: LegGeom
             apex=apex,
             height_bias=height_bias,
             speed_offset=speed_offset,
+            speed_reference=speed_reference,
             thrust_force=thrust_force,
             work=s.work + jnp.abs(torque * qd).sum() * dt,
         )
@@ -260,13 +299,31 @@ def raibert(layout: Layout, config: RaibertConfig | None = None, *, leg: LegGeom
     return Controller(name="raibert", init=init, act=act)
 
 
-def _placement_angles(leg: LegGeometry, quat: jax.Array, placement: jax.Array, length: jax.Array) -> jax.Array:
-    """Joint targets that put the foot `placement` (world x, y, m) from the COM with a
-    virtual leg of `length`, for the body's current attitude."""
-    below = length + leg.hfe_below_haa
-    in_body = bmath.rotate(jnp.stack([placement[0], placement[1], -below]), bmath.quat_inv(quat))
-    x = in_body[0] + leg.com_ahead_of_haa
-    y = in_body[1]
+def _placement_angles(leg: LegGeometry, quat: jax.Array, q: jax.Array, placement: jax.Array,
+                      length: jax.Array, com: jax.Array, compensation: jax.Array) -> jax.Array:
+    """Joint targets that put the foot `placement` (m along the heading frame's x and y)
+    from the COM (`com`, base frame from the haa axis) with a virtual leg of `length`,
+    by the time the leg has got there.
+
+    In flight the robot's angular momentum is fixed, so when a hip turns the leg
+    by Δ the body turns back by α·Δ, α = (leg's momentum per hip rate) / (robot's
+    inertia); this leg is as heavy in rotation as the body, so α ≈ 0.5. The target
+    that lands the foot where wanted despite that, hip_level being the angle for a
+    level body, is (hip_level - tilt - α·hip_now) / (1 - α): it stays put while the
+    leg swings, so the hip servo does not chase its own reaction.
+    """
+    rot = bmath.quat_to_3x3(quat)
+    heading = jnp.arctan2(rot[1, 0], rot[0, 0])
+    c, s = jnp.cos(heading), jnp.sin(heading)
+    x = c * placement[0] + s * placement[1] + com[0]
+    y = -s * placement[0] + c * placement[1] + com[1]
     down = jnp.sqrt(jnp.maximum(length**2 - x**2, 1e-4)) + leg.hfe_below_haa
     z = -jnp.sqrt(jnp.maximum(down**2 - y**2, 1e-4))
-    return kinematics.inverse(leg, jnp.stack([x, y, z]))
+    level = kinematics.inverse(leg, jnp.stack([x, y, z]))
+    roll, pitch = _tilt(quat)
+    eye = jnp.eye(3)
+    leg_momentum = jnp.stack([kinematics.angular_momentum(leg, q, eye[i], jnp.zeros(3))[i] for i in (0, 1)])
+    robot_inertia = jnp.stack([kinematics.angular_momentum(leg, q, jnp.zeros(3), eye[i])[i] for i in (0, 1)])
+    alpha = compensation * leg_momentum / robot_inertia  # (haa about x, hfe about y)
+    hips = (level[:2] - compensation * jnp.stack([roll, pitch]) - alpha * q[:2]) / (1.0 - alpha)
+    return jnp.concatenate([hips, level[2:]])
