@@ -33,6 +33,10 @@ AXIS = "instances"
 STANCE_HFE = 0.5  # rad: hip flexion of the default crouched stance
 CLEARANCE = 0.05  # m between the foot and the floor in the default initial state
 DIVERGED_SPEED = 1e6  # rad/s or m/s: beyond this a state is taken as diverged
+# XLA:CPU's newer fusion emitters recompute the chained body transforms of
+# mjx.kinematics inside each fused consumer; the classic emitters keep the step
+# ~35% cheaper here (docs/performance.md). Same arithmetic, so same results.
+CPU_COMPILER_OPTIONS = {"xla_cpu_use_fusion_emitters": False}
 
 _INTEGRATORS = {
     mujoco.mjtIntegrator.mjINT_EULER: mjx.euler,
@@ -223,7 +227,8 @@ class Sim:
                 out_specs=PartitionSpec(AXIS),
                 check_vma=False,
             )
-            self._compiled[cache_key] = jax.jit(sharded)
+            on_cpu = all(d.platform == "cpu" for d in self.devices)
+            self._compiled[cache_key] = jax.jit(sharded, compiler_options=CPU_COMPILER_OPTIONS if on_cpu else None)
         return self._compiled[cache_key]
 
 
