@@ -14,7 +14,9 @@ steps from the same initial state, instance i under the same gravity:
   saturated at the effort limits) runs inside MuJoCo's C step as affine-bias
   servo actuators with a constant target, so native pays for the same
   closed-loop control law without a Python callback. Native also computes its
-  native sensors and writes its full state every step.
+  native sensors and writes its full state every step. `--controller raibert`
+  has no C twin: MJX runs Raibert's hopping controller while native keeps the
+  hold law, which flatters native (cheaper control, fewer contact changes).
 
 Timings interleave the two sides and keep each side's best of `--repeat`
 runs, because the cores are shared and noise only ever adds time. The ratio
@@ -147,7 +149,7 @@ class CompileClock:
             self.cache_hits += 1
 
 
-def controller_pair(name: str, sim):
+def controller_pair(name: str, sim, gravity):
     """(MJX controller, params, native MjModel, native ctrl (nu,)) for a --controller value."""
     from hopper_mjx.control import base
 
@@ -160,7 +162,13 @@ def controller_pair(name: str, sim):
         return base.hold(layout), None, native_hold_model(sim.mj_model, layout, **gains), ctrl
     if name == "none":
         return base.zero_torque(layout), None, sim.mj_model, np.zeros(layout.nu)
-    raise ValueError(f"unknown controller {name!r}; choose from: hold, none")
+    if name == "raibert":  # no C twin: native keeps the (cheaper) hold law, see the module doc
+        from hopper_mjx.control import raibert
+
+        n = len(gravity)
+        params = raibert.raibert_params(n, height=raibert.DEFAULT_HEIGHT)
+        return (raibert.raibert(layout), params) + controller_pair("hold", sim, gravity)[2:]
+    raise ValueError(f"unknown controller {name!r}; choose from: hold, raibert, none")
 
 
 def timed(fn):
@@ -188,7 +196,7 @@ def run(num: int, steps: int, *, controller: str = "hold", chunk: int = 256, rep
     sim = Sim(model.load(timestep=timestep), chunk=chunk)
     threads = threads or len(sim.devices)
     gravity = gravity_vectors(bench_gravities(num))
-    mjx_controller, params, native_model, native_ctrl = controller_pair(controller, sim)
+    mjx_controller, params, native_model, native_ctrl = controller_pair(controller, sim, gravity)
     state0 = sim.reset(gravity, key=0, controller=mjx_controller, params=params)
     jax.block_until_ready(state0)
 
@@ -220,6 +228,7 @@ def run(num: int, steps: int, *, controller: str = "hold", chunk: int = 256, rep
         "num": num,
         "steps": steps,
         "controller": controller,
+        "native_controller": "none" if controller == "none" else "hold",
         "timestep": timestep,
         "mjx_steps_per_s": mjx_rate,
         "native_steps_per_s": native_rate,
@@ -243,7 +252,7 @@ def run(num: int, steps: int, *, controller: str = "hold", chunk: int = 256, rep
         "jax": jax.__version__,
         "python": platform.python_version(),
     }
-    if native_s:
+    if native_s and controller != "raibert":  # same law on both sides: same trajectories
         record["native_final_base_height_m"] = float(np.median(native_qpos[:, 2]))
         record["max_final_qpos_gap"] = float(np.abs(native_qpos - qpos).max())
     import mujoco
@@ -330,7 +339,8 @@ def parser() -> argparse.ArgumentParser:
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--num", type=int, default=4096, help="instances N")
     p.add_argument("--steps", type=int, default=1000, help="physics steps T per instance (multiple of 20)")
-    p.add_argument("--controller", default="hold", help="hold (PD to the initial angles) or none")
+    p.add_argument("--controller", default="hold",
+                   help="hold (PD to the initial angles), raibert (hopping; native keeps hold) or none")
     p.add_argument("--chunk", type=int, default=256, help="instances per vmapped chunk on a device")
     p.add_argument("--repeat", type=int, default=2, help="timed runs per side; the best counts")
     p.add_argument("--threads", type=int, default=None, help="native threads (default: one per device)")
