@@ -186,8 +186,8 @@ def _rows(gravity, speed, g, moving):
 
 
 # Targets the controller does not meet yet; measured in this very batch (docs/control.md).
-MOON_APEX = pytest.mark.xfail(strict=False, reason="Moon: hops 20 s without falling, but the apex rise is "
-                              "0.076 m for 0.10 commanded (-24 %, target ±15 %)")
+MOON_APEX = pytest.mark.xfail(strict=False, reason="Moon is marginal: one run hopped 20 s with an apex rise of "
+                              "0.076 m for 0.10 (-24 %, target ±15 %), another (same batch) fell")
 NO_SPEED_TRACKING = pytest.mark.xfail(strict=False, reason="falls within 3.8-6.8 s for every moving command: "
                                       "foot placement costs body tilt with this heavy leg (alpha ~ 0.5)")
 
@@ -247,7 +247,7 @@ def test_flight_follows_the_instances_own_gravity(hopping, mj_model):
 def test_metrics_of_the_hops_are_consistent(hopping):
     gravity, speed, final, traj, met = hopping
     ok = ~met["fell"]
-    assert ok.sum() >= 3
+    assert ok[np.isin(gravity, (9.81, 3.71)) & (speed == 0).all(axis=1)].all()  # Earth and Mars in place
     np.testing.assert_allclose(met["hop_period"][ok], met["flight_time"][ok] + met["stance_time"][ok], rtol=1e-6)
     assert np.all((met["duty_factor"][ok] > 0) & (met["duty_factor"][ok] < 1))
     assert np.all(met["hops_before_fall"] == met["hops"])

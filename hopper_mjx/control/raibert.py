@@ -143,6 +143,8 @@ def raibert_params(n: int, *, height, speed=(0.0, 0.0), config: RaibertConfig | 
     for name in ("leg_length", "sag"):
         if np.any(params[name] <= 0):
             raise ValueError(f"{name} must be > 0 m")
+    if np.any((params["swing_compensation"] < 0) | (params["swing_compensation"] > 1)):
+        raise ValueError("swing_compensation must be in [0, 1]")
     return params
 
 
