@@ -6,6 +6,9 @@ complete flight (its lift-off and touchdown both recorded) together with the
 stance before it, when that stance began inside the record. Per-hop values:
 
 - apex rise: highest base height in the flight minus the standing height (m);
+- flight rise: the same apex minus the base height at lift-off (m), the height of
+  the ballistic arc; `ballistic_flight_time` is 2·√(2·flight_rise/g) of each hop
+  (averaged like the rest), the flight time a point mass would need for that arc;
 - flight time (lift-off -> touchdown), stance time (touchdown -> lift-off),
   hop period (touchdown -> touchdown) in s, and duty factor = stance / period.
 
@@ -142,6 +145,9 @@ def hop_metrics(
     np.maximum.at(apex, slot.ravel(), z.ravel())
     apex = apex[:-1].reshape(n, width)
     rise = np.where(np.isfinite(apex), apex - standing_height, np.nan)
+    # Lift-off height, interpolated: the base moves fast there and the state stream may be coarse.
+    z_liftoff = np.stack([np.interp(liftoff[i], t_state, z[i]) for i in range(n)])
+    arc = np.where(np.isfinite(apex), apex - z_liftoff, np.nan)
 
     mean = lambda v: _last_mean(v, complete, last_hops)
     hops = complete.sum(axis=1)
@@ -167,6 +173,8 @@ def hop_metrics(
     return {
         "hops": hops,
         "apex_height": mean(rise),
+        "flight_rise": mean(arc),
+        "ballistic_flight_time": mean(2 * np.sqrt(np.maximum(arc, 0.0) * 2 / g[:, None])),
         "flight_time": mean(flight_time),
         "stance_time": mean(stance_time),
         "hop_period": mean(period),

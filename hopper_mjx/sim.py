@@ -105,7 +105,9 @@ class Sim:
         self.integrate = _INTEGRATORS[mujoco.mjtIntegrator(mj_model.opt.integrator)]
         self.devices = tuple(devices or jax.local_devices())
         self.mesh = Mesh(np.array(self.devices), (AXIS,))
-        self.model = jax.device_put(mjx.put_model(self._mjx_source), NamedSharding(self.mesh, PartitionSpec()))
+        # Placed on this process's devices (the default device may be another process's).
+        self.model = jax.device_put(mjx.put_model(self._mjx_source, device=self.devices[0]),
+                                    NamedSharding(self.mesh, PartitionSpec()))
         self.chunk = chunk
         self._compiled = {}
 
@@ -160,7 +162,7 @@ class Sim:
         qvel = np.broadcast_to(np.asarray(qvel, dtype=np.float32), (n, self.layout.nv))
         if not (np.isfinite(qpos).all() and np.isfinite(qvel).all()):
             raise ValueError("initial qpos/qvel must be finite")
-        data0 = mjx.make_data(self._mjx_source)
+        data0 = mjx.make_data(self._mjx_source, device=self.devices[0])
         data = jax.tree_util.tree_map(lambda x: jnp.broadcast_to(x, (n,) + x.shape), data0)
         data = data.replace(qpos=jnp.asarray(qpos), qvel=jnp.asarray(qvel))
         if not isinstance(key, jax.Array):

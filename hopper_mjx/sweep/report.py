@@ -73,7 +73,7 @@ def versions() -> dict:
 
 def table_text(spec: SweepSpec, groups: list[dict]) -> str:
     cols = [("g m/s²", "gravity", "{:.2f}"), ("", "label", "{}"), ("n", "n", "{}"), ("alive", "survival", "{:.0%}"),
-            ("hops", "hops", "{:.1f}"), ("apex m", "apex_height", "{:.3f}"), ("flight s", "flight_time", "{:.3f}"),
+            ("hops", "hops", "{:.1f}"), ("apex m", "apex_height", "{:.3f}"), ("arc m", "flight_rise", "{:.3f}"), ("flight s", "flight_time", "{:.3f}"),
             ("stance s", "stance_time", "{:.3f}"), ("period s", "hop_period", "{:.3f}"), ("duty", "duty_factor", "{:.2f}"),
             ("v m/s", "mean_speed", "{:+.2f}"), ("|v err|", "tracking_error", "{:.2f}"), ("CoT", "cost_of_transport", "{:.2f}")]
     if spec.kind == "gains":
@@ -107,9 +107,7 @@ def plot_gravity(path: Path, spec: SweepSpec, groups: list[dict]) -> None:
             ax.text(gp, 1.0, name, transform=ax.get_xaxis_transform(), ha="center", va="bottom", fontsize=7)
         ax.grid(alpha=0.3)
     axes[0, 0].axhline(spec.height, color="C3", ls="--", label="commanded")
-    gg = np.linspace(g.min(), g.max(), 200)
-    apex = np.interp(gg, g, val("apex_height"))
-    axes[0, 1].plot(gg, 2 * np.sqrt(2 * apex / gg), "C3--", label="ballistic 2√(2h/g), h = measured apex rise")
+    axes[0, 1].plot(g, val("ballistic_flight_time"), "C3x--", label="ballistic 2√(2h/g), h = each hop's measured rise")
     axes[0, 0].legend(fontsize=8)
     axes[0, 1].legend(fontsize=8)
     axes[1, 1].set_ylim(-0.05, 1.05)

@@ -25,10 +25,10 @@ from hopper_mjx.sim import Sim, gravity_vectors
 from hopper_mjx.sweep.grid import Instances, SweepSpec, expand
 
 MANIFEST = "manifest.json"
-COLUMNS = ("apex_height", "flight_time", "stance_time", "hop_period", "duty_factor", "mean_speed", "tracking_error",
+COLUMNS = ("apex_height", "flight_rise", "flight_time", "ballistic_flight_time", "stance_time", "hop_period", "duty_factor", "mean_speed", "tracking_error",
            "max_roll", "max_pitch", "hops", "fell", "diverged", "cost_of_transport")
-# Contact at the physics rate times touchdown and lift-off to the step; the rest is smooth enough at 100 Hz.
-SENSORS = signals.SensorConfig(imu_rate=100, odom_rate=100, contact_rate=1000, state_rate=100)
+# Contact and state at the physics rate: events, lift-off heights and apexes to the step (short flights too).
+SENSORS = signals.SensorConfig(imu_rate=100, odom_rate=100, contact_rate=1000, state_rate=1000)
 
 
 class ManifestMismatch(ValueError):
@@ -40,8 +40,9 @@ def claim(out: Path, spec: SweepSpec) -> None:
     path = out / MANIFEST
     if path.exists():
         saved = json.loads(path.read_text())
-        if saved != spec.to_json():
-            diff = {k: (saved.get(k), v) for k, v in spec.to_json().items() if saved.get(k) != v}
+        wanted = json.loads(json.dumps(spec.to_json()))  # tuples -> lists, as saved
+        if saved != wanted:
+            diff = {k: (saved.get(k), v) for k, v in wanted.items() if saved.get(k) != v}
             raise ManifestMismatch(
                 f"{out} holds a different sweep (differs in {', '.join(f'{k}: {a!r} -> {b!r}' for k, (a, b) in diff.items())}); "
                 "use another --out, or the same arguments to resume"
@@ -138,13 +139,20 @@ def run(spec: SweepSpec, out: Path, *, progress: bool = True) -> tuple[Instances
 
 def _gather_to_all(mine_rows: list[np.ndarray], chunks: list[np.ndarray], procs: int) -> list[np.ndarray]:
     """Every process's chunk rows, in chunk order, on every process (bit-exact)."""
-    from jax.experimental import multihost_utils
+    from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
     per_proc = -(-len(chunks) // procs)
-    width = len(COLUMNS)
-    block = np.full((per_proc, chunks[0].size, width), np.nan)
+    block = np.full((per_proc, chunks[0].size, len(COLUMNS)), np.nan)
     for j, rows in enumerate(mine_rows):
         block[j, : len(rows)] = rows
-    # float64 travels as uint32 pairs: JAX without x64 would round it to float32.
-    gathered = np.asarray(multihost_utils.process_allgather(block.view(np.uint32))).view(np.float64)
+    # A global array with one slice per process, replicated by a jitted identity: an
+    # all-gather over JAX's CPU collectives. float64 travels as uint32 pairs, since
+    # JAX without x64 would round it to float32.
+    devices = sorted(jax.devices(), key=lambda d: (d.process_index, d.id))
+    mesh = Mesh(np.array(devices).reshape(procs, -1), ("process", "local"))
+    local = jax.make_array_from_process_local_data(
+        NamedSharding(mesh, PartitionSpec("process")), block.view(np.uint32)[None]
+    )
+    everywhere = jax.jit(lambda x: x, out_shardings=NamedSharding(mesh, PartitionSpec()))(local)
+    gathered = np.asarray(everywhere.addressable_data(0)).view(np.float64)
     return [gathered[k % procs, k // procs, : len(chunks[k])] for k in range(len(chunks))]
