@@ -297,13 +297,14 @@ def scaling(nums: list[int], steps: int, extra_args: list[str]) -> list[dict]:
 
 def markdown_table(records: list[dict]) -> str:
     lines = [
-        "| N | MJX steps/s | native steps/s | ratio | compile s | peak RSS MB |",
-        "|---:|---:|---:|---:|---:|---:|",
+        "| N | MJX steps/s | native steps/s | ratio | CPU µs/step MJX / native | CPU ratio | compile s | peak RSS MB |",
+        "|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for r in records:
         lines.append(
-            f"| {r['num']} | {r['mjx_steps_per_s']:,.0f} | {r['native_steps_per_s']:,.0f} | "
-            f"{r['ratio']:.2f} | {r['compile_s']:.1f} | {r['peak_rss_mb']:,.0f} |"
+            f"| {r['num']} | {r['mjx_steps_per_s']:,.0f} | {r['native_steps_per_s']:,.0f} | {r['ratio']:.2f} | "
+            f"{r['mjx_cpu_us_per_step']:.1f} / {r['native_cpu_us_per_step']:.1f} | {r['cpu_ratio']:.2f} | "
+            f"{r['compile_s']:.1f} | {r['peak_rss_mb']:,.0f} |"
         )
     return "\n".join(lines)
 
