@@ -90,7 +90,7 @@ def train(args) -> dict:
     from hopper_mjx.control import policy
     from hopper_mjx.envs import MonopedConfig, MonopedEnv, randomize_gravity
 
-    out = Path(args.out)
+    out = Path(args.out).resolve()  # orbax writes checkpoints to absolute paths only
     out.mkdir(parents=True, exist_ok=True)
     devices = jax.local_device_count()
     if args.num_envs % devices:
@@ -203,12 +203,17 @@ def evaluate(policy_path, *, gravities, duration: float, height: float, num: int
         m = metrics.hop_metrics(traj, g, standing_height=metrics.standing_height(mj_model),
                                 work=np.asarray(final.cstate.work), mass=sim.layout.total_mass)
         m["survival"] = ~(m["fell"] | np.asarray(final.diverged))
-        out[name] = {f"{v:g}": {k: float(np.nanmean(np.where(g == v, m[k], np.nan)))
-                                if np.isfinite(np.where(g == v, m[k], np.nan)).any() else None
-                                for k in (*COMPARED, "fell")}
+        out[name] = {f"{v:g}": {**{k: _mean(m[k][g == v]) for k in COMPARED}, "min_hops": int(m["hops"][g == v].min())}
                      for v in gravities}
-        out[name]["min_hops"] = {f"{v:g}": int(m["hops"][g == v].min()) for v in gravities}
     return out
+
+
+def _mean(values) -> float | None:
+    """Mean over instances of the defined (finite) values; None if there are none."""
+    import numpy as np
+
+    values = np.asarray(values, dtype=float)
+    return float(values[np.isfinite(values)].mean()) if np.isfinite(values).any() else None
 
 
 def evaluation_table(result: dict, height: float) -> str:
@@ -218,10 +223,8 @@ def evaluation_table(result: dict, height: float) -> str:
     fmt = lambda v, f: "n/a" if v is None else format(v, f)
     for name, by_g in result.items():
         for g, row in by_g.items():
-            if g == "min_hops":
-                continue
             lines.append(f"| {name} | {g} | {fmt(row['survival'], '.0%')} | {fmt(row['hops'], '.1f')} "
-                         f"({by_g['min_hops'][g]}) | {fmt(row['apex_height'], '.3f')} | {fmt(row['hop_period'], '.3f')} "
+                         f"({row['min_hops']}) | {fmt(row['apex_height'], '.3f')} | {fmt(row['hop_period'], '.3f')} "
                          f"| {fmt(row['tracking_error'], '.3f')} | {fmt(row['cost_of_transport'], '.2f')} |")
     return "\n".join(lines)
 

@@ -6,6 +6,7 @@ training, checkpoint and controller tests).
 
 import functools
 import importlib.util
+import os
 from pathlib import Path
 
 import jax
@@ -156,9 +157,14 @@ TINY = ["--timesteps", "80", "--num-envs", "4", "--batch-size", "4", "--num-mini
 
 @pytest.fixture(scope="module")
 def trained(tmp_path_factory):
-    out = tmp_path_factory.mktemp("ppo") / "run"
-    record = train_ppo.train(train_ppo.parser().parse_args([*TINY, "--out", str(out)]))
-    return out, record
+    base = tmp_path_factory.mktemp("ppo")
+    cwd = os.getcwd()
+    os.chdir(base)
+    try:  # a relative --out, as on the command line (orbax itself needs absolute paths)
+        record = train_ppo.train(train_ppo.parser().parse_args([*TINY, "--out", "run"]))
+    finally:
+        os.chdir(cwd)
+    return base / "run", record
 
 
 def _params_at_start(out, restore=None):
@@ -219,7 +225,7 @@ def test_policy_runs_as_a_core_controller(trained, mj_model, sim):
     from hopper_mjx.sim import gravity_vectors
 
     out, _ = trained
-    controller = policy.policy_controller(mj_model, out)
+    controller = policy.policy_controller(mj_model, os.path.relpath(out))  # relative, as typed on a command line
     params = policy.policy_params(mj_model, 3, height=0.2, speed=(0.1, 0.0))
     np.testing.assert_allclose(np.asarray(params[0]), [monoped.stance_qpos(mj_model)[2] + 0.2, 0.1, 0.0], rtol=1e-6)
     state = sim.reset(gravity_vectors([9.81, 3.71, 1.62]), key=0, controller=controller, params=params)

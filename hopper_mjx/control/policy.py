@@ -51,7 +51,7 @@ def save(directory, step: int, params, network_config, env_config: monoped.Monop
 
 def resolve(path) -> Path:
     """A checkpoint directory, or a training output folder (its final ``policy/``)."""
-    path = Path(path)
+    path = Path(path).resolve()  # orbax reads absolute paths only
     if (path / "policy" / ENV_CONFIG).exists():
         path = path / "policy"
     if not (path / ENV_CONFIG).exists():
