@@ -57,10 +57,12 @@ def group_summary(spec: SweepSpec, inst: Instances, table: np.ndarray, columns: 
             if spec.kind == "gains":
                 record[spec.param] = value
             record.update(n=int(sel.sum()), survival=float(alive[sel].mean()), diverged=int(table[sel, columns.index("diverged")].sum()))
+            # Hop metrics describe steady hopping: the survivors' (a fallen run's last hops are its collapse).
+            steady = sel & alive
             for c, name in enumerate(columns):
                 if name in ("fell", "diverged"):
                     continue
-                finite = table[sel, c][np.isfinite(table[sel, c])]
+                finite = table[steady, c][np.isfinite(table[steady, c])]
                 record[name] = float(finite.mean()) if finite.size else None
                 record[f"{name}_std"] = float(finite.std()) if finite.size > 1 else None
             groups.append(record)
@@ -145,7 +147,8 @@ def write(out: Path, spec: SweepSpec, inst: Instances, table: np.ndarray, column
     header, body = rows(spec, inst, table, columns)
     write_csv(out / "results.csv", header, body)
     groups = group_summary(spec, inst, table, columns)
-    summary = {"groups": groups, "arguments": spec.to_json(), "versions": versions(), "run": facts}
+    summary = {"groups": groups, "note": "survival over all replicates; every other aggregate over the survivors",
+               "arguments": spec.to_json(), "versions": versions(), "run": facts}
     (out / "summary.json").write_text(json.dumps(summary, indent=1))
     if spec.kind == "gravity":
         plot_gravity(out / "gravity.png", spec, groups)
