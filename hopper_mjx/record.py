@@ -372,9 +372,7 @@ def main(argv=None) -> int:
     except ValueError as err:  # includes URDFError
         print(f"error: {err}", file=sys.stderr)
         return 2
-    bad = np.flatnonzero(rec.diverged)
-    if bad.size:
-        print(f"warning: {bad.size} instance(s) diverged and were frozen: {bad[:20].tolist()}", file=sys.stderr)
+    simulate.warn_diverged(rec.diverged)
     print(f"wrote {path}")
     return 0
 

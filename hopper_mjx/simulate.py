@@ -54,7 +54,7 @@ def build_controller(name: str, layout, args):
         mj_model = model.load(args.urdf, timestep=args.timestep)
         params = policy.policy_params(mj_model, args.num * len(args.gravity), height=args.height, speed=args.speed)
         return policy.policy_controller(mj_model, name.removeprefix("policy:")), params
-    raise ValueError(f"unknown controller {name!r}; choose from: none, hold, pid, raibert")
+    raise ValueError(f"unknown controller {name!r}; choose from: none, hold, pid, raibert, policy:PATH")
 
 
 def run(args) -> dict[str, np.ndarray]:
@@ -101,6 +101,12 @@ def run(args) -> dict[str, np.ndarray]:
     return {k: np.asarray(v) for k, v in out.items()}
 
 
+def warn_diverged(diverged) -> None:
+    bad = np.flatnonzero(diverged)
+    if bad.size:
+        print(f"warning: {bad.size} instance(s) diverged and were frozen: {bad[:20].tolist()}", file=sys.stderr)
+
+
 def parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="python -m hopper_mjx.simulate", description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -110,7 +116,7 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--duration", type=float, default=2.0, help="simulated time, s")
     p.add_argument("--controller", default="hold",
                    help="none (limp), hold (keep initial joint angles), pid (the seed's joint position "
-                        "controllers, holding them) or raibert (hop)")
+                        "controllers, holding them), raibert (hop) or policy:PATH (a trained PPO policy)")
     p.add_argument("--height", type=float, default=0.10,
                    help="raibert: commanded apex rise of the base above its standing height, m")
     p.add_argument("--speed", type=lambda s: parse_floats(s, "--speed"), default=[0.0, 0.0],
@@ -135,9 +141,7 @@ def main(argv=None) -> int:
         print(f"error: {err}", file=sys.stderr)
         return 2
     np.savez_compressed(args.out, **arrays)
-    bad = np.flatnonzero(arrays["diverged"])
-    if bad.size:
-        print(f"warning: {bad.size} instance(s) diverged and were frozen: {bad[:20].tolist()}", file=sys.stderr)
+    warn_diverged(arrays["diverged"])
     print(f"wrote {args.out}: {arrays['qpos'].shape[0]} instances x {arrays['time'].size} samples")
     return 0
 
