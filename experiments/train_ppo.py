@@ -181,17 +181,19 @@ def evaluate(policy_path, *, gravities, duration: float, height: float, num: int
     """
     import numpy as np
 
-    from hopper_mjx import metrics, model, signals
+    from hopper_mjx import metrics, model
     from hopper_mjx.control import policy, raibert
     from hopper_mjx.sim import Sim, gravity_vectors
+    from hopper_mjx.sweep.grid import KICK
+    from hopper_mjx.sweep.runner import SENSORS
 
     mj_model = model.load()
     sim = Sim(mj_model)
     g = np.repeat(np.asarray(gravities, dtype=float), num)
-    sensors = signals.SensorConfig(imu_rate=100, odom_rate=100, contact_rate=1000, state_rate=100)
+    sensors = SENSORS  # the sweep's streams and kicks: the numbers compare with a sweep's
     steps = int(round(duration / sim.layout.timestep / 10)) * 10
     kick = np.zeros((len(g), sim.layout.nv), np.float32)
-    kick[:, [0, 1, 3, 4]] = 0.1 * np.random.default_rng(seed).standard_normal((len(g), 4))
+    kick[:, [0, 1, 3, 4]] = KICK * np.random.default_rng(seed).standard_normal((len(g), 4))
     controllers = {
         "policy": (policy.policy_controller(mj_model, policy_path), policy.policy_params(mj_model, len(g), height=height)),
         "raibert": (raibert.raibert(sim.layout), raibert.raibert_params(len(g), height=height)),
