@@ -1,1 +1,12 @@
-"""hopper_mjx: batched MJX simulation of the seed monoped under per-instance gravity."""
+"""hopper_mjx: batched MJX simulation of the seed monoped under per-instance gravity.
+
+The few names a user needs; everything else lives in its module (see the README's module map).
+Importing the package changes no JAX setting: the command-line entry points call
+`hopper_mjx.runtime.configure()` themselves.
+"""
+
+from hopper_mjx.model import URDFError, load
+from hopper_mjx.signals import SensorConfig
+from hopper_mjx.sim import Sim, State, Trajectory, gravity_vectors
+
+__all__ = ["SensorConfig", "Sim", "State", "Trajectory", "URDFError", "gravity_vectors", "load"]
