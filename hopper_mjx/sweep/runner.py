@@ -118,15 +118,15 @@ def run(spec: SweepSpec, out: Path, *, progress: bool = True) -> tuple[Instances
     bar.close()
     wall = time.perf_counter() - start
 
-    mine_rows = [np.load(chunk_path(out, k)) for k in mine]
+    # With one process its chunks are all the chunks; with several, gather them in chunk order.
+    rows_by_chunk = [np.load(chunk_path(out, k)) for k in mine]
     if procs > 1:
-        mine_rows = _gather_to_all(mine_rows, chunks, procs)
+        rows_by_chunk = _gather_to_all(rows_by_chunk, chunks, procs)
         if me == 0:  # keep every chunk on the coordinator, so it can merge and resume
-            for k, rows in enumerate(mine_rows):
+            for k, rows in enumerate(rows_by_chunk):
                 if not chunk_path(out, k).exists():
                     _atomic_write(chunk_path(out, k), lambda f, rows=rows: np.save(f, rows))
-    table = np.concatenate(mine_rows) if procs > 1 else np.concatenate(
-        [np.load(chunk_path(out, k)) for k in range(len(chunks))])
+    table = np.concatenate(rows_by_chunk)
     facts = {
         "wall_s": wall,
         "steps_simulated": simulated,
