@@ -87,6 +87,7 @@ class RaibertConfig:
     pitch_kd: float = 200.0  # N·m·s/rad, on the whole robot's pitch rate H_y / I_y
     roll_kp: float = 150.0  # N·m/rad at g = 9.81 (x g/9.81), stance haa servo on body roll
     roll_kd: float = 200.0  # N·m·s/rad, on H_x / I_x
+    traction: float = 0.5  # attitude hip torque <= traction · leg force · L (a share of the friction cone)
 
 
 def default_config() -> RaibertConfig:
@@ -101,6 +102,7 @@ class RaibertState(NamedTuple):
     params: dict  # "height" () m, "speed" (2,) m/s, and every RaibertConfig field
     phase: jax.Array  # int32, one of FLIGHT..UNLOADING
     phase_start: jax.Array  # s, simulation time the phase began
+    touchdown_time: jax.Array  # s, simulation time of the last touchdown
     stance_time: jax.Array  # s, last measured stance duration (0 before the first)
     apex: jax.Array  # m, highest base height of the current flight
     height_bias: jax.Array  # m added to the apex target (adapted per hop)
@@ -182,6 +184,7 @@ def raibert(layout: Layout, config: RaibertConfig | None = None, *, leg: LegGeom
             params=params,
             phase=jnp.int32(FLIGHT),
             phase_start=jnp.asarray(data.time, dtype=jnp.float32),
+            touchdown_time=jnp.asarray(data.time, dtype=jnp.float32),
             stance_time=jnp.float32(0.0),  # none measured yet
             apex=jnp.asarray(data.qpos[2], dtype=jnp.float32),
             height_bias=jnp.float32(0.0),
@@ -233,7 +236,8 @@ def raibert(layout: Layout, config: RaibertConfig | None = None, *, leg: LegGeom
         # Part 2 bookkeeping: stance time at lift-off, the placement integral at touchdown.
         # Before the first lift-off: half a period of the virtual spring-mass.
         stance_time = jnp.where(s.stance_time > 0, s.stance_time, math.pi * jnp.sqrt(p["sag"] / g))
-        stance_time = jnp.where(liftoff, elapsed, stance_time)
+        touchdown_time = jnp.where(touchdown, data.time, s.touchdown_time)
+        stance_time = jnp.where(liftoff, data.time - touchdown_time, stance_time)
         speed_gain = p["speed_gain"] * p["leg_length"] / (g * stance_time)
         step = jnp.clip(p["speed"] - s.speed_reference, -p["speed_step"], p["speed_step"])
         speed_reference = jnp.where(touchdown, s.speed_reference + step, s.speed_reference)
@@ -268,6 +272,10 @@ def raibert(layout: Layout, config: RaibertConfig | None = None, *, leg: LegGeom
         lean = g / EARTH_GRAVITY
         attitude = jnp.stack([lean * p["roll_kp"] * roll + p["roll_kd"] * spin[0],
                               lean * p["pitch_kp"] * pitch + p["pitch_kd"] * spin[1], 0.0])
+        # A hip torque τ pushes the foot sideways with τ/L: beyond the floor's grip
+        # (friction 1 times the leg force) the foot slides and the hop is lost.
+        grip = p["traction"] * leg_force * length
+        attitude = attitude * jnp.minimum(1.0, grip / (jnp.linalg.norm(attitude) + 1e-6))
         brake = -flight_gains.d * qd  # unloading: let the joints coast to rest, no push
         stance_torque = jnp.where(
             phase == UNLOADING, brake,
@@ -278,9 +286,10 @@ def raibert(layout: Layout, config: RaibertConfig | None = None, *, leg: LegGeom
         placement = v * stance_time / 2 + speed_gain * speed_error + speed_offset
         placement = jnp.clip(placement, -MAX_PLACEMENT, MAX_PLACEMENT)
         flight_length = p["leg_length"] - jnp.where(zdot > 0, p["retract"], 0.0)
-        target = _placement_angles(leg, data.qpos[3:7], q, placement, flight_length, com,
+        target = _placement_angles(leg, data.qpos[3:7], placement, flight_length, com,
                                    p["swing_compensation"])
-        flight_torque, _ = pid.effort(flight_gains, target - q, -qd, jnp.zeros(3), dt)
+        leg_rate = qd + p["swing_compensation"] * jnp.concatenate([gyro[:2], jnp.zeros(1)])
+        flight_torque, _ = pid.effort(flight_gains, target - q, -leg_rate, jnp.zeros(3), dt)
 
         ctrl = clip_to_limits(layout, jnp.where(phase == FLIGHT, flight_torque, stance_torque))
         torque = ctrl[jnp.asarray(layout.actuator_of_joint)]
@@ -288,6 +297,7 @@ def raibert(layout: Layout, config: RaibertConfig | None = None, *, leg: LegGeom
             params=p,
             phase=phase,
             phase_start=jnp.where(changed, data.time, s.phase_start),
+            touchdown_time=touchdown_time,
             stance_time=stance_time,
             apex=apex,
             height_bias=height_bias,
@@ -301,31 +311,26 @@ def raibert(layout: Layout, config: RaibertConfig | None = None, *, leg: LegGeom
     return Controller(name="raibert", init=init, act=act)
 
 
-def _placement_angles(leg: LegGeometry, quat: jax.Array, q: jax.Array, placement: jax.Array,
-                      length: jax.Array, com: jax.Array, compensation: jax.Array) -> jax.Array:
-    """Joint targets that put the foot `placement` (m along the heading frame's x and y)
-    from the COM (`com`, base frame from the haa axis) with a virtual leg of `length`,
-    by the time the leg has got there.
+def _placement_angles(leg: LegGeometry, quat: jax.Array, placement: jax.Array, length: jax.Array,
+                      com: jax.Array, world_frame: jax.Array) -> jax.Array:
+    """Joint targets that put the foot `placement` (m, world x and y) from the COM
+    (`com`, base frame from the haa axis) with a virtual leg of `length`.
 
-    In flight the robot's angular momentum is fixed, so when a hip turns the leg
-    by Δ the body turns back by α·Δ, α = (leg's momentum per hip rate) / (robot's
-    inertia); this leg is as heavy in rotation as the body, so α ≈ 0.5. The target
-    that lands the foot where wanted despite that, hip_level being the angle for a
-    level body, is (hip_level - tilt - α·hip_now) / (1 - α): it stays put while the
-    leg swings, so the hip servo does not chase its own reaction.
+    The target is built in the level frame (the body's frame without its roll
+    and pitch) and turned into the body frame by the body's present tilt, so the
+    foot lands where wanted although the body tilts: in flight it must, because
+    this leg is as heavy in rotation as the body and every swing turns the body
+    back. `world_frame` = 0 ignores the tilt (the body assumed level).
     """
     rot = bmath.quat_to_3x3(quat)
     heading = jnp.arctan2(rot[1, 0], rot[0, 0])
     c, s = jnp.cos(heading), jnp.sin(heading)
-    x = c * placement[0] + s * placement[1] + com[0]
-    y = -s * placement[0] + c * placement[1] + com[1]
+    unturn = jnp.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])
+    level = unturn @ rot  # body -> level frame: roll and pitch only
+    level = world_frame * level + (1.0 - world_frame) * jnp.eye(3)
+    com_level = level @ com
+    x = c * placement[0] + s * placement[1] + com_level[0]
+    y = -s * placement[0] + c * placement[1] + com_level[1]
     down = jnp.sqrt(jnp.maximum(length**2 - x**2, 1e-4)) + leg.hfe_below_haa
     z = -jnp.sqrt(jnp.maximum(down**2 - y**2, 1e-4))
-    level = kinematics.inverse(leg, jnp.stack([x, y, z]))
-    roll, pitch = _tilt(quat)
-    eye = jnp.eye(3)
-    leg_momentum = jnp.stack([kinematics.angular_momentum(leg, q, eye[i], jnp.zeros(3))[i] for i in (0, 1)])
-    robot_inertia = jnp.stack([kinematics.angular_momentum(leg, q, jnp.zeros(3), eye[i])[i] for i in (0, 1)])
-    alpha = compensation * leg_momentum / robot_inertia  # (haa about x, hfe about y)
-    hips = (level[:2] - compensation * jnp.stack([roll, pitch]) - alpha * q[:2]) / (1.0 - alpha)
-    return jnp.concatenate([hips, level[2:]])
+    return kinematics.inverse(leg, level.T @ jnp.stack([x, y, z]))
