@@ -59,7 +59,7 @@ def _rollout(batch, seed, actions):
 def test_reset_and_step_shapes_and_dtypes(env, batch):
     wrapped, reset, step = batch
     state = reset(jax.random.split(jax.random.PRNGKey(0), N))
-    assert env.observation_size == 28 and env.action_size == 3 and env.n_frames == 20
+    assert env.observation_size == 28 and env.action_size == 3 and env.n_frames == 10
     assert state.obs.shape == (N, env.observation_size) and state.obs.dtype == jnp.float32
     state = step(state, jnp.zeros((N, 3)))
     assert state.obs.shape == (N, env.observation_size) and state.obs.dtype == jnp.float32
@@ -67,7 +67,7 @@ def test_reset_and_step_shapes_and_dtypes(env, batch):
     assert state.done.shape == (N,)
     assert state.info["command"].shape == (N, 3)
     assert np.isfinite(np.asarray(state.obs)).all()
-    # 20 physics steps of 1 ms per policy step.
+    # 10 physics steps of 2 ms (the training timestep) per policy step.
     np.testing.assert_allclose(state.pipeline_state.time, 0.02, atol=1e-6)
 
 
@@ -79,6 +79,18 @@ def test_gravity_is_drawn_per_environment_within_the_range(env, batch):
     state = reset(jax.random.split(jax.random.PRNGKey(0), N))
     # The observed gravity (last entry, in units of 9.81) is the environment's own.
     np.testing.assert_allclose(np.asarray(state.obs[:, -1]) * 9.81, g, rtol=1e-5)
+
+
+def test_gravity_draws_are_log_uniform(env):
+    """As many environments per factor of g at the Moon end as at the Earth end."""
+    sys, _ = randomize_gravity(env.sys, jax.random.split(jax.random.PRNGKey(0), 4000), gravity_range=(1.0, 12.0))
+    g = -np.asarray(sys.opt.gravity[:, 2])
+    assert np.allclose(np.asarray(sys.opt.gravity[:, :2]), 0.0)
+    assert 1.0 <= g.min() and g.max() <= 12.0
+    np.testing.assert_allclose(np.median(g), np.sqrt(12.0), rtol=0.05)  # uniform would give 6.5
+    below_2, above_6 = np.mean(g < 2.0), np.mean(g > 6.0)  # each a factor of 2
+    np.testing.assert_allclose(below_2, np.log(2) / np.log(12), atol=0.03)
+    np.testing.assert_allclose(above_6, np.log(2) / np.log(12), atol=0.03)
 
 
 def test_physics_uses_each_environments_gravity(batch):
@@ -139,7 +151,7 @@ def test_config_rejects_bad_ranges(env):
     with pytest.raises(ValueError, match="gravity_range"):
         MonopedConfig(gravity_range=(12.0, 1.0))
     with pytest.raises(ValueError, match="gravity_range"):
-        MonopedConfig(gravity_range=(-1.0, 1.0))
+        MonopedConfig(gravity_range=(0.0, 1.0))  # log-uniform draws need a positive low end
     with pytest.raises(ValueError, match="policy_rate"):
         monoped.decimation(env.layout, MonopedConfig(policy_rate=300.0))  # 1000 Hz / 300 Hz
     with pytest.raises(ValueError, match="unknown"):

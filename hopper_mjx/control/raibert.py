@@ -79,15 +79,15 @@ class RaibertConfig:
     sag: float = 0.025  # m, static compression of the virtual spring under m·g (k = m·g/sag)
     damping_ratio: float = 0.1  # of the virtual spring during compression
     height_adapt: float = 0.5  # fraction of the apex error added to the apex target per hop
-    speed_gain: float = 0.15  # fraction of the speed error removed per stance (sets k_v, see above)
-    swing_compensation: float = 0.0  # 0..1, how far flight hip targets allow for tilt and swing reaction
+    speed_gain: float = 0.1  # fraction of the speed error removed per stance (sets k_v, see above)
+    tilt_lead: float = 1.0  # 0..1, share of the flight's predicted tilt the stance servo leans against
     speed_step: float = 0.05  # m/s per hop: the speed reference ramps to the command at this rate
     speed_integral: float = 0.2  # fraction of k_v·(v - v_d) accumulated into the placement per hop
-    pitch_kp: float = 150.0  # N·m/rad at g = 9.81 (x g/9.81), stance hfe servo on body pitch
+    pitch_kp: float = 400.0  # N·m/rad at g = 9.81 (x g/9.81), stance hfe servo on body pitch
     pitch_kd: float = 200.0  # N·m·s/rad, on the whole robot's pitch rate H_y / I_y
-    roll_kp: float = 150.0  # N·m/rad at g = 9.81 (x g/9.81), stance haa servo on body roll
+    roll_kp: float = 400.0  # N·m/rad at g = 9.81 (x g/9.81), stance haa servo on body roll
     roll_kd: float = 200.0  # N·m·s/rad, on H_x / I_x
-    traction: float = 0.5  # attitude hip torque <= traction · leg force · L (a share of the friction cone)
+    traction: float = 0.3  # attitude hip torque <= traction · leg force · L (a share of the friction cone)
 
 
 def default_config() -> RaibertConfig:
@@ -145,8 +145,8 @@ def raibert_params(n: int, *, height, speed=(0.0, 0.0), config: RaibertConfig | 
     for name in ("leg_length", "sag"):
         if np.any(params[name] <= 0):
             raise ValueError(f"{name} must be > 0 m")
-    if np.any((params["swing_compensation"] < 0) | (params["swing_compensation"] > 1)):
-        raise ValueError("swing_compensation must be in [0, 1]")
+    if np.any((params["tilt_lead"] < 0) | (params["tilt_lead"] > 1)):
+        raise ValueError("tilt_lead must be in [0, 1]")
     return params
 
 
@@ -175,6 +175,10 @@ def raibert(layout: Layout, config: RaibertConfig | None = None, *, leg: LegGeom
     mass, dt = layout.total_mass, layout.timestep
     stance = jnp.array([0.0, STANCE_HFE, STANCE_KFE])
     robot_inertia = jax.vmap(lambda axis: kinematics.angular_momentum(leg, stance, jnp.zeros(3), axis))(jnp.eye(3)).diagonal()
+    # In flight a hip swing of Δ turns the body back by α·Δ (zero angular momentum),
+    # so a leg that swings its world angle by Δθ tilts the body by -α/(1-α)·Δθ.
+    leg_momentum = jax.vmap(lambda hip: kinematics.angular_momentum(leg, stance, hip, jnp.zeros(3)))(jnp.eye(3)).diagonal()
+    swing_tilt = (leg_momentum / robot_inertia / (1.0 - leg_momentum / robot_inertia))[:2]  # (haa/roll, hfe/pitch)
     defaults = {k: v[0] for k, v in raibert_params(1, height=DEFAULT_HEIGHT, config=config).items()}
 
     def init(data, params):
@@ -207,7 +211,7 @@ def raibert(layout: Layout, config: RaibertConfig | None = None, *, leg: LegGeom
         roll, pitch = _tilt(data.qpos[3:7])
         length = kinematics.leg_length(leg, q[2])
         length_rate = kinematics.leg_length_rate(leg, q[2], qd[2])
-        stiffness = mass * g / p["sag"]
+        stiffness = mass * EARTH_GRAVITY / p["sag"]
         touching = foot_contact(layout, data)
         elapsed = data.time - s.phase_start
 
@@ -235,7 +239,7 @@ def raibert(layout: Layout, config: RaibertConfig | None = None, *, leg: LegGeom
 
         # Part 2 bookkeeping: stance time at lift-off, the placement integral at touchdown.
         # Before the first lift-off: half a period of the virtual spring-mass.
-        stance_time = jnp.where(s.stance_time > 0, s.stance_time, math.pi * jnp.sqrt(p["sag"] / g))
+        stance_time = jnp.where(s.stance_time > 0, s.stance_time, math.pi * jnp.sqrt(p["sag"] / EARTH_GRAVITY))
         touchdown_time = jnp.where(touchdown, data.time, s.touchdown_time)
         stance_time = jnp.where(liftoff, data.time - touchdown_time, stance_time)
         speed_gain = p["speed_gain"] * p["leg_length"] / (g * stance_time)
@@ -270,8 +274,13 @@ def raibert(layout: Layout, config: RaibertConfig | None = None, *, leg: LegGeom
         # foot placed in flight, works in proportion to g.
         spin = kinematics.angular_momentum(leg, q, qd, gyro) / robot_inertia
         lean = g / EARTH_GRAVITY
-        attitude = jnp.stack([lean * p["roll_kp"] * roll + p["roll_kd"] * spin[0],
-                              lean * p["pitch_kp"] * pitch + p["pitch_kd"] * spin[1], 0.0])
+        # The next flight swings the leg from about -x_f to +x_f (x_f = v·T_s/2, the
+        # neutral placement) and so tilts the body by swing_tilt·2x_f/L: leaving the
+        # floor leaned the other way by half of that centres the tilt on level.
+        neutral = _heading_frame(data.qpos[3:7], v * stance_time / 2) / p["leg_length"]
+        lean_ref = p["tilt_lead"] * swing_tilt * jnp.stack([neutral[1], -neutral[0]])
+        attitude = jnp.stack([lean * p["roll_kp"] * (roll - lean_ref[0]) + p["roll_kd"] * spin[0],
+                              lean * p["pitch_kp"] * (pitch - lean_ref[1]) + p["pitch_kd"] * spin[1], 0.0])
         # A hip torque τ pushes the foot sideways with τ/L: beyond the floor's grip
         # (friction 1 times the leg force) the foot slides and the hop is lost.
         grip = p["traction"] * leg_force * length
@@ -286,9 +295,8 @@ def raibert(layout: Layout, config: RaibertConfig | None = None, *, leg: LegGeom
         placement = v * stance_time / 2 + speed_gain * speed_error + speed_offset
         placement = jnp.clip(placement, -MAX_PLACEMENT, MAX_PLACEMENT)
         flight_length = p["leg_length"] - jnp.where(zdot > 0, p["retract"], 0.0)
-        target = _placement_angles(leg, data.qpos[3:7], placement, flight_length, com,
-                                   p["swing_compensation"])
-        leg_rate = qd + p["swing_compensation"] * jnp.concatenate([gyro[:2], jnp.zeros(1)])
+        target = _placement_angles(leg, data.qpos[3:7], placement, flight_length, com)
+        leg_rate = qd + jnp.concatenate([gyro[:2], jnp.zeros(1)])  # the leg's rate in the world
         flight_torque, _ = pid.effort(flight_gains, target - q, -leg_rate, jnp.zeros(3), dt)
 
         ctrl = clip_to_limits(layout, jnp.where(phase == FLIGHT, flight_torque, stance_torque))
@@ -311,8 +319,20 @@ def raibert(layout: Layout, config: RaibertConfig | None = None, *, leg: LegGeom
     return Controller(name="raibert", init=init, act=act)
 
 
+def _unturn(rot: jax.Array) -> jax.Array:
+    """World -> heading frame (the world turned by the body's yaw)."""
+    heading = jnp.arctan2(rot[1, 0], rot[0, 0])
+    c, s = jnp.cos(heading), jnp.sin(heading)
+    return jnp.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def _heading_frame(quat: jax.Array, xy: jax.Array) -> jax.Array:
+    """A horizontal world vector (x, y) in the heading frame."""
+    return (_unturn(bmath.quat_to_3x3(quat)) @ jnp.append(xy, 0.0))[:2]
+
+
 def _placement_angles(leg: LegGeometry, quat: jax.Array, placement: jax.Array, length: jax.Array,
-                      com: jax.Array, world_frame: jax.Array) -> jax.Array:
+                      com: jax.Array) -> jax.Array:
     """Joint targets that put the foot `placement` (m, world x and y) from the COM
     (`com`, base frame from the haa axis) with a virtual leg of `length`.
 
@@ -320,17 +340,11 @@ def _placement_angles(leg: LegGeometry, quat: jax.Array, placement: jax.Array, l
     and pitch) and turned into the body frame by the body's present tilt, so the
     foot lands where wanted although the body tilts: in flight it must, because
     this leg is as heavy in rotation as the body and every swing turns the body
-    back. `world_frame` = 0 ignores the tilt (the body assumed level).
+    back.
     """
     rot = bmath.quat_to_3x3(quat)
-    heading = jnp.arctan2(rot[1, 0], rot[0, 0])
-    c, s = jnp.cos(heading), jnp.sin(heading)
-    unturn = jnp.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])
-    level = unturn @ rot  # body -> level frame: roll and pitch only
-    level = world_frame * level + (1.0 - world_frame) * jnp.eye(3)
-    com_level = level @ com
-    x = c * placement[0] + s * placement[1] + com_level[0]
-    y = -s * placement[0] + c * placement[1] + com_level[1]
+    level = _unturn(rot) @ rot  # body -> level frame: roll and pitch only
+    x, y = _heading_frame(quat, placement) + (level @ com)[:2]
     down = jnp.sqrt(jnp.maximum(length**2 - x**2, 1e-4)) + leg.hfe_below_haa
     z = -jnp.sqrt(jnp.maximum(down**2 - y**2, 1e-4))
     return kinematics.inverse(leg, level.T @ jnp.stack([x, y, z]))

@@ -3,8 +3,9 @@
     env = MonopedEnv()                       # brax.envs.base.Env
     ppo.train(environment=env, randomization_fn=randomize_gravity, ...)
 
-- **Physics**: `hopper_mjx.model.load()` stepped by `mjx.step` at its own timestep
-  (1 kHz); the policy acts every `n_frames` physics steps (default 50 Hz).
+- **Physics**: `hopper_mjx.model.load()` stepped by `mjx.step` at the config's
+  `timestep` (2 ms for training; the core evaluates at its own 1 ms); the policy acts
+  every `n_frames` physics steps (default 50 Hz).
 - **Actions** (3, in [-1, 1]) are joint position targets around the standing pose
   (`Sim.stance_qpos`), `target = stance + action_scale * action`, clipped to the
   joint range and tracked by a PD law at the physics rate (`pd_torque`), saturated
@@ -13,8 +14,9 @@
   angular rate), odometry (base height, linear velocity), the foot contact flag and
   force, joint positions and velocities, the command and the previous action;
   gravity only when `observe_gravity` is set.
-- **Gravity** is drawn per environment from `gravity_range` by `randomize_gravity`,
-  the Brax domain-randomisation hook that batches `opt.gravity` of the MJX model.
+- **Gravity** is drawn per environment, log-uniformly over `gravity_range`, by
+  `randomize_gravity`, the Brax domain-randomisation hook that batches `opt.gravity`
+  of the MJX model.
 - **Reward and termination**: see `reward_terms` and `fallen`, documented in docs/learning.md.
 
 State between steps lives in `State.info`: the command, the previous action and
@@ -46,7 +48,9 @@ class MonopedConfig:
     """Everything that shapes the task; saved beside a trained policy (`to_dict`)."""
 
     policy_rate: float = 50.0  # Hz; the physics runs at 1 / timestep
-    gravity_range: tuple[float, float] = (1.0, 12.0)  # m/s², uniform per environment
+    # m/s², per environment, log-uniform: as much experience per factor of g at the Moon end
+    # (slow hops, few per episode) as at the Earth end.
+    gravity_range: tuple[float, float] = (1.0, 12.0)
     observe_gravity: bool = False
     apex_range: tuple[float, float] = (1.0, 1.2)  # m, commanded base height at the top of a hop
     speed_range: tuple[float, float] = (-0.2, 0.2)  # m/s, commanded horizontal velocity, x and y
@@ -59,6 +63,7 @@ class MonopedConfig:
     w_speed: float = 0.5
     speed_scale: float = 0.3  # m/s
     w_upright: float = 0.5
+    upright_scale: float = 0.25  # rad; exp(-(tilt / scale)²)
     w_effort: float = 0.05  # times the mean of (torque / limit)²
     w_action_rate: float = 0.02
     w_spin: float = 0.01  # times |angular rate|², rad²/s²
@@ -68,8 +73,10 @@ class MonopedConfig:
     min_base_height: float = 0.4  # m
     initial_clearance: tuple[float, float] = (0.0, 0.1)  # m, foot above the floor at reset
     initial_joint_noise: float = 0.05  # rad
-    # Training physics: MuJoCo's Newton solver, warm-started, capped at these iterations
-    # (the core runs to convergence; a capped solve is ~3x cheaper on CPU MJX).
+    # Training physics: a 2 ms step (half the core's cost per simulated second; a policy
+    # behaves alike at 1 and 2 ms) and MuJoCo's Newton solver, warm-started, capped at
+    # these iterations (the core runs to convergence; a capped solve is ~3x cheaper on CPU MJX).
+    timestep: float = 0.002  # s
     solver_iterations: int = 2
     ls_iterations: int = 4
 
@@ -78,10 +85,10 @@ class MonopedConfig:
             lo, hi = getattr(self, name)
             if not (math.isfinite(lo) and math.isfinite(hi) and lo <= hi):
                 raise ValueError(f"{name} must be a finite (low, high) pair with low <= high, got {(lo, hi)}")
-        if self.gravity_range[0] < 0:
-            raise ValueError(f"gravity_range must be >= 0 m/s² (magnitudes), got {self.gravity_range}")
-        if not self.policy_rate > 0:
-            raise ValueError(f"policy_rate must be positive, got {self.policy_rate}")
+        if not self.gravity_range[0] > 0:
+            raise ValueError(f"gravity_range must be > 0 m/s² (magnitudes, drawn log-uniformly), got {self.gravity_range}")
+        if not (self.policy_rate > 0 and self.timestep > 0):
+            raise ValueError(f"policy_rate and timestep must be positive, got {self.policy_rate}, {self.timestep}")
 
     def to_dict(self) -> dict:
         return dataclasses.asdict(self)
@@ -174,7 +181,7 @@ def reward_terms(
     return {
         "apex": cfg.w_apex * jnp.exp(-apex_error / cfg.apex_scale),
         "speed": cfg.w_speed * jnp.exp(-speed_error / cfg.speed_scale**2),
-        "upright": cfg.w_upright * jnp.cos(tilt(d)),
+        "upright": cfg.w_upright * jnp.exp(-((tilt(d) / cfg.upright_scale) ** 2)),
         "effort": -cfg.w_effort * effort,
         "action_rate": -cfg.w_action_rate * jnp.sum((action - last_action) ** 2),
         "spin": -cfg.w_spin * jnp.sum(d.qvel[3:6] ** 2),
@@ -190,14 +197,19 @@ def sample_command(cfg: MonopedConfig, key: jax.Array) -> jax.Array:
     return jnp.concatenate([apex, speed])
 
 
-def physics_model(mj_model: mujoco.MjModel, cfg: MonopedConfig) -> mjx.Model:
-    """The MJX model the environment steps: MuJoCo's sensor stage off (signals come from
-    the state), the constraint solver capped at the configured iterations."""
+def training_model(mj_model: mujoco.MjModel, cfg: MonopedConfig) -> mujoco.MjModel:
+    """The model the environment steps: the configured timestep, MuJoCo's sensor stage off
+    (signals come from the state), the constraint solver capped at the configured iterations."""
     m = copy.deepcopy(mj_model)
+    m.opt.timestep = cfg.timestep
     m.opt.disableflags |= mujoco.mjtDisableBit.mjDSBL_SENSOR
     m.opt.iterations = cfg.solver_iterations
     m.opt.ls_iterations = cfg.ls_iterations
-    return mjx.put_model(m)
+    return m
+
+
+def physics_model(mj_model: mujoco.MjModel, cfg: MonopedConfig) -> mjx.Model:
+    return mjx.put_model(training_model(mj_model, cfg))
 
 
 def stance_qpos(mj_model: mujoco.MjModel) -> np.ndarray:
@@ -214,11 +226,12 @@ class MonopedEnv(Env):
 
     def __init__(self, config: MonopedConfig = MonopedConfig(), mj_model: mujoco.MjModel | None = None):
         mj_model = mj_model if mj_model is not None else hopper_model.load()
+        trained = training_model(mj_model, config)
         self.config = config
-        self.layout = Layout.of(mj_model)
+        self.layout = Layout.of(trained)
         self.n_frames = decimation(self.layout, config)
-        self.sys = physics_model(mj_model, config)
-        self._stance_qpos = stance_qpos(mj_model)
+        self.sys = mjx.put_model(trained)
+        self._stance_qpos = stance_qpos(mj_model)  # the same pose the policy controller uses
         self.stance = self._stance_qpos[list(self.layout.joint_qpos)]
 
     # Brax reads these.
@@ -277,12 +290,13 @@ class MonopedEnv(Env):
 
 
 def randomize_gravity(sys: mjx.Model, rng: jax.Array, gravity_range=(1.0, 12.0)):
-    """Brax `randomization_fn`: one gravity magnitude per environment (rng is (N, 2)).
+    """Brax `randomization_fn`: one gravity magnitude per environment (rng is (N, 2)),
+    log-uniform over `gravity_range` (m/s², low > 0).
 
     Returns the model with `opt.gravity` batched (N, 3) and the matching vmap in_axes.
     """
-    lo, hi = gravity_range
-    magnitude = jax.vmap(lambda k: jax.random.uniform(k, (), minval=lo, maxval=hi))(rng)
+    log_lo, log_hi = math.log(gravity_range[0]), math.log(gravity_range[1])
+    magnitude = jax.vmap(lambda k: jnp.exp(jax.random.uniform(k, (), minval=log_lo, maxval=log_hi)))(rng)
     gravity = jnp.stack([jnp.zeros_like(magnitude), jnp.zeros_like(magnitude), -magnitude], axis=1)
     batched = sys.replace(opt=sys.opt.replace(gravity=gravity))
     in_axes = jax.tree_util.tree_map(lambda _: None, sys)
