@@ -28,7 +28,7 @@ HISTORY = "metrics.json"
 def parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--out", default="runs/ppo", help="output folder (resumes if it holds checkpoints)")
-    p.add_argument("--timesteps", type=int, default=12_000_000, help="total environment steps (policy steps)")
+    p.add_argument("--timesteps", type=int, default=8_000_000, help="total environment steps (policy steps)")
     p.add_argument("--num-envs", type=int, default=256, help="parallel environments (a multiple of the devices)")
     p.add_argument("--episode-length", type=int, default=500, help="policy steps per episode (500 = 10 s at 50 Hz)")
     p.add_argument("--eval-every", type=int, default=400_000, help="environment steps between evaluations")
