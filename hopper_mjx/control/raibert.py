@@ -10,7 +10,8 @@ Phases (driven by foot contact and the virtual leg length L / rate L̇):
     FLIGHT       joint PD (the shipped position controllers' p, d) to the IK
                  target of the foot placement below.
     COMPRESSION  touchdown -> L̇ >= 0: a virtual spring-damper along the leg,
-                 stiffness k = m·g/sag; hip torques servo body pitch and roll.
+                 stiffness k = m·9.81/sag (a physical spring: the same
+                 k under every g); hip torques servo body pitch and roll.
     THRUST       bottom -> L = leg_length: the spring plus a constant extra force
                  that supplies the energy still missing for the commanded apex.
     UNLOADING    L = leg_length -> lift-off: the joints are braked, no push.
@@ -22,22 +23,28 @@ the measured apex (it absorbs the energy lost when the leg is jerked off the flo
 
 Part 2, speed: the foot is placed (from the COM, in the heading frame) at
 x_f = v·T_s/2 + k_v·(v - v_ref) + x_i in x and y, with v the COM velocity, T_s the
-last measured stance time, k_v = speed_gain·L/(g·T_s) (over a stance the COM's
-speed changes by about -g·T_s·x_f/L, so `speed_gain` is the fraction of the error
-removed per hop), x_i a per-hop integral of the error, and v_ref a reference that
-ramps to the command by `speed_step` per hop. Lateral placement
-uses haa. The hip targets account for the body's tilt and for how the body
-will turn back as the leg swings (see `_placement_angles`): this leg is as heavy
-in rotation as the body, so a world-fixed target chased naively in flight swings
-the body away, and the target with it.
+last measured stance time (touchdown to lift-off), k_v = speed_gain·L/(g·T_s)
+(over a stance the COM's speed changes by about -g·T_s·x_f/L, so `speed_gain` is
+the fraction of the error removed per hop), x_i a per-hop integral of the error,
+and v_ref a reference that ramps to the command by `speed_step` per hop. Lateral
+placement uses haa. The target is built in the level frame and turned into the
+body frame by the body's present tilt (see `_placement_angles`), and the hip
+damping acts on the leg's world rate: this leg is as heavy in rotation as the
+body, so every swing in flight tilts the body back, and targets fixed to the
+body would land the foot off by L·tilt.
 
-Part 3, attitude: in compression and thrust, τ_hfe = (g/9.81)·kp·pitch + kd·H_y/I_y
-and τ_haa likewise with roll, H being the whole robot's angular momentum about
-its COM and I its inertia at the default stance. Damping H rather than the body's
-rate matters because H at lift-off is how fast the robot tumbles through the
-flight. The stiffness scales with g: leveling the body pushes the robot
-sideways through the foot, and what undoes that push, leaning over the foot
-placed in flight, works in proportion to g.
+Part 3, attitude: in compression and thrust, τ_hfe = (g/9.81)·kp·(pitch - p_ref)
++ kd·H_y/I_y and τ_haa likewise with roll, H being the whole robot's angular
+momentum about its COM and I its inertia at the default stance. Damping H rather
+than the body's rate matters because H at lift-off is how fast the robot tumbles
+through the flight. The reference p_ref leans the body against the tilt the next
+flight's swing will cause (α/(1-α)·x_f/L, α the body's turn-back per hip swing),
+so the tilt swings about level instead of from level to one side. The stiffness
+scales with g: leveling the body pushes the robot sideways through the foot, and
+what undoes that push, leaning over the foot placed in flight, works in
+proportion to g. The servo's torque is capped at `traction`·leg force·L, a share
+of the friction cone: at touchdown the leg force is still small, and a hip
+torque beyond the floor's grip makes the foot slip or bounce.
 
 Every gravity-dependent quantity uses the instance's own g. Contact is read in
 `act` from the MJX contact rows of the foot (distance < 0), the definition of
@@ -76,7 +83,7 @@ class RaibertConfig:
 
     leg_length: float = 0.64  # m, virtual leg length at touchdown and lift-off
     retract: float = 0.0  # m the leg is shortened while rising in flight
-    sag: float = 0.025  # m, static compression of the virtual spring under m·g (k = m·g/sag)
+    sag: float = 0.025  # m, static compression of the virtual spring under m·9.81 (k = m·9.81/sag)
     damping_ratio: float = 0.1  # of the virtual spring during compression
     height_adapt: float = 0.5  # fraction of the apex error added to the apex target per hop
     speed_gain: float = 0.1  # fraction of the speed error removed per stance (sets k_v, see above)
