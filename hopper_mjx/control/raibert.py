@@ -33,16 +33,17 @@ damping acts on the leg's world rate: this leg is as heavy in rotation as the
 body, so every swing in flight tilts the body back, and targets fixed to the
 body would land the foot off by L·tilt.
 
-Part 3, attitude: in compression and thrust, τ_hfe = (g/9.81)·kp·(pitch - p_ref)
+Part 3, attitude: in compression and thrust, τ_hfe = √(g/9.81)·kp·(pitch - p_ref)
 + kd·H_y/I_y and τ_haa likewise with roll, H being the whole robot's angular
 momentum about its COM and I its inertia at the default stance. Damping H rather
 than the body's rate matters because H at lift-off is how fast the robot tumbles
 through the flight. The reference p_ref leans the body against the tilt the next
 flight's swing will cause (α/(1-α)·x_f/L, α the body's turn-back per hip swing),
 so the tilt swings about level instead of from level to one side. The stiffness
-scales with g: leveling the body pushes the robot sideways through the foot, and
+falls with g: leveling the body pushes the robot sideways through the foot, and
 what undoes that push, leaning over the foot placed in flight, works in
-proportion to g. The servo's torque is capped at `traction`·leg force·L, a share
+proportion to g; √g (measured against g and 1) keeps the Moon's servo stiff
+enough to lean the body back at 0.5 m/s without upsetting it sideways. The servo's torque is capped at `traction`·leg force·L, a share
 of the friction cone: at touchdown the leg force is still small, and a hip
 torque beyond the floor's grip makes the foot slip or bounce.
 
@@ -89,10 +90,10 @@ class RaibertConfig:
     speed_gain: float = 0.1  # fraction of the speed error removed per stance (sets k_v, see above)
     tilt_lead: float = 1.0  # 0..1, share of the flight's predicted tilt the stance servo leans against
     speed_step: float = 0.05  # m/s per hop: the speed reference ramps to the command at this rate
-    speed_integral: float = 0.2  # fraction of k_v·(v - v_d) accumulated into the placement per hop
-    pitch_kp: float = 400.0  # N·m/rad at g = 9.81 (x g/9.81), stance hfe servo on body pitch
+    speed_integral: float = 0.1  # fraction of k_v·(v - v_d) accumulated into the placement per hop
+    pitch_kp: float = 400.0  # N·m/rad at g = 9.81 (x √(g/9.81)), stance hfe servo on body pitch
     pitch_kd: float = 200.0  # N·m·s/rad, on the whole robot's pitch rate H_y / I_y
-    roll_kp: float = 400.0  # N·m/rad at g = 9.81 (x g/9.81), stance haa servo on body roll
+    roll_kp: float = 400.0  # N·m/rad at g = 9.81 (x √(g/9.81)), stance haa servo on body roll
     roll_kd: float = 200.0  # N·m·s/rad, on H_x / I_x
     traction: float = 0.3  # attitude hip torque <= traction · leg force · L (a share of the friction cone)
 
@@ -276,11 +277,9 @@ def raibert(layout: Layout, config: RaibertConfig | None = None, *, leg: LegGeom
         # The damping acts on the whole robot's rotation rate H / I, not the body's:
         # the leg carries as much angular momentum as the body, and what H is at
         # lift-off is how fast the robot will tumble through the flight.
-        # The stiffness scales with g: leveling the body in stance pushes the robot
-        # sideways through the foot, and what undoes that push, the lean over the
-        # foot placed in flight, works in proportion to g.
+        # The stiffness falls with g (as √g, see the module docstring).
         spin = kinematics.angular_momentum(leg, q, qd, gyro) / robot_inertia
-        lean = g / EARTH_GRAVITY
+        lean = jnp.sqrt(g / EARTH_GRAVITY)
         # The next flight swings the leg from about -x_f to +x_f (x_f = v·T_s/2, the
         # neutral placement) and so tilts the body by swing_tilt·2x_f/L: leaving the
         # floor leaned the other way by half of that centres the tilt on level.
