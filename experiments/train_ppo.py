@@ -1,8 +1,9 @@
 """Brax PPO on the MJX monoped with per-environment gravity: hop to a commanded apex height.
 
-    nice -n 5 python experiments/train_ppo.py --out runs/ppo            # ~30 min on 2 CPU cores
-    python experiments/train_ppo.py --out runs/ppo                      # again: resumes from the last checkpoint
-    python -m hopper_mjx.simulate --controller policy:runs/ppo --gravity 9.81,3.71,1.62 --duration 10
+    nice -n 5 python experiments/train_ppo.py --out runs/ppo30 --observe-gravity   # ~25 min on 2 CPU cores
+    python experiments/train_ppo.py --out runs/ppo30 --observe-gravity   # again: resumes from the last checkpoint
+    python experiments/train_ppo.py --out runs/ppo30 --observe-gravity --evaluate --eval-height 0.12  # vs Raibert
+    python -m hopper_mjx.simulate --controller policy:runs/ppo30 --gravity 9.81,3.71,1.62 --duration 10
 
 Writes into --out: checkpoints/<env step>/ (every evaluation), policy/ (the final
 params, loadable by `hopper_mjx.control.policy`), metrics.json (arguments, env config,

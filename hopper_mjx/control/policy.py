@@ -4,10 +4,12 @@ A policy directory is a Brax PPO checkpoint (orbax params + ``ppo_network_config
 with the environment's ``hopper_env.json`` beside it, as written by `save`
 (experiments/train_ppo.py saves every checkpoint and the final ``policy/`` this way).
 
-The controller replays the environment's control loop exactly: every
+The controller replays the environment's control loop: every
 ``n_frames`` physics steps it builds the same observation (`envs.monoped.observe`)
 and asks the deterministic policy for new joint targets; at every physics step
-the same PD law (`envs.monoped.pd_torque`) turns them into torques.
+the same PD law (`envs.monoped.pd_torque`) turns them into torques. Only the physics
+differs: the core's own timestep (1 ms) and full constraint solve instead of the
+training's 2 ms and capped solve; the policy rate stays the same.
 """
 
 from __future__ import annotations

@@ -86,7 +86,8 @@ class MonopedConfig:
             if not (math.isfinite(lo) and math.isfinite(hi) and lo <= hi):
                 raise ValueError(f"{name} must be a finite (low, high) pair with low <= high, got {(lo, hi)}")
         if not self.gravity_range[0] > 0:
-            raise ValueError(f"gravity_range must be > 0 m/s² (magnitudes, drawn log-uniformly), got {self.gravity_range}")
+            raise ValueError(f"gravity_range must be > 0 m/s² (magnitudes, drawn log-uniformly), "
+                             f"got {self.gravity_range}")
         if not (self.policy_rate > 0 and self.timestep > 0):
             raise ValueError(f"policy_rate and timestep must be positive, got {self.policy_rate}, {self.timestep}")
 
