@@ -103,7 +103,8 @@ def test_physics_uses_each_environments_gravity(batch):
 
 
 def test_same_seed_same_rollout_and_different_seed_differs(batch):
-    actions = [jnp.full((N, 3), 0.3), jnp.full((N, 3), -0.5), jnp.zeros((N, 3))]
+    # float32 arrays (jnp.full of a Python float is weakly typed, a new signature for the jitted step)
+    actions = [jnp.full((N, 3), 0.3, jnp.float32), jnp.full((N, 3), -0.5, jnp.float32), jnp.zeros((N, 3))]
     a, b = _rollout(batch, 7, actions), _rollout(batch, 7, actions)
     np.testing.assert_array_equal(np.asarray(a.obs), np.asarray(b.obs))
     np.testing.assert_array_equal(np.asarray(a.reward), np.asarray(b.reward))
