@@ -95,6 +95,7 @@ class RaibertConfig:
     pitch_kd: float = 200.0  # N·m·s/rad, on the whole robot's pitch rate H_y / I_y
     roll_kp: float = 400.0  # N·m/rad at g = 9.81 (x √(g/9.81)), stance haa servo on body roll
     roll_kd: float = 200.0  # N·m·s/rad, on H_x / I_x
+    tilt_budget: float = 0.4  # rad, largest body tilt at touchdown the foot placement may cause
     traction: float = 0.3  # attitude hip torque <= traction · leg force · L (a share of the friction cone)
 
 
@@ -153,6 +154,8 @@ def raibert_params(n: int, *, height, speed=(0.0, 0.0), config: RaibertConfig | 
     for name in ("leg_length", "sag"):
         if np.any(params[name] <= 0):
             raise ValueError(f"{name} must be > 0 m")
+    if np.any(params["tilt_budget"] <= 0):
+        raise ValueError("tilt_budget must be > 0 rad")
     if np.any((params["tilt_lead"] < 0) | (params["tilt_lead"] > 1)):
         raise ValueError("tilt_lead must be in [0, 1]")
     return params
@@ -186,7 +189,8 @@ def raibert(layout: Layout, config: RaibertConfig | None = None, *, leg: LegGeom
     # In flight a hip swing of Δ turns the body back by α·Δ (zero angular momentum),
     # so a leg that swings its world angle by Δθ tilts the body by -α/(1-α)·Δθ.
     leg_momentum = jax.vmap(lambda hip: kinematics.angular_momentum(leg, stance, hip, jnp.zeros(3)))(jnp.eye(3)).diagonal()
-    swing_tilt = (leg_momentum / robot_inertia / (1.0 - leg_momentum / robot_inertia))[:2]  # (haa/roll, hfe/pitch)
+    alpha = (leg_momentum / robot_inertia)[:2]  # (haa/roll, hfe/pitch)
+    swing_tilt = alpha / (1.0 - alpha)
     defaults = {k: v[0] for k, v in raibert_params(1, height=DEFAULT_HEIGHT, config=config).items()}
 
     def init(data, params):
@@ -300,6 +304,7 @@ def raibert(layout: Layout, config: RaibertConfig | None = None, *, leg: LegGeom
         # -- flight: foot placement by IK, joint PD -----------------------------
         placement = v * stance_time / 2 + speed_gain * speed_error + speed_offset
         placement = jnp.clip(placement, -MAX_PLACEMENT, MAX_PLACEMENT)
+        placement = _within_tilt_budget(data, leg, g, p, placement, q, com, spin, alpha, swing_tilt)
         flight_length = p["leg_length"] - jnp.where(zdot > 0, p["retract"], 0.0)
         target = _placement_angles(leg, data.qpos[3:7], placement, flight_length, com)
         leg_rate = qd + jnp.concatenate([gyro[:2], jnp.zeros(1)])  # the leg's rate in the world
@@ -323,6 +328,33 @@ def raibert(layout: Layout, config: RaibertConfig | None = None, *, leg: LegGeom
         return ctrl, state
 
     return Controller(name="raibert", init=init, act=act)
+
+
+def _within_tilt_budget(data, leg, g, p, placement, q, com, spin, alpha, swing_tilt):
+    """The placement moved, if need be, so that the body lands tilted <= `tilt_budget`.
+
+    In flight, pitch + swing_tilt·(leg world angle) - H·t/I_body is constant (the
+    robot's angular momentum H is), so the tilt at touchdown follows from where the
+    foot is sent: tilt_td = tilt + spin·T/(1-α) + swing_tilt·Δθ, T the time left to
+    touchdown. Past the budget the leg is sent short, taking up part of H itself.
+    """
+    rot = bmath.quat_to_3x3(data.qpos[3:7])
+    level = _unturn(rot) @ rot
+    foot = kinematics.foot_position(leg, q)  # base frame, from the haa axis
+    now = (level @ (foot - com))[:2]  # heading frame, from the COM
+    wanted = _heading_frame(data.qpos[3:7], placement)
+    foot_z = data.qpos[2] + (rot @ (foot - jnp.array([0.0, 0.0, leg.haa_below_base])))[2]
+    height = jnp.maximum(foot_z - leg.foot_radius, 0.0)
+    zdot = data.qvel[2]
+    time_left = (zdot + jnp.sqrt(zdot**2 + 2.0 * g * height)) / g
+    roll, pitch = _tilt(data.qpos[3:7])
+    # Leg world angle: +x placement turns it by -x/L about y; +y placement by +y/L about x.
+    sign = jnp.array([-1.0, 1.0])  # roll tilts by -swing_tilt·Δy/L, pitch by +swing_tilt·Δx/L
+    drift = jnp.stack([roll, pitch]) + spin[:2] * time_left / (1.0 - alpha)
+    landing = drift + sign * swing_tilt * (wanted[::-1] - now[::-1]) / p["leg_length"]
+    allowed = jnp.clip(landing, -p["tilt_budget"], p["tilt_budget"])
+    budgeted = (now[::-1] + sign * (allowed - drift) * p["leg_length"] / swing_tilt)[::-1]
+    return _unturn(rot)[:2, :2].T @ budgeted  # back to the world frame
 
 
 def _unturn(rot: jax.Array) -> jax.Array:
