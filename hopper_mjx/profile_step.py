@@ -1,17 +1,17 @@
-"""python -m hopper_mjx.profile_step: where the batched MJX step spends its time, by pipeline stage.
+"""python -m hopper_mjx.profile_step: where the batched MJX step spends its time.
 
     python -m hopper_mjx.profile_step --num 256
 
-Each stage of the step's pipeline (`mjx.step` = position -> velocity ->
-actuation -> acceleration -> constraint solve -> Euler) is compiled on its own,
-vmapped over one chunk of instances the way the core runs it (same XLA:CPU
-options), and timed on the output of the stages before it. Fusion across
-stage boundaries is lost, so the sum slightly exceeds the fused step. Two batches are timed: airborne (the
-core's initial state, no contact) and standing (the same instances after
-`--settle` steps holding the stance, foot on the floor: the solver works).
-
-The stages are MJX's own functions (`mujoco.mjx._src`, a private module: this is
-a measuring tool, not part of the core's path).
+An ablation of the compiled, fused step as the core runs it (vmapped over one
+chunk of instances, XLA:CPU options of `Sim`, a `lax.scan` over `--steps`
+steps): the same rollout is timed with MuJoCo's contact stage disabled, then
+with every constraint disabled. The differences are what contacts (collision,
+contact rows and their share of the solve) and the rest of the constraint
+pipeline (joint-limit rows, the Newton solve itself) cost; what remains is the
+smooth dynamics (kinematics, inertia, bias forces, actuation, integration).
+Each rollout starts from the same standing batch (foot on the floor, after
+`--settle` steps holding the stance); without contacts the robots fall through
+the floor, which is what a timing ablation asks for.
 """
 
 from __future__ import annotations
@@ -19,113 +19,92 @@ from __future__ import annotations
 import argparse
 import time
 
+import mujoco
 import numpy as np
 
 from hopper_mjx import runtime
 
-REPEATS = 20  # timed calls per prefix; the best counts (noise only adds time)
+REPEATS = 5  # timed rollouts per variant; the best counts (noise only adds time)
+VARIANTS = (
+    ("full step", 0),
+    ("no contacts", mujoco.mjtDisableBit.mjDSBL_CONTACT),
+    ("no constraints", mujoco.mjtDisableBit.mjDSBL_CONSTRAINT),
+)
 
 
-def pipeline():
-    """(name, f(m, d) -> d) in mjx.step's order, with fwd_position split at its costly parts."""
-    from mujoco.mjx._src import collision_driver, constraint, forward, smooth, solver
-
-    def kinematics_and_mass(m, d):
-        for f in (smooth.kinematics, smooth.com_pos, smooth.crb, smooth.factor_m):
-            d = f(m, d)
-        return d
-
-    return (
-        ("kinematics, com, crb, factor_m", kinematics_and_mass),
-        ("collision", collision_driver.collision),
-        ("make_constraint", constraint.make_constraint),
-        ("transmission", smooth.transmission),
-        ("fwd_velocity", forward.fwd_velocity),
-        ("fwd_actuation", forward.fwd_actuation),
-        ("fwd_acceleration", forward.fwd_acceleration),
-        ("solver.solve", solver.solve),
-        ("euler", forward.euler),
-    )
-
-
-def stage_costs(mj_model, data, gravity) -> list[tuple[str, float]]:
-    """[(stage, µs per instance-step)] for one batch `data` (an mjx.Data with a leading axis).
-
-    Each stage is compiled alone and timed on the output of the stages before it,
-    less the time of a stage that only passes the batch through (moving the whole
-    Data in and out of a call, which the fused step does not pay per stage).
-    """
+def rollout_cost(mj_model, qpos, qvel, gravity, steps: int) -> float:
+    """µs per instance-step of a compiled vmapped scan of mjx.step from (qpos, qvel)."""
     import jax
     from mujoco import mjx
 
     from hopper_mjx.sim import CPU_COMPILER_OPTIONS
 
     model = mjx.put_model(mj_model)
-    num = gravity.shape[0]
+    data = jax.vmap(lambda q, v: mjx.make_data(mj_model).replace(qpos=q, qvel=v))(qpos, qvel)
 
-    def timed(stage, d):
-        def one(d, g):
-            return stage(model.replace(opt=model.opt.replace(gravity=g)), d)
+    def one(d, g):
+        m = model.replace(opt=model.opt.replace(gravity=g))
+        return jax.lax.scan(lambda d, _: (mjx.step(m, d), None), d, None, length=steps)[0]
 
-        f = jax.jit(jax.vmap(one), compiler_options=CPU_COMPILER_OPTIONS)
-        out = jax.block_until_ready(f(d, gravity))  # compiles
-        best = np.inf
-        for _ in range(REPEATS):
-            start = time.perf_counter()
-            jax.block_until_ready(f(d, gravity))
-            best = min(best, time.perf_counter() - start)
-        return best / num * 1e6, out
-
-    pass_through, _ = timed(lambda m, d: d.replace(time=d.time + 0.0), data)
-    costs = []
-    for name, stage in pipeline():
-        cost, data = timed(stage, data)
-        costs.append((name, max(cost - pass_through, 0.0)))
-    return costs
+    f = jax.jit(jax.vmap(one), compiler_options=CPU_COMPILER_OPTIONS)
+    jax.block_until_ready(f(data, gravity))  # compiles
+    best = np.inf
+    for _ in range(REPEATS):
+        start = time.perf_counter()
+        jax.block_until_ready(f(data, gravity))
+        best = min(best, time.perf_counter() - start)
+    return best / (gravity.shape[0] * steps) * 1e6
 
 
-def measure(num: int, settle: int) -> dict:
+def measure(num: int, steps: int, settle: int) -> dict:
+    import copy
+
     import jax
 
     from hopper_mjx import model
     from hopper_mjx.control.base import hold
     from hopper_mjx.sim import Sim, gravity_vectors
 
-    if num < 1:
-        raise ValueError(f"--num must be >= 1, got {num}")
+    if num < 1 or steps < 1:
+        raise ValueError(f"--num and --steps must be >= 1, got {num}, {steps}")
     mj_model = model.load()
     sim = Sim(mj_model, chunk=num, devices=jax.local_devices()[:1])
-    gravity = gravity_vectors(np.linspace(1.62, 9.81, num))
     controller = hold(sim.layout)
-    airborne = sim.reset(gravity, controller=controller)
-    standing, _ = sim.rollout(airborne, controller, steps=settle)
-    rows = {label: stage_costs(mj_model, state.data, state.gravity)
-            for label, state in (("airborne", airborne), ("standing", standing))}
-    efc_rows = int(standing.data._impl.efc_J.shape[1])  # allocated per instance, used or not
-    return {"num": num, "settle_steps": settle, "constraint_rows": efc_rows, "stages": rows}
+    state = sim.reset(gravity_vectors(np.linspace(1.62, 9.81, num)), controller=controller)
+    standing, _ = sim.rollout(state, controller, steps=settle)
+    costs = {}
+    for name, flag in VARIANTS:
+        variant = copy.deepcopy(mj_model)
+        variant.opt.disableflags |= flag | mujoco.mjtDisableBit.mjDSBL_SENSOR  # the core computes its own signals
+        costs[name] = rollout_cost(variant, standing.data.qpos, standing.data.qvel, standing.gravity, steps)
+    return {"num": num, "steps": steps, "constraint_rows": int(standing.data._impl.efc_J.shape[1]), "us": costs}
 
 
 def table(record: dict) -> str:
-    names = [name for name, _ in record["stages"]["airborne"]]
-    cost = {label: dict(rows) for label, rows in record["stages"].items()}
-    total = {label: sum(c.values()) for label, c in cost.items()}
-    lines = [f"{record['num']} instances on one device, {record['constraint_rows']} constraint rows per instance",
-             f"{'stage':32s} {'airborne µs':>12s} {'share':>6s} {'standing µs':>12s} {'share':>6s}"]
-    for name in names:
-        a, s = cost["airborne"][name], cost["standing"][name]
-        lines.append(f"{name:32s} {a:12.2f} {a / total['airborne']:6.0%} {s:12.2f} {s / total['standing']:6.0%}")
-    lines.append(f"{'sum (one instance-step)':32s} {total['airborne']:12.2f} {'':6s} {total['standing']:12.2f}")
+    us = record["us"]
+    full = us["full step"]
+    parts = (
+        ("contacts (collision, contact rows, their solve)", us["full step"] - us["no contacts"]),
+        ("other constraints (limit rows, the solve itself)", us["no contacts"] - us["no constraints"]),
+        ("smooth dynamics (kinematics .. integration)", us["no constraints"]),
+    )
+    lines = [f"{record['num']} standing instances on one device, {record['steps']} steps, "
+             f"{record['constraint_rows']} constraint rows per instance",
+             f"{'part of the step':50s} {'µs':>7s} {'share':>6s}"]
+    lines += [f"{name:50s} {cost:7.2f} {cost / full:6.0%}" for name, cost in parts]
+    lines.append(f"{'full step (one instance-step)':50s} {full:7.2f}")
     return "\n".join(lines)
 
 
 def main(argv=None) -> None:
     p = argparse.ArgumentParser(prog="python -m hopper_mjx.profile_step", description=__doc__.split("\n")[0])
     p.add_argument("--num", type=int, default=256, help="instances in the batch (the core's chunk)")
-    p.add_argument("--settle", type=int, default=300, help="physics steps holding the stance before 'standing'")
+    p.add_argument("--steps", type=int, default=200, help="steps per timed rollout")
+    p.add_argument("--settle", type=int, default=300, help="physics steps holding the stance before timing")
     args = p.parse_args(argv)
     runtime.configure()
     try:
-        record = measure(args.num, args.settle)
+        record = measure(args.num, args.steps, args.settle)
     except ValueError as err:
         p.error(str(err))
     print(table(record))

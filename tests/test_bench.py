@@ -73,29 +73,3 @@ def test_bad_arguments_exit_with_a_message(capsys):
     assert bench.main(["--num", "0", "--steps", "20"]) == 2
     assert "--num" in capsys.readouterr().err
 
-
-def test_profiled_stages_compose_to_mjx_step(mj_model):
-    """profile_step times the real pipeline: its stages in order reproduce mjx.step, in contact."""
-    import jax
-    import mujoco
-    from mujoco import mjx
-
-    from hopper_mjx import profile_step
-
-    d = mujoco.MjData(mj_model)
-    d.qpos[:] = mj_model.qpos0
-    d.qpos[2] = 0.85  # foot pressed into the floor: contact rows are active
-    d.qpos[7:10] = [0.1, 0.5, -0.95]
-    d.qvel[:] = np.linspace(-0.5, 0.5, mj_model.nv)
-    model, data = mjx.put_model(mj_model), mjx.put_data(mj_model, d)
-
-    def staged(data):
-        for _, stage in profile_step.pipeline():
-            data = stage(model, data)
-        return data
-
-    expected = jax.jit(mjx.step)(model, data)
-    got = jax.jit(staged)(data)
-    assert np.asarray(expected._impl.efc_J).any(), "the check must include the constraint solve"
-    np.testing.assert_allclose(got.qpos, expected.qpos, atol=1e-6)
-    np.testing.assert_allclose(got.qvel, expected.qvel, atol=1e-5)
