@@ -161,9 +161,8 @@ def raibert_params(n: int, *, height, speed=(0.0, 0.0), config: RaibertConfig | 
     return params
 
 
-def _tilt(quat: jax.Array) -> tuple[jax.Array, jax.Array]:
-    """(roll, pitch), rad, of a [w, x, y, z] body->world quaternion (ZYX Euler angles)."""
-    rot = bmath.quat_to_3x3(quat)
+def _tilt(rot: jax.Array) -> tuple[jax.Array, jax.Array]:
+    """(roll, pitch), rad, of a body->world rotation matrix (ZYX Euler angles)."""
     return jnp.arctan2(rot[2, 1], rot[2, 2]), -jnp.arcsin(jnp.clip(rot[2, 0], -1.0, 1.0))
 
 
@@ -219,8 +218,12 @@ def raibert(layout: Layout, config: RaibertConfig | None = None, *, leg: LegGeom
         gyro = data.qvel[3:6]
         com, com_rate = jax.jvp(lambda a: kinematics.com_position(leg, a), (q,), (qd,))
         from_base = com + jnp.array([0.0, 0.0, -leg.haa_below_base])
-        v = (data.qvel[:3] + bmath.rotate(jnp.cross(gyro, from_base) + com_rate, data.qpos[3:7]))[:2]
-        roll, pitch = _tilt(data.qpos[3:7])
+        rot = bmath.quat_to_3x3(data.qpos[3:7])  # body -> world ([w, x, y, z] quaternion)
+        unturn = _unturn(rot)  # world -> heading frame
+        level = unturn @ rot  # body -> level frame: roll and pitch only
+        heading = lambda xy: unturn[:2, :2] @ xy  # a horizontal world vector in the heading frame
+        v = (data.qvel[:3] + rot @ (jnp.cross(gyro, from_base) + com_rate))[:2]
+        roll, pitch = _tilt(rot)
         length = kinematics.leg_length(leg, q[2])
         length_rate = kinematics.leg_length_rate(leg, q[2], qd[2])
         stiffness = mass * EARTH_GRAVITY / p["sag"]
@@ -287,7 +290,7 @@ def raibert(layout: Layout, config: RaibertConfig | None = None, *, leg: LegGeom
         # The next flight swings the leg from about -x_f to +x_f (x_f = v·T_s/2, the
         # neutral placement) and so tilts the body by swing_tilt·2x_f/L: leaving the
         # floor leaned the other way by half of that centres the tilt on level.
-        neutral = _heading_frame(data.qpos[3:7], v * stance_time / 2) / p["leg_length"]
+        neutral = heading(v * stance_time / 2) / p["leg_length"]
         lean_ref = p["tilt_lead"] * swing_tilt * jnp.stack([neutral[1], -neutral[0]])
         attitude = jnp.stack([lean * p["roll_kp"] * (roll - lean_ref[0]) + p["roll_kd"] * spin[0],
                               lean * p["pitch_kp"] * (pitch - lean_ref[1]) + p["pitch_kd"] * spin[1], 0.0])
@@ -303,10 +306,14 @@ def raibert(layout: Layout, config: RaibertConfig | None = None, *, leg: LegGeom
 
         # -- flight: foot placement by IK, joint PD -----------------------------
         placement = v * stance_time / 2 + speed_gain * speed_error + speed_offset
-        placement = jnp.clip(placement, -MAX_PLACEMENT, MAX_PLACEMENT)
-        placement = _within_tilt_budget(data, leg, g, p, placement, q, com, spin, alpha, swing_tilt)
+        placement = heading(jnp.clip(placement, -MAX_PLACEMENT, MAX_PLACEMENT))
+        foot_height = z + (rot @ (foot - jnp.array([0.0, 0.0, leg.haa_below_base])))[2] - leg.foot_radius
+        time_left = (zdot + jnp.sqrt(zdot**2 + 2.0 * g * jnp.maximum(foot_height, 0.0))) / g  # to touchdown
+        drift = jnp.stack([roll, pitch]) + spin[:2] * time_left / (1.0 - alpha)  # tilt at touchdown, leg held
+        placement = _within_tilt_budget(placement, (level @ (foot - com))[:2], drift, swing_tilt,
+                                        p["tilt_budget"], p["leg_length"])
         flight_length = p["leg_length"] - jnp.where(zdot > 0, p["retract"], 0.0)
-        target = _placement_angles(leg, data.qpos[3:7], placement, flight_length, com)
+        target = _placement_angles(leg, level, placement, flight_length, com)
         leg_rate = qd + jnp.concatenate([gyro[:2], jnp.zeros(1)])  # the leg's rate in the world
         flight_torque, _ = pid.effort(flight_gains, target - q, -leg_rate, jnp.zeros(3), dt)
 
@@ -330,31 +337,21 @@ def raibert(layout: Layout, config: RaibertConfig | None = None, *, leg: LegGeom
     return Controller(name="raibert", init=init, act=act)
 
 
-def _within_tilt_budget(data, leg, g, p, placement, q, com, spin, alpha, swing_tilt):
-    """The placement moved, if need be, so that the body lands tilted <= `tilt_budget`.
+def _within_tilt_budget(wanted: jax.Array, now: jax.Array, drift: jax.Array, swing_tilt: jax.Array,
+                        budget: jax.Array, length: jax.Array) -> jax.Array:
+    """The placement `wanted` moved, if need be, so that the body lands tilted <= `budget`.
 
-    In flight, pitch + swing_tilt·(leg world angle) - H·t/I_body is constant (the
-    robot's angular momentum H is), so the tilt at touchdown follows from where the
-    foot is sent: tilt_td = tilt + spin·T/(1-α) + swing_tilt·Δθ, T the time left to
-    touchdown. Past the budget the leg is sent short, taking up part of H itself.
+    Heading frame, from the COM: `now` is where the foot is, `drift` the (roll,
+    pitch) the body would land with if the leg were held where it is. In flight,
+    tilt + swing_tilt·(leg world angle) - H·t/I_body is constant (the robot's angular
+    momentum H is), so sending the foot Δ further tilts the body by swing_tilt·Δ/L
+    more. Past the budget the leg is sent short, taking up part of H itself.
     """
-    rot = bmath.quat_to_3x3(data.qpos[3:7])
-    level = _unturn(rot) @ rot
-    foot = kinematics.foot_position(leg, q)  # base frame, from the haa axis
-    now = (level @ (foot - com))[:2]  # heading frame, from the COM
-    wanted = _heading_frame(data.qpos[3:7], placement)
-    foot_z = data.qpos[2] + (rot @ (foot - jnp.array([0.0, 0.0, leg.haa_below_base])))[2]
-    height = jnp.maximum(foot_z - leg.foot_radius, 0.0)
-    zdot = data.qvel[2]
-    time_left = (zdot + jnp.sqrt(zdot**2 + 2.0 * g * height)) / g
-    roll, pitch = _tilt(data.qpos[3:7])
-    # Leg world angle: +x placement turns it by -x/L about y; +y placement by +y/L about x.
-    sign = jnp.array([-1.0, 1.0])  # roll tilts by -swing_tilt·Δy/L, pitch by +swing_tilt·Δx/L
-    drift = jnp.stack([roll, pitch]) + spin[:2] * time_left / (1.0 - alpha)
-    landing = drift + sign * swing_tilt * (wanted[::-1] - now[::-1]) / p["leg_length"]
-    allowed = jnp.clip(landing, -p["tilt_budget"], p["tilt_budget"])
-    budgeted = (now[::-1] + sign * (allowed - drift) * p["leg_length"] / swing_tilt)[::-1]
-    return _unturn(rot)[:2, :2].T @ budgeted  # back to the world frame
+    # +x placement turns the leg by -x/L about y (pitch +), +y by +y/L about x (roll -).
+    sign = jnp.array([-1.0, 1.0])  # (roll, pitch) per unit of (y, x)
+    landing = drift + sign * swing_tilt * (wanted[::-1] - now[::-1]) / length
+    allowed = jnp.clip(landing, -budget, budget)
+    return (now[::-1] + sign * (allowed - drift) * length / swing_tilt)[::-1]
 
 
 def _unturn(rot: jax.Array) -> jax.Array:
@@ -364,25 +361,18 @@ def _unturn(rot: jax.Array) -> jax.Array:
     return jnp.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])
 
 
-def _heading_frame(quat: jax.Array, xy: jax.Array) -> jax.Array:
-    """A horizontal world vector (x, y) in the heading frame."""
-    return (_unturn(bmath.quat_to_3x3(quat)) @ jnp.append(xy, 0.0))[:2]
-
-
-def _placement_angles(leg: LegGeometry, quat: jax.Array, placement: jax.Array, length: jax.Array,
+def _placement_angles(leg: LegGeometry, level: jax.Array, placement: jax.Array, length: jax.Array,
                       com: jax.Array) -> jax.Array:
-    """Joint targets that put the foot `placement` (m, world x and y) from the COM
-    (`com`, base frame from the haa axis) with a virtual leg of `length`.
+    """Joint targets that put the foot `placement` (m, heading-frame x and y) from the
+    COM (`com`, base frame from the haa axis) with a virtual leg of `length`.
 
-    The target is built in the level frame (the body's frame without its roll
-    and pitch) and turned into the body frame by the body's present tilt, so the
-    foot lands where wanted although the body tilts: in flight it must, because
-    this leg is as heavy in rotation as the body and every swing turns the body
-    back.
+    The target is built in the level frame (the body's frame without its roll and
+    pitch; `level` turns body vectors into it) and turned into the body frame by
+    the body's present tilt, so the foot lands where wanted although the body
+    tilts: in flight it must, because this leg is as heavy in rotation as the body
+    and every swing turns the body back.
     """
-    rot = bmath.quat_to_3x3(quat)
-    level = _unturn(rot) @ rot  # body -> level frame: roll and pitch only
-    x, y = _heading_frame(quat, placement) + (level @ com)[:2]
+    x, y = placement + (level @ com)[:2]
     down = jnp.sqrt(jnp.maximum(length**2 - x**2, 1e-4)) + leg.hfe_below_haa
     z = -jnp.sqrt(jnp.maximum(down**2 - y**2, 1e-4))
     return kinematics.inverse(leg, level.T @ jnp.stack([x, y, z]))
