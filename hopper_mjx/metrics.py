@@ -33,9 +33,9 @@ MIN_TRANSPORT = 0.05  # m of net horizontal travel below which the cost of trans
 
 def standing_height(mj_model) -> float:
     """Base height (m) of a model standing still in the core's default stance, foot on the floor."""
-    from hopper_mjx.sim import Sim
+    from hopper_mjx.sim import stance_qpos
 
-    return float(Sim(mj_model).stance_qpos(clearance=0.0)[2])
+    return float(stance_qpos(mj_model, clearance=0.0)[2])
 
 
 def tilt(quat: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -57,25 +57,24 @@ def rollout_cost(mj_model, qpos, qvel, gravity, steps: int) -> float:
 
 
 def measure(num: int, steps: int, settle: int) -> dict:
-    import copy
-
     import jax
 
     from hopper_mjx import model
+    from hopper_mjx.bench import GRAVITY_SPAN
     from hopper_mjx.control.base import hold
-    from hopper_mjx.sim import Sim, gravity_vectors
+    from hopper_mjx.sim import Sim, _without_sensors, gravity_vectors
 
     if num < 1 or steps < 1:
         raise ValueError(f"--num and --steps must be >= 1, got {num}, {steps}")
     mj_model = model.load()
     sim = Sim(mj_model, chunk=num, devices=jax.local_devices()[:1])
     controller = hold(sim.layout)
-    state = sim.reset(gravity_vectors(np.linspace(1.62, 9.81, num)), controller=controller)
+    state = sim.reset(gravity_vectors(np.linspace(*GRAVITY_SPAN, num)), controller=controller)
     standing, _ = sim.rollout(state, controller, steps=settle)
     costs = {}
     for name, flag in VARIANTS:
-        variant = copy.deepcopy(mj_model)
-        variant.opt.disableflags |= flag | mujoco.mjtDisableBit.mjDSBL_SENSOR  # the core computes its own signals
+        variant = _without_sensors(mj_model)  # as the core: it computes its own signals
+        variant.opt.disableflags |= flag
         costs[name] = rollout_cost(variant, standing.data.qpos, standing.data.qvel, standing.gravity, steps)
     return {"num": num, "steps": steps, "constraint_rows": int(standing.data._impl.efc_J.shape[1]), "us": costs}
 

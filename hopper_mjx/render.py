@@ -108,9 +108,9 @@ def robot_pixels(m: mujoco.MjModel, qpos, **size) -> np.ndarray:
 
 def stance_qpos(urdf=None) -> np.ndarray:
     """The core's default initial pose (upright, crouched, foot just above the floor)."""
-    from hopper_mjx.sim import Sim
+    from hopper_mjx import sim
 
-    return Sim(model.load(urdf)).stance_qpos()
+    return sim.stance_qpos(model.load(urdf))
 
 
 def simulate_qpos(args) -> np.ndarray:

@@ -66,6 +66,35 @@ class Trajectory(NamedTuple):
     time: dict  # stream name -> (T_stream,) seconds
 
 
+def stance_qpos(mj_model: mujoco.MjModel, clearance: float = CLEARANCE, hfe: float = STANCE_HFE) -> np.ndarray:
+    """qpos upright at rest: hip flexed by `hfe`, the knee bent so that the whole-robot
+    centre of mass sits straight above the foot, the foot `clearance` m above the floor."""
+    m, lay = mj_model, Layout.of(mj_model)
+    d = mujoco.MjData(m)
+
+    def com_ahead_of_foot(kfe: float) -> float:
+        d.qpos[:] = m.qpos0
+        d.qpos[list(lay.joint_qpos)] = (0.0, hfe, kfe)
+        mujoco.mj_kinematics(m, d)
+        mujoco.mj_comPos(m, d)
+        return d.subtree_com[0, 0] - d.geom_xpos[lay.foot_geom, 0]
+
+    lo, hi = lay.joint_range[2]
+    f_lo = com_ahead_of_foot(lo)
+    if f_lo * com_ahead_of_foot(hi) > 0:
+        raise ValueError(f"no knee angle puts the centre of mass above the foot at hfe={hfe}")
+    for _ in range(60):  # bisection on the knee angle
+        mid = 0.5 * (lo + hi)
+        f_mid = com_ahead_of_foot(mid)
+        if f_lo * f_mid <= 0:
+            hi = mid
+        else:
+            lo, f_lo = mid, f_mid
+    com_ahead_of_foot(0.5 * (lo + hi))
+    d.qpos[2] += clearance - (d.geom_xpos[lay.foot_geom, 2] - lay.foot_radius)
+    return d.qpos.copy()
+
+
 def gravity_vectors(magnitudes) -> np.ndarray:
     """(N,) magnitudes in m/s², pointing down -> (N, 3) vectors; rejects bad values."""
     g = np.asarray(magnitudes, dtype=float).reshape(-1)
@@ -114,30 +143,8 @@ class Sim:
 
     # -- state ----------------------------------------------------------------
     def stance_qpos(self, clearance: float = CLEARANCE, hfe: float = STANCE_HFE) -> np.ndarray:
-        """qpos upright at rest: hip flexed by `hfe`, the knee bent so that the whole-robot
-        centre of mass sits straight above the foot, the foot `clearance` m above the floor."""
-        m, lay = self.mj_model, self.layout
-        d = mujoco.MjData(m)
-
-        def com_ahead_of_foot(kfe: float) -> float:
-            d.qpos[:] = m.qpos0
-            d.qpos[list(lay.joint_qpos)] = (0.0, hfe, kfe)
-            mujoco.mj_kinematics(m, d)
-            mujoco.mj_comPos(m, d)
-            return d.subtree_com[0, 0] - d.geom_xpos[lay.foot_geom, 0]
-
-        lo, hi = lay.joint_range[2]
-        if com_ahead_of_foot(lo) * com_ahead_of_foot(hi) > 0:
-            raise ValueError(f"no knee angle puts the centre of mass above the foot at hfe={hfe}")
-        for _ in range(60):  # bisection on the knee angle
-            mid = 0.5 * (lo + hi)
-            if com_ahead_of_foot(lo) * com_ahead_of_foot(mid) <= 0:
-                hi = mid
-            else:
-                lo = mid
-        com_ahead_of_foot(0.5 * (lo + hi))
-        d.qpos[2] += clearance - (d.geom_xpos[lay.foot_geom, 2] - lay.foot_radius)
-        return d.qpos.copy()
+        """`stance_qpos` of this Sim's model."""
+        return stance_qpos(self.mj_model, clearance, hfe)
 
     def reset(
         self,

@@ -42,8 +42,8 @@ class LegGeometry:
 
     @classmethod
     def of(cls, m: mujoco.MjModel) -> "LegGeometry":
-        """Measures a compiled monoped at its default stance (`Sim.stance_qpos(clearance=0)`)."""
-        from hopper_mjx.sim import Sim  # the stance pose is the core's definition
+        """Measures a compiled monoped at its default stance (`sim.stance_qpos(m, clearance=0)`)."""
+        from hopper_mjx.sim import stance_qpos  # the stance pose is the core's definition
 
         layout = Layout.of(m)
         d = mujoco.MjData(m)
@@ -71,7 +71,7 @@ class LegGeometry:
             thigh=layout.thigh,
             shank=layout.shank,
             foot_radius=layout.foot_radius,
-            standing_height=float(Sim(m).stance_qpos(clearance=0.0)[2]),
+            standing_height=float(stance_qpos(m, clearance=0.0)[2]),
             link_mass=tuple(mass),
             link_com=tuple(tuple(float(v) for v in c - o) for c, o in zip(com, origin)),
             link_inertia=tuple(inertia),

@@ -37,10 +37,10 @@ from brax.envs.base import Env, State
 from mujoco import mjx
 
 from hopper_mjx import model as hopper_model
-from hopper_mjx import signals
+from hopper_mjx import metrics, signals
 from hopper_mjx.control.base import clip_to_limits
 from hopper_mjx.model.layout import Layout
-from hopper_mjx.sim import Sim
+from hopper_mjx.sim import stance_qpos as sim_stance_qpos
 
 
 @dataclasses.dataclass(frozen=True)
@@ -69,8 +69,8 @@ class MonopedConfig:
     w_spin: float = 0.01  # times |angular rate|², rad²/s²
     fall_penalty: float = 10.0
     # A fall: the base tilted beyond this, or its origin this low (m).
-    max_tilt: float = 0.8  # rad
-    min_base_height: float = 0.4  # m
+    max_tilt: float = metrics.FALL_TILT  # rad, angle of the base z axis from vertical
+    min_base_height: float = metrics.FALL_HEIGHT  # m
     initial_clearance: tuple[float, float] = (0.0, 0.1)  # m, foot above the floor at reset
     initial_joint_noise: float = 0.05  # rad
     # Training physics: a 2 ms step (half the core's cost per simulated second; a policy
@@ -216,7 +216,7 @@ def physics_model(mj_model: mujoco.MjModel, cfg: MonopedConfig) -> mjx.Model:
 def stance_qpos(mj_model: mujoco.MjModel) -> np.ndarray:
     """The core's standing pose with the foot on the floor; its joint angles are the
     centre of the action space."""
-    return Sim(mj_model, devices=jax.local_devices()[:1]).stance_qpos(clearance=0.0).astype(np.float32)
+    return sim_stance_qpos(mj_model, clearance=0.0).astype(np.float32)
 
 
 # -- the environment -------------------------------------------------------------------------

@@ -11,6 +11,7 @@ needed), which writes the merged outputs.
 from __future__ import annotations
 
 import json
+import math
 import os
 import time
 from pathlib import Path
@@ -73,8 +74,8 @@ class ChunkRunner:
         self.controller = raibert(sim.layout)
         self.qpos = sim.stance_qpos()
         self.standing_height = metrics.standing_height(sim.mj_model)
-        period = SENSORS.periods(sim.layout.timestep)["state"]
-        self.steps = max(1, round(spec.duration / sim.layout.timestep / period)) * period
+        whole = math.lcm(*SENSORS.periods(sim.layout.timestep).values())  # a whole period of every stream
+        self.steps = max(1, round(spec.duration / sim.layout.timestep / whole)) * whole
 
     def __call__(self, index: np.ndarray) -> np.ndarray:
         """Metrics (len(index), len(COLUMNS)) of the given instances."""
