@@ -62,14 +62,13 @@ def _vector(values, dtype) -> jax.Array:
     return jnp.stack([jnp.asarray(v, dtype) for v in values])
 
 
-def _smooth(cm: ChainModel, pose, qpos, qvel, ctrl, gravity):
+def _smooth(cm: ChainModel, gate, pose, qpos, qvel, ctrl, gravity):
     """Mass matrix, qfrc_smooth and the unconstrained acceleration."""
-    mass = chain_smooth.mass_matrix(cm, pose)
-    bias = chain_smooth.bias(cm, pose, qvel, gravity)
-    applied = chain_smooth.applied_forces(cm, qpos, qvel, ctrl)
-    qfrc_smooth = tuple(al.sub(a, b) for a, b in zip(applied, bias))
-    qacc_smooth = chain_solver.cho_solve(chain_solver.cholesky(mass, cm.nv), qfrc_smooth)
-    return mass, qfrc_smooth, qacc_smooth
+    mass = chain_smooth.mass_matrix(cm, gate, pose)
+    bias = chain_smooth.bias(cm, gate, pose, qvel, gravity)
+    qfrc_smooth = stored(gate, lambda *a: tuple(
+        al.sub(f, b) for f, b in zip(chain_smooth.applied_forces(cm, *a), bias)), qpos, qvel, ctrl)
+    return mass, qfrc_smooth, chain_solver.solve_spd(gate, mass, qfrc_smooth)
 
 
 def _foot_force(foot: chain_constraint.FootContact, force) -> tuple:
@@ -107,10 +106,9 @@ class ChainEngine:
         qvel = tuple(data.qvel[i] for i in range(cm.nv))
         ctrl = tuple(data.ctrl[i] for i in range(self.nu))
         gravity = tuple(jnp.asarray(gravity, dtype)[i] for i in range(3))
-        pose = stored(gate, lambda q: chain_smooth.kinematics(cm, q), qpos)
-        mass, qfrc_smooth, qacc_smooth = stored(
-            gate, lambda *a: _smooth(cm, *a), pose, qpos, qvel, ctrl, gravity)
-        rows, foot = stored(gate, lambda *a: chain_constraint.rows(cm, *a), pose, qpos, qvel)
+        pose = chain_smooth.kinematics(cm, gate, qpos)
+        mass, qfrc_smooth, qacc_smooth = _smooth(cm, gate, pose, qpos, qvel, ctrl, gravity)
+        rows, foot = chain_constraint.rows(cm, gate, pose, qpos, qvel)
         warm = tuple(data.qacc_warmstart[i] for i in range(cm.nv))
         sol = chain_solver.solve(gate, mass, qfrc_smooth, qacc_smooth, warm, rows, iterations=cm.iterations,
                                  ls_iterations=cm.ls_iterations)
@@ -130,8 +128,8 @@ class ChainEngine:
             damped = {(i, j): next(upper) + (h * cm.damping[i] if i == j else 0.0)
                       for i in range(cm.nv) for j in range(i, cm.nv)}
             total = data.qfrc_smooth + data.qfrc_constraint
-            qacc = _vector(chain_solver.cho_solve(chain_solver.cholesky(damped, cm.nv),
-                                                  tuple(total[i] for i in range(cm.nv))), data.qvel.dtype)
+            qacc = _vector(chain_solver.solve_spd(model.gate, damped, tuple(total[i] for i in range(cm.nv))),
+                           data.qvel.dtype)
         qvel = data.qvel + h * qacc
         return data.replace(qpos=_advance_qpos(cm, data.qpos, qvel), qvel=qvel, time=data.time + h,
                             qacc_warmstart=data.qacc)

@@ -20,6 +20,7 @@ import jax.numpy as jnp
 from hopper_mjx.engine import chain_algebra as al
 from hopper_mjx.engine.chain_model import ChainModel, ContactPair, SolParams
 from hopper_mjx.engine.chain_smooth import Pose, dof_body
+from hopper_mjx.engine.chain_stage import stored
 
 MINVAL = 1e-15  # mujoco.mjMINVAL
 MINIMP, MAXIMP = 0.0001, 0.9999  # mujoco.mjMINIMP, mjMAXIMP
@@ -133,15 +134,18 @@ def _directions(cm: ChainModel, pair: ContactPair) -> tuple:
     return tuple(out)
 
 
-def rows(cm: ChainModel, pose: Pose, qpos, qvel) -> tuple[Rows, FootContact]:
-    """All constraint rows (MuJoCo's order: limits, then contacts by pair) and the foot's."""
-    jac, weight, aref = _limit_rows(cm, qpos, qvel)
+def _all_slots(cm: ChainModel, pose: Pose):
     normal = cm.contact_frame[0:3]
     height = al.dot(normal, al.vsub(pose.base_pos, cm.floor_point))  # base origin above the floor
+    return tuple(tuple(_slots(pair, pose, normal, height)) for pair in cm.pairs)
+
+
+def _assemble(cm: ChainModel, pose: Pose, qpos, qvel, slots) -> tuple[Rows, FootContact]:
+    jac, weight, aref = _limit_rows(cm, qpos, qvel)
     foot = None
-    for pair in cm.pairs:
+    for pair, pair_slots in zip(cm.pairs, slots):
         directions = _directions(cm, pair)
-        for dist, point in _slots(pair, pose, normal, height):
+        for dist, point in pair_slots:
             exists = dist <= pair.include_margin
             first = len(jac)
             for direction in directions:
@@ -154,3 +158,9 @@ def rows(cm: ChainModel, pose: Pose, qpos, qvel) -> tuple[Rows, FootContact]:
                 foot = FootContact(touching, tuple(jnp.where(touching, x, 0.0) for x in world),
                                    tuple(range(first, len(jac))), directions)
     return Rows(tuple(jac), tuple(weight), tuple(aref)), foot
+
+
+def rows(cm: ChainModel, gate, pose: Pose, qpos, qvel) -> tuple[Rows, FootContact]:
+    """All constraint rows (MuJoCo's order: limits, then contacts by pair) and the foot's."""
+    slots = stored(gate, lambda p: _all_slots(cm, p), pose)
+    return stored(gate, lambda *a: _assemble(cm, *a), pose, qpos, qvel, slots)

@@ -15,6 +15,7 @@ import jax.numpy as jnp
 
 from hopper_mjx.engine import chain_algebra as al
 from hopper_mjx.engine.chain_model import ChainModel
+from hopper_mjx.engine.chain_stage import stored
 
 
 class Pose(NamedTuple):
@@ -41,37 +42,54 @@ def body_masses(cm: ChainModel) -> tuple:
     return (cm.base_mass,) + tuple(link.mass for link in cm.links)
 
 
-def kinematics(cm: ChainModel, qpos) -> Pose:
-    """Body poses, inertias and dof motions from qpos (a tuple of nq scalars)."""
+def _base_and_trig(cm: ChainModel, qpos):
+    """The base rotation (quaternion normalised as MuJoCo does) and each hinge's (cos, sin)."""
     w, x, y, z = qpos[3:7]
     norm = jnp.sqrt(w * w + x * x + y * y + z * z)
     rot = al.quat_to_mat(w / norm, x / norm, y / norm, z / norm)
+    angles = [qpos[link.hinge.qpos_adr] - link.hinge.qpos0 for link in cm.links if link.hinge is not None]
+    return rot, tuple((jnp.cos(a), jnp.sin(a)) for a in angles)
+
+
+def _place_link(link, rot, origin, cos_sin):
+    """A link's rotation and origin from its parent's; with a hinge, its world axis and anchor."""
+    origin = al.vadd(origin, al.matvec(rot, link.pos))
+    rot = al.matmul(rot, link.rot)
+    hinge = link.hinge
+    if hinge is None:
+        return rot, origin, None, None
+    anchor = al.vadd(origin, al.matvec(rot, hinge.pos))
+    axis = al.matvec(rot, hinge.axis)
+    rot = al.matmul(rot, al.axis_rotation(hinge.axis, *cos_sin))
+    return rot, al.vsub(anchor, al.matvec(rot, hinge.pos)), axis, anchor
+
+
+def _mass_placement(cm: ChainModel, rots, origins):
+    locals_ = [(cm.base_com, cm.base_inertia)] + [(link.com, link.inertia) for link in cm.links]
+    coms = tuple(al.vadd(o, al.matvec(r, com)) for r, o, (com, _) in zip(rots, origins, locals_))
+    inertias = tuple(al.rotate_sym(r, inertia) for r, (_, inertia) in zip(rots, locals_))
+    return coms, inertias
+
+
+def kinematics(cm: ChainModel, gate, qpos) -> Pose:
+    """Body poses, inertias and dof motions from qpos (a tuple of nq scalars), one stage per body."""
+    rot, trig = stored(gate, lambda q: _base_and_trig(cm, q), qpos)
     origin = (0.0, 0.0, 0.0)
     rots, origins, anchors = [rot], [origin], [None]
     dof_w = [(0.0, 0.0, 0.0)] * 3 + [al.column(rot, k) for k in range(3)]
     dof_v = [tuple(1.0 if i == k else 0.0 for i in range(3)) for k in range(3)] + [(0.0, 0.0, 0.0)] * 3
+    trig = iter(trig)
     for link in cm.links:
-        origin = al.vadd(origin, al.matvec(rot, link.pos))
-        rot = al.matmul(rot, link.rot)
-        anchor = None
-        hinge = link.hinge
-        if hinge is not None:
-            anchor = al.vadd(origin, al.matvec(rot, hinge.pos))
-            axis = al.matvec(rot, hinge.axis)
-            angle = qpos[hinge.qpos_adr] - hinge.qpos0
-            rot = al.matmul(rot, al.axis_rotation(hinge.axis, jnp.cos(angle), jnp.sin(angle)))
-            origin = al.vsub(anchor, al.matvec(rot, hinge.pos))
+        cos_sin = next(trig) if link.hinge is not None else None
+        rot, origin, axis, anchor = stored(gate, lambda *a, link=link: _place_link(link, *a), rot, origin, cos_sin)
+        if link.hinge is not None:
             dof_w.append(axis)
-            dof_v.append(al.cross(anchor, axis))  # axis x (O - anchor)
+            dof_v.append(stored(gate, al.cross, anchor, axis))  # axis x (O - anchor)
         rots.append(rot)
         origins.append(origin)
         anchors.append(anchor)
-    coms, inertias = [], []
-    locals_ = [(cm.base_com, cm.base_inertia)] + [(link.com, link.inertia) for link in cm.links]
-    for r, o, (com, inertia) in zip(rots, origins, locals_):
-        coms.append(al.vadd(o, al.matvec(r, com)))
-        inertias.append(al.rotate_sym(r, inertia))
-    return Pose(tuple(qpos[:3]), tuple(rots), tuple(origins), tuple(coms), tuple(inertias),
+    coms, inertias = stored(gate, lambda r, o: _mass_placement(cm, r, o), tuple(rots), tuple(origins))
+    return Pose(tuple(qpos[:3]), tuple(rots), tuple(origins), coms, inertias,
                 tuple(dof_w), tuple(dof_v), tuple(anchors))
 
 
@@ -96,15 +114,17 @@ def _composites(cm: ChainModel, pose: Pose):
     return out[::-1]
 
 
-def mass_matrix(cm: ChainModel, pose: Pose) -> dict:
-    """Joint-space inertia M as {(i, j): value} for i <= j, armature included."""
-    composite = _composites(cm, pose)
-    bodies = dof_body(cm)
-    momenta = []
-    for j, b in enumerate(bodies):
+def _momenta(cm: ChainModel, pose: Pose, composite):
+    """Per dof j: the (angular about O, linear) momentum of body(j)'s subtree moving with dof j."""
+    out = []
+    for j, b in enumerate(dof_body(cm)):
         m, h, about_o = composite[b]
         w, v = pose.dof_w[j], pose.dof_v[j]
-        momenta.append((al.vadd(al.sym_matvec(about_o, w), al.cross(h, v)), al.vsub(al.vscale(m, v), al.cross(h, w))))
+        out.append((al.vadd(al.sym_matvec(about_o, w), al.cross(h, v)), al.vsub(al.vscale(m, v), al.cross(h, w))))
+    return tuple(out)
+
+
+def _mass_entries(cm: ChainModel, pose: Pose, momenta) -> dict:
     mass = {}
     for i in range(cm.nv):
         for j in range(i, cm.nv):
@@ -114,37 +134,41 @@ def mass_matrix(cm: ChainModel, pose: Pose) -> dict:
     return mass
 
 
-def bias(cm: ChainModel, pose: Pose, qvel, gravity) -> tuple:
-    """Coriolis, centrifugal and gravity forces (MuJoCo's qfrc_bias) by Newton-Euler."""
-    omega = al.matvec(pose.rot[0], tuple(qvel[3:6]))
-    alpha = (0.0, 0.0, 0.0)
-    acc_origin = al.vscale(-1.0, tuple(gravity))  # accelerate the base against gravity
-    masses = body_masses(cm)
-    forces, moments = [], []
-    origin_prev = pose.origin[0]
-    for b in range(len(masses)):
-        hinge = None if b == 0 else cm.links[b - 1].hinge
-        origin = pose.origin[b]
-        if hinge is None and b > 0:
-            acc_origin = _point_acc(acc_origin, alpha, omega, al.vsub(origin, origin_prev))
-        elif hinge is not None:  # via the anchor, a point of both the parent and the child
-            anchor = pose.anchor[b]
-            acc_origin = _point_acc(acc_origin, alpha, omega, al.vsub(anchor, origin_prev))
-            spin = al.vscale(qvel[hinge.dof], pose.dof_w[hinge.dof])
-            alpha = al.vadd(alpha, al.cross(omega, spin))
-            omega = al.vadd(omega, spin)
-            acc_origin = _point_acc(acc_origin, alpha, omega, al.vsub(origin, anchor))
-        acc_com = _point_acc(acc_origin, alpha, omega, al.vsub(pose.com[b], origin))
-        f = al.vscale(masses[b], acc_com)
-        inertia = pose.inertia[b]
-        n = al.vadd(al.sym_matvec(inertia, alpha), al.cross(omega, al.sym_matvec(inertia, omega)))
-        forces.append(f)
-        moments.append(al.vadd(n, al.cross(pose.com[b], f)))  # about O
-        origin_prev = origin
+def mass_matrix(cm: ChainModel, gate, pose: Pose) -> dict:
+    """Joint-space inertia M as {(i, j): value} for i <= j, armature included (composite rigid bodies)."""
+    composite = stored(gate, lambda p: _composites(cm, p), pose)
+    momenta = stored(gate, lambda p, c: _momenta(cm, p, c), pose, composite)
+    return stored(gate, lambda p, mo: _mass_entries(cm, p, mo), pose, momenta)
+
+
+def _body_wrench(cm: ChainModel, pose: Pose, b: int, qvel, motion):
+    """Newton-Euler forward step into body b: its (omega, alpha, origin acceleration) from the
+    parent's, and the force and moment about O that its motion takes."""
+    omega, alpha, acc_origin = motion
+    hinge = None if b == 0 else cm.links[b - 1].hinge
+    origin = pose.origin[b]
+    if b > 0 and hinge is None:
+        acc_origin = _point_acc(acc_origin, alpha, omega, al.vsub(origin, pose.origin[b - 1]))
+    elif hinge is not None:  # via the anchor, a point of both the parent and the child
+        anchor = pose.anchor[b]
+        acc_origin = _point_acc(acc_origin, alpha, omega, al.vsub(anchor, pose.origin[b - 1]))
+        spin = al.vscale(qvel[hinge.dof], pose.dof_w[hinge.dof])
+        alpha = al.vadd(alpha, al.cross(omega, spin))
+        omega = al.vadd(omega, spin)
+        acc_origin = _point_acc(acc_origin, alpha, omega, al.vsub(origin, anchor))
+    acc_com = _point_acc(acc_origin, alpha, omega, al.vsub(pose.com[b], origin))
+    force = al.vscale(body_masses(cm)[b], acc_com)
+    inertia = pose.inertia[b]
+    torque = al.vadd(al.sym_matvec(inertia, alpha), al.cross(omega, al.sym_matvec(inertia, omega)))
+    return (omega, alpha, acc_origin), (force, al.vadd(torque, al.cross(pose.com[b], force)))
+
+
+def _project_wrenches(cm: ChainModel, pose: Pose, wrenches) -> tuple:
+    """Sum the wrenches from the tip and project them on each dof."""
     out = [None] * cm.nv
     force, moment = (0.0, 0.0, 0.0), (0.0, 0.0, 0.0)
-    for b in reversed(range(len(masses))):
-        force, moment = al.vadd(force, forces[b]), al.vadd(moment, moments[b])
+    for b in reversed(range(len(wrenches))):
+        force, moment = al.vadd(force, wrenches[b][0]), al.vadd(moment, wrenches[b][1])
         hinge = None if b == 0 else cm.links[b - 1].hinge
         if hinge is not None:
             about_anchor = al.vsub(moment, al.cross(pose.anchor[b], force))
@@ -152,6 +176,17 @@ def bias(cm: ChainModel, pose: Pose, qvel, gravity) -> tuple:
     out[0:3] = force
     out[3:6] = al.mattvec(pose.rot[0], moment)
     return tuple(out)
+
+
+def bias(cm: ChainModel, gate, pose: Pose, qvel, gravity) -> tuple:
+    """Coriolis, centrifugal and gravity forces (MuJoCo's qfrc_bias) by Newton-Euler, one stage per body."""
+    omega = stored(gate, al.matvec, pose.rot[0], tuple(qvel[3:6]))
+    motion = (omega, (0.0, 0.0, 0.0), al.vscale(-1.0, tuple(gravity)))  # the base accelerated against gravity
+    wrenches = []
+    for b in range(len(body_masses(cm))):
+        motion, wrench = stored(gate, lambda p, q, mo, b=b: _body_wrench(cm, p, b, q, mo), pose, qvel, motion)
+        wrenches.append(wrench)
+    return stored(gate, lambda p, w: _project_wrenches(cm, p, w), pose, tuple(wrenches))
 
 
 def _point_acc(acc, alpha, omega, r):

@@ -32,28 +32,34 @@ class Solution(NamedTuple):
     qfrc_constraint: tuple
 
 
-def cholesky(a: dict, n: int):
-    """Lower factor L (dict over i >= j) and the inverses of its diagonal."""
-    low, inv = {}, []
-    for j in range(n):
-        pivot = al.sub(a[j, j], al.total(al.mul(low[j, k], low[j, k]) for k in range(j)))
-        diag = al.sqrt(pivot)
-        inv.append(1.0 / diag if al.is_const(diag) else 1 / diag)
-        for i in range(j + 1, n):
-            off = al.sub(a[j, i], al.total(al.mul(low[i, k], low[j, k]) for k in range(j)))
-            low[i, j] = al.mul(off, inv[j])
-    return low, tuple(inv)
-
-
-def cho_solve(factor, b) -> tuple:
-    low, inv = factor
+def _column(a: dict, b, low: dict, y, j: int):
+    """Column j of the Cholesky factor of a, the inverse of its diagonal, and entry j of
+    L^-1 b (the forward substitution rides along the factorisation)."""
     n = len(b)
-    y = []
-    for i in range(n):
-        y.append(al.mul(al.sub(b[i], al.total(al.mul(low[i, k], y[k]) for k in range(i))), inv[i]))
+    pivot = al.sub(a[j, j], al.total(al.mul(low[j, k], low[j, k]) for k in range(j)))
+    inv = 1.0 / al.sqrt(pivot) if al.is_const(pivot) else 1 / jnp.sqrt(pivot)
+    column = tuple(al.mul(al.sub(a[j, i], al.total(al.mul(low[i, k], low[j, k]) for k in range(j))), inv)
+                   for i in range(j + 1, n))
+    y_j = al.mul(al.sub(b[j], al.total(al.mul(low[j, k], y[k]) for k in range(j))), inv)
+    return inv, column, y_j
+
+
+def solve_spd(gate, a: dict, b) -> tuple:
+    """x = a^-1 b for symmetric positive definite a (dict over i <= j): Cholesky, one stored
+    stage per column and per back-substitution row (each depends on all before it)."""
+    n = len(b)
+    low, inv, y = {}, [], []
+    for j in range(n):
+        inv_j, column, y_j = stored(gate, lambda a_, b_, l_, y_, j=j: _column(a_, b_, l_, y_, j), a, tuple(b), dict(low), tuple(y))
+        inv.append(inv_j)
+        y.append(y_j)
+        low.update({(i, j): v for i, v in zip(range(j + 1, n), column)})
     x = [0.0] * n
     for i in reversed(range(n)):
-        x[i] = al.mul(al.sub(y[i], al.total(al.mul(low[k, i], x[k]) for k in range(i + 1, n))), inv[i])
+        later = tuple(x[i + 1:])
+        x[i] = stored(gate, lambda y_i, l_, later, inv_i, i=i: al.mul(
+            al.sub(y_i, al.total(al.mul(l_[k, i], later[k - i - 1]) for k in range(i + 1, n))), inv_i),
+            y[i], dict(low), later, inv[i])
     return tuple(x)
 
 
@@ -65,11 +71,17 @@ def _residuals(rows: Rows, qacc):
     return tuple(al.sub(al.dot(j, qacc), a) for j, a in zip(rows.jac, rows.aref))
 
 
-def _cost(mass, qfrc_smooth, qacc_smooth, rows: Rows, qacc):
-    ma = sym_matvec(mass, qacc, len(qacc))
+def _forces(rows: Rows, residual):
+    """Row forces -D r of the active rows (r < 0) and their joint-space sum J' f."""
+    force = tuple(jnp.where(r < 0, -w * r, 0.0) for w, r in zip(rows.weight, residual))
+    nv = len(rows.jac[0])
+    return force, tuple(al.total(al.mul(j[i], f) for j, f in zip(rows.jac, force)) for i in range(nv))
+
+
+def _cost(gate, mass, qfrc_smooth, qacc_smooth, rows: Rows, qacc):
+    residual, ma = stored(gate, lambda r, x: (_residuals(r, x), sym_matvec(mass, x, len(x))), rows, qacc)
     gauss = 0.5 * al.dot(al.vsub(ma, qfrc_smooth), al.vsub(qacc, qacc_smooth))
-    return gauss + al.total(
-        jnp.where(r < 0, 0.5 * w * r * r, 0.0) for w, r in zip(rows.weight, _residuals(rows, qacc)))
+    return gauss + al.total(jnp.where(r < 0, 0.5 * w * r * r, 0.0) for w, r in zip(rows.weight, residual))
 
 
 def _line(weight, residual, slope, g1, g2, alpha):
@@ -84,48 +96,65 @@ def _line(weight, residual, slope, g1, g2, alpha):
     return alpha, cost, d1, jnp.maximum(d2, MINVAL)
 
 
-def _line_search(weight, residual, slope, g1, g2, iterations: int):
+def _pick(c, p, q):
+    return tuple(jnp.where(c, x, y) for x, y in zip(p, q))
+
+
+def _bracket(line, bracket):
+    """One line-search step: evaluate the candidate, keep it as the lower or upper end, and
+    choose the next candidate (Newton from either end inside the bracket, else the secant)."""
+    lo, hi, found_hi, candidate = bracket
+    p = line(candidate)
+    below = p[2] < 0
+    lo, hi = _pick(below, p, lo), _pick(below, hi, p)
+    found_hi = found_hi | ~below
+    from_lo, from_hi = lo[0] - lo[2] / lo[3], hi[0] - hi[2] / hi[3]
+    secant = lo[0] - lo[2] * (hi[0] - lo[0]) / jnp.maximum(hi[2] - lo[2], MINVAL)
+    inside = lambda a: (a > lo[0]) & (a < hi[0])
+    candidate = jnp.where(~found_hi | inside(from_lo), from_lo, jnp.where(inside(from_hi), from_hi, secant))
+    return lo, hi, found_hi, candidate
+
+
+def _line_search(gate, weight, residual, slope, g1, g2, iterations: int):
     """The step along the search direction that minimises the cost (see the module doc)."""
-    point = lambda a: _line(weight, residual, slope, g1, g2, a)
-    pick = lambda c, p, q: tuple(jnp.where(c, x, y) for x, y in zip(p, q))
-    lo = point(jnp.zeros_like(g1))
+    line = lambda a, args: _line(*args, a)
+    args = (weight, residual, slope, g1, g2)
+    lo = stored(gate, line, jnp.zeros_like(g1), args)
     hi = (jnp.full_like(g1, FAR), jnp.full_like(g1, FAR), jnp.full_like(g1, FAR), jnp.ones_like(g1))
-    found_hi = jnp.zeros_like(g1, dtype=bool)
-    candidate = -lo[2] / lo[3]
+    bracket = (lo, hi, jnp.zeros_like(g1, dtype=bool), -lo[2] / lo[3])
     for _ in range(iterations):
-        p = point(candidate)
-        below = p[2] < 0
-        lo, hi = pick(below, p, lo), pick(below, hi, p)
-        found_hi = found_hi | ~below
-        from_lo, from_hi = lo[0] - lo[2] / lo[3], hi[0] - hi[2] / hi[3]
-        secant = lo[0] - lo[2] * (hi[0] - lo[0]) / jnp.maximum(hi[2] - lo[2], MINVAL)
-        inside = lambda a: (a > lo[0]) & (a < hi[0])
-        candidate = jnp.where(~found_hi | inside(from_lo), from_lo, jnp.where(inside(from_hi), from_hi, secant))
-    last = point(candidate)
-    best = pick(last[1] < lo[1], last, lo)
-    best = pick(found_hi & (hi[1] < best[1]), hi, best)
-    return best[0]
+        bracket = stored(gate, lambda b, a: _bracket(lambda x: line(x, a), b), bracket, args)
+
+    def best(bracket, args):
+        lo, hi, found_hi, candidate = bracket
+        last = line(candidate, args)
+        out = _pick(last[1] < lo[1], last, lo)
+        return _pick(found_hi & (hi[1] < out[1]), hi, out)[0]
+    return stored(gate, best, bracket, args)
+
+
+def _gradient(mass, qfrc_smooth, rows: Rows, qacc):
+    residual = _residuals(rows, qacc)
+    active = tuple(jnp.where(r < 0, w, 0.0) for w, r in zip(rows.weight, residual))
+    ma = sym_matvec(mass, qacc, len(qacc))
+    return residual, active, ma
 
 
 def _newton_step(gate, mass, qfrc_smooth, rows: Rows, ls_iterations: int, qacc):
     n = len(qacc)
-    residual = _residuals(rows, qacc)
-    active = tuple(jnp.where(r < 0, w, 0.0) for w, r in zip(rows.weight, residual))
-    force = tuple(-w * r for w, r in zip(active, residual))
-    qfrc_c = tuple(al.total(al.mul(j[i], f) for j, f in zip(rows.jac, force)) for i in range(n))
-    ma = sym_matvec(mass, qacc, n)
-    grad = tuple(al.sub(al.sub(m, s), c) for m, s, c in zip(ma, qfrc_smooth, qfrc_c))
+    residual, active, ma = stored(gate, lambda *a: _gradient(*a), mass, qfrc_smooth, rows, qacc)
+    _, qfrc_c = stored(gate, _forces, rows, residual)
+    grad = stored(gate, lambda *a: tuple(al.sub(al.sub(m, s), c) for m, s, c in zip(*a)), ma, qfrc_smooth, qfrc_c)
+    hessian = stored(gate, lambda act, jac: {
+        (i, j): al.add(mass[i, j], al.total(al.mul(w, al.mul(jr[i], jr[j])) for w, jr in zip(act, jac)))
+        for i in range(n) for j in range(i, n)}, active, rows.jac)
+    search = tuple(-x for x in solve_spd(gate, hessian, grad))
 
-    def direction(active, grad):
-        hessian = {(i, j): al.add(mass[i, j], al.total(al.mul(w, al.mul(jr[i], jr[j])) for w, jr in zip(active, rows.jac)))
-                   for i in range(n) for j in range(i, n)}
-        return tuple(-x for x in cho_solve(cholesky(hessian, n), grad))
-
-    search = stored(gate, direction, active, grad)
-    slope = tuple(al.dot(j, search) for j in rows.jac)
-    g1 = al.dot(search, al.vsub(ma, qfrc_smooth))
-    g2 = al.dot(search, sym_matvec(mass, search, n))
-    alpha = _line_search(rows.weight, residual, slope, g1, g2, ls_iterations)
+    def along(search, ma):
+        slope = tuple(al.dot(j, search) for j in rows.jac)
+        return slope, al.dot(search, al.vsub(ma, qfrc_smooth)), al.dot(search, sym_matvec(mass, search, n))
+    slope, g1, g2 = stored(gate, along, search, ma)
+    alpha = _line_search(gate, rows.weight, residual, slope, g1, g2, ls_iterations)
     return tuple(al.add(a, al.mul(alpha, s)) for a, s in zip(qacc, search))
 
 
@@ -134,12 +163,12 @@ def solve(gate, mass: dict, qfrc_smooth, qacc_smooth, qacc_warmstart, rows: Rows
     """The constrained accelerations and the rows' forces."""
     qacc = qacc_smooth
     if warmstart:
-        better = _cost(mass, qfrc_smooth, qacc_smooth, rows, qacc_warmstart) < _cost(
-            mass, qfrc_smooth, qacc_smooth, rows, qacc_smooth)
-        qacc = tuple(jnp.where(better, w, s) for w, s in zip(qacc_warmstart, qacc_smooth))
+        better = _cost(gate, mass, qfrc_smooth, qacc_smooth, rows, qacc_warmstart) < _cost(
+            gate, mass, qfrc_smooth, qacc_smooth, rows, qacc_smooth)
+        qacc = stored(gate, lambda w, s: tuple(jnp.where(better, a, b) for a, b in zip(w, s)),
+                      qacc_warmstart, qacc_smooth)
     step = lambda _, x: _newton_step(gate, mass, qfrc_smooth, rows, ls_iterations, x)
     qacc = jax.lax.fori_loop(0, iterations, step, tuple(jnp.asarray(x) for x in qacc))
-    residual = _residuals(rows, qacc)
-    force = tuple(jnp.where(r < 0, -w * r, 0.0) for w, r in zip(rows.weight, residual))
-    qfrc_c = tuple(al.total(al.mul(j[i], f) for j, f in zip(rows.jac, force)) for i in range(len(qacc)))
+    residual = stored(gate, _residuals, rows, qacc)
+    force, qfrc_c = stored(gate, _forces, rows, residual)
     return Solution(qacc, force, qfrc_c)
