@@ -116,7 +116,8 @@ def _bracket(line, bracket):
 
 
 def _line_search(gate, weight, residual, slope, g1, g2, iterations: int):
-    """The step along the search direction that minimises the cost (see the module doc)."""
+    """The step along the search direction that minimises the cost (see the module doc), and
+    the cost's decrease."""
     line = lambda a, args: _line(*args, a)
     args = (weight, residual, slope, g1, g2)
     lo = stored(gate, line, jnp.zeros_like(g1), args)
@@ -125,50 +126,74 @@ def _line_search(gate, weight, residual, slope, g1, g2, iterations: int):
     for _ in range(iterations):
         bracket = stored(gate, lambda b, a: _bracket(lambda x: line(x, a), b), bracket, args)
 
-    def best(bracket, args):
+    def best(bracket, args, start_cost):
         lo, hi, found_hi, candidate = bracket
         last = line(candidate, args)
         out = _pick(last[1] < lo[1], last, lo)
-        return _pick(found_hi & (hi[1] < out[1]), hi, out)[0]
-    return stored(gate, best, bracket, args)
+        out = _pick(found_hi & (hi[1] < out[1]), hi, out)
+        return out[0], start_cost - out[1]
+    return stored(gate, best, bracket, args, lo[1])
 
 
-def _gradient(mass, qfrc_smooth, rows: Rows, qacc):
-    residual = _residuals(rows, qacc)
-    active = tuple(jnp.where(r < 0, w, 0.0) for w, r in zip(rows.weight, residual))
-    ma = sym_matvec(mass, qacc, len(qacc))
-    return residual, active, ma
+class _Iterate(NamedTuple):
+    """The solver's state at one point: the rows' residuals, forces and the cost's gradient."""
+
+    qacc: tuple
+    residual: tuple
+    active: tuple  # D of the active rows, 0 elsewhere
+    ma: tuple  # M qacc
+    force: tuple
+    qfrc_constraint: tuple
+    grad: tuple
 
 
-def _newton_step(gate, mass, qfrc_smooth, rows: Rows, ls_iterations: int, qacc):
-    n = len(qacc)
-    residual, active, ma = stored(gate, lambda *a: _gradient(*a), mass, qfrc_smooth, rows, qacc)
-    _, qfrc_c = stored(gate, _forces, rows, residual)
+def _evaluate(gate, mass, qfrc_smooth, rows: Rows, qacc) -> _Iterate:
+    def residuals(rows, qacc):
+        residual = _residuals(rows, qacc)
+        active = tuple(jnp.where(r < 0, w, 0.0) for w, r in zip(rows.weight, residual))
+        return residual, active, sym_matvec(mass, qacc, len(qacc))
+    residual, active, ma = stored(gate, residuals, rows, qacc)
+    force, qfrc_c = stored(gate, _forces, rows, residual)
     grad = stored(gate, lambda *a: tuple(al.sub(al.sub(m, s), c) for m, s, c in zip(*a)), ma, qfrc_smooth, qfrc_c)
+    return _Iterate(tuple(qacc), residual, active, ma, force, qfrc_c, grad)
+
+
+def _newton_step(gate, mass, qfrc_smooth, rows: Rows, ls_iterations: int, it: _Iterate):
+    """The next point along the Newton direction of the current active set, and the cost's decrease."""
+    n = len(it.qacc)
     hessian = stored(gate, lambda act, jac: {
         (i, j): al.add(mass[i, j], al.total(al.mul(w, al.mul(jr[i], jr[j])) for w, jr in zip(act, jac)))
-        for i in range(n) for j in range(i, n)}, active, rows.jac)
-    search = tuple(-x for x in solve_spd(gate, hessian, grad))
+        for i in range(n) for j in range(i, n)}, it.active, rows.jac)
+    search = tuple(-x for x in solve_spd(gate, hessian, it.grad))
 
     def along(search, ma):
         slope = tuple(al.dot(j, search) for j in rows.jac)
         return slope, al.dot(search, al.vsub(ma, qfrc_smooth)), al.dot(search, sym_matvec(mass, search, n))
-    slope, g1, g2 = stored(gate, along, search, ma)
-    alpha = _line_search(gate, rows.weight, residual, slope, g1, g2, ls_iterations)
-    return tuple(al.add(a, al.mul(alpha, s)) for a, s in zip(qacc, search))
+    slope, g1, g2 = stored(gate, along, search, it.ma)
+    alpha, decrease = _line_search(gate, rows.weight, it.residual, slope, g1, g2, ls_iterations)
+    return tuple(al.add(a, al.mul(alpha, s)) for a, s in zip(it.qacc, search)), decrease
 
 
-def solve(gate, mass: dict, qfrc_smooth, qacc_smooth, qacc_warmstart, rows: Rows, *,
-          iterations: int, ls_iterations: int, warmstart: bool = True) -> Solution:
-    """The constrained accelerations and the rows' forces."""
+def solve(gate, mass: dict, qfrc_smooth, qacc_smooth, qacc_warmstart, rows: Rows, *, iterations: int,
+          ls_iterations: int, tolerance: float, cost_scale: float, warmstart: bool = True) -> Solution:
+    """The constrained accelerations and the rows' forces. Like MuJoCo, an instance stops
+    iterating once the scaled cost decrease or gradient falls below the tolerance."""
     qacc = qacc_smooth
     if warmstart:
         better = _cost(gate, mass, qfrc_smooth, qacc_smooth, rows, qacc_warmstart) < _cost(
             gate, mass, qfrc_smooth, qacc_smooth, rows, qacc_smooth)
         qacc = stored(gate, lambda w, s: tuple(jnp.where(better, a, b) for a, b in zip(w, s)),
                       qacc_warmstart, qacc_smooth)
-    step = lambda _, x: _newton_step(gate, mass, qfrc_smooth, rows, ls_iterations, x)
-    qacc = jax.lax.fori_loop(0, iterations, step, tuple(jnp.asarray(x) for x in qacc))
-    residual = stored(gate, _residuals, rows, qacc)
-    force, qfrc_c = stored(gate, _forces, rows, residual)
-    return Solution(qacc, force, qfrc_c)
+    start = _evaluate(gate, mass, qfrc_smooth, rows, tuple(jnp.asarray(x) for x in qacc))
+
+    def body(carry):
+        it, _, count = carry
+        qacc, decrease = _newton_step(gate, mass, qfrc_smooth, rows, ls_iterations, it)
+        it = _evaluate(gate, mass, qfrc_smooth, rows, qacc)
+        gradient = jnp.sqrt(al.dot(it.grad, it.grad))
+        return it, (cost_scale * decrease < tolerance) | (cost_scale * gradient < tolerance), count + 1
+
+    # Under vmap the loop runs until every instance is done; finished ones are held.
+    it, _, _ = jax.lax.while_loop(lambda c: ~c[1] & (c[2] < iterations), body,
+                                  (start, jnp.zeros((), bool), jnp.zeros((), jnp.int32)))
+    return Solution(it.qacc, it.force, it.qfrc_constraint)

@@ -33,8 +33,10 @@ def stored(gate: jax.Array, fn, *args):
         return [x for x in out_leaves if not is_const(x)]
 
     traced_in = [jnp.asarray(arg_leaves[i]) for i in traced_at]
-    shapes = jax.eval_shape(run, traced_in)
-    outs = jax.lax.cond(gate, run, lambda _: [jnp.zeros(s.shape, s.dtype) for s in shapes], traced_in)
-    outs = iter(outs)
+    # Trace the Python once; the conditional's branch replays the recorded primitives.
+    closed = jax.make_jaxpr(run)(traced_in)
+    replay = lambda t: jax.core.eval_jaxpr(closed.jaxpr, closed.consts, *t)
+    zeros = lambda _: [jnp.zeros(v.aval.shape, v.aval.dtype) for v in closed.jaxpr.outvars]
+    outs = iter(jax.lax.cond(gate, replay, zeros, traced_in))
     leaves = [x if is_const(x) else next(outs) for x in box["leaves"]]
     return jax.tree_util.tree_unflatten(box["tree"], leaves)
