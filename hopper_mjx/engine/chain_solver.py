@@ -24,6 +24,7 @@ from hopper_mjx.engine.chain_constraint import MINVAL, Rows
 from hopper_mjx.engine.chain_stage import stored
 
 FAR = 1e30  # the search's upper end before any point past the minimum is found
+UNROLLED_LINE_SEARCH = 8  # up to this many steps, each is its own stored stage (measured faster than a loop)
 
 
 class Solution(NamedTuple):
@@ -123,8 +124,12 @@ def _line_search(gate, weight, residual, slope, g1, g2, iterations: int):
     lo = stored(gate, line, jnp.zeros_like(g1), args)
     hi = (jnp.full_like(g1, FAR), jnp.full_like(g1, FAR), jnp.full_like(g1, FAR), jnp.ones_like(g1))
     bracket = (lo, hi, jnp.zeros_like(g1, dtype=bool), -lo[2] / lo[3])
-    for _ in range(iterations):
-        bracket = stored(gate, lambda b, a: _bracket(lambda x: line(x, a), b), bracket, args)
+    one_step = lambda b: _bracket(lambda x: line(x, args), b)
+    if iterations <= UNROLLED_LINE_SEARCH:
+        for _ in range(iterations):
+            bracket = stored(gate, one_step, bracket)
+    else:  # a long search (a converged reference) as a loop: one trace, a smaller program
+        bracket = jax.lax.fori_loop(0, iterations, lambda _, b: one_step(b), bracket)
 
     def best(bracket, args, start_cost):
         lo, hi, found_hi, candidate = bracket
