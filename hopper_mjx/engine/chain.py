@@ -54,7 +54,7 @@ class ChainData:
     foot_force: jax.Array  # (3,) N floor on foot, world
     foot_pos: jax.Array  # (3,) m contact point, world (zeros when not touching)
 
-    def replace(self, **fields) -> "ChainData":
+    def replace(self, **fields) -> ChainData:
         return dataclasses.replace(self, **fields)
 
 
