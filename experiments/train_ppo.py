@@ -6,7 +6,7 @@
     python -m hopper_mjx.simulate --controller policy:runs/ppo30 --gravity 9.81,3.71,1.62 --duration 10
 
 Writes into --out: checkpoints/<env step>/ (every evaluation), policy/ (the final
-params, loadable by `hopper_mjx.control.policy`), metrics.json (arguments, env config,
+params, loadable by `hopper_mjx.envs.policy`), metrics.json (arguments, env config,
 one record per evaluation, wall time) and reward_curve.png.
 """
 
@@ -72,7 +72,7 @@ def _pair(text: str, what: str) -> tuple[float, float]:
 
 def latest_checkpoint(out: Path) -> tuple[Path, int] | None:
     """The newest complete checkpoint under out/checkpoints, and its env step."""
-    from hopper_mjx.control.policy import ENV_CONFIG
+    from hopper_mjx.envs.policy import ENV_CONFIG
 
     done = [p for p in (out / "checkpoints").glob("[0-9]" * 12) if (p / ENV_CONFIG).exists()]
     if not done:
@@ -88,8 +88,7 @@ def train(args) -> dict:
     from brax.training.agents.ppo import networks as ppo_networks
     from brax.training.agents.ppo import train as ppo
 
-    from hopper_mjx.control import policy
-    from hopper_mjx.envs import MonopedConfig, MonopedEnv, randomize_gravity
+    from hopper_mjx.envs import MonopedConfig, MonopedEnv, policy, randomize_gravity
 
     out = Path(args.out).resolve()  # orbax writes checkpoints to absolute paths only
     out.mkdir(parents=True, exist_ok=True)
@@ -183,7 +182,8 @@ def evaluate(policy_path, *, gravities, duration: float, height: float, num: int
     import numpy as np
 
     from hopper_mjx import metrics, model
-    from hopper_mjx.control import policy, raibert
+    from hopper_mjx.control import raibert
+    from hopper_mjx.envs import policy
     from hopper_mjx.sim import Sim, gravity_vectors
     from hopper_mjx.sweep.grid import KICK
     from hopper_mjx.sweep.runner import SENSORS
@@ -192,18 +192,18 @@ def evaluate(policy_path, *, gravities, duration: float, height: float, num: int
     sim = Sim(mj_model)
     g = np.repeat(np.asarray(gravities, dtype=float), num)
     sensors = SENSORS  # the sweep's streams and kicks: the numbers compare with a sweep's
-    steps = int(round(duration / sim.layout.timestep / 10)) * 10
     kick = np.zeros((len(g), sim.layout.nv), np.float32)
     kick[:, [0, 1, 3, 4]] = KICK * np.random.default_rng(seed).standard_normal((len(g), 4))
     controllers = {
-        "policy": (policy.policy_controller(mj_model, policy_path), policy.policy_params(mj_model, len(g), height=height)),
-        "raibert": (raibert.raibert(sim.layout), raibert.raibert_params(len(g), height=height)),
+        "policy": (policy.policy_controller(mj_model, policy_path),
+                   policy.policy_params(sim.robot, len(g), height=height)),
+        "raibert": (raibert.raibert(sim.robot), raibert.raibert_params(len(g), height=height)),
     }
     out = {}
     for name, (controller, params) in controllers.items():
-        state = sim.reset(gravity_vectors(g), key=seed, controller=controller, params=params, qvel=kick)
-        final, traj = sim.rollout(state, controller, steps=steps, sensors=sensors)
-        m = metrics.hop_metrics(traj, g, standing_height=metrics.standing_height(mj_model),
+        final, traj = sim.run(gravity_vectors(g), controller, params, duration=duration, sensors=sensors,
+                              key=seed, qvel=kick)
+        m = metrics.hop_metrics(traj, g, standing_height=sim.robot.standing_height,
                                 work=np.asarray(final.cstate.work), mass=sim.layout.total_mass)
         m["survival"] = ~(m["fell"] | np.asarray(final.diverged))
         out[name] = {f"{v:g}": {**{k: _mean(m[k][g == v]) for k in COMPARED}, "min_hops": int(m["hops"][g == v].min())}

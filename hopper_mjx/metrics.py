@@ -31,13 +31,6 @@ FALL_TILT = 0.8  # rad of |roll| or |pitch|: far past any recoverable hopping at
 MIN_TRANSPORT = 0.05  # m of net horizontal travel below which the cost of transport is NaN
 
 
-def standing_height(mj_model) -> float:
-    """Base height (m) of a model standing still in the core's default stance, foot on the floor."""
-    from hopper_mjx.sim import stance_qpos
-
-    return float(stance_qpos(mj_model, clearance=0.0)[2])
-
-
 def tilt(quat: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(roll, pitch) in rad of [w, x, y, z] quaternions (..., 4), ZYX Euler angles."""
     w, x, y, z = np.moveaxis(np.asarray(quat, dtype=float), -1, 0)
@@ -98,7 +91,7 @@ def hop_metrics(
 
     traj: a `hopper_mjx.sim.Trajectory` (uses its state and contact streams);
     gravity: (N, 3) vectors or (N,) magnitudes, m/s²; command_speed: (2,) or (N, 2) m/s;
-    standing_height: m (`standing_height(mj_model)`); work: (N,) J the motors did
+    standing_height: m (`Robot.standing_height`); work: (N,) J the motors did
     (e.g. the Raibert controller state's `work`) and mass: kg, for the cost of transport;
     last_hops: hops averaged; speed_window: s of speed averaging before the end or fall.
     """

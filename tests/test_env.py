@@ -16,8 +16,7 @@ import pytest
 from brax.envs.wrappers import training
 from mujoco import mjx
 
-from hopper_mjx.envs import MonopedConfig, MonopedEnv, randomize_gravity
-from hopper_mjx.envs import monoped
+from hopper_mjx.envs import MonopedConfig, MonopedEnv, monoped, randomize_gravity
 
 N = 4  # environments, a multiple of the 2 host devices
 
@@ -234,12 +233,12 @@ def test_a_rerun_resumes_from_the_last_checkpoint(trained, capsys):
 
 
 def test_policy_runs_as_a_core_controller(trained, mj_model, sim):
-    from hopper_mjx.control import policy
+    from hopper_mjx.envs import policy
     from hopper_mjx.sim import gravity_vectors
 
     out, _ = trained
     controller = policy.policy_controller(mj_model, os.path.relpath(out))  # relative, as typed on a command line
-    params = policy.policy_params(mj_model, 3, height=0.2, speed=(0.1, 0.0))
+    params = policy.policy_params(sim.robot, 3, height=0.2, speed=(0.1, 0.0))
     np.testing.assert_allclose(np.asarray(params[0]), [monoped.stance_qpos(mj_model)[2] + 0.2, 0.1, 0.0], rtol=1e-6)
     state = sim.reset(gravity_vectors([9.81, 3.71, 1.62]), key=0, controller=controller, params=params)
     final, traj = sim.rollout(state, controller, steps=100)
@@ -252,10 +251,10 @@ def test_policy_runs_as_a_core_controller(trained, mj_model, sim):
     assert (np.abs(np.asarray(cs.last_action)) <= 1).all() and np.abs(np.asarray(cs.last_action)).sum() > 0
 
 
-def test_policy_path_errors_name_the_problem(tmp_path, mj_model):
-    from hopper_mjx.control import policy
+def test_policy_path_errors_name_the_problem(tmp_path, mj_model, sim):
+    from hopper_mjx.envs import policy
 
     with pytest.raises(ValueError, match="not a trained policy"):
         policy.policy_controller(mj_model, tmp_path)
     with pytest.raises(ValueError, match="speed"):
-        policy.policy_params(mj_model, 2, height=0.1, speed=(0.1,))
+        policy.policy_params(sim.robot, 2, height=0.1, speed=(0.1,))

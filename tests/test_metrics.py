@@ -87,4 +87,6 @@ def test_bad_arguments():
 
 
 def test_standing_height_is_the_stance_with_the_foot_down(mj_model):
-    assert metrics.standing_height(mj_model) == pytest.approx(0.8823, abs=1e-3)
+    from hopper_mjx.model.robot import standing_height
+
+    assert standing_height(mj_model) == pytest.approx(0.8823, abs=1e-3)

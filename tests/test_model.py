@@ -105,7 +105,8 @@ def test_timestep_is_configurable():
         (lambda t: t.replace('<joint name="hfe_joint" type="revolute">', '<joint name="hfe_joint" type="prismatic">'),
          "'hfe_joint' must be revolute"),
     ],
-    ids=["xml", "missing-joint", "no-inertia", "negative-mass", "no-foot", "no-transmission", "bad-effort", "prismatic"],
+    ids=["xml", "missing-joint", "no-inertia", "negative-mass", "no-foot", "no-transmission", "bad-effort",
+         "prismatic"],
 )
 def test_bad_urdf_is_rejected_with_a_clear_message(tmp_path, edit, message):
     path = tmp_path / "bad.urdf"
