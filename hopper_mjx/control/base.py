@@ -50,11 +50,21 @@ def joint_state(layout: Layout, obs: Observation) -> tuple[jax.Array, jax.Array]
     return obs.qpos[jnp.asarray(layout.joint_qpos)], obs.qvel[jnp.asarray(layout.joint_dof)]
 
 
+def saturate(layout: Layout, torque_by_joint: jax.Array) -> jax.Array:
+    """Joint torques (haa, hfe, kfe), N·m, clipped at each joint's effort limit."""
+    limit = jnp.asarray(layout.effort_limit)
+    return jnp.clip(torque_by_joint, -limit, limit)
+
+
+def to_ctrl(layout: Layout, torque_by_joint: jax.Array) -> jax.Array:
+    """Joint torques (haa, hfe, kfe) -> actuator controls (actuator order, torque / gear)."""
+    ctrl = torque_by_joint / jnp.asarray(layout.gear)
+    return jnp.zeros(layout.nu).at[jnp.asarray(layout.actuator_of_joint)].set(ctrl)
+
+
 def clip_to_limits(layout: Layout, torque_by_joint: jax.Array) -> jax.Array:
     """Joint torques (haa, hfe, kfe) -> actuator controls, saturated at the effort limits."""
-    limit = jnp.asarray(layout.effort_limit)
-    ctrl = jnp.zeros(layout.nu).at[jnp.asarray(layout.actuator_of_joint)].set(torque_by_joint)
-    return jnp.clip(ctrl, -limit, limit)
+    return to_ctrl(layout, saturate(layout, torque_by_joint))
 
 
 def zero_torque(layout: Layout) -> Controller:

@@ -70,7 +70,7 @@ import numpy as np
 from brax import math as bmath
 
 from hopper_mjx.control import kinematics
-from hopper_mjx.control.base import Controller, clip_to_limits, joint_state, pd
+from hopper_mjx.control.base import Controller, joint_state, pd, saturate, to_ctrl
 from hopper_mjx.model.robot import LegGeometry, Robot
 from hopper_mjx.signals import Observation
 
@@ -393,8 +393,8 @@ def raibert(robot: Robot, config: RaibertConfig | None = None) -> Controller:
         stance = stance_torque(leg, gains, phase, body, spin, speed, thrust_force, g, stiffness, mass,
                                inertia.swing_tilt)
         flight = flight_torque(leg, gains, body, spin, speed, g, inertia)
-        ctrl = clip_to_limits(layout, jnp.where(phase == FLIGHT, flight, stance))
-        torque = ctrl[jnp.asarray(layout.actuator_of_joint)]
+        torque = saturate(layout, jnp.where(phase == FLIGHT, flight, stance))
+        ctrl = to_ctrl(layout, torque)
         state = RaibertState(
             params=s.params, phase=phase, phase_start=jnp.where(phase != s.phase, obs.time, s.phase_start),
             touchdown_time=speed.touchdown_time, stance_time=speed.stance_time, apex=apex,

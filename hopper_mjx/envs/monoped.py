@@ -38,7 +38,7 @@ from mujoco import mjx
 
 from hopper_mjx import metrics
 from hopper_mjx import model as hopper_model
-from hopper_mjx.control.base import clip_to_limits, joint_state, pd
+from hopper_mjx.control.base import joint_state, pd, saturate, to_ctrl
 from hopper_mjx.engine.mjx import foot_contact
 from hopper_mjx.model import robot
 from hopper_mjx.model.layout import Layout
@@ -124,9 +124,9 @@ def joint_targets(layout: Layout, cfg: MonopedConfig, stance: jax.Array, action:
 
 
 def pd_torque(layout: Layout, cfg: MonopedConfig, target: jax.Array, obs) -> jax.Array:
-    """The PD law on joint angles -> actuator controls, saturated at the effort limits."""
+    """The PD law on joint angles -> joint torques (haa, hfe, kfe), saturated at the effort limits."""
     q, qd = joint_state(layout, obs)
-    return clip_to_limits(layout, pd(jnp.asarray(cfg.kp), jnp.asarray(cfg.kd), target - q, qd))
+    return saturate(layout, pd(jnp.asarray(cfg.kp), jnp.asarray(cfg.kd), target - q, qd))
 
 
 def observation_of(foot_geom: int, m: mjx.Model, d: mjx.Data) -> Observation:
@@ -275,8 +275,8 @@ class MonopedEnv(Env):
 
         def physics_step(carry, _):
             d, effort = carry
-            ctrl = pd_torque(lay, cfg, target, d)
-            return (mjx.step(m, d.replace(ctrl=ctrl)), effort + jnp.mean((ctrl / limit) ** 2)), None
+            torque = pd_torque(lay, cfg, target, d)
+            return (mjx.step(m, d.replace(ctrl=to_ctrl(lay, torque))), effort + jnp.mean((torque / limit) ** 2)), None
 
         (data, effort), _ = jax.lax.scan(physics_step, (state.pipeline_state, jnp.zeros(())), None, self.n_frames)
         g = -m.opt.gravity[2]

@@ -27,7 +27,7 @@ from brax.training.acme import running_statistics
 from brax.training.agents.ppo import checkpoint as ppo_checkpoint
 from brax.training.agents.ppo import networks as ppo_networks
 
-from hopper_mjx.control.base import Controller, joint_state
+from hopper_mjx.control.base import Controller, joint_state, to_ctrl
 from hopper_mjx.envs import monoped
 from hopper_mjx.model.layout import Layout
 from hopper_mjx.model.robot import Robot
@@ -117,8 +117,9 @@ def policy_controller(mj_model: mujoco.MjModel, path) -> Controller:
         decide = cs.tick % every == 0
         action = jnp.where(decide, policy(features), cs.last_action)
         target = jnp.where(decide, monoped.joint_targets(layout, cfg, stance, action), cs.target)
-        ctrl = monoped.pd_torque(layout, cfg, target, obs)
-        power = jnp.abs(ctrl[jnp.asarray(layout.actuator_of_joint)] * joint_state(layout, obs)[1]).sum()
-        return ctrl, PolicyState(cs.command, target, action, cs.tick + 1, cs.work + power * layout.timestep)
+        torque = monoped.pd_torque(layout, cfg, target, obs)
+        power = jnp.abs(torque * joint_state(layout, obs)[1]).sum()
+        work = cs.work + power * layout.timestep
+        return to_ctrl(layout, torque), PolicyState(cs.command, target, action, cs.tick + 1, work)
 
     return Controller(name=f"policy:{path}", init=init, act=act)
