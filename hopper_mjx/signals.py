@@ -149,9 +149,15 @@ def _perturb_quat(key, quat, std):
     return noisy / jnp.linalg.norm(noisy, axis=-1, keepdims=True)
 
 
+def noise_keys(key: jax.Array) -> jax.Array:
+    """(6, 2) the keys `add_noise` draws from: orientation, gyro, accel, odometry position,
+    linear and angular velocity."""
+    return jax.random.split(key, 6)
+
+
 def add_noise(cfg: SensorConfig, key: jax.Array, imu_: Imu, odom: Odometry) -> tuple[Imu, Odometry]:
     """Measurement noise for one instance's recorded streams; exact when every std is 0."""
-    k = jax.random.split(key, 6)
+    k = noise_keys(key)
     imu_ = Imu(
         quat=_perturb_quat(k[0], imu_.quat, cfg.orientation_noise),
         gyro=_gauss(k[1], imu_.gyro, cfg.gyro_noise),

@@ -57,6 +57,13 @@ class Trajectory(NamedTuple):
     time: dict  # stream name -> (T_stream,) seconds
 
 
+def split_rollout_key(key: jax.Array) -> tuple[jax.Array, jax.Array]:
+    """(this rollout's noise key, the next rollout's key) from an instance's key: the noise
+    draws from the first only, so the second was never used."""
+    noise, following = jax.random.split(key)
+    return noise, following
+
+
 def steps_for(duration: float, timestep: float, sensors: signals.SensorConfig) -> int:
     """Physics steps closest to `duration` s that hold a whole number of every stream's period (at least one)."""
     whole = math.lcm(*sensors.periods(timestep).values())
@@ -264,10 +271,10 @@ def _instance_rollout(engine, controller, steps, tick, periods, sensors):
         (_, state), sig = jax.lax.scan(one_tick, (model, state), None, length=steps // tick)
         every = {k: p // tick for k, p in periods.items()}
         decimate = lambda tree, stream: jax.tree_util.tree_map(lambda x: x[:: every[stream]], tree)
-        imu, odom = signals.add_noise(sensors, state.key, decimate(sig.imu, "imu"), decimate(sig.odom, "odom"))
+        noise_key, next_key = split_rollout_key(state.key)
+        imu, odom = signals.add_noise(sensors, noise_key, decimate(sig.imu, "imu"), decimate(sig.odom, "odom"))
         contact = decimate(sig.contact, "contact")
-        key = jax.random.split(state.key)[0]  # fresh noise for the next rollout
         traj = (imu, odom, contact, sig.qpos[:: every["state"]], sig.qvel[:: every["state"]])
-        return state._replace(key=key), traj
+        return state._replace(key=next_key), traj
 
     return run
