@@ -179,6 +179,5 @@ def hop_metrics(
         "max_pitch": np.where(upright, np.abs(pitch), 0.0).max(axis=1),
         "fell": fell,
         "fall_time": np.where(fell, t_fall, np.nan),
-        "hops_before_fall": hops,
         "cost_of_transport": cost,
     }

@@ -13,7 +13,7 @@ import numpy as np
 
 from hopper_mjx.sweep.grid import PLANETS, Instances, SweepSpec
 
-INTEGER_COLUMNS = {"replicate", "seed", "hops", "hops_before_fall", "fell", "diverged"}
+INTEGER_COLUMNS = {"replicate", "seed", "hops", "fell", "diverged"}
 
 
 def rows(spec: SweepSpec, inst: Instances, table: np.ndarray, columns: tuple[str, ...]) -> tuple[list[str], list[list]]:
