@@ -172,6 +172,17 @@ def train(args) -> dict:
 COMPARED = ("survival", "hops", "apex_height", "hop_period", "tracking_error", "cost_of_transport")
 
 
+def evaluation_batch(gravities, num: int, seed: int, nv: int):
+    """(gravity magnitudes (n,), initial velocities (n, nv)): `num` instances per gravity, kicked
+    exactly as a gravity sweep with this seed kicks its replicates (`sweep.grid.expand`)."""
+    from hopper_mjx.sweep.grid import SweepSpec, expand
+
+    spec = SweepSpec(kind="gravity", gravity=tuple(gravities), num=num, duration=1.0, height=0.0,
+                     speed=(0.0, 0.0), seed=seed)
+    instances = expand(spec, nv)
+    return instances.gravity, instances.qvel
+
+
 def evaluate(policy_path, *, gravities, duration: float, height: float, num: int, seed: int = 0) -> dict:
     """Hop metrics of the policy and of the Raibert controller, same batch, same commands.
 
@@ -185,15 +196,12 @@ def evaluate(policy_path, *, gravities, duration: float, height: float, num: int
     from hopper_mjx.control import raibert
     from hopper_mjx.envs import policy
     from hopper_mjx.sim import Sim, gravity_vectors
-    from hopper_mjx.sweep.grid import KICK
     from hopper_mjx.sweep.runner import SENSORS
 
     mj_model = model.load()
     sim = Sim(mj_model)
-    g = np.repeat(np.asarray(gravities, dtype=float), num)
+    g, kick = evaluation_batch(gravities, num, seed, sim.layout.nv)
     sensors = SENSORS  # the sweep's streams and kicks: the numbers compare with a sweep's
-    kick = np.zeros((len(g), sim.layout.nv), np.float32)
-    kick[:, [0, 1, 3, 4]] = KICK * np.random.default_rng(seed).standard_normal((len(g), 4))
     controllers = {
         "policy": (policy.policy_controller(mj_model, policy_path),
                    policy.policy_params(sim.robot, len(g), height=height)),

@@ -258,3 +258,16 @@ def test_policy_path_errors_name_the_problem(tmp_path, mj_model, sim):
         policy.policy_controller(mj_model, tmp_path)
     with pytest.raises(ValueError, match="speed"):
         policy.policy_params(sim.robot, 2, height=0.1, speed=(0.1,))
+
+
+def test_evaluation_kicks_are_the_sweeps():
+    """The evaluation claims the sweep's kicks: replicate r gets the sweep's kick for replicate r."""
+    from hopper_mjx.sweep.grid import KICK, SweepSpec, expand
+
+    g, qvel = train_ppo.evaluation_batch([9.81, 1.62], 3, seed=4, nv=9)
+    sweep = expand(SweepSpec(kind="gravity", gravity=(9.81, 1.62), num=3, duration=10.0, height=0.1,
+                             speed=(0.0, 0.0), seed=4), 9)
+    np.testing.assert_array_equal(g, sweep.gravity)
+    np.testing.assert_array_equal(qvel, sweep.qvel)
+    np.testing.assert_array_equal(qvel[:3], qvel[3:])  # common random numbers across gravities
+    assert 0 < np.abs(qvel[:, [0, 1, 3, 4]]).max() < 6 * KICK and not qvel[:, [2, 5, 6, 7, 8]].any()
