@@ -16,7 +16,6 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import mujoco
-import numpy as np
 
 DEFAULT_URDF = Path(__file__).with_name("monoped.urdf")
 JOINTS = ("haa_joint", "hfe_joint", "kfe_joint")
@@ -53,16 +52,6 @@ class LegDescription:
     foot_link: str
     foot_radius: float
     transmissions: tuple[Transmission, ...]
-
-
-def _floats(text: str | None, n: int, where: str) -> np.ndarray:
-    try:
-        values = np.array([float(v) for v in (text or "").split()])
-    except ValueError:
-        raise URDFError(f"{where}: expected {n} numbers, got {text!r}") from None
-    if values.shape != (n,) or not np.all(np.isfinite(values)):
-        raise URDFError(f"{where}: expected {n} finite numbers, got {text!r}")
-    return values
 
 
 def _number(element: ET.Element | None, attr: str, where: str) -> float:

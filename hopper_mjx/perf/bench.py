@@ -178,7 +178,7 @@ def peak_rss_mb() -> float:
 
 
 def run(num: int, steps: int, *, controller: str = "hold", chunk: int = 256, repeat: int = 2,
-        threads: int | None = None, timestep: float = 1e-3, native: bool = True) -> dict:
+        threads: int | None = None, timestep: float = 1e-3) -> dict:
     """One side-by-side measurement; returns the JSON record."""
     import jax
 
@@ -207,17 +207,14 @@ def run(num: int, steps: int, *, controller: str = "hold", chunk: int = 256, rep
     for _ in range(repeat):  # interleaved, so that both sides see the same background load
         wall, cpu, final = timed(run_mjx)
         mjx_runs.append((wall, cpu))
-        if pool:
-            wall, cpu, native_qpos = timed(lambda: pool.run(steps))
-            native_runs.append((wall, cpu))
-    if pool:
-        pool.close()
+        wall, cpu, native_qpos = timed(lambda: pool.run(steps))
+        native_runs.append((wall, cpu))
+    pool.close()
     total = num * steps
     mjx_s, native_s = [w for w, _ in mjx_runs], [w for w, _ in native_runs]
-    mjx_rate = total / min(mjx_s)
-    native_rate = total / min(native_s) if native_s else float("nan")
+    mjx_rate, native_rate = total / min(mjx_s), total / min(native_s)
     mjx_cpu = min(c for _, c in mjx_runs) / total * 1e6
-    native_cpu = min(c for _, c in native_runs) / total * 1e6 if native_runs else float("nan")
+    native_cpu = min(c for _, c in native_runs) / total * 1e6
     qpos = np.asarray(final.data.qpos)
     record = {
         "num": num,
@@ -247,7 +244,7 @@ def run(num: int, steps: int, *, controller: str = "hold", chunk: int = 256, rep
         "jax": jax.__version__,
         "python": platform.python_version(),
     }
-    if native_s and controller != "raibert":  # same law on both sides: same trajectories
+    if controller != "raibert":  # same law on both sides: same trajectories
         record["native_final_base_height_m"] = float(np.median(native_qpos[:, 2]))
         record["max_final_qpos_gap"] = float(np.abs(native_qpos - qpos).max())
     import mujoco
