@@ -13,7 +13,7 @@ stance before it, when that stance began inside the record. Per-hop values:
   hop period (touchdown -> touchdown) in s, and duty factor = stance / period.
 
 A *fall* is the first sample where the base is below `FALL_HEIGHT` or |roll| or
-|pitch| exceeds `FALL_TILT`. Everything after a fall is ignored: per-hop means
+|pitch| exceeds `FALL_ROLL_PITCH`. Everything after a fall is ignored: per-hop means
 are over the last `last_hops` hops before it, the speed window ends at it.
 
 Undefined values are NaN: an instance that never completes a hop has NaN apex
@@ -27,11 +27,11 @@ import numpy as np
 
 FALL_HEIGHT = 0.4  # m: the base centre this low means the leg folded or the robot lies on the floor
 # (the deepest upright crouch, knee at its -1.6 rad limit, keeps the base above 0.7 m)
-FALL_TILT = 0.8  # rad of |roll| or |pitch|: far past any recoverable hopping attitude
+FALL_ROLL_PITCH = 0.8  # rad of |roll| or |pitch| (each): far past any recoverable hopping attitude
 MIN_TRANSPORT = 0.05  # m of net horizontal travel below which the cost of transport is NaN
 
 
-def tilt(quat: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def roll_pitch(quat: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(roll, pitch) in rad of [w, x, y, z] quaternions (..., 4), ZYX Euler angles."""
     w, x, y, z = np.moveaxis(np.asarray(quat, dtype=float), -1, 0)
     roll = np.arctan2(2 * (w * x + y * z), 1 - 2 * (x * x + y * y))
@@ -110,8 +110,8 @@ def hop_metrics(
 
     # -- falls -----------------------------------------------------------------
     z = qpos[:, :, 2]
-    roll, pitch = tilt(qpos[:, :, 3:7])
-    down = (z < FALL_HEIGHT) | (np.abs(roll) > FALL_TILT) | (np.abs(pitch) > FALL_TILT)
+    roll, pitch = roll_pitch(qpos[:, :, 3:7])
+    down = (z < FALL_HEIGHT) | (np.abs(roll) > FALL_ROLL_PITCH) | (np.abs(pitch) > FALL_ROLL_PITCH)
     fell = down.any(axis=1)
     fall_index = np.where(fell, down.argmax(axis=1), len(t_state) - 1)
     t_fall = np.where(fell, t_state[fall_index], np.inf)

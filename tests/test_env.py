@@ -271,3 +271,21 @@ def test_evaluation_kicks_are_the_sweeps():
     np.testing.assert_array_equal(qvel, sweep.qvel)
     np.testing.assert_array_equal(qvel[:3], qvel[3:])  # common random numbers across gravities
     assert 0 < np.abs(qvel[:, [0, 1, 3, 4]]).max() < 6 * KICK and not qvel[:, [2, 5, 6, 7, 8]].any()
+
+
+def test_env_and_metrics_falls_are_different_measures(mj_model):
+    """The env ends an episode on the angle of the base z axis from vertical; the metrics call a fall
+    on |roll| or |pitch| each. A base rolled and pitched 0.7 rad each (1.0 rad from vertical) is
+    fallen to the env and upright to the metrics; the two are named apart."""
+    from hopper_mjx import metrics
+
+    roll = pitch = 0.7
+    # ZYX Euler (yaw 0): q = q_y(pitch) * q_x(roll), [w, x, y, z]
+    cr, sr, cp, sp = np.cos(roll / 2), np.sin(roll / 2), np.cos(pitch / 2), np.sin(pitch / 2)
+    quat = (cp * cr, cp * sr, sp * cr, -sp * sr)
+    d = _state(mj_model, height=1.0, quat=quat)
+    np.testing.assert_allclose(metrics.roll_pitch(np.asarray(quat)), (roll, pitch), atol=1e-6)
+    np.testing.assert_allclose(float(monoped.tilt_from_vertical(d)), np.arccos(np.cos(roll) * np.cos(pitch)),
+                               atol=1e-5)
+    assert bool(monoped.fallen(MonopedConfig(), d))
+    assert max(roll, pitch) < metrics.FALL_ROLL_PITCH

@@ -44,6 +44,8 @@ from hopper_mjx.model import robot
 from hopper_mjx.model.layout import Layout
 from hopper_mjx.signals import Contact, Observation
 
+MAX_TILT_FROM_VERTICAL = 0.8  # rad between the base's z axis and the vertical that ends an episode
+
 
 @dataclasses.dataclass(frozen=True)
 class MonopedConfig:
@@ -70,8 +72,9 @@ class MonopedConfig:
     w_action_rate: float = 0.02
     w_spin: float = 0.01  # times |angular rate|², rad²/s²
     fall_penalty: float = 10.0
-    # A fall: the base tilted beyond this, or its origin this low (m).
-    max_tilt: float = metrics.FALL_TILT  # rad, angle of the base z axis from vertical
+    # A fall: the base's z axis this far from vertical (rad; not the metrics' per-axis roll/pitch
+    # bound, see docs/learning.md), or its origin this low (m).
+    max_tilt: float = MAX_TILT_FROM_VERTICAL
     min_base_height: float = metrics.FALL_HEIGHT  # m
     initial_clearance: tuple[float, float] = (0.0, 0.1)  # m, foot above the floor at reset
     initial_joint_noise: float = 0.05  # rad
@@ -163,7 +166,7 @@ def predicted_apex(d: mjx.Data, g: jax.Array) -> jax.Array:
     return d.qpos[2] + vz**2 / (2.0 * jnp.maximum(g, 0.1))
 
 
-def tilt(d: mjx.Data) -> jax.Array:
+def tilt_from_vertical(d: mjx.Data) -> jax.Array:
     """Angle (rad) between the base's z axis and the world's vertical."""
     w, x, y, _ = d.qpos[3:7]
     cos = 1.0 - 2.0 * (x * x + y * y)  # z-component of the body z axis
@@ -172,7 +175,7 @@ def tilt(d: mjx.Data) -> jax.Array:
 
 def fallen(cfg: MonopedConfig, d: mjx.Data) -> jax.Array:
     finite = jnp.isfinite(d.qpos).all() & jnp.isfinite(d.qvel).all()
-    return ~finite | (tilt(d) > cfg.max_tilt) | (d.qpos[2] < cfg.min_base_height)
+    return ~finite | (tilt_from_vertical(d) > cfg.max_tilt) | (d.qpos[2] < cfg.min_base_height)
 
 
 def reward_terms(
@@ -185,7 +188,7 @@ def reward_terms(
     return {
         "apex": cfg.w_apex * jnp.exp(-apex_error / cfg.apex_scale),
         "speed": cfg.w_speed * jnp.exp(-speed_error / cfg.speed_scale**2),
-        "upright": cfg.w_upright * jnp.exp(-((tilt(d) / cfg.upright_scale) ** 2)),
+        "upright": cfg.w_upright * jnp.exp(-((tilt_from_vertical(d) / cfg.upright_scale) ** 2)),
         "effort": -cfg.w_effort * effort,
         "action_rate": -cfg.w_action_rate * jnp.sum((action - last_action) ** 2),
         "spin": -cfg.w_spin * jnp.sum(d.qvel[3:6] ** 2),
