@@ -81,14 +81,48 @@ def latest_checkpoint(out: Path) -> tuple[Path, int] | None:
     return path, int(path.name)
 
 
+def _run_ppo(args, env, config, factory, remaining: int, start_step: int, resume, progress, save_checkpoint) -> None:
+    """Brax PPO for the `remaining` environment steps, resuming from `resume` (path, step) if given."""
+    from brax.training.agents.ppo import train as ppo
+
+    from hopper_mjx.envs import randomize_gravity
+
+    per_train_step = args.batch_size * args.num_minibatches * args.unroll_length
+    ppo.train(
+        environment=env,
+        num_timesteps=remaining,
+        num_evals=max(1, math.ceil(remaining / max(args.eval_every, per_train_step))) + 1,
+        episode_length=args.episode_length,
+        num_envs=args.num_envs,
+        num_eval_envs=args.num_eval_envs,
+        deterministic_eval=True,
+        randomization_fn=functools.partial(randomize_gravity, gravity_range=config.gravity_range),
+        unroll_length=args.unroll_length,
+        batch_size=args.batch_size,
+        num_minibatches=args.num_minibatches,
+        num_updates_per_batch=args.updates_per_batch,
+        learning_rate=args.learning_rate,
+        entropy_cost=args.entropy_cost,
+        discounting=args.discounting,
+        gae_lambda=0.95,
+        clipping_epsilon=0.2,
+        max_grad_norm=1.0,
+        normalize_observations=True,
+        network_factory=factory,
+        seed=args.seed + start_step,  # a resumed run draws fresh environments
+        restore_checkpoint_path=str(resume[0]) if resume else None,
+        progress_fn=progress,
+        policy_params_fn=save_checkpoint,
+    )
+
+
 def train(args) -> dict:
     """Trains (or resumes) as the arguments say; returns the metrics record also saved to metrics.json."""
     import jax
     from brax.training.agents.ppo import checkpoint as ppo_checkpoint
     from brax.training.agents.ppo import networks as ppo_networks
-    from brax.training.agents.ppo import train as ppo
 
-    from hopper_mjx.envs import MonopedConfig, MonopedEnv, policy, randomize_gravity
+    from hopper_mjx.envs import MonopedConfig, MonopedEnv, policy
 
     out = Path(args.out).resolve()  # orbax writes checkpoints to absolute paths only
     out.mkdir(parents=True, exist_ok=True)
@@ -131,33 +165,7 @@ def train(args) -> dict:
             policy.save(out / "checkpoints", start_step + int(step), params, network_config, config)
 
     if remaining > 0:
-        per_train_step = args.batch_size * args.num_minibatches * args.unroll_length
-        ppo.train(
-            environment=env,
-            num_timesteps=remaining,
-            num_evals=max(1, math.ceil(remaining / max(args.eval_every, per_train_step))) + 1,
-            episode_length=args.episode_length,
-            num_envs=args.num_envs,
-            num_eval_envs=args.num_eval_envs,
-            deterministic_eval=True,
-            randomization_fn=functools.partial(randomize_gravity, gravity_range=config.gravity_range),
-            unroll_length=args.unroll_length,
-            batch_size=args.batch_size,
-            num_minibatches=args.num_minibatches,
-            num_updates_per_batch=args.updates_per_batch,
-            learning_rate=args.learning_rate,
-            entropy_cost=args.entropy_cost,
-            discounting=args.discounting,
-            gae_lambda=0.95,
-            clipping_epsilon=0.2,
-            max_grad_norm=1.0,
-            normalize_observations=True,
-            network_factory=factory,
-            seed=args.seed + start_step,  # a resumed run draws fresh environments
-            restore_checkpoint_path=str(resume[0]) if resume else None,
-            progress_fn=progress,
-            policy_params_fn=save_checkpoint,
-        )
+        _run_ppo(args, env, config, factory, remaining, start_step, resume, progress, save_checkpoint)
     final = latest_checkpoint(out)
     if final is None:
         raise ValueError(f"no checkpoint was written under {out / 'checkpoints'}")

@@ -28,3 +28,17 @@ def test_every_module_level_name_is_used_or_documented():
             dead += [f"{path.relative_to(ROOT)}:{node.lineno} {name}" for name in names
                      if uses.get(name, 0) <= 1 and name not in documented and not name.startswith("__")]
     assert not dead, "defined, never used:\n" + "\n".join(dead)
+
+
+MAX_FUNCTION_LINES = 80
+
+
+def test_functions_are_at_most_80_lines():
+    long = []
+    for path in sorted([*ROOT.glob("hopper_mjx/**/*.py"), *ROOT.glob("experiments/*.py")]):
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                lines = node.end_lineno - node.lineno + 1
+                if lines > MAX_FUNCTION_LINES:
+                    long.append(f"{path.relative_to(ROOT)}:{node.lineno} {node.name}: {lines} lines")
+    assert not long, "\n".join(long)
