@@ -239,7 +239,8 @@ def test_policy_runs_as_a_core_controller(trained, mj_model, sim):
     out, _ = trained
     controller = policy.policy_controller(mj_model, os.path.relpath(out))  # relative, as typed on a command line
     params = policy.policy_params(sim.robot, 3, height=0.2, speed=(0.1, 0.0))
-    np.testing.assert_allclose(np.asarray(params[0]), [monoped.stance_qpos(mj_model)[2] + 0.2, 0.1, 0.0], rtol=1e-6)
+    standing = monoped.stance_qpos(mj_model)[2]
+    np.testing.assert_allclose(np.asarray(params.command[0]), [standing + 0.2, 0.1, 0.0], rtol=1e-6)
     state = sim.reset(gravity_vectors([9.81, 3.71, 1.62]), key=0, controller=controller, params=params)
     final, traj = sim.rollout(state, controller, steps=100)
     assert not np.asarray(final.diverged).any() and np.isfinite(np.asarray(traj.qpos)).all()

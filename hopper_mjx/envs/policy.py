@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import json
 import math
+from dataclasses import dataclass
 from pathlib import Path
 from typing import NamedTuple
 
@@ -91,14 +92,22 @@ def default_command(config: monoped.MonopedConfig) -> jnp.ndarray:
     return jnp.array([0.5 * sum(config.apex_range), 0.0, 0.0])
 
 
-def policy_params(robot: Robot, n: int, *, height: float, speed=(0.0, 0.0)) -> jnp.ndarray:
-    """(n, 3) commands from the Raibert controller's terms: `height` m of apex rise above the
+@jax.tree_util.register_dataclass
+@dataclass(frozen=True)
+class PolicyParams:
+    """Per-instance command of a trained policy, (3,) per instance, (n, 3) batched."""
+
+    command: jax.Array  # apex height of the base (m, above the floor), vx, vy (m/s)
+
+
+def policy_params(robot: Robot, n: int, *, height: float, speed=(0.0, 0.0)) -> PolicyParams:
+    """Commands from the Raibert controller's terms: `height` m of apex rise above the
     standing height (`Robot.standing_height`), `speed` (vx, vy) m/s."""
     if len(speed) != 2:
         raise ValueError(f"speed needs two values (vx, vy) in m/s, got {speed}")
     if not (math.isfinite(height) and height >= 0):
         raise ValueError(f"height must be a finite apex rise >= 0 m, got {height}")
-    return jnp.tile(jnp.array([robot.standing_height + height, *speed], dtype=jnp.float32), (n, 1))
+    return PolicyParams(jnp.tile(jnp.array([robot.standing_height + height, *speed], dtype=jnp.float32), (n, 1)))
 
 
 def policy_controller(mj_model: mujoco.MjModel, path) -> Controller:
@@ -108,8 +117,8 @@ def policy_controller(mj_model: mujoco.MjModel, path) -> Controller:
     every = monoped.decimation(layout, cfg)  # raises if the policy rate does not divide the physics rate
     stance = jnp.asarray(monoped.stance_qpos(mj_model)[list(layout.joint_qpos)])
 
-    def init(obs, params):
-        command = default_command(cfg) if params is None else jnp.asarray(params, dtype=jnp.float32)
+    def init(obs, params: PolicyParams | None):
+        command = default_command(cfg) if params is None else jnp.asarray(params.command, dtype=jnp.float32)
         return PolicyState(command, stance, jnp.zeros(3), jnp.zeros((), jnp.int32), jnp.zeros(()))
 
     def act(cs: PolicyState, obs: Observation, gravity):
