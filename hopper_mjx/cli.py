@@ -58,6 +58,12 @@ def add_batch_options(p: argparse.ArgumentParser, *, gravity=(9.81, 3.71, 1.62),
     p.add_argument("--urdf", default=None, help="monoped URDF (default: the shipped one)")
     p.add_argument("--timestep", type=float, default=1e-3, help="physics step, s")
     p.add_argument("--chunk", type=int, default=256, help="instances per vmapped chunk on a device")
+    add_engine_option(p)
+
+
+def add_engine_option(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--engine", default="auto",
+                   help="physics engine: auto (chain when the model qualifies), chain or mjx (default auto)")
 
 
 def check_batch(args) -> None:
@@ -70,6 +76,16 @@ def check_batch(args) -> None:
         raise ValueError(f"--speed needs two values VX,VY in m/s, got {args.speed}")
     if args.chunk < 1:
         raise ValueError(f"--chunk must be >= 1, got {args.chunk}")
+    check_engine(args.engine)
+
+
+def check_engine(name: str) -> None:
+    from hopper_mjx.engine import check_name
+
+    try:
+        check_name(name)
+    except ValueError as err:
+        raise ValueError(f"--engine: {err}") from None
 
 
 def batch_gravity(args) -> np.ndarray:
@@ -101,7 +117,7 @@ def run_batch(args, sensors):
 
     check_batch(args)
     gravity = batch_gravity(args)
-    sim = Sim(model.load(args.urdf, timestep=args.timestep), chunk=args.chunk)
+    sim = Sim(model.load(args.urdf, timestep=args.timestep), engine=args.engine, chunk=args.chunk)
     controller, params = make_controller(args, sim, len(gravity))
     start = time.perf_counter()
     final, traj = sim.run(gravity, controller, params, duration=args.duration, sensors=sensors, key=args.seed)

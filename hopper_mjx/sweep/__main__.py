@@ -39,6 +39,7 @@ def parser() -> argparse.ArgumentParser:
         s.add_argument("--kick", type=float, default=KICK, help="std of the random initial velocity, m/s and rad/s")
         s.add_argument("--seed", type=int, default=0)
         s.add_argument("--chunk", type=int, default=256, help="instances per compiled call")
+        cli.add_engine_option(s)
         s.add_argument("--out", type=Path, default=None, help="output folder (default runs/<kind>-<UTC time>)")
         s.add_argument("--no-progress", action="store_true")
         s.add_argument("--coordinator", default=None, help="HOST:PORT of process 0, for a multi-process sweep")
@@ -56,7 +57,7 @@ def main(argv=None) -> int:
     try:
         spec = SweepSpec(kind=args.kind, gravity=tuple(args.gravity), num=args.num, duration=args.duration,
                          height=args.height, speed=tuple(args.speed), seed=args.seed, kick=args.kick,
-                         chunk=args.chunk, param=getattr(args, "param", None),
+                         chunk=args.chunk, engine=args.engine, param=getattr(args, "param", None),
                          values=tuple(args.values) if args.kind == "gains" else ())
     except ValueError as err:
         return cli.fail(err)
