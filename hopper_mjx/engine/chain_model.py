@@ -109,6 +109,10 @@ _ALLOWED_DISABLE = (
 )
 
 
+_SHAPES = {int(mujoco.mjtGeom.mjGEOM_SPHERE): "sphere", int(mujoco.mjtGeom.mjGEOM_BOX): "box"}
+_BIASES = (int(mujoco.mjtBias.mjBIAS_NONE), int(mujoco.mjtBias.mjBIAS_AFFINE))
+
+
 def _require(ok: bool, why: str) -> None:
     if not ok:
         raise NotChain(f"not a chain model: {why}")
@@ -202,7 +206,7 @@ def _pairs(m: mujoco.MjModel, floor: int) -> tuple[ContactPair, ...]:
     for p in range(m.npair):
         g1, g2 = int(m.pair_geom1[p]), int(m.pair_geom2[p])
         _require(g1 == floor, f"contact pair {p} does not have the floor plane as its first geom")
-        kind = {int(mujoco.mjtGeom.mjGEOM_SPHERE): "sphere", int(mujoco.mjtGeom.mjGEOM_BOX): "box"}.get(int(m.geom_type[g2]))
+        kind = _SHAPES.get(int(m.geom_type[g2]))
         _require(kind is not None, f"contact pair {p} is not with a sphere or a box")
         condim = int(m.pair_dim[p])
         _require(condim in (1, 3), f"contact pair {p} has condim {condim} (1 or 3 supported)")
@@ -242,7 +246,7 @@ def _actuators(m: mujoco.MjModel):
                  f"actuator {a} does not drive a hinge")
         _require(m.actuator_dyntype[a] == mujoco.mjtDyn.mjDYN_NONE
                  and m.actuator_gaintype[a] == mujoco.mjtGain.mjGAIN_FIXED
-                 and int(m.actuator_biastype[a]) in (int(mujoco.mjtBias.mjBIAS_NONE), int(mujoco.mjtBias.mjBIAS_AFFINE)),
+                 and int(m.actuator_biastype[a]) in _BIASES,
                  f"actuator {a} is not a plain motor or affine servo")
         joint = int(m.actuator_trnid[a, 0])
         ctrl = tuple(float(x) for x in m.actuator_ctrlrange[a]) if m.actuator_ctrllimited[a] else None

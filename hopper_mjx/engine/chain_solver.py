@@ -51,7 +51,8 @@ def solve_spd(gate, a: dict, b) -> tuple:
     n = len(b)
     low, inv, y = {}, [], []
     for j in range(n):
-        inv_j, column, y_j = stored(gate, lambda a_, b_, l_, y_, j=j: _column(a_, b_, l_, y_, j), a, tuple(b), dict(low), tuple(y))
+        inv_j, column, y_j = stored(gate, lambda a_, b_, l_, y_, j=j: _column(a_, b_, l_, y_, j),
+                                    a, tuple(b), dict(low), tuple(y))
         inv.append(inv_j)
         y.append(y_j)
         low.update({(i, j): v for i, v in zip(range(j + 1, n), column)})

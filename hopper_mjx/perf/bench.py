@@ -300,7 +300,8 @@ def markdown_table(records: list[dict]) -> str:
     ]
     for r in records:
         lines.append(
-            f"| {r.get('engine', 'mjx')} | {r['num']} | {r['mjx_steps_per_s']:,.0f} | {r['native_steps_per_s']:,.0f} | {r['ratio']:.2f} | "
+            f"| {r.get('engine', 'mjx')} | {r['num']} "
+            f"| {r['mjx_steps_per_s']:,.0f} | {r['native_steps_per_s']:,.0f} | {r['ratio']:.2f} | "
             f"{r['mjx_cpu_us_per_step']:.1f} / {r['native_cpu_us_per_step']:.1f} | {r['cpu_ratio']:.2f} | "
             f"{r['compile_s']:.1f} | {r['peak_rss_mb']:,.0f} |"
         )
