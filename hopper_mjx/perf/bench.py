@@ -316,7 +316,8 @@ def plot_scaling(records: list[dict], path: str) -> None:
 
     nums = [r["num"] for r in records]
     fig, (rate, ratio) = plt.subplots(1, 2, figsize=(10, 4))
-    rate.loglog(nums, [r["mjx_steps_per_s"] for r in records], "o-", label=f"core ({records[0].get('engine', 'mjx')}), {records[0]['devices']} devices")
+    core = f"core ({records[0].get('engine', 'mjx')}), {records[0]['devices']} devices"
+    rate.loglog(nums, [r["mjx_steps_per_s"] for r in records], "o-", label=core)
     rate.loglog(nums, [r["native_steps_per_s"] for r in records], "s-",
                 label=f"native mujoco.rollout, {records[0]['native_threads']} threads")
     rate.set_xlabel("instances N")
