@@ -20,7 +20,7 @@ import pytest
 from hopper_mjx import model
 from hopper_mjx.engine import chain, chain_smooth
 from hopper_mjx.engine.chain_model import NotChain, describe
-from hopper_mjx.sim import stance_qpos
+from hopper_mjx.model.robot import stance_qpos
 
 SECOND_URDF = Path(__file__).parent / "data" / "long_shin_hopper.urdf"
 N_STATES = 12
