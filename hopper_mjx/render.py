@@ -39,7 +39,11 @@ LINK_COLOURS = {
 
 def scene_model(urdf=None) -> mujoco.MjModel:
     """The simulated monoped plus what only pictures need: a checkered floor and a sky."""
-    spec = model.build_spec(urdf)
+    return dress(model.build_spec(urdf)).compile()
+
+
+def dress(spec: mujoco.MjSpec) -> mujoco.MjSpec:
+    """Adds the pictures' floor texture, sky and link colours to a monoped spec (in place)."""
     spec.add_texture(name="checker", type=mujoco.mjtTexture.mjTEXTURE_2D, builtin=mujoco.mjtBuiltin.mjBUILTIN_CHECKER,
                      rgb1=[0.82, 0.84, 0.86], rgb2=[0.62, 0.66, 0.70], width=256, height=256)
     spec.add_texture(name="sky", type=mujoco.mjtTexture.mjTEXTURE_SKYBOX, builtin=mujoco.mjtBuiltin.mjBUILTIN_GRADIENT,
@@ -55,7 +59,7 @@ def scene_model(urdf=None) -> mujoco.MjModel:
     spec.visual.headlight.diffuse = [0.5, 0.5, 0.5]
     spec.visual.global_.offwidth = 1920
     spec.visual.global_.offheight = 1080
-    return spec.compile()
+    return spec
 
 
 def camera(base_pos, distance: float = 2.0, azimuth: float = 135.0, elevation: float = -12.0) -> mujoco.MjvCamera:
