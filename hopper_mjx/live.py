@@ -139,6 +139,7 @@ class LiveBatch:
         if command is not None:  # a reset keeps the commands the user set
             self.state = self.state._replace(cstate=set_command(self.state.cstate, **command))
         self.hop_counter = HopCounter(self.n)
+        self.steps_done = 0  # physics steps since the reset
         self.epoch += 1
 
     def kick(self, instance: int, velocity=(0.0, KICK_SPEED, 0.0)) -> None:
@@ -160,7 +161,12 @@ class LiveBatch:
         import jax
 
         self.state, traj = self.sim.rollout(self.state, self.controller, steps=self.steps, sensors=self.sensors)
-        traj = jax.tree_util.tree_map(np.asarray, traj)
+        # Stamps from a whole step count: the state's float32 clock drifts by microseconds per chunk.
+        dt = self.sim.layout.timestep
+        periods = self.sensors.periods(dt)
+        traj = jax.tree_util.tree_map(np.asarray, traj)._replace(
+            time={k: (self.steps_done + np.arange(0, self.steps, p)) * dt for k, p in periods.items()})
+        self.steps_done += self.steps
         diverged = np.asarray(self.state.diverged)
         status = self.hop_counter.update(traj.contact.flag, np.asarray(self.state.data.qpos), diverged)
         return Chunk(

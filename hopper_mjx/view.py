@@ -5,13 +5,14 @@
 
 The core advances the whole batch in compiled chunks (`hopper_mjx.live`); up to 16 of its
 instances are drawn side by side in a display-only scene, each labelled with its gravity
-and its hops or state. Keys (also listed in the window):
+and its hops or state. Keys (also listed in the window; MuJoCo's viewer keeps its own letter,
+digit and F1-F7 shortcuts, e.g. 2 hides the robots' geom group):
 
-    Space      pause / run             N          one recorded instant (20 ms) while paused
-    Backspace  reset the batch         S          select the next shown instance (or double-click one)
-    K          kick the selected instance sideways (+0.5 m/s)
+    Space      pause / run             Enter      one recorded instant (20 ms) while paused
+    Backspace  reset the batch         Page Down  select the next shown instance (or double-click one)
+    Insert     kick the selected instance sideways (+0.5 m/s)
     Up / Down  commanded speed +- 0.1 m/s     Right / Left  commanded apex rise +- 0.02 m
-    = / -      speed factor x2 / /2    I          print the live status as one JSON line on stdout
+    = / -      speed factor x2 / /2    F8         print the live status as one JSON line on stdout
 
 `--foxglove [PORT]` also streams the shown instances' ROS topics (docs/recording.md).
 Closing the window ends the program. Without a display, use `python -m hopper_mjx.render`.
@@ -38,12 +39,14 @@ SPACING = 1.5  # m between neighbouring robots on the display grid
 LABEL_ABOVE = 0.45  # m above the base centre
 ROBOT_GROUP = 2  # geom group of the robots: MuJoCo's key 2 hides and shows them
 FRAME_TIME = 1 / 60  # s between redraws while paused or waiting
-KEYS_HELP = ("Space\nN\nBackspace\nS, double-click\nK\nUp, Down\nRight, Left\n=, -\nI",
-             "pause / run\nstep one instant\nreset\nselect a robot\nkick it +0.5 m/s\nspeed +-0.1 m/s\n"
-             "apex rise +-0.02 m\nspeed factor x2, /2\nprint status")
-# GLFW key codes
-KEY_SPACE, KEY_BACKSPACE, KEY_RIGHT, KEY_LEFT, KEY_DOWN, KEY_UP = 32, 259, 262, 263, 264, 265
-KEY_EQUAL, KEY_MINUS = 61, 45
+KEYS_HELP = ("Space\nEnter\nBackspace\nPage Down\nInsert\nUp, Down\nRight, Left\n=, -\nF8",
+             ("pause / run\nstep one instant\nreset\nselect a robot\nkick it +0.5 m/s\nspeed +-0.1 m/s\n"
+              "apex rise +-0.02 m\nspeed factor x2, /2\nprint status"))
+# GLFW key codes. Letters are all MuJoCo viewer shortcuts; these keys are free in its passive mode.
+KEY_SPACE, KEY_EQUAL, KEY_MINUS = 32, 61, 45
+KEY_ENTER, KEY_BACKSPACE, KEY_INSERT = 257, 259, 260
+KEY_RIGHT, KEY_LEFT, KEY_DOWN, KEY_UP, KEY_PAGE_DOWN = 262, 263, 264, 265, 267
+KEY_F8 = 297
 
 
 def shown_instances(n: int, count: int) -> list[int]:
@@ -199,13 +202,13 @@ def key_handler(run, display: Display, requests: set):
     def on_key(key: int) -> None:
         if key == KEY_SPACE:
             run.toggle_pause()
-        elif key == ord("N"):
+        elif key == KEY_ENTER:
             run.step()
         elif key == KEY_BACKSPACE:
             run.reset()
-        elif key == ord("S"):
+        elif key == KEY_PAGE_DOWN:
             display.selected = (display.selected + 1) % len(display.shown)
-        elif key == ord("K"):
+        elif key == KEY_INSERT:
             display.select_from_viewer()
             instance = display.shown[display.selected]
             run.act(lambda batch: batch.kick(instance))
@@ -217,7 +220,7 @@ def key_handler(run, display: Display, requests: set):
             run.act(lambda batch: batch.change_command(height_step=step))
         elif key in (KEY_EQUAL, KEY_MINUS):
             run.set_factor(run.pacer.factor * (2.0 if key == KEY_EQUAL else 0.5))
-        elif key == ord("I"):
+        elif key == KEY_F8:
             requests.add("status")
 
     return on_key

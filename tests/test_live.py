@@ -115,7 +115,8 @@ class Client:
     def __init__(self, port: int, topics: list[str]):
         from websockets.sync.client import connect
 
-        self.ws = connect(f"ws://127.0.0.1:{port}", subprotocols=["foxglove.sdk.v1"], open_timeout=30)
+        self.ws = connect(f"ws://127.0.0.1:{port}", subprotocols=["foxglove.sdk.v1"], open_timeout=30,
+                          legacy=True)  # closed by close(), not by a with-block
         self.topics, self.channels, self.types = topics, {}, {}
         self.messages = {t: [] for t in topics}
 
@@ -308,8 +309,17 @@ class Viewer:
             time.sleep(0.3)
 
     def status(self) -> dict:
-        self.key("i")
+        self.key("F8")
         return json.loads(self.wait_for("{"))
+
+    def status_when(self, ready, timeout: float = 240.0) -> dict:
+        """The first status for which `ready(status)` holds (simulated time, not wall time:
+        a loaded machine plays slower than real time)."""
+        deadline = time.monotonic() + timeout
+        while not ready(status := self.status()):
+            assert time.monotonic() < deadline, f"view stuck at {status}"
+            time.sleep(0.2)
+        return status
 
 
 def test_view_shows_the_robots_labelled_with_their_gravity_and_obeys_its_keys(xvfb, tmp_path):
@@ -317,18 +327,17 @@ def test_view_shows_the_robots_labelled_with_their_gravity_and_obeys_its_keys(xv
     viewer = Viewer(display, ARGS)
     try:
         viewer.wait_for("view: running")
-        time.sleep(SETTLED)
+        viewer.status_when(lambda s: s["time"] >= SETTLED)
         viewer.key("space")  # pause
         paused = viewer.status()
-        viewer.key("n")  # one recorded instant
-        stepped = viewer.status()
+        viewer.key("Return")  # one recorded instant
+        stepped = viewer.status_when(lambda s: s["time"] != paused["time"])
         shown = read_xwd(screen)
         viewer.key("2")  # MuJoCo's geom group 2: the robots
         time.sleep(0.5)
         background = read_xwd(screen)
-        viewer.key("2", "s", "k", "space")  # robots back; select instance 1, kick it, run
-        time.sleep(1.5)
-        kicked = viewer.status()
+        viewer.key("2", "Next", "Insert", "space")  # robots back; select instance 1, kick it, run
+        kicked = viewer.status_when(lambda s: s["time"] >= stepped["time"] + 0.5)
         viewer.key("ctrl+q")
         out, err = viewer.proc.communicate(timeout=60)
     finally:
