@@ -8,7 +8,9 @@ The channels are the topics `record` writes (`/monoped/imu/data`, `/odom`,
 `/monoped/joint_states`, `/lowerleg_contactsensor_state`, `/clock`, or `/monoped_<i>/...` for
 several instances), each with its ROS 1 message definition as the schema (`ros1msg`) and
 ROS 1-serialised messages, so Foxglove decodes them as it decodes a ROS 1 bag or a live
-rosbridge. Messages are built from the played chunks by `record.messages` and published as
+rosbridge. `/tf` adds what robot_state_publisher and the odometry's frame would give a ROS
+user: world -> base and each link from its parent (the URDF's link frames, tf-prefixed like
+the topics), at the joint-state rate, so that Foxglove's 3D panel can pose the URDF. Messages are built from the played chunks by `record.messages` and published as
 their stamps fall due, with the server's time (the Time capability) following simulated time.
 A chunk is serialised only while some client is subscribed to one of its channels.
 """
@@ -22,10 +24,34 @@ import numpy as np
 from hopper_mjx import record
 
 DEFAULT_PORT = 8765
+TF_TOPIC = "/tf"
+TF_MSGTYPE = "tf2_msgs/msg/TFMessage"
+TF_DEFINITION = "geometry_msgs/TransformStamped[] transforms\n"  # ROS 1 tf2_msgs, not in rosbags' store
 
 
 class PortError(ValueError):
     """The port cannot be listened on (in use, or not allowed)."""
+
+
+def link_transforms(mj_model, data, qpos: np.ndarray) -> list[tuple[str, str, np.ndarray, np.ndarray]]:
+    """(parent frame, child frame, position m, quaternion [w, x, y, z]) of every robot link
+    relative to its parent ("world" for the base) at `qpos` (nq,), computed in `data` (an
+    MjData of `mj_model`): MuJoCo's body frames are the URDF's link frames."""
+    import mujoco
+
+    data.qpos[:] = qpos
+    mujoco.mj_kinematics(mj_model, data)
+    out = []
+    for body in range(1, mj_model.nbody):
+        parent = mj_model.body_parentid[body]
+        pos, quat = data.xpos[body].copy(), data.xquat[body].copy()
+        if parent:
+            inverse = np.zeros(4)
+            mujoco.mju_negQuat(inverse, data.xquat[parent])
+            mujoco.mju_rotVecQuat(pos, data.xpos[body] - data.xpos[parent], inverse)
+            mujoco.mju_mulQuat(quat, inverse, data.xquat[body])
+        out.append((mj_model.body(parent).name if parent else "world", mj_model.body(body).name, pos, quat))
+    return out
 
 
 def _floor_normal(mj_model, layout) -> np.ndarray:
@@ -42,6 +68,9 @@ class FoxgloveStream:
     def __init__(self, server, context, instances: list[int]):
         self.server, self.context, self.instances = server, context, list(instances)
         self.store = record.typestore("ros1")
+        from rosbags.typesys import get_types_from_msg
+
+        self.store.register(get_types_from_msg(TF_DEFINITION, TF_MSGTYPE))
         self.channels: dict[str, object] = {}
         self.template: record.Recording | None = None
         self._messages: dict[int, list[tuple[float, str, bytes]]] = {}  # id(chunk) -> its messages
@@ -87,6 +116,8 @@ class FoxgloveStream:
         names = [record.topic_names(None if single else i) for i in self.instances]
         topics = {t: record.MSGTYPES[kind] for n in names for kind, t in n.items()}
         topics["/clock"] = record.MSGTYPES["clock"]
+        topics[TF_TOPIC] = TF_MSGTYPE
+        self.mj_model = sim.mj_model
         for topic, msgtype in topics.items():
             text, _ = self.store.generate_msgdef(msgtype, ros_version=1)
             schema = foxglove.Schema(name=msgtype.replace("/msg/", "/"), encoding="ros1msg", data=text.encode())
@@ -101,9 +132,32 @@ class FoxgloveStream:
                                       diverged=chunk.diverged)
             out = [(t, topic, bytes(self.store.serialize_ros1(msg, msgtype)))
                    for topic, msgtype, t, msg in record.messages(rec, self.instances, self.store, ros1=True)]
+            out += self._tf_messages(chunk)
             out.sort(key=lambda m: m[0])
             self._messages[key] = out
         return self._messages[key]
+
+    def _tf_messages(self, chunk) -> list[tuple[float, str, bytes]]:
+        """One /tf message per joint-state instant, holding every streamed instance's links."""
+        import mujoco
+
+        build = record._Builder(self.store, ros1=True)
+        data = mujoco.MjData(self.mj_model)
+        transform_type = self.store.types["geometry_msgs/msg/TransformStamped"]
+        out = []
+        for k, t in enumerate(chunk.traj.time["state"]):
+            transforms = []
+            for i in self.instances:
+                prefix = record.frame_prefix(None if len(self.instances) == 1 else i)
+                for parent, child, pos, quat in link_transforms(self.mj_model, data, chunk.traj.qpos[i, k]):
+                    transform = self.store.types["geometry_msgs/msg/Transform"](
+                        translation=build.vector(pos), rotation=build.quaternion(quat))
+                    frame = "world" if parent == "world" else prefix + parent
+                    transforms.append(transform_type(header=build.header(0, t, frame), child_frame_id=prefix + child,
+                                                     transform=transform))
+            msg = self.store.types[TF_MSGTYPE](transforms=transforms)
+            out.append((float(t), TF_TOPIC, bytes(self.store.serialize_ros1(msg, TF_MSGTYPE))))
+        return out
 
     def __call__(self, chunk, t_from: float, t_to: float) -> None:
         """Publishes the messages of `chunk` stamped in [t_from, t_to) (a LiveRun sink)."""

@@ -102,6 +102,23 @@ def test_hold_takes_no_commands_and_a_kick_changes_one_base_velocity(batch):
 
 
 # -- Foxglove stream ---------------------------------------------------------------------
+def xyz(v):
+    return [v.x, v.y, v.z]
+
+
+def compose(frames: dict, child: str) -> np.ndarray:
+    """World position (m) of a frame's origin, chaining the TransformStamped parents up to world."""
+    from scipy.spatial.transform import Rotation
+
+    point = np.zeros(3)
+    while child != "world":
+        t = frames[child].transform
+        rotation = Rotation.from_quat([t.rotation.x, t.rotation.y, t.rotation.z, t.rotation.w])
+        point = rotation.apply(point) + xyz(t.translation)
+        child = frames[child].header.frame_id
+    return point
+
+
 def decoder(channel: dict):
     """The genpy message class for an advertised channel, from its ros1msg schema."""
     import genpy.dynamic
@@ -182,7 +199,7 @@ def test_foxglove_stream_carries_the_recorded_topics_decoded_by_genpy(streaming,
 
     stream, run = streaming
     kinds = {"imu": "/monoped_0/imu/data", "contact": "/monoped_0/lowerleg_contactsensor_state",
-             "odom": "/monoped_0/odom", "joints": "/monoped_0/joint_states", "clock": "/clock"}
+             "odom": "/monoped_0/odom", "joints": "/monoped_0/joint_states", "clock": "/clock", "tf": "/tf"}
     mars_contact = "/monoped_1/lowerleg_contactsensor_state"
     client = Client(stream.port, [*kinds.values(), mars_contact])
     try:
@@ -195,7 +212,8 @@ def test_foxglove_stream_carries_the_recorded_topics_decoded_by_genpy(streaming,
     for topic, msgs in client.messages.items():  # every stream at 50 Hz, stamped in simulated time
         log_times = np.array([t for t, _ in msgs])
         assert (np.diff(log_times) == PERIOD_NS).all(), topic
-        stamps = [m.clock if topic == "/clock" else m.header.stamp for _, m in msgs]
+        stamps = [m.clock if topic == "/clock" else m.transforms[0].header.stamp if topic == "/tf"
+                  else m.header.stamp for _, m in msgs]
         assert [s.to_nsec() for s in stamps] == log_times.tolist(), topic
 
     mass = Layout.of(mj_model).total_mass
@@ -208,6 +226,17 @@ def test_foxglove_stream_carries_the_recorded_topics_decoded_by_genpy(streaming,
     accel = np.array([[m.linear_acceleration.x, m.linear_acceleration.y, m.linear_acceleration.z] for m in imu])
     np.testing.assert_allclose(np.linalg.norm(accel, axis=1), GRAVITY[0], rtol=0.02)  # specific force = g at rest
     assert (accel[:, 2] > 0.95 * GRAVITY[0]).all()  # pointing up in the upright base frame
+
+    # /tf: world -> base is the odometry's pose, and the chain down to the foot ends over the contact point.
+    t, tf = next((t, m) for t, m in client.messages["/tf"] if t * 1e-9 >= SETTLED)
+    odom = dict(client.messages[kinds["odom"]])[t]
+    contact = dict(client.messages[kinds["contact"]])[t].states[0].contact_positions[0]
+    frames = {f.child_frame_id: f for f in tf.transforms}
+    assert {f.header.frame_id for f in tf.transforms} >= {"world", "monoped_0/base", "monoped_2/lowerleg"}
+    foot = compose(frames, "monoped_0/foot")
+    base = frames["monoped_0/base"].transform.translation
+    assert [base.x, base.y, base.z] == xyz(odom.pose.pose.position)
+    assert np.hypot(foot[0] - contact.x, foot[1] - contact.y) < 0.01 and 0 < foot[2] - contact.z < 0.1
 
 
 def test_a_client_leaving_does_not_stop_the_simulation(streaming):
