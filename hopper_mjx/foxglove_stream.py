@@ -10,8 +10,9 @@ several instances), each with its ROS 1 message definition as the schema (`ros1m
 ROS 1-serialised messages, so Foxglove decodes them as it decodes a ROS 1 bag or a live
 rosbridge. `/tf` adds what robot_state_publisher and the odometry's frame would give a ROS
 user: world -> base and each link from its parent (the URDF's link frames, tf-prefixed like
-the topics), at the joint-state rate, so that Foxglove's 3D panel can pose the URDF. Messages are built from the played chunks by `record.messages` and published as
-their stamps fall due, with the server's time (the Time capability) following simulated time.
+the topics), at the joint-state rate, so that Foxglove's 3D panel can pose the URDF.
+Messages are built from the played chunks by `record.messages` and published as their
+stamps fall due, with the server's time (the Time capability) following simulated time.
 A chunk is serialised only while some client is subscribed to one of its channels.
 """
 

@@ -11,8 +11,9 @@ recorded instant when simulated time reaches `factor` x the wall time since the 
 A rollout call costs ~20 ms of dispatch whatever its length, so the chunks are long
 (0.1 s) and the recorded streams carry the motion between them.
 
-User actions (pause, step, reset, kick, commands) are queued to the producer and act on
-the state between two chunks, so they show after the chunk already queued (<= 0.2 s).
+User actions (reset, kick, commands) are queued to the producer and act on the state
+between two chunks, so they show after the chunks already computed (<= 0.2 s of simulated
+time); pause and step act on the playing at once.
 """
 
 from __future__ import annotations
@@ -274,8 +275,7 @@ class LiveRun:
                         self._chunks.put(chunk, timeout=0.05)
                         break
                     except queue.Full:
-                        if not self._actions.empty():  # act now rather than after the queued chunk
-                            break
+                        continue
         except BaseException as err:  # surfaced by poll() on the main thread
             self.error = err
 
@@ -311,13 +311,13 @@ class LiveRun:
         return float(self.chunk.clock[max(self._next - 1, 0)])
 
     # -- playing ---------------------------------------------------------------------
-    def _take_chunk(self, block: bool) -> bool:
+    def _take_chunk(self) -> bool:
         try:
-            chunk = self._chunks.get(timeout=0.01 if block else 0.0) if block else self._chunks.get_nowait()
+            chunk = self._chunks.get(timeout=0.01)
         except queue.Empty:
             return False
         if chunk.epoch < self.epoch:  # computed before a reset
-            return self._take_chunk(block)
+            return self._take_chunk()
         restarted = self.chunk is None or chunk.epoch != self.chunk.epoch
         self.chunk, self._next = chunk, 0
         if restarted:
@@ -331,9 +331,9 @@ class LiveRun:
         stepping = self.paused and self.steps_pending > 0
         if self.paused and not stepping:
             return None
-        if self.chunk is None or self._next >= len(self.chunk.clock):
-            if not self._take_chunk(block=True):
-                return None
+        done = self.chunk is None or self._next >= len(self.chunk.clock) or self.chunk.epoch < self.epoch
+        if done and not self._take_chunk():
+            return None
         if stepping:
             self.steps_pending -= 1
         chunk, start = self.chunk, self._next

@@ -28,8 +28,10 @@ import argparse
 import json
 import math
 import sys
+import threading
 import time
 
+import mujoco
 import numpy as np
 
 from hopper_mjx import runtime, simulate
@@ -66,8 +68,6 @@ def grid_offsets(count: int, spacing: float = SPACING) -> np.ndarray:
 def scene(urdf, count: int):
     """(MjModel, qpos address of each copy's free joint, its first body id, bodies per copy):
     `count` copies of the robot over the pictures' checkered floor, for display only."""
-    import mujoco
-
     from hopper_mjx import model, render
 
     display = render.dress(model.build_spec(urdf))  # floor, sky, lights and robot copy 0
@@ -96,8 +96,6 @@ class Display:
     """The viewer window: copies of the shown instances, labels, texts and keys."""
 
     def __init__(self, viewer, m, qpos_adr, first_body, bodies_per_copy, shown, gravity):
-        import mujoco
-
         self.viewer, self.m = viewer, m
         self.d = viewer.d
         self.qpos_adr, self.first_body, self.bodies = qpos_adr, first_body, bodies_per_copy
@@ -106,7 +104,6 @@ class Display:
         self.offsets = grid_offsets(len(shown))
         self.selected = 0  # index into shown
         self.labels: list[str] = []
-        self.mujoco = mujoco
         width = np.ptp(self.offsets, axis=0).max()
         with viewer.lock():
             cam = viewer.cam
@@ -124,7 +121,6 @@ class Display:
 
     def draw(self, chunk, index: int, texts: tuple[str, str]) -> None:
         """Poses every copy at the chunk's recorded instant `index` and relabels them."""
-        mujoco = self.mujoco
         traj = chunk.traj
         state = max(int(np.searchsorted(traj.time["state"], chunk.clock[index], side="right")) - 1, 0)
         qpos = traj.qpos[self.shown, state]
@@ -152,7 +148,6 @@ class Display:
         return f"{'> ' if k == self.selected else ''}g {self.gravity[i]:.2f}  {state}"
 
     def show_texts(self, texts: tuple[str, str]) -> None:
-        mujoco = self.mujoco
         self.viewer.set_texts([
             (mujoco.mjtFontScale.mjFONTSCALE_150, mujoco.mjtGridPos.mjGRID_TOPLEFT, *texts),
             (mujoco.mjtFontScale.mjFONTSCALE_100, mujoco.mjtGridPos.mjGRID_BOTTOMLEFT, *KEYS_HELP),
@@ -304,7 +299,6 @@ def main(argv=None) -> int:
 
 def watch(args, batch, shown: list[int], stream) -> int:
     """Runs the window until it is closed (or --duration is played); prints the factor reached."""
-    import mujoco
     import mujoco.viewer
 
     from hopper_mjx.live import LiveRun
@@ -338,6 +332,10 @@ def watch(args, batch, shown: list[int], stream) -> int:
             viewer.sync()
             time.sleep(run.seconds_to_next() if not run.paused else FRAME_TIME)
     viewer.close()
+    # The window's thread tears down its GL context after the close; exiting under it aborts the process.
+    for thread in threading.enumerate():
+        if thread.daemon and thread is not threading.current_thread():
+            thread.join(timeout=10)
     if reached:
         print(f"view: played {run.time:.2f} s; reached real-time factor x{np.median(reached):.2f} "
               f"(median over the run) at x{run.pacer.factor:g} asked", flush=True)

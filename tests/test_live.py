@@ -24,6 +24,7 @@ from hopper_mjx import foxglove_stream, live, simulate
 GRAVITY = (9.81, 3.71, 1.62)
 ARGS = ["--gravity", ",".join(map(str, GRAVITY)), "--controller", "hold"]
 SETTLED = 1.0  # s: the dropped robots stand still by then (touchdown <= 0.25 s)
+LANDED = 0.3  # s: every robot is on the floor
 PERIOD_NS = 20_000_000  # the seed's 50 Hz on every stream
 ROBOT_BLUE = np.array([51, 97, 166])  # render.LINK_COLOURS["base"] in 8-bit RGB
 
@@ -353,10 +354,10 @@ class Viewer:
 
 def test_view_shows_the_robots_labelled_with_their_gravity_and_obeys_its_keys(xvfb, tmp_path):
     display, screen = xvfb
-    viewer = Viewer(display, ARGS)
+    viewer = Viewer(display, [*ARGS, "--speed-factor", "4"])
     try:
         viewer.wait_for("view: running")
-        viewer.status_when(lambda s: s["time"] >= SETTLED)
+        viewer.status_when(lambda s: s["time"] >= LANDED)
         viewer.key("space")  # pause
         paused = viewer.status()
         viewer.key("Return")  # one recorded instant
@@ -366,7 +367,7 @@ def test_view_shows_the_robots_labelled_with_their_gravity_and_obeys_its_keys(xv
         time.sleep(0.5)
         background = read_xwd(screen)
         viewer.key("2", "Next", "Insert", "space")  # robots back; select instance 1, kick it, run
-        kicked = viewer.status_when(lambda s: s["time"] >= stepped["time"] + 0.5)
+        kicked = viewer.status_when(lambda s: s["time"] >= stepped["time"] + 0.4)  # queued chunks, then the kick
         viewer.key("ctrl+q")
         out, err = viewer.proc.communicate(timeout=60)
     finally:
@@ -377,8 +378,9 @@ def test_view_shows_the_robots_labelled_with_their_gravity_and_obeys_its_keys(xv
 
     assert paused["paused"] and stepped["time"] == pytest.approx(paused["time"] + 0.02, abs=1e-6)
     assert [i["gravity"] for i in paused["instances"]] == list(GRAVITY)
-    assert [i["label"] for i in paused["instances"]] == [  # landing bounces count as hops
-        f"{'> ' if k == 0 else ''}g {g:.2f}  {i['hops']} hops" for k, (g, i) in enumerate(zip(GRAVITY, paused["instances"]))]
+    labels = [f"{'> ' if k == 0 else ''}g {g:.2f}  {i['hops']} hops"  # landing bounces count as hops
+              for k, (g, i) in enumerate(zip(GRAVITY, paused["instances"]))]
+    assert [i["label"] for i in paused["instances"]] == labels
 
     # The robots are the only difference from the floor-only background: three separate figures.
     import matplotlib.image
