@@ -29,6 +29,7 @@ from typing import Any
 import numpy as np
 
 CHUNK_TIME = 0.1  # s of simulated time per compiled call
+SHOWN = 16  # instances a live run draws or streams at most
 AHEAD = 1  # chunks computed ahead of the one playing
 MAX_LAG = 0.25  # s: a batch slower than asked drops the backlog instead of racing to catch up
 KICK_SPEED = 0.5  # m/s, sideways (+y) base velocity impulse of a kick
@@ -49,29 +50,55 @@ class Chunk:
     command: dict | None  # {"speed": (vx, vy) m/s, "height": m} of every instance, or None
 
 
-def set_command(cstate, *, speed=None, height=None):
-    """The controller state with a new commanded speed (vx, vy) and/or apex rise for every
-    instance, or None when the controller takes no commands (none, hold, pid)."""
-    params = getattr(cstate, "params", None)
-    if not (isinstance(params, dict) and "speed" in params and "height" in params):
+def read_command(cstate, standing_height: float) -> dict | None:
+    """Instance 0's commanded {"speed": (vx, vy) m/s, "height": apex rise m} (all instances share
+    them live), or None when the controller takes no commands (none, hold, pid)."""
+    if hasattr(cstate, "params") and hasattr(cstate.params, "speed"):  # raibert: apex rise
+        speed, height = cstate.params.speed[0], float(cstate.params.height[0])
+    elif hasattr(cstate, "command"):  # a trained policy: apex height above the floor
+        speed, height = cstate.command[0, 1:], float(cstate.command[0, 0]) - standing_height
+    else:
         return None
+    return {"speed": tuple(float(v) for v in np.asarray(speed)), "height": height}
+
+
+def set_command(cstate, speed, height: float, standing_height: float):
+    """The controller state with commanded `speed` (vx, vy) m/s and apex rise `height` m for every instance."""
+    import dataclasses
+
     import jax.numpy as jnp
 
-    new = dict(params)
-    if speed is not None:
-        new["speed"] = jnp.broadcast_to(jnp.asarray(speed, jnp.float32), params["speed"].shape)
-    if height is not None:
-        new["height"] = jnp.full_like(params["height"], max(float(height), 0.0))
-    return cstate._replace(params=new)
+    height = max(float(height), 0.0)
+    if hasattr(cstate, "command"):
+        n = cstate.command.shape[0]
+        command = jnp.tile(jnp.array([standing_height + height, *speed], jnp.float32), (n, 1))
+        return cstate._replace(command=command)
+    params = cstate.params
+    return cstate._replace(params=dataclasses.replace(
+        params, speed=jnp.broadcast_to(jnp.asarray(speed, jnp.float32), params.speed.shape),
+        height=jnp.full_like(params.height, height)))
 
 
-def read_command(cstate) -> dict | None:
-    """The commands of instance 0 (all instances share them live), or None without any."""
-    params = getattr(cstate, "params", None)
-    if not (isinstance(params, dict) and "speed" in params and "height" in params):
-        return None
-    return {"speed": tuple(float(v) for v in np.asarray(params["speed"][0])),
-            "height": float(params["height"][0])}
+def spread(n: int, count: int) -> list[int]:
+    """`count` instances spread evenly over a batch of n (gravity-major, so every gravity shows)."""
+    return sorted(set(np.linspace(0, n - 1, min(count, n)).round().astype(int).tolist()))
+
+
+STREAM_OF_FIELD = {"imu": "imu", "odom": "odom", "contact": "contact", "qpos": "state", "qvel": "state"}
+
+
+def joined(chunks: list[Chunk], end: float):
+    """One Trajectory of consecutive chunks, cut before simulated time `end` (s)."""
+    import jax
+
+    times = {k: np.concatenate([c.traj.time[k] for c in chunks]) for k in chunks[0].traj.time}
+    keep = {k: t < end - 1e-9 for k, t in times.items()}
+    fields = {
+        field: jax.tree_util.tree_map(lambda *parts, s=stream: np.concatenate(parts, axis=1)[:, keep[s]],
+                                      *[getattr(c.traj, field) for c in chunks])
+        for field, stream in STREAM_OF_FIELD.items()
+    }
+    return chunks[0].traj._replace(**fields, time={k: t[keep[k]] for k, t in times.items()})
 
 
 class HopCounter:
@@ -94,9 +121,9 @@ class HopCounter:
             self.hops += land & self.airborne & ~self.fallen
             self.airborne = (self.airborne | lift) & ~land
         self.last_flag = flags[:, -1]
-        roll, pitch = metrics.tilt(qpos_end[:, 3:7])
-        self.fallen |= ((qpos_end[:, 2] < metrics.FALL_HEIGHT) | (np.abs(roll) > metrics.FALL_TILT)
-                        | (np.abs(pitch) > metrics.FALL_TILT))
+        roll, pitch = metrics.roll_pitch(qpos_end[:, 3:7])
+        self.fallen |= ((qpos_end[:, 2] < metrics.FALL_HEIGHT) | (np.abs(roll) > metrics.FALL_ROLL_PITCH)
+                        | (np.abs(pitch) > metrics.FALL_ROLL_PITCH))
         return tuple("diverged" if d else "fallen" if f else "hopping" if h else "standing"
                      for d, f, h in zip(diverged, self.fallen, self.hops > 0))
 
@@ -106,39 +133,34 @@ class LiveBatch:
 
     def __init__(self, sim, controller, params, gravity: np.ndarray, *, seed: int = 0, sensors=None):
         from hopper_mjx import signals
+        from hopper_mjx.sim import steps_for
 
         self.sim, self.controller, self.params = sim, controller, params
         self.gravity = np.asarray(gravity, dtype=float)
         self.seed = seed
         self.sensors = sensors or signals.SensorConfig()  # the seed's 50 Hz on every stream, as record
-        periods = self.sensors.periods(sim.layout.timestep)
-        whole = math.lcm(*periods.values())
-        self.steps = max(1, round(CHUNK_TIME / sim.layout.timestep / whole)) * whole
+        self.steps = steps_for(CHUNK_TIME, sim.layout.timestep, self.sensors)
         self.epoch = 0
         self.reset()
 
     @classmethod
-    def build(cls, args) -> LiveBatch:
-        """The batch `python -m hopper_mjx.simulate` would run with these arguments."""
-        from hopper_mjx import model, simulate
-        from hopper_mjx.sim import Sim, gravity_vectors
+    def build(cls, args, sensors=None) -> LiveBatch:
+        """The batch the command-line arguments describe (`cli.build_batch`), streams at `sensors`' rates."""
+        from hopper_mjx import cli
 
-        if args.num < 1:
-            raise ValueError(f"--num must be >= 1, got {args.num}")
-        gravity = gravity_vectors(np.repeat(args.gravity, args.num))
-        sim = Sim(model.load(args.urdf, timestep=args.timestep), chunk=args.chunk)
-        controller, params = simulate.build_controller(args.controller, sim.layout, args)
-        return cls(sim, controller, params, gravity, seed=args.seed)
+        cli.check_batch(args)
+        sim, gravity, controller, params = cli.build_batch(args)
+        return cls(sim, controller, params, gravity, seed=args.seed, sensors=sensors)
 
     @property
     def n(self) -> int:
         return len(self.gravity)
 
     def reset(self) -> None:
-        command = read_command(self.state.cstate) if self.epoch else None
+        command = self.command() if self.epoch else None
         self.state = self.sim.reset(self.gravity, key=self.seed, controller=self.controller, params=self.params)
         if command is not None:  # a reset keeps the commands the user set
-            self.state = self.state._replace(cstate=set_command(self.state.cstate, **command))
+            self._set_command(command["speed"], command["height"])
         self.hop_counter = HopCounter(self.n)
         self.steps_done = 0  # physics steps since the reset
         self.epoch += 1
@@ -148,14 +170,19 @@ class LiveBatch:
         qvel = self.state.data.qvel.at[instance, :3].add(np.asarray(velocity, np.float32))
         self.state = self.state._replace(data=self.state.data.replace(qvel=qvel))
 
+    def command(self) -> dict | None:
+        return read_command(self.state.cstate, self.sim.robot.standing_height)
+
+    def _set_command(self, speed, height: float) -> None:
+        cstate = set_command(self.state.cstate, speed, height, self.sim.robot.standing_height)
+        self.state = self.state._replace(cstate=cstate)
+
     def change_command(self, *, speed_step=(0.0, 0.0), height_step: float = 0.0) -> bool:
         """Shifts every instance's commanded speed and apex rise; False if the controller has none."""
-        now = read_command(self.state.cstate)
+        now = self.command()
         if now is None:
             return False
-        speed = np.add(now["speed"], speed_step)
-        cstate = set_command(self.state.cstate, speed=speed, height=now["height"] + height_step)
-        self.state = self.state._replace(cstate=cstate)
+        self._set_command(np.add(now["speed"], speed_step), now["height"] + height_step)
         return True
 
     def advance(self) -> Chunk:
@@ -177,7 +204,7 @@ class LiveBatch:
             hops=self.hop_counter.hops.copy(),
             status=status,
             diverged=diverged,
-            command=read_command(self.state.cstate),
+            command=self.command(),
         )
 
 
@@ -242,6 +269,7 @@ class LiveRun:
         self.chunk: Chunk | None = None  # the chunk playing
         self._next = 0  # index into chunk.clock of the next instant to play
         self.steps_played = 0  # instance-steps since the start
+        self.played_until = 0.0  # s: every instant before this simulated time has been played
         self.epoch = batch.epoch
 
     # -- lifecycle -----------------------------------------------------------------
@@ -354,6 +382,7 @@ class LiveRun:
         for sink in self.sinks:
             sink(chunk, float(chunk.clock[start]), t_to)
         self._next = end
+        self.played_until = t_to
         self.steps_played += self.batch.n * round((t_to - float(chunk.clock[start])) / dt)
         self.pacer.played(t_to, self.steps_played)
 

@@ -34,9 +34,9 @@ import time
 import mujoco
 import numpy as np
 
-from hopper_mjx import runtime, simulate
+from hopper_mjx import cli, runtime
+from hopper_mjx.live import HEIGHT_STEP, SHOWN, SPEED_STEP, LiveBatch, LiveRun, spread
 
-MAX_SHOWN = 16
 SPACING = 1.5  # m between neighbouring robots on the display grid
 LABEL_ABOVE = 0.45  # m above the base centre
 ROBOT_GROUP = 2  # geom group of the robots: MuJoCo's key 2 hides and shows them
@@ -51,11 +51,6 @@ KEY_RIGHT, KEY_LEFT, KEY_DOWN, KEY_UP, KEY_PAGE_DOWN = 262, 263, 264, 265, 267
 KEY_F8 = 297
 
 
-def shown_instances(n: int, count: int) -> list[int]:
-    """`count` instances spread evenly over the batch (gravity-major, so every gravity shows)."""
-    return sorted(set(np.linspace(0, n - 1, min(count, n)).round().astype(int).tolist()))
-
-
 def grid_offsets(count: int, spacing: float = SPACING) -> np.ndarray:
     """(count, 2) m: a row-major grid centred on the origin, rows along x: one row up to 4
     robots (side by side in the default view), else as square as possible."""
@@ -65,14 +60,15 @@ def grid_offsets(count: int, spacing: float = SPACING) -> np.ndarray:
     return np.stack([k % cols - (cols - 1) / 2, (rows - 1) / 2 - k // cols], axis=1) * spacing
 
 
-def scene(urdf, count: int):
+def display_model(urdf, count: int):
     """(MjModel, qpos address of each copy's free joint, its first body id, bodies per copy):
     `count` copies of the robot over the pictures' checkered floor, for display only."""
-    from hopper_mjx import model, render
+    from hopper_mjx import model
+    from hopper_mjx.model import scene
 
-    display = render.dress(model.build_spec(urdf))  # floor, sky, lights and robot copy 0
+    display = scene.dress(model.build_spec(urdf))  # floor, sky, lights and robot copy 0
     for k in range(1, count):
-        source = render.dress(model.build_spec(urdf))  # a fresh spec per copy: attaching moves the body
+        source = scene.dress(model.build_spec(urdf))  # a fresh spec per copy: attaching moves the body
         display.worldbody.add_frame().attach_body(source.worldbody.first_body(), f"monoped_{k}/", "")
     m = display.compile()
     m.geom_group[m.geom_bodyid != 0] = ROBOT_GROUP
@@ -192,8 +188,6 @@ def status_line(run, display: Display) -> str:
 
 def key_handler(run, display: Display, requests: set):
     """The viewer's key callback (runs on the viewer's thread: it only queues work)."""
-    from hopper_mjx.live import HEIGHT_STEP, SPEED_STEP
-
     def on_key(key: int) -> None:
         if key == KEY_SPACE:
             run.toggle_pause()
@@ -221,77 +215,43 @@ def key_handler(run, display: Display, requests: set):
     return on_key
 
 
-def parse_port(text: str) -> int:
-    try:
-        port = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"--foxglove takes a port number, got {text!r}") from None
-    if not 0 <= port <= 65535:
-        raise argparse.ArgumentTypeError(f"--foxglove port must be in 0..65535, got {port}")
-    return port
-
-
 def parser() -> argparse.ArgumentParser:
-    # Built on simulate's options, so that controller options added there work here too.
-    from hopper_mjx.foxglove_stream import DEFAULT_PORT
-
     p = argparse.ArgumentParser(prog="python -m hopper_mjx.view", description=__doc__,
-                                formatter_class=argparse.RawDescriptionHelpFormatter,
-                                parents=[simulate.parser()], conflict_handler="resolve")
-    p.add_argument("--controller", default="raibert", help="as in simulate (default here: raibert, hopping)")
-    p.add_argument("--speed-factor", type=float, default=1.0,
-                   help="simulated seconds per wall-clock second (1: real time)")
-    p.add_argument("--show", type=int, default=MAX_SHOWN,
-                   help=f"instances drawn, spread over the batch (at most {MAX_SHOWN})")
-    p.add_argument("--duration", type=float, default=None,
-                   help="stop after this much simulated time, s (default: when the window closes)")
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    cli.add_batch_options(p)
+    p.set_defaults(controller="raibert", duration=None)
+    cli.add_live_options(p, foxglove_help="also stream the shown instances' ROS topics")
+    p.add_argument("--show", type=int, default=SHOWN,
+                   help=f"instances drawn, spread over the batch (at most {SHOWN})")
     p.add_argument("--paused", action="store_true", help="start paused (Space runs)")
-    p.add_argument("--foxglove", type=parse_port, nargs="?", const=DEFAULT_PORT, default=None, metavar="PORT",
-                   help=f"also stream the shown instances' ROS topics on ws://127.0.0.1:PORT "
-                        f"(default port {DEFAULT_PORT})")
-    for unused in ("--rate", "--out"):  # simulate's; the streams run at the seed's 50 Hz
-        p.add_argument(unused, help=argparse.SUPPRESS)
     return p
-
-
-def check(args) -> None:
-    if not (math.isfinite(args.speed_factor) and args.speed_factor > 0):
-        raise ValueError(f"--speed-factor must be > 0, got {args.speed_factor}")
-    if not 1 <= args.show <= MAX_SHOWN:
-        raise ValueError(f"--show must be in 1..{MAX_SHOWN}, got {args.show}")
-    if args.num < 1:
-        raise ValueError(f"--num must be >= 1, got {args.num}")
-    if args.duration is not None and not args.duration > 0:
-        raise ValueError(f"--duration must be > 0 s, got {args.duration}")
 
 
 def main(argv=None) -> int:
     args = parser().parse_args(argv)
-    from hopper_mjx.foxglove_stream import FoxgloveStream
+    from hopper_mjx.ros.foxglove import FoxgloveStream
 
     stream = None
     try:
-        check(args)
-        n = args.num * len(args.gravity)
-        shown = shown_instances(n, args.show)
+        cli.check_batch(args)
+        cli.check_live(args)
+        if not 1 <= args.show <= SHOWN:
+            raise ValueError(f"--show must be in 1..{SHOWN}, got {args.show}")
+        shown = spread(args.num * len(args.gravity), args.show)
         if args.foxglove is not None:  # a busy port is reported before anything is built
             stream = FoxgloveStream.start(args.foxglove, shown)
         why = needs_display()
         if why:
-            print(f"error: view needs a display: {why}; for pictures and videos without one use "
-                  "python -m hopper_mjx.render", file=sys.stderr)
-            return 2
+            return cli.fail(f"view needs a display: {why}; for pictures and videos without one use "
+                            "python -m hopper_mjx.render")
         runtime.configure()
-        from hopper_mjx.live import LiveBatch
-
         batch = LiveBatch.build(args)
         if stream is not None:
             stream.attach(batch)
             print(f"streaming to Foxglove on ws://127.0.0.1:{stream.port}", flush=True)
         return watch(args, batch, shown, stream)
     except ValueError as err:  # includes URDFError and a busy --foxglove port
-        print(f"error: {err}", file=sys.stderr)
-        return 2
+        return cli.fail(err)
     finally:
         if stream is not None:
             stream.close()
@@ -301,9 +261,7 @@ def watch(args, batch, shown: list[int], stream) -> int:
     """Runs the window until it is closed (or --duration is played); prints the factor reached."""
     import mujoco.viewer
 
-    from hopper_mjx.live import LiveRun
-
-    m, qpos_adr, first_body, bodies = scene(args.urdf, len(shown))
+    m, qpos_adr, first_body, bodies = display_model(args.urdf, len(shown))
     requests: set = set()
     run = LiveRun(batch, factor=args.speed_factor, sinks=[stream] if stream else [], paused=args.paused)
     holder = {}

@@ -19,14 +19,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from hopper_mjx import foxglove_stream, live, simulate
+from hopper_mjx import live, simulate
+from hopper_mjx.ros.foxglove import FoxgloveStream
 
 GRAVITY = (9.81, 3.71, 1.62)
 ARGS = ["--gravity", ",".join(map(str, GRAVITY)), "--controller", "hold"]
 SETTLED = 1.0  # s: the dropped robots stand still by then (touchdown <= 0.25 s)
 LANDED = 0.3  # s: every robot is on the floor
 PERIOD_NS = 20_000_000  # the seed's 50 Hz on every stream
-ROBOT_BLUE = np.array([51, 97, 166])  # render.LINK_COLOURS["base"] in 8-bit RGB
+ROBOT_BLUE = np.array([51, 97, 166])  # model.scene.LINK_COLOURS["base"] in 8-bit RGB
 
 
 @pytest.fixture(scope="module")
@@ -81,13 +82,13 @@ def test_arrow_key_commands_reach_every_raibert_instance_and_survive_a_reset():
     args = simulate.parser().parse_args(["--gravity", "9.81,1.62", "--num", "2", "--controller", "raibert",
                                          "--height", "0.1", "--speed", "0.2,0"])
     raibert = live.LiveBatch.build(args)
-    assert live.read_command(raibert.state.cstate) == {"speed": pytest.approx((0.2, 0.0)), "height": pytest.approx(0.1)}
+    assert raibert.command() == {"speed": pytest.approx((0.2, 0.0)), "height": pytest.approx(0.1)}
     assert raibert.change_command(speed_step=(live.SPEED_STEP, 0.0))
     assert raibert.change_command(height_step=-2 * live.HEIGHT_STEP)
     raibert.reset()
     params = raibert.state.cstate.params
-    np.testing.assert_allclose(np.asarray(params["speed"]), [[0.3, 0.0]] * 4, atol=1e-6)
-    np.testing.assert_allclose(np.asarray(params["height"]), [0.06] * 4, atol=1e-6)
+    np.testing.assert_allclose(np.asarray(params.speed), [[0.3, 0.0]] * 4, atol=1e-6)
+    np.testing.assert_allclose(np.asarray(params.height), [0.06] * 4, atol=1e-6)
 
 
 def test_hold_takes_no_commands_and_a_kick_changes_one_base_velocity(batch):
@@ -164,6 +165,15 @@ class Client:
                 subscriptions.append({"id": sub, "channelId": channel["id"]})
         self.ws.send(json.dumps({"op": "subscribe", "subscriptions": subscriptions}))
 
+    def collect_until_closed(self, timeout: float = 180.0) -> None:
+        """Receives until the server goes away (the streaming process ended)."""
+        from websockets.exceptions import ConnectionClosed
+
+        try:
+            self.collect(lambda c: False, timeout=timeout)
+        except ConnectionClosed:
+            pass
+
     def latest(self, topic: str) -> float:
         return self.messages[topic][-1][0] * 1e-9 if self.messages[topic] else -1.0
 
@@ -174,7 +184,7 @@ class Client:
 @pytest.fixture(scope="module")
 def streaming(batch):
     """The batch played at 4x real time into a Foxglove stream on a free port, in a thread."""
-    stream = foxglove_stream.FoxgloveStream.start(0, [0, 1, 2])
+    stream = FoxgloveStream.start(0, [0, 1, 2])
     batch.reset()
     stream.attach(batch)
     stop = threading.Event()
@@ -255,18 +265,60 @@ def test_a_client_leaving_does_not_stop_the_simulation(streaming):
     assert run.time >= left_at + 1.0
 
 
+def wait_for_line(proc, prefix: str, timeout: float = 240.0) -> str:
+    """The first line a process prints on stdout that starts with `prefix`."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        line = proc.stdout.readline()
+        if line.startswith(prefix):
+            return line
+        if not line and proc.poll() is not None:
+            break
+    pytest.fail(f"{proc.args[2:4]} never printed {prefix!r}: {proc.stderr.read()[-2000:]}")
+
+
+def test_simulate_streams_live_what_it_saves(tmp_path):
+    """`simulate --foxglove` plays the batch live: every value a client receives is in the .npz."""
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        port = probe.getsockname()[1]
+    out = tmp_path / "live.npz"
+    proc = subprocess.Popen([sys.executable, "-u", "-m", "hopper_mjx.simulate", *ARGS, "--rate", "50",
+                             "--duration", "0.6", "--speed-factor", "2", "--foxglove", str(port), "--out", str(out)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        wait_for_line(proc, "streaming instances [0, 1, 2] to Foxglove")
+        client = Client(port, ["/monoped_0/imu/data", "/monoped_2/odom"])
+        client.collect_until_closed()
+        assert proc.wait(timeout=60) == 0, proc.stderr.read()[-2000:]
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    saved = np.load(out)
+    np.testing.assert_array_equal(saved["time"], np.arange(30) * 0.02)
+    imu, odom = client.messages["/monoped_0/imu/data"], client.messages["/monoped_2/odom"]
+    assert len(imu) >= 10 and len(odom) >= 10
+    for log_time, msg in imu:
+        k = round(log_time / PERIOD_NS)
+        assert xyz(msg.linear_acceleration) == saved["imu_accel"][0, k].tolist()
+    for log_time, msg in odom:
+        k = round(log_time / PERIOD_NS)
+        assert xyz(msg.pose.pose.position) == saved["odom_pos"][2, k].tolist()
+
+
 # -- the command line ------------------------------------------------------------------------
-def run_view(args, env=None, **kw):
-    return subprocess.run([sys.executable, "-m", "hopper_mjx.view", *args], capture_output=True, text=True,
-                          env=env, timeout=120, **kw)
+def run_tool(tool, args, env=None):
+    return subprocess.run([sys.executable, "-m", f"hopper_mjx.{tool}", *args], capture_output=True, text=True,
+                          env=env, timeout=120)
 
 
-def test_a_busy_foxglove_port_is_one_line_on_stderr():
+@pytest.mark.parametrize("tool", ["view", "simulate"])
+def test_a_busy_foxglove_port_is_one_line_on_stderr(tool):
     with socket.socket() as busy:
         busy.bind(("127.0.0.1", 0))
         busy.listen()
         port = busy.getsockname()[1]
-        out = run_view([*ARGS, "--foxglove", str(port)])
+        out = run_tool(tool, [*ARGS, "--foxglove", str(port)])
     assert out.returncode == 2
     lines = out.stderr.strip().splitlines()
     assert lines[-1].startswith("error: --foxglove cannot listen on 127.0.0.1:") and str(port) in lines[-1]
@@ -275,7 +327,7 @@ def test_a_busy_foxglove_port_is_one_line_on_stderr():
 
 def test_without_a_display_view_says_so_and_names_render():
     env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY")}
-    out = run_view(ARGS, env=env)
+    out = run_tool("view", ARGS, env=env)
     assert out.returncode == 2
     last = out.stderr.strip().splitlines()[-1]
     assert last.startswith("error: view needs a display") and "python -m hopper_mjx.render" in last
@@ -319,15 +371,8 @@ class Viewer:
                                      stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
         self.window = None
 
-    def wait_for(self, prefix: str, timeout: float = 240.0) -> str:
-        deadline = time.monotonic() + timeout
-        while time.monotonic() < deadline:
-            line = self.proc.stdout.readline()
-            if line.startswith(prefix):
-                return line
-            if not line and self.proc.poll() is not None:
-                break
-        pytest.fail(f"view never printed {prefix!r}: {self.proc.stderr.read()[-2000:]}")
+    def wait_for(self, prefix: str) -> str:
+        return wait_for_line(self.proc, prefix)
 
     def key(self, *keys: str) -> None:
         if self.window is None:

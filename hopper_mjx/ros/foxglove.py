@@ -11,20 +11,17 @@ ROS 1-serialised messages, so Foxglove decodes them as it decodes a ROS 1 bag or
 rosbridge. `/tf` adds what robot_state_publisher and the odometry's frame would give a ROS
 user: world -> base and each link from its parent (the URDF's link frames, tf-prefixed like
 the topics), at the joint-state rate, so that Foxglove's 3D panel can pose the URDF.
-Messages are built from the played chunks by `record.messages` and published as their
+Messages are built from the played chunks by `messages.messages` and published as their
 stamps fall due, with the server's time (the Time capability) following simulated time.
 A chunk is serialised only while some client is subscribed to one of its channels.
 """
 
 from __future__ import annotations
 
-import dataclasses
-
 import numpy as np
 
-from hopper_mjx import record
+from hopper_mjx.ros import messages, record
 
-DEFAULT_PORT = 8765
 TF_TOPIC = "/tf"
 TF_MSGTYPE = "tf2_msgs/msg/TFMessage"
 TF_DEFINITION = "geometry_msgs/TransformStamped[] transforms\n"  # ROS 1 tf2_msgs, not in rosbags' store
@@ -55,25 +52,17 @@ def link_transforms(mj_model, data, qpos: np.ndarray) -> list[tuple[str, str, np
     return out
 
 
-def _floor_normal(mj_model, layout) -> np.ndarray:
-    import mujoco
-
-    data = mujoco.MjData(mj_model)
-    mujoco.mj_kinematics(mj_model, data)
-    return data.geom_xmat[layout.floor_geom].reshape(3, 3)[:, 2].copy()  # a plane's normal is its z axis
-
-
 class FoxgloveStream:
     """A Foxglove WebSocket server publishing the chosen instances' topics."""
 
     def __init__(self, server, context, instances: list[int]):
-        self.server, self.context, self.instances = server, context, list(instances)
-        self.store = record.typestore("ros1")
         from rosbags.typesys import get_types_from_msg
 
+        self.server, self.context, self.instances = server, context, list(instances)
+        self.store = messages.typestore("ros1")
         self.store.register(get_types_from_msg(TF_DEFINITION, TF_MSGTYPE))
         self.channels: dict[str, object] = {}
-        self.template: record.Recording | None = None
+        self.batch = None
         self._messages: dict[int, list[tuple[float, str, bytes]]] = {}  # id(chunk) -> its messages
 
     @classmethod
@@ -82,8 +71,6 @@ class FoxgloveStream:
         import foxglove
         from foxglove.websocket import Capability
 
-        if not 0 <= port <= 65535:
-            raise PortError(f"--foxglove port must be in 0..65535, got {port}")
         context = foxglove.Context()
         try:
             server = foxglove.start_server(name="hopper_mjx", host=host, port=port, context=context,
@@ -101,24 +88,15 @@ class FoxgloveStream:
         """Advertises the channels of `batch` (a LiveBatch) for the instances chosen at start."""
         import foxglove
 
-        from hopper_mjx import model
-
-        sim = batch.sim
         bad = [i for i in self.instances if not 0 <= i < batch.n]
         if bad:
             raise ValueError(f"instances {bad} out of range: the batch has {batch.n}")
-        self.template = record.Recording(
-            traj=None, gravity=batch.gravity, sensors=batch.sensors,
-            joint_names=model.JOINTS,
-            joint_qpos=sim.layout.joint_qpos, joint_dof=sim.layout.joint_dof,
-            floor_normal=_floor_normal(sim.mj_model, sim.layout), clock_time=None, diverged=None,
-        )
+        self.batch = batch
         single = len(self.instances) == 1
-        names = [record.topic_names(None if single else i) for i in self.instances]
-        topics = {t: record.MSGTYPES[kind] for n in names for kind, t in n.items()}
-        topics["/clock"] = record.MSGTYPES["clock"]
+        names = [messages.topic_names(None if single else i) for i in self.instances]
+        topics = {t: messages.MSGTYPES[kind] for n in names for kind, t in n.items()}
+        topics["/clock"] = messages.MSGTYPES["clock"]
         topics[TF_TOPIC] = TF_MSGTYPE
-        self.mj_model = sim.mj_model
         for topic, msgtype in topics.items():
             text, _ = self.store.generate_msgdef(msgtype, ros_version=1)
             schema = foxglove.Schema(name=msgtype.replace("/msg/", "/"), encoding="ros1msg", data=text.encode())
@@ -129,10 +107,10 @@ class FoxgloveStream:
         key = id(chunk)
         if key not in self._messages:
             self._messages = {}  # only the chunk playing is kept
-            rec = dataclasses.replace(self.template, traj=chunk.traj, clock_time=chunk.clock,
-                                      diverged=chunk.diverged)
+            batch = self.batch
+            rec = record.recording(batch.sim, chunk.traj, batch.gravity, batch.sensors, chunk.diverged)
             out = [(t, topic, bytes(self.store.serialize_ros1(msg, msgtype)))
-                   for topic, msgtype, t, msg in record.messages(rec, self.instances, self.store, ros1=True)]
+                   for topic, msgtype, t, msg in messages.messages(rec, self.instances, self.store, ros1=True)]
             out += self._tf_messages(chunk)
             out.sort(key=lambda m: m[0])
             self._messages[key] = out
@@ -142,33 +120,34 @@ class FoxgloveStream:
         """One /tf message per joint-state instant, holding every streamed instance's links."""
         import mujoco
 
-        build = record._Builder(self.store, ros1=True)
-        data = mujoco.MjData(self.mj_model)
-        transform_type = self.store.types["geometry_msgs/msg/TransformStamped"]
+        build = messages._Builder(self.store, ros1=True)
+        types = self.store.types
+        mj_model = self.batch.sim.mj_model
+        data = mujoco.MjData(mj_model)
         out = []
         for k, t in enumerate(chunk.traj.time["state"]):
             transforms = []
             for i in self.instances:
-                prefix = record.frame_prefix(None if len(self.instances) == 1 else i)
-                for parent, child, pos, quat in link_transforms(self.mj_model, data, chunk.traj.qpos[i, k]):
-                    transform = self.store.types["geometry_msgs/msg/Transform"](
+                prefix = messages.frame_prefix(None if len(self.instances) == 1 else i)
+                for parent, child, pos, quat in link_transforms(mj_model, data, chunk.traj.qpos[i, k]):
+                    transform = types["geometry_msgs/msg/Transform"](
                         translation=build.vector(pos), rotation=build.quaternion(quat))
                     frame = "world" if parent == "world" else prefix + parent
-                    transforms.append(transform_type(header=build.header(0, t, frame), child_frame_id=prefix + child,
-                                                     transform=transform))
-            msg = self.store.types[TF_MSGTYPE](transforms=transforms)
+                    transforms.append(types["geometry_msgs/msg/TransformStamped"](
+                        header=build.header(0, t, frame), child_frame_id=prefix + child, transform=transform))
+            msg = types[TF_MSGTYPE](transforms=transforms)
             out.append((float(t), TF_TOPIC, bytes(self.store.serialize_ros1(msg, TF_MSGTYPE))))
         return out
 
     def __call__(self, chunk, t_from: float, t_to: float) -> None:
         """Publishes the messages of `chunk` stamped in [t_from, t_to) (a LiveRun sink)."""
-        self.server.broadcast_time(int(round(t_from * 1e9)))
+        self.server.broadcast_time(round(t_from * 1e9))
         if not any(channel.has_sinks() for channel in self.channels.values()):
             return
-        eps = 1e-9  # stamps are t0 + k·timestep: equal instants are equal floats, but be safe
+        eps = 1e-9  # stamps are whole steps x timestep: equal instants are equal floats, but be safe
         for t, topic, data in self._chunk_messages(chunk):
             if t_from - eps <= t < t_to - eps:
-                self.channels[topic].log(data, log_time=int(round(t * 1e9)))
+                self.channels[topic].log(data, log_time=round(t * 1e9))
 
     def close(self) -> None:
         self.server.stop()
