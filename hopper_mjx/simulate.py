@@ -94,22 +94,15 @@ def parser() -> argparse.ArgumentParser:
 def main(argv=None) -> int:
     args = parser().parse_args(argv)
     from hopper_mjx import live
-    from hopper_mjx.ros.foxglove import FoxgloveStream
+    from hopper_mjx.ros import foxglove
 
-    stream = None
     try:
         cli.check_batch(args)
-        cli.check_live(args)
-        if args.foxglove is not None:  # a busy port is reported before anything is built
-            streamed = live.spread(args.num * len(args.gravity), live.SHOWN)
-            stream = FoxgloveStream.start(args.foxglove, streamed)
-        runtime.configure()
-        saved = run(args) if stream is None else run_live(args, stream)
+        with foxglove.listening(args, live.spread(args.num * len(args.gravity), live.SHOWN)) as stream:
+            runtime.configure()
+            saved = run(args) if stream is None else run_live(args, stream)
     except ValueError as err:  # includes URDFError and a busy --foxglove port
         return cli.fail(err)
-    finally:
-        if stream is not None:
-            stream.close()
     np.savez_compressed(args.out, **saved)
     cli.warn_diverged(saved["diverged"])
     print(f"wrote {args.out}: {saved['qpos'].shape[0]} instances x {saved['time'].size} samples")

@@ -229,32 +229,26 @@ def parser() -> argparse.ArgumentParser:
 
 def main(argv=None) -> int:
     args = parser().parse_args(argv)
-    from hopper_mjx.ros.foxglove import FoxgloveStream
+    from hopper_mjx.ros import foxglove
 
-    stream = None
     try:
         cli.check_batch(args)
-        cli.check_live(args)
         if not 1 <= args.show <= SHOWN:
             raise ValueError(f"--show must be in 1..{SHOWN}, got {args.show}")
         shown = spread(args.num * len(args.gravity), args.show)
-        if args.foxglove is not None:  # a busy port is reported before anything is built
-            stream = FoxgloveStream.start(args.foxglove, shown)
-        why = needs_display()
-        if why:
-            return cli.fail(f"view needs a display: {why}; for pictures and videos without one use "
-                            "python -m hopper_mjx.render")
-        runtime.configure()
-        batch = LiveBatch.build(args)
-        if stream is not None:
-            stream.attach(batch)
-            print(f"streaming to Foxglove on ws://127.0.0.1:{stream.port}", flush=True)
-        return watch(args, batch, shown, stream)
+        with foxglove.listening(args, shown) as stream:
+            why = needs_display()
+            if why:
+                return cli.fail(f"view needs a display: {why}; for pictures and videos without one use "
+                                "python -m hopper_mjx.render")
+            runtime.configure()
+            batch = LiveBatch.build(args)
+            if stream is not None:
+                stream.attach(batch)
+                print(f"streaming to Foxglove on ws://127.0.0.1:{stream.port}", flush=True)
+            return watch(args, batch, shown, stream)
     except ValueError as err:  # includes URDFError and a busy --foxglove port
         return cli.fail(err)
-    finally:
-        if stream is not None:
-            stream.close()
 
 
 def watch(args, batch, shown: list[int], stream) -> int:

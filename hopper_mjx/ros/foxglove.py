@@ -18,8 +18,11 @@ A chunk is serialised only while some client is subscribed to one of its channel
 
 from __future__ import annotations
 
+from contextlib import contextmanager
+
 import numpy as np
 
+from hopper_mjx import cli
 from hopper_mjx.ros import messages, record
 
 TF_TOPIC = "/tf"
@@ -151,3 +154,18 @@ class FoxgloveStream:
 
     def close(self) -> None:
         self.server.stop()
+
+
+@contextmanager
+def listening(args, instances: list[int]):
+    """The stream `--foxglove` asks for (None without it), listening while the block runs.
+    Checks the live options first; a busy port raises PortError before anything is built."""
+    cli.check_live(args)
+    if args.foxglove is None:
+        yield None
+        return
+    stream = FoxgloveStream.start(args.foxglove, instances)
+    try:
+        yield stream
+    finally:
+        stream.close()
