@@ -7,7 +7,8 @@ PY := $(VENV)/bin/python
 install: $(VENV)/.installed
 
 # Headless rendering (hopper_mjx.render): EGL with Mesa's software rasteriser, no display or GPU.
-RENDER_DEBS := libegl1 libopengl0 libgl1-mesa-dri
+# The viewer's test (hopper_mjx.view) runs it on a virtual X display driven by scripted key presses.
+RENDER_DEBS := libegl1 libopengl0 libgl1-mesa-dri xvfb xdotool
 
 $(VENV)/.installed: pyproject.toml
 	@if command -v dpkg >/dev/null && ! dpkg -s $(RENDER_DEBS) >/dev/null 2>&1; then \

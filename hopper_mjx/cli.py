@@ -61,10 +61,11 @@ def add_batch_options(p: argparse.ArgumentParser, *, gravity=(9.81, 3.71, 1.62),
 
 
 def check_batch(args) -> None:
-    """Raises ValueError naming the first bad batch option (before anything is built)."""
+    """Raises ValueError naming the first bad batch option (before anything is built).
+    A --duration of None (`view`: until the window closes) passes."""
     if args.num < 1:
         raise ValueError(f"--num must be >= 1, got {args.num}")
-    if not (math.isfinite(args.duration) and args.duration > 0):
+    if args.duration is not None and not (math.isfinite(args.duration) and args.duration > 0):
         raise ValueError(f"--duration must be > 0 s, got {args.duration}")
     if len(args.speed) != 2:
         raise ValueError(f"--speed needs two values VX,VY in m/s, got {args.speed}")
@@ -92,17 +93,23 @@ def make_controller(args, sim, n: int):
     return control.make(args.controller, sim.robot, n, height=args.height, speed=args.speed)
 
 
+def build_batch(args):
+    """(Sim, gravity (N, 3), controller, params) of the batch the arguments describe."""
+    from hopper_mjx import model
+    from hopper_mjx.sim import Sim
+
+    gravity = batch_gravity(args)
+    sim = Sim(model.load(args.urdf, timestep=args.timestep), chunk=args.chunk)
+    controller, params = make_controller(args, sim, len(gravity))
+    return sim, gravity, controller, params
+
+
 def run_batch(args, sensors):
     """(Sim, final state, trajectory) of the batch the arguments describe, on the one batch-run path."""
     import jax
 
-    from hopper_mjx import model
-    from hopper_mjx.sim import Sim
-
     check_batch(args)
-    gravity = batch_gravity(args)
-    sim = Sim(model.load(args.urdf, timestep=args.timestep), chunk=args.chunk)
-    controller, params = make_controller(args, sim, len(gravity))
+    sim, gravity, controller, params = build_batch(args)
     start = time.perf_counter()
     final, traj = sim.run(gravity, controller, params, duration=args.duration, sensors=sensors, key=args.seed)
     jax.block_until_ready(traj)
@@ -113,7 +120,34 @@ def run_batch(args, sensors):
     return sim, final, jax.tree_util.tree_map(np.asarray, traj)
 
 
-def fail(err: Exception) -> int:
+FOXGLOVE_PORT = 8765  # Foxglove's default for a WebSocket connection
+
+
+def port(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"--foxglove takes a port number, got {text!r}") from None
+    if not 0 <= value <= 65535:
+        raise argparse.ArgumentTypeError(f"--foxglove port must be in 0..65535, got {value}")
+    return value
+
+
+def add_live_options(p: argparse.ArgumentParser, *, foxglove_help: str) -> None:
+    """The options of a batch played live: the Foxglove stream and the pace."""
+    p.add_argument("--foxglove", type=port, nargs="?", const=FOXGLOVE_PORT, default=None, metavar="PORT",
+                   help=f"{foxglove_help} on ws://127.0.0.1:PORT (default port {FOXGLOVE_PORT}), "
+                        "paced at --speed-factor x real time")
+    p.add_argument("--speed-factor", type=float, default=1.0,
+                   help="simulated seconds per wall-clock second of a live run (1: real time)")
+
+
+def check_live(args) -> None:
+    if not (math.isfinite(args.speed_factor) and args.speed_factor > 0):
+        raise ValueError(f"--speed-factor must be > 0, got {args.speed_factor}")
+
+
+def fail(err: Exception | str) -> int:
     print(f"error: {err}", file=sys.stderr)
     return 2
 

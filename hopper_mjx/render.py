@@ -24,39 +24,15 @@ import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
 
 from hopper_mjx import cli, model, runtime  # noqa: E402
-from hopper_mjx.model import robot  # noqa: E402
+from hopper_mjx.model import robot, scene  # noqa: E402
 
 VIDEO_SUFFIXES = (".mp4", ".gif")
 TRACK_HEIGHT = 0.45  # m: the camera looks at the leg's middle, not at the base
-# The URDF has no colours; these tell the links apart (RGBA).
-LINK_COLOURS = {
-    "base": (0.20, 0.38, 0.65, 1),
-    "hipassembly": (0.85, 0.45, 0.10, 1),
-    "upperleg": (0.85, 0.85, 0.82, 1),
-    "lowerleg": (0.85, 0.45, 0.10, 1),
-    "foot": (0.12, 0.12, 0.12, 1),
-}
 
 
 def scene_model(urdf=None) -> mujoco.MjModel:
-    """The simulated monoped plus what only pictures need: a checkered floor and a sky."""
-    spec = model.build_spec(urdf)
-    spec.add_texture(name="checker", type=mujoco.mjtTexture.mjTEXTURE_2D, builtin=mujoco.mjtBuiltin.mjBUILTIN_CHECKER,
-                     rgb1=[0.82, 0.84, 0.86], rgb2=[0.62, 0.66, 0.70], width=256, height=256)
-    spec.add_texture(name="sky", type=mujoco.mjtTexture.mjTEXTURE_SKYBOX, builtin=mujoco.mjtBuiltin.mjBUILTIN_GRADIENT,
-                     rgb1=[0.55, 0.70, 0.90], rgb2=[0.95, 0.97, 1.0], width=256, height=256)
-    floor = spec.add_material(name="floor", texrepeat=[4, 4], texuniform=True)
-    floor.textures[mujoco.mjtTextureRole.mjTEXROLE_RGB] = "checker"
-    spec.geom(model.FLOOR_GEOM).material = "floor"
-    for body, rgba in LINK_COLOURS.items():
-        if spec.body(body) is not None:  # another URDF may name its links differently
-            for geom in spec.body(body).geoms:
-                geom.rgba = rgba
-    spec.visual.headlight.ambient = [0.4, 0.4, 0.4]
-    spec.visual.headlight.diffuse = [0.5, 0.5, 0.5]
-    spec.visual.global_.offwidth = 1920
-    spec.visual.global_.offheight = 1080
-    return spec.compile()
+    """The simulated monoped plus what only pictures need: a checkered floor, a sky, link colours."""
+    return scene.dress(model.build_spec(urdf)).compile()
 
 
 def camera(base_pos, distance: float = 2.0, azimuth: float = 135.0, elevation: float = -12.0) -> mujoco.MjvCamera:

@@ -10,7 +10,8 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGE = "hopper_mjx"
 # Bottom to top, as the data flows: description -> compiled model -> engine -> signals ->
-# controllers -> metrics -> the batched core -> environments -> command-line support -> tools.
+# controllers -> metrics -> the batched core -> environments -> command-line support -> live runs
+# and ROS I/O -> tools.
 LAYERS = (
     ("runtime", "model"),
     ("engine",),
@@ -21,6 +22,7 @@ LAYERS = (
     ("envs",),
     ("__init__",),  # the package's public surface
     ("cli",),
+    ("live", "ros"),  # live runs of the batch, ROS messages and streams: used by several tools
 )
 # Tools sit on top and may not import one another; a part not listed above is a tool.
 # The experiments (training scripts) sit above the tools and may use them.
@@ -129,4 +131,5 @@ def test_the_check_sees_an_upstream_import_and_a_cycle():
     assert upstream_imports(graph, files) == [
         "hopper_mjx/control/raibert.py:1: control (layer 3) imports sim (layer 5), which is not below it"]
     assert cycles(graph) == ["hopper_mjx.control.raibert -> hopper_mjx.sim -> hopper_mjx.control.raibert"]
-    assert layer_of("view") == TOOL_LAYER and layer_of("ros") == layer_of("perf") == TOOL_LAYER
+    assert layer_of("view") == layer_of("simulate") == layer_of("perf") == TOOL_LAYER
+    assert layer_of("cli") < layer_of("ros") == layer_of("live") < TOOL_LAYER

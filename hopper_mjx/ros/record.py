@@ -68,14 +68,12 @@ def sensor_config(args):
     )
 
 
-def simulate_batch(args) -> Recording:
-    """Runs the batch the arguments describe (the one batch-run path) at the bag's rates."""
+def recording(sim, traj, gravity, sensors, diverged) -> Recording:
+    """What the messages need of a batch simulated by `sim` (a `hopper_mjx.sim.Sim`)."""
     import mujoco
 
     from hopper_mjx import model
 
-    sensors = sensor_config(args)
-    sim, final, traj = cli.run_batch(args, sensors)
     data = mujoco.MjData(sim.mj_model)
     mujoco.mj_kinematics(sim.mj_model, data)
     floor_normal = data.geom_xmat[sim.layout.floor_geom].reshape(3, 3)[:, 2].copy()  # a plane's normal is its z axis
@@ -83,15 +81,22 @@ def simulate_batch(args) -> Recording:
     clock_time = np.unique(np.concatenate(list(traj.time.values())))
     return Recording(
         traj=traj,
-        gravity=cli.batch_gravity(args),
+        gravity=gravity,
         sensors=sensors,
         joint_names=model.JOINTS,
         joint_qpos=sim.layout.joint_qpos,
         joint_dof=sim.layout.joint_dof,
         floor_normal=floor_normal,
         clock_time=clock_time,
-        diverged=np.asarray(final.diverged),
+        diverged=np.asarray(diverged),
     )
+
+
+def simulate_batch(args) -> Recording:
+    """Runs the batch the arguments describe (the one batch-run path) at the bag's rates."""
+    sensors = sensor_config(args)
+    sim, final, traj = cli.run_batch(args, sensors)
+    return recording(sim, traj, cli.batch_gravity(args), sensors, final.diverged)
 
 
 # -- bag files -------------------------------------------------------------------------------
