@@ -5,25 +5,20 @@
 
 The still shows the robot in its initial stance; the video (MP4 or GIF, by the
 file name) shows one instance simulated by the core. Headless machines render
-through EGL (software Mesa on a CPU-only box).
-MuJoCo picks its OpenGL backend when it is first imported, so this module sets
-MUJOCO_GL=egl by default before importing it (an explicit MUJOCO_GL wins).
+through EGL (software Mesa on a CPU-only box): importing `hopper_mjx` chooses it
+before MuJoCo is loaded, unless MUJOCO_GL is set (see `hopper_mjx.startup`).
 """
 
 from __future__ import annotations
 
-import os
+import argparse
+import sys
+from pathlib import Path
 
-os.environ.setdefault("MUJOCO_GL", "egl")
+import mujoco
+import numpy as np
 
-import argparse  # noqa: E402 (MUJOCO_GL must be set before mujoco is imported)
-import sys  # noqa: E402
-from pathlib import Path  # noqa: E402
-
-import mujoco  # noqa: E402
-import numpy as np  # noqa: E402
-
-from hopper_mjx import model, runtime, simulate  # noqa: E402
+from hopper_mjx import model, runtime, simulate
 
 VIDEO_SUFFIXES = (".mp4", ".gif")
 TRACK_HEIGHT = 0.45  # m: the camera looks at the leg's middle, not at the base
