@@ -19,6 +19,17 @@ are over the last `last_hops` hops before it, the speed window ends at it.
 Undefined values are NaN: an instance that never completes a hop has NaN apex
 and timing metrics (and hops = 0); a cost of transport needs the motors' work
 and a displacement of at least `MIN_TRANSPORT`.
+
+Gravity enters through its downward part g = -g_z (the floor is level: a
+sideways part pushes the robot along but does not change its hops). With g = 0
+(the seed's zero-gravity world) the robot floats: `floating` is True, and the
+values defined through g (ballistic flight time, cost of transport) are NaN
+rather than a division by zero.
+
+Energy, from the motors' work W (J, e.g. the Raibert controller's ∫Σ|τ·q̇|dt over
+the whole record): `mechanical_power` = W / (mass · record length) in W/kg, and
+`energy_per_hop` = that power times the mean hop period, in J/kg. Both are
+meaningful when the robot hops in place, where the cost of transport is not.
 """
 
 from __future__ import annotations
@@ -108,9 +119,11 @@ def hop_metrics(
     t_contact = np.asarray(traj.time["contact"], dtype=float)
     n = qpos.shape[0]
     g = np.asarray(gravity, dtype=float)
-    g = np.linalg.norm(g, axis=-1) if g.ndim == 2 else g.reshape(-1)
+    g = -g[:, 2] if g.ndim == 2 and g.shape[1:] == (3,) else g.reshape(-1)  # downward part, m/s²
     if g.shape != (n,):
         raise ValueError(f"gravity must be (N, 3) or (N,) with N={n}, got {np.shape(gravity)}")
+    floating = ~(g > 0)
+    g_or_nan = np.where(floating, np.nan, g)  # nothing that divides by g is defined while floating
     command = np.broadcast_to(np.asarray(command_speed, dtype=float), (n, 2))
     if last_hops < 1 or speed_window <= 0:
         raise ValueError("last_hops must be >= 1 and speed_window > 0")
@@ -160,24 +173,28 @@ def hop_metrics(
     with np.errstate(invalid="ignore", divide="ignore"):
         velocity = (qpos[rows, end, :2] - qpos[rows, start, :2]) / np.where(span > 0, span, np.nan)[:, None]
 
-    # -- cost of transport -------------------------------------------------------
+    # -- energy and cost of transport -------------------------------------------
     travel = np.linalg.norm(qpos[rows, end, :2] - qpos[:, 0, :2], axis=1)
     if work is None:
-        cost = np.full(n, np.nan)
+        cost = power = np.full(n, np.nan)
     else:
         if mass is None or not mass > 0:
             raise ValueError("the cost of transport needs the robot's mass (kg) along with the work")
+        work = np.asarray(work, float)
+        record_length = t_state[-1] - t_state[0]
+        power = work / (mass * record_length) if record_length > 0 else np.full(n, np.nan)
         with np.errstate(invalid="ignore", divide="ignore"):
-            cost = np.where(travel >= MIN_TRANSPORT, np.asarray(work, float) / (mass * g * travel), np.nan)
+            cost = np.where(travel >= MIN_TRANSPORT, work / (mass * g_or_nan * travel), np.nan)
+    hop_period = mean(period)
 
     return {
         "hops": hops,
         "apex_height": mean(rise),
         "flight_rise": mean(arc),
-        "ballistic_flight_time": mean(2 * np.sqrt(np.maximum(arc, 0.0) * 2 / g[:, None])),
+        "ballistic_flight_time": mean(2 * np.sqrt(np.maximum(arc, 0.0) * 2 / g_or_nan[:, None])),
         "flight_time": mean(flight_time),
         "stance_time": mean(stance_time),
-        "hop_period": mean(period),
+        "hop_period": hop_period,
         "duty_factor": mean(stance_time / period),
         "mean_speed": velocity[:, 0],
         "mean_speed_y": velocity[:, 1],
@@ -188,4 +205,7 @@ def hop_metrics(
         "fall_time": np.where(fell, t_fall, np.nan),
         "hops_before_fall": hops,
         "cost_of_transport": cost,
+        "mechanical_power": power,
+        "energy_per_hop": power * hop_period,
+        "floating": floating,
     }

@@ -47,9 +47,11 @@ enough to lean the body back at 0.5 m/s without upsetting it sideways. The servo
 of the friction cone: at touchdown the leg force is still small, and a hip
 torque beyond the floor's grip makes the foot slip or bounce.
 
-Every gravity-dependent quantity uses the instance's own g. Contact is read in
-`act` from the MJX contact rows of the foot (distance < 0), the definition of
-`hopper_mjx.signals.contact`; like the joint readings it is one step (1 ms) old.
+Every gravity-dependent quantity uses the instance's own g, its downward (vertical)
+part, floored at `MIN_GRAVITY` so that a weightless robot gets finite commands.
+Contact is read in `act` from the MJX contact rows of the foot (distance < 0), the
+definition of `hopper_mjx.signals.contact`; like the joint readings it is one step
+(1 ms) old.
 """
 
 from __future__ import annotations
@@ -211,7 +213,9 @@ def raibert(layout: Layout, config: RaibertConfig | None = None, *, leg: LegGeom
 
     def act(s: RaibertState, data, gravity):
         p = s.params
-        g = jnp.maximum(jnp.linalg.norm(gravity), MIN_GRAVITY)
+        # The floor is level, so hops and flights follow gravity's vertical part; a sideways
+        # part only pushes the robot along, which the speed loop sees as an error.
+        g = jnp.maximum(-gravity[2], MIN_GRAVITY)
         q, qd = data.qpos[qadr], data.qvel[dadr]
         z, zdot = data.qpos[2], data.qvel[2]
         # Horizontal velocity of the COM (constant through a flight, unlike the base's).

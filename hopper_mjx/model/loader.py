@@ -194,11 +194,18 @@ def describe(urdf_text: str, source: str = "<string>") -> LegDescription:
     )
 
 
-def build_spec(urdf: str | os.PathLike | None = None, *, timestep: float = DEFAULT_TIMESTEP) -> mujoco.MjSpec:
-    """The monoped as an editable `MjSpec`, with everything the simulation adds."""
+def build_spec(urdf: str | os.PathLike | None = None, *, timestep: float = DEFAULT_TIMESTEP,
+               friction: tuple[float, float] = (FOOT_FRICTION, FOOT_FRICTION)) -> mujoco.MjSpec:
+    """The monoped as an editable `MjSpec`, with everything the simulation adds.
+
+    friction: the foot-floor contact's tangential coefficients (MuJoCo's two sliding directions,
+    Gazebo's mu and mu2); a world file sets them (`hopper_mjx.model.world`).
+    """
     path = Path(urdf) if urdf is not None else DEFAULT_URDF
     if not (isinstance(timestep, (int, float)) and math.isfinite(timestep) and 0 < timestep <= 0.01):
         raise ValueError(f"timestep must be in (0, 0.01] s, got {timestep!r}")
+    if len(friction) != 2 or not all(math.isfinite(mu) and mu >= 0 for mu in friction):
+        raise ValueError(f"friction must be two finite coefficients >= 0, got {friction!r}")
     try:
         text = path.read_text()
     except OSError as err:
@@ -242,7 +249,7 @@ def build_spec(urdf: str | os.PathLike | None = None, *, timestep: float = DEFAU
     foot = next(g for g in foot_body.geoms if g.type == mujoco.mjtGeom.mjGEOM_SPHERE)
     foot.name = FOOT_GEOM
     spec.add_pair(geomname1=FLOOR_GEOM, geomname2=FOOT_GEOM, condim=3,
-                  friction=[FOOT_FRICTION, FOOT_FRICTION, 0.005, 1e-4, 1e-4])
+                  friction=[friction[0], friction[1], 0.005, 1e-4, 1e-4])
     for i, geom in enumerate(base.geoms):
         geom.name = geom.name or f"{leg.base_link}_collision{i}"
         spec.add_pair(geomname1=FLOOR_GEOM, geomname2=geom.name, condim=1)
@@ -274,9 +281,10 @@ def build_spec(urdf: str | os.PathLike | None = None, *, timestep: float = DEFAU
     return spec
 
 
-def load(urdf: str | os.PathLike | None = None, *, timestep: float = DEFAULT_TIMESTEP) -> mujoco.MjModel:
+def load(urdf: str | os.PathLike | None = None, *, timestep: float = DEFAULT_TIMESTEP,
+         friction: tuple[float, float] = (FOOT_FRICTION, FOOT_FRICTION)) -> mujoco.MjModel:
     """Compiles a monoped URDF (default: the shipped seed monoped) to an `MjModel`."""
-    spec = build_spec(urdf, timestep=timestep)
+    spec = build_spec(urdf, timestep=timestep, friction=friction)
     try:
         return spec.compile()
     except ValueError as err:
