@@ -20,6 +20,7 @@ import numpy as np
 import yaml
 
 TIME_TYPES = ("builtin_interfaces/msg/Time", "builtin_interfaces/msg/Duration")
+ROS2_METADATA = "metadata.yaml"  # what makes a folder a rosbag2 bag
 
 
 def bag_path(path: str | Path) -> Path:
@@ -28,7 +29,12 @@ def bag_path(path: str | Path) -> Path:
     if not path.exists():
         raise ValueError(f"no such bag: {path}")
     if path.is_file() and path.suffix in (".mcap", ".db3", ".yaml"):
+        if not (path.parent / ROS2_METADATA).is_file():
+            raise ValueError(f"{path} is a ROS 2 storage file without its bag folder: no {ROS2_METADATA} "
+                             f"beside it (give the bag folder that rosbag2 wrote)")
         return path.parent
+    if path.is_dir() and not (path / ROS2_METADATA).is_file():
+        raise ValueError(f"{path} is a folder but not a ROS 2 bag: it has no {ROS2_METADATA}")
     return path
 
 
@@ -40,7 +46,7 @@ def open_bag(path: str | Path):
     try:
         reader = AnyReader([bag_path(path)])
         reader.open()
-    except AnyReaderError as err:
+    except (AnyReaderError, OSError) as err:
         raise ValueError(f"cannot read {path} as a ROS bag: {err}") from None
     try:
         yield reader

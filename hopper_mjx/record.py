@@ -27,30 +27,15 @@ from typing import Iterator
 
 import numpy as np
 
-from hopper_mjx import runtime, simulate
+from hopper_mjx import msgdefs, runtime, simulate
 
 FORMATS = ("ros1", "mcap")
 ROBOT = "monoped"
 CONTACT_LINK = "lowerleg"  # the seed's contact sensor sits on the lower leg; the foot is fixed to it
 GROUND_COLLISION = "ground_plane::link::collision"
 
-# gazebo_msgs is not among rosbags' built-in types; these are its ROS 1 and ROS 2 definitions.
-GAZEBO_MSGS = {
-    "gazebo_msgs/msg/ContactState": """\
-string info
-string collision1_name
-string collision2_name
-geometry_msgs/Wrench[] wrenches
-geometry_msgs/Wrench total_wrench
-geometry_msgs/Vector3[] contact_positions
-geometry_msgs/Vector3[] contact_normals
-float64[] depths
-""",
-    "gazebo_msgs/msg/ContactsState": """\
-std_msgs/Header header
-gazebo_msgs/ContactState[] states
-""",
-}
+# gazebo_msgs is not among rosbags' built-in types; its definitions come from ROS's own .msg files.
+GAZEBO_MSGS = ("gazebo_msgs/msg/ContactState", "gazebo_msgs/msg/ContactsState")
 
 MSGTYPES = {
     "imu": "sensor_msgs/msg/Imu",
@@ -159,8 +144,8 @@ def typestore(fmt: str):
 
     store = get_typestore(Stores.ROS1_NOETIC if fmt == "ros1" else Stores.ROS2_JAZZY)
     types = {}
-    for name, text in GAZEBO_MSGS.items():
-        types.update(get_types_from_msg(text, name))
+    for name in GAZEBO_MSGS:
+        types.update(get_types_from_msg(msgdefs.text(name), name))
     store.register(types)
     return store
 
@@ -291,6 +276,14 @@ def messages(rec: Recording, instances: list[int], store, ros1: bool) -> Iterato
 
 
 # -- bag files -------------------------------------------------------------------------------
+def definition(store, msgtype: str, ros1: bool) -> dict:
+    """add_connection's keywords: for ROS 1, ROS's own definition text (with its comments, which
+    rosbags' generated text lacks) and the md5 sum, which ignores comments; for ROS 2, the type store."""
+    if not ros1:
+        return {"typestore": store}
+    return {"msgdef": msgdefs.full_text(msgtype), "md5sum": store.generate_msgdef(msgtype, ros_version=1)[1]}
+
+
 def write(rec: Recording, out: str | Path, fmt: str, instances: list[int] | None = None) -> Path:
     """Writes the chosen instances (default: all) as a ROS 1 .bag file or a ROS 2 MCAP bag folder."""
     if fmt not in FORMATS:
@@ -328,7 +321,7 @@ def write(rec: Recording, out: str | Path, fmt: str, instances: list[int] | None
         connections = {}
         for topic, msgtype, t, msg in msgs:
             if topic not in connections:
-                connections[topic] = writer.add_connection(topic, msgtype, typestore=store)
+                connections[topic] = writer.add_connection(topic, msgtype, **definition(store, msgtype, ros1))
             writer.write(connections[topic], int(round(t * 1e9)), serialize(msg, msgtype))
     return out
 
