@@ -207,7 +207,9 @@ def build_spec(urdf: str | os.PathLike | None = None, *, timestep: float = DEFAU
     if len(friction) != 2 or not all(math.isfinite(mu) and mu >= 0 for mu in friction):
         raise ValueError(f"friction must be two finite coefficients >= 0, got {friction!r}")
     try:
-        text = path.read_text()
+        text = path.read_text(encoding="utf-8")
+    except UnicodeDecodeError:
+        raise URDFError(f"{path} is not a text (UTF-8) URDF file") from None
     except OSError as err:
         raise URDFError(f"cannot read URDF {path}: {err.strerror}") from None
     leg = describe(text, str(path))
