@@ -237,7 +237,8 @@ def genmsg_definitions(search: dict) -> dict:
         context = msg_loader.MsgContext.create_default()
         spec = msg_loader.load_msg_by_type(context, msgdefs.ros1_name(msgtype), search)
         msg_loader.load_depends(context, spec, search)
-        out[msgdefs.ros1_name(msgtype)] = (gentools.compute_full_text(context, spec), gentools.compute_md5(context, spec))
+        text, md5 = gentools.compute_full_text(context, spec), gentools.compute_md5(context, spec)
+        out[msgdefs.ros1_name(msgtype)] = (text, md5)
     return out
 
 

@@ -150,7 +150,8 @@ def test_gains_heatmap_reads_at_a_glance():
 def test_gravity_figure_shows_energy_per_hop_in_place_and_cot_with_a_speed_command():
     from hopper_mjx.sweep import report
 
-    groups = [{"gravity": g, "survival": 1.0, "energy_per_hop": 0.4 * g, "cost_of_transport": None} for g in (9.81, 1.62, 3.71)]
+    groups = [{"gravity": g, "survival": 1.0, "energy_per_hop": 0.4 * g, "cost_of_transport": None}
+              for g in (9.81, 1.62, 3.71)]
     in_place = report.gravity_figure(_spec(), groups)
     energy = in_place.axes[5]
     assert energy.get_ylabel() == "motor work per hop (J/kg)"

@@ -111,7 +111,8 @@ def gravity_figure(spec: SweepSpec, groups: list[dict]):
     err = lambda k: np.array([np.nan if r.get(f"{k}_std") is None else r[f"{k}_std"] for r in groups])
     # Hopping in place travels (almost) nowhere, so work / (m·g·distance) is empty or noise there;
     # the energy of one hop is meaningful either way.
-    energy = ("cost_of_transport", "cost of transport") if any(spec.speed) else ("energy_per_hop", "motor work per hop (J/kg)")
+    energy = (("cost_of_transport", "cost of transport") if any(spec.speed)
+              else ("energy_per_hop", "motor work per hop (J/kg)"))
     panels = [("apex_height", "apex rise (m)"), ("flight_time", "flight time (s)"), ("hop_period", "hop period (s)"),
               ("duty_factor", "duty factor"), ("survival", "survival"), energy]
     fig, axes = plt.subplots(2, 3, figsize=(13, 7), constrained_layout=True)
@@ -146,8 +147,9 @@ def gains_figure(spec: SweepSpec, groups: list[dict]):
     at = {(r[spec.param], r["gravity"]): r for r in groups}
     fig, axes = plt.subplots(1, 2, figsize=(12, 4.5), constrained_layout=True)
     # Survival is a fraction: a fixed 0-1 scale, so that all-survived reads as the top colour.
-    for ax, key, label, cmap, limits in ((axes[0], "survival", "survival", "viridis", (0.0, 1.0)),
-                                         (axes[1], "tracking_error", "speed tracking error (m/s)", "magma_r", (None, None))):
+    heatmaps = ((axes[0], "survival", "survival", "viridis", (0.0, 1.0)),
+                (axes[1], "tracking_error", "speed tracking error (m/s)", "magma_r", (None, None)))
+    for ax, key, label, cmap, limits in heatmaps:
         grid = np.array([[np.nan if at[v, g].get(key) is None else at[v, g][key] for g in gravity] for v in values])
         im = ax.imshow(grid, origin="lower", aspect="auto", cmap=cmap, vmin=limits[0], vmax=limits[1])
         ax.set_xticks(range(len(gravity)), [f"{g:g}" for g in gravity])
