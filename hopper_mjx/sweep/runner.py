@@ -26,7 +26,8 @@ from hopper_mjx.sim import Sim, gravity_vectors
 from hopper_mjx.sweep.grid import Instances, SweepSpec, expand
 
 MANIFEST = "manifest.json"
-COLUMNS = ("apex_height", "flight_rise", "flight_time", "ballistic_flight_time", "stance_time", "hop_period", "duty_factor", "mean_speed", "tracking_error",
+COLUMNS = ("apex_height", "flight_rise", "flight_time", "ballistic_flight_time", "stance_time", "hop_period",
+           "duty_factor", "mean_speed", "tracking_error",
            "max_roll", "max_pitch", "hops", "fell", "diverged", "cost_of_transport",
            "energy_per_hop", "mechanical_power")
 # Contact and state at the physics rate: events, lift-off heights and apexes to the step (short flights too).
