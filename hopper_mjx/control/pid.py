@@ -24,7 +24,7 @@ import yaml
 
 from hopper_mjx.control.base import Controller, clip_to_limits
 from hopper_mjx.model.layout import Layout
-from hopper_mjx.model.loader import JOINTS
+from hopper_mjx.model.loader import JOINTS, read_text
 
 DEFAULT_GAINS = Path(__file__).with_name("monoped.yaml")
 SEED_GAINS_NAMES = ("monoped.yaml", "monoped.yml")
@@ -64,11 +64,7 @@ def load_gains(path: str | Path | None = None) -> dict[str, dict[str, float]]:
     """
     path = gains_file(path) if path is not None else DEFAULT_GAINS
     try:
-        doc = yaml.safe_load(path.read_text(encoding="utf-8"))
-    except UnicodeDecodeError:
-        raise ValueError(f"{path} is not a text (UTF-8) YAML file") from None
-    except OSError as err:
-        raise ValueError(f"cannot read PID gains {path}: {err.strerror}") from None
+        doc = yaml.safe_load(read_text(path, "PID gains file"))
     except yaml.YAMLError as err:
         first_line = str(err).splitlines()[0] if str(err) else type(err).__name__
         raise ValueError(f"{path} is not valid YAML: {first_line}") from None

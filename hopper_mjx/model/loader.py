@@ -36,6 +36,18 @@ class URDFError(ValueError):
     """The URDF cannot describe a monoped that this toolkit can simulate."""
 
 
+def read_text(path: str | os.PathLike, what: str, error: type[ValueError] = ValueError) -> str:
+    """A text file's contents; `error` with one line naming the file if it is missing, unreadable or
+    not UTF-8 text (`what`, e.g. "URDF file", says what the file should have been)."""
+    path = Path(path)
+    try:
+        return path.read_text(encoding="utf-8")
+    except UnicodeDecodeError:
+        raise error(f"{path} is not a text (UTF-8) {what}") from None
+    except OSError as err:
+        raise error(f"cannot read {what} {path}: {err.strerror}") from None
+
+
 @dataclass(frozen=True)
 class Transmission:
     joint: str
@@ -206,13 +218,7 @@ def build_spec(urdf: str | os.PathLike | None = None, *, timestep: float = DEFAU
         raise ValueError(f"timestep must be in (0, 0.01] s, got {timestep!r}")
     if len(friction) != 2 or not all(math.isfinite(mu) and mu >= 0 for mu in friction):
         raise ValueError(f"friction must be two finite coefficients >= 0, got {friction!r}")
-    try:
-        text = path.read_text(encoding="utf-8")
-    except UnicodeDecodeError:
-        raise URDFError(f"{path} is not a text (UTF-8) URDF file") from None
-    except OSError as err:
-        raise URDFError(f"cannot read URDF {path}: {err.strerror}") from None
-    leg = describe(text, str(path))
+    leg = describe(read_text(path, "URDF file", URDFError), str(path))
     try:
         spec = mujoco.MjSpec.from_file(str(path))
     except ValueError as err:

@@ -27,6 +27,8 @@ from pathlib import Path
 
 import numpy as np
 
+from hopper_mjx.model.loader import read_text
+
 LOW_GRAVITY_WORLD = Path(__file__).with_name("low_gravity.world")  # the seed's, as an example
 SDF_DEFAULT_GRAVITY = (0.0, 0.0, -9.8)  # m/s², SDF's default <gravity>
 SDF_DEFAULT_MU = 1.0  # SDF's default <surface><friction><ode><mu> (and mu2)
@@ -151,14 +153,7 @@ def parse(text: str, source: str = "<string>") -> World:
 
 def read(path: str | Path) -> World:
     """`parse` of a file, with a one-line error naming it when it cannot be read."""
-    path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except UnicodeDecodeError:
-        raise WorldError(f"{path} is not a text (UTF-8) world file") from None
-    except OSError as err:
-        raise WorldError(f"cannot read world file {path}: {err.strerror}") from None
-    return parse(text, str(path))
+    return parse(read_text(path, "world file", WorldError), str(path))
 
 
 def foot_friction(world_mu: tuple[float, float] | None, foot_mu: float) -> tuple[float, float] | None:
