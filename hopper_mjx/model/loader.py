@@ -208,11 +208,8 @@ def describe(urdf_text: str, source: str = "<string>") -> LegDescription:
 
 def build_spec(urdf: str | os.PathLike | None = None, *, timestep: float = DEFAULT_TIMESTEP,
                friction: tuple[float, float] = (FOOT_FRICTION, FOOT_FRICTION)) -> mujoco.MjSpec:
-    """The monoped as an editable `MjSpec`, with everything the simulation adds.
-
-    friction: the foot-floor contact's tangential coefficients (MuJoCo's two sliding directions,
-    Gazebo's mu and mu2); a world file sets them (`hopper_mjx.model.world`).
-    """
+    """The monoped as an editable `MjSpec`, with everything the simulation adds. `friction`: the foot-floor
+    contact's two sliding coefficients (Gazebo's mu, mu2), which a world file sets (`hopper_mjx.model.world`)."""
     path = Path(urdf) if urdf is not None else DEFAULT_URDF
     if not (isinstance(timestep, (int, float)) and math.isfinite(timestep) and 0 < timestep <= 0.01):
         raise ValueError(f"timestep must be in (0, 0.01] s, got {timestep!r}")
