@@ -3,7 +3,7 @@ PYTHON ?= python3
 VENV ?= .venv
 PY := $(VENV)/bin/python
 
-.PHONY: install sweep test
+.PHONY: install sweep lint test
 install: $(VENV)/.installed
 
 # Headless rendering (hopper_mjx.render): EGL with Mesa's software rasteriser, no display or GPU.
@@ -26,5 +26,8 @@ $(VENV)/.installed: pyproject.toml
 sweep: install
 	$(PY) -m hopper_mjx.sweep gravity
 
-test: install
+lint: install
+	$(VENV)/bin/ruff check .
+
+test: lint
 	$(PY) -m pytest -q

@@ -6,7 +6,7 @@
     python -m hopper_mjx.simulate --controller policy:runs/ppo30 --gravity 9.81,3.71,1.62 --duration 10
 
 Writes into --out: checkpoints/<env step>/ (every evaluation), policy/ (the final
-params, loadable by `hopper_mjx.control.policy`), metrics.json (arguments, env config,
+params, loadable by `hopper_mjx.envs.policy`), metrics.json (arguments, env config,
 one record per evaluation, wall time) and reward_curve.png.
 """
 
@@ -72,7 +72,7 @@ def _pair(text: str, what: str) -> tuple[float, float]:
 
 def latest_checkpoint(out: Path) -> tuple[Path, int] | None:
     """The newest complete checkpoint under out/checkpoints, and its env step."""
-    from hopper_mjx.control.policy import ENV_CONFIG
+    from hopper_mjx.envs.policy import ENV_CONFIG
 
     done = [p for p in (out / "checkpoints").glob("[0-9]" * 12) if (p / ENV_CONFIG).exists()]
     if not done:
@@ -81,15 +81,48 @@ def latest_checkpoint(out: Path) -> tuple[Path, int] | None:
     return path, int(path.name)
 
 
+def _run_ppo(args, env, config, factory, remaining: int, start_step: int, resume, progress, save_checkpoint) -> None:
+    """Brax PPO for the `remaining` environment steps, resuming from `resume` (path, step) if given."""
+    from brax.training.agents.ppo import train as ppo
+
+    from hopper_mjx.envs import randomize_gravity
+
+    per_train_step = args.batch_size * args.num_minibatches * args.unroll_length
+    ppo.train(
+        environment=env,
+        num_timesteps=remaining,
+        num_evals=max(1, math.ceil(remaining / max(args.eval_every, per_train_step))) + 1,
+        episode_length=args.episode_length,
+        num_envs=args.num_envs,
+        num_eval_envs=args.num_eval_envs,
+        deterministic_eval=True,
+        randomization_fn=functools.partial(randomize_gravity, gravity_range=config.gravity_range),
+        unroll_length=args.unroll_length,
+        batch_size=args.batch_size,
+        num_minibatches=args.num_minibatches,
+        num_updates_per_batch=args.updates_per_batch,
+        learning_rate=args.learning_rate,
+        entropy_cost=args.entropy_cost,
+        discounting=args.discounting,
+        gae_lambda=0.95,
+        clipping_epsilon=0.2,
+        max_grad_norm=1.0,
+        normalize_observations=True,
+        network_factory=factory,
+        seed=args.seed + start_step,  # a resumed run draws fresh environments
+        restore_checkpoint_path=str(resume[0]) if resume else None,
+        progress_fn=progress,
+        policy_params_fn=save_checkpoint,
+    )
+
+
 def train(args) -> dict:
     """Trains (or resumes) as the arguments say; returns the metrics record also saved to metrics.json."""
     import jax
     from brax.training.agents.ppo import checkpoint as ppo_checkpoint
     from brax.training.agents.ppo import networks as ppo_networks
-    from brax.training.agents.ppo import train as ppo
 
-    from hopper_mjx.control import policy
-    from hopper_mjx.envs import MonopedConfig, MonopedEnv, randomize_gravity
+    from hopper_mjx.envs import MonopedConfig, MonopedEnv, policy
 
     out = Path(args.out).resolve()  # orbax writes checkpoints to absolute paths only
     out.mkdir(parents=True, exist_ok=True)
@@ -132,33 +165,7 @@ def train(args) -> dict:
             policy.save(out / "checkpoints", start_step + int(step), params, network_config, config)
 
     if remaining > 0:
-        per_train_step = args.batch_size * args.num_minibatches * args.unroll_length
-        ppo.train(
-            environment=env,
-            num_timesteps=remaining,
-            num_evals=max(1, math.ceil(remaining / max(args.eval_every, per_train_step))) + 1,
-            episode_length=args.episode_length,
-            num_envs=args.num_envs,
-            num_eval_envs=args.num_eval_envs,
-            deterministic_eval=True,
-            randomization_fn=functools.partial(randomize_gravity, gravity_range=config.gravity_range),
-            unroll_length=args.unroll_length,
-            batch_size=args.batch_size,
-            num_minibatches=args.num_minibatches,
-            num_updates_per_batch=args.updates_per_batch,
-            learning_rate=args.learning_rate,
-            entropy_cost=args.entropy_cost,
-            discounting=args.discounting,
-            gae_lambda=0.95,
-            clipping_epsilon=0.2,
-            max_grad_norm=1.0,
-            normalize_observations=True,
-            network_factory=factory,
-            seed=args.seed + start_step,  # a resumed run draws fresh environments
-            restore_checkpoint_path=str(resume[0]) if resume else None,
-            progress_fn=progress,
-            policy_params_fn=save_checkpoint,
-        )
+        _run_ppo(args, env, config, factory, remaining, start_step, resume, progress, save_checkpoint)
     final = latest_checkpoint(out)
     if final is None:
         raise ValueError(f"no checkpoint was written under {out / 'checkpoints'}")
@@ -173,6 +180,17 @@ def train(args) -> dict:
 COMPARED = ("survival", "hops", "apex_height", "hop_period", "tracking_error", "cost_of_transport")
 
 
+def evaluation_batch(gravities, num: int, seed: int, nv: int):
+    """(gravity magnitudes (n,), initial velocities (n, nv)): `num` instances per gravity, kicked
+    exactly as a gravity sweep with this seed kicks its replicates (`sweep.grid.expand`)."""
+    from hopper_mjx.sweep.grid import SweepSpec, expand
+
+    spec = SweepSpec(kind="gravity", gravity=tuple(gravities), num=num, duration=1.0, height=0.0,
+                     speed=(0.0, 0.0), seed=seed)
+    instances = expand(spec, nv)
+    return instances.gravity, instances.qvel
+
+
 def evaluate(policy_path, *, gravities, duration: float, height: float, num: int, seed: int = 0) -> dict:
     """Hop metrics of the policy and of the Raibert controller, same batch, same commands.
 
@@ -183,27 +201,25 @@ def evaluate(policy_path, *, gravities, duration: float, height: float, num: int
     import numpy as np
 
     from hopper_mjx import metrics, model
-    from hopper_mjx.control import policy, raibert
+    from hopper_mjx.control import raibert
+    from hopper_mjx.envs import policy
     from hopper_mjx.sim import Sim, gravity_vectors
-    from hopper_mjx.sweep.grid import KICK
     from hopper_mjx.sweep.runner import SENSORS
 
     mj_model = model.load()
     sim = Sim(mj_model)
-    g = np.repeat(np.asarray(gravities, dtype=float), num)
+    g, kick = evaluation_batch(gravities, num, seed, sim.layout.nv)
     sensors = SENSORS  # the sweep's streams and kicks: the numbers compare with a sweep's
-    steps = int(round(duration / sim.layout.timestep / 10)) * 10
-    kick = np.zeros((len(g), sim.layout.nv), np.float32)
-    kick[:, [0, 1, 3, 4]] = KICK * np.random.default_rng(seed).standard_normal((len(g), 4))
     controllers = {
-        "policy": (policy.policy_controller(mj_model, policy_path), policy.policy_params(mj_model, len(g), height=height)),
-        "raibert": (raibert.raibert(sim.layout), raibert.raibert_params(len(g), height=height)),
+        "policy": (policy.policy_controller(mj_model, policy_path),
+                   policy.policy_params(sim.robot, len(g), height=height)),
+        "raibert": (raibert.raibert(sim.robot), raibert.raibert_params(len(g), height=height)),
     }
     out = {}
     for name, (controller, params) in controllers.items():
-        state = sim.reset(gravity_vectors(g), key=seed, controller=controller, params=params, qvel=kick)
-        final, traj = sim.rollout(state, controller, steps=steps, sensors=sensors)
-        m = metrics.hop_metrics(traj, g, standing_height=metrics.standing_height(mj_model),
+        final, traj = sim.run(gravity_vectors(g), controller, params, duration=duration, sensors=sensors,
+                              key=seed, qvel=kick)
+        m = metrics.hop_metrics(traj, g, standing_height=sim.robot.standing_height,
                                 work=np.asarray(final.cstate.work), mass=sim.layout.total_mass)
         m["survival"] = ~(m["fell"] | np.asarray(final.diverged))
         out[name] = {f"{v:g}": {**{k: _mean(m[k][g == v]) for k in COMPARED}, "min_hops": int(m["hops"][g == v].min())}

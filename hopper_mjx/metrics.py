@@ -13,7 +13,7 @@ stance before it, when that stance began inside the record. Per-hop values:
   hop period (touchdown -> touchdown) in s, and duty factor = stance / period.
 
 A *fall* is the first sample where the base is below `FALL_HEIGHT` or |roll| or
-|pitch| exceeds `FALL_TILT`. Everything after a fall is ignored: per-hop means
+|pitch| exceeds `FALL_ROLL_PITCH`. Everything after a fall is ignored: per-hop means
 are over the last `last_hops` hops before it, the speed window ends at it.
 
 Undefined values are NaN: an instance that never completes a hop has NaN apex
@@ -34,22 +34,17 @@ meaningful when the robot hops in place, where the cost of transport is not.
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 
 FALL_HEIGHT = 0.4  # m: the base centre this low means the leg folded or the robot lies on the floor
 # (the deepest upright crouch, knee at its -1.6 rad limit, keeps the base above 0.7 m)
-FALL_TILT = 0.8  # rad of |roll| or |pitch|: far past any recoverable hopping attitude
+FALL_ROLL_PITCH = 0.8  # rad of |roll| or |pitch| (each): far past any recoverable hopping attitude
 MIN_TRANSPORT = 0.05  # m of net horizontal travel below which the cost of transport is NaN
 
 
-def standing_height(mj_model) -> float:
-    """Base height (m) of a model standing still in the core's default stance, foot on the floor."""
-    from hopper_mjx.sim import stance_qpos
-
-    return float(stance_qpos(mj_model, clearance=0.0)[2])
-
-
-def tilt(quat: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def roll_pitch(quat: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(roll, pitch) in rad of [w, x, y, z] quaternions (..., 4), ZYX Euler angles."""
     w, x, y, z = np.moveaxis(np.asarray(quat, dtype=float), -1, 0)
     roll = np.arctan2(2 * (w * x + y * z), 1 - 2 * (x * x + y * y))
@@ -109,7 +104,7 @@ def hop_metrics(
 
     traj: a `hopper_mjx.sim.Trajectory` (uses its state and contact streams);
     gravity: (N, 3) vectors or (N,) magnitudes, m/s²; command_speed: (2,) or (N, 2) m/s;
-    standing_height: m (`standing_height(mj_model)`); work: (N,) J the motors did
+    standing_height: m (`Robot.standing_height`); work: (N,) J the motors did
     (e.g. the Raibert controller state's `work`) and mass: kg, for the cost of transport;
     last_hops: hops averaged; speed_window: s of speed averaging before the end or fall.
     """
@@ -123,36 +118,85 @@ def hop_metrics(
     if g.shape != (n,):
         raise ValueError(f"gravity must be (N, 3) or (N,) with N={n}, got {np.shape(gravity)}")
     floating = ~(g > 0)
-    g_or_nan = np.where(floating, np.nan, g)  # nothing that divides by g is defined while floating
+    g = np.where(floating, np.nan, g)  # nothing that divides by g is defined while floating
     command = np.broadcast_to(np.asarray(command_speed, dtype=float), (n, 2))
     if last_hops < 1 or speed_window <= 0:
         raise ValueError("last_hops must be >= 1 and speed_window > 0")
 
-    # -- falls -----------------------------------------------------------------
+    fall = _falls(qpos, t_state)
+    hops = _hops(flag, t_contact, fall.t_fall)
+    rise, arc = _apexes(qpos[:, :, 2], flag, t_state, t_contact, hops.liftoff, standing_height)
+    mean = lambda v: _last_mean(v, hops.complete, last_hops)
+    velocity = _mean_velocity(qpos, t_state, fall.index, speed_window)
+    power = _mechanical_power(n, t_state, work, mass)
+    return {
+        "hops": hops.complete.sum(axis=1),
+        "apex_height": mean(rise),
+        "flight_rise": mean(arc),
+        "ballistic_flight_time": mean(2 * np.sqrt(np.maximum(arc, 0.0) * 2 / g[:, None])),
+        "flight_time": mean(hops.flight_time),
+        "stance_time": mean(hops.stance_time),
+        "hop_period": mean(hops.period),
+        "duty_factor": mean(hops.stance_time / hops.period),
+        "mean_speed": velocity[:, 0],
+        "mean_speed_y": velocity[:, 1],
+        "tracking_error": np.linalg.norm(velocity - command, axis=1),
+        "max_roll": np.where(fall.upright, np.abs(fall.roll), 0.0).max(axis=1),
+        "max_pitch": np.where(fall.upright, np.abs(fall.pitch), 0.0).max(axis=1),
+        "fell": fall.fell,
+        "fall_time": np.where(fall.fell, fall.t_fall, np.nan),
+        "cost_of_transport": _cost_of_transport(qpos, fall.index, g, work, mass),
+        "mechanical_power": power,
+        "energy_per_hop": power * mean(hops.period),
+        "floating": floating,
+    }
+
+
+class _Falls(NamedTuple):
+    roll: np.ndarray  # (N, T) rad
+    pitch: np.ndarray  # (N, T) rad
+    fell: np.ndarray  # (N,) bool
+    index: np.ndarray  # (N,) state sample of the fall (the last sample without one)
+    t_fall: np.ndarray  # (N,) s, inf without a fall
+    upright: np.ndarray  # (N, T) bool, up to and including the fall sample
+
+
+def _falls(qpos: np.ndarray, t_state: np.ndarray) -> _Falls:
     z = qpos[:, :, 2]
-    roll, pitch = tilt(qpos[:, :, 3:7])
-    down = (z < FALL_HEIGHT) | (np.abs(roll) > FALL_TILT) | (np.abs(pitch) > FALL_TILT)
+    roll, pitch = roll_pitch(qpos[:, :, 3:7])
+    down = (z < FALL_HEIGHT) | (np.abs(roll) > FALL_ROLL_PITCH) | (np.abs(pitch) > FALL_ROLL_PITCH)
     fell = down.any(axis=1)
     fall_index = np.where(fell, down.argmax(axis=1), len(t_state) - 1)
     t_fall = np.where(fell, t_state[fall_index], np.inf)
     upright = np.arange(len(t_state)) <= fall_index[:, None]
+    return _Falls(roll, pitch, fell, fall_index, t_fall, upright)
 
-    # -- hops ------------------------------------------------------------------
+
+class _Hops(NamedTuple):
+    liftoff: np.ndarray  # (N, H) s, NaN-padded
+    complete: np.ndarray  # (N, H) bool: a flight with its landing and the stance before it, before any fall
+    flight_time: np.ndarray  # (N, H) s
+    stance_time: np.ndarray
+    period: np.ndarray
+
+
+def _hops(flag: np.ndarray, t_contact: np.ndarray, t_fall: np.ndarray) -> _Hops:
     liftoff = _padded_times(_events(flag, rising=False), t_contact)  # (N, H)
     touchdowns = _padded_times(_events(flag, rising=True), t_contact)
     landing = _nearest_after(touchdowns, liftoff, first=True)  # touchdown ending each flight
     stance_start = _nearest_after(touchdowns, liftoff, first=False)  # touchdown before each lift-off
     complete = np.isfinite(landing) & np.isfinite(stance_start) & (landing < t_fall[:, None])
-    flight_time = landing - liftoff
-    stance_time = liftoff - stance_start
-    period = landing - stance_start
+    return _Hops(liftoff, complete, landing - liftoff, liftoff - stance_start, landing - stance_start)
 
-    # Apex of each flight: the highest state sample while the contact stream says
-    # airborne, labelled by how many lift-offs came before it.
+
+def _apexes(z, flag, t_state, t_contact, liftoff, standing_height) -> tuple[np.ndarray, np.ndarray]:
+    """(apex rise over the standing height, rise over the lift-off height), (N, H) m, of each flight."""
+    n, width = z.shape[0], liftoff.shape[1]
+    # The highest state sample while the contact stream says airborne, labelled by how
+    # many lift-offs came before it.
     at = np.clip(np.searchsorted(t_contact, t_state, side="right") - 1, 0, len(t_contact) - 1)
     flight_id = np.cumsum(_events(flag, rising=False), axis=1)[:, at] - 1
     airborne = ~flag[:, at] & (flight_id >= 0)
-    width = liftoff.shape[1]
     slot = np.where(airborne, np.arange(n)[:, None] * width + flight_id, n * width)
     apex = np.full(n * width + 1, -np.inf)
     np.maximum.at(apex, slot.ravel(), z.ravel())
@@ -160,52 +204,37 @@ def hop_metrics(
     rise = np.where(np.isfinite(apex), apex - standing_height, np.nan)
     # Lift-off height, interpolated: the base moves fast there and the state stream may be coarse.
     z_liftoff = np.stack([np.interp(liftoff[i], t_state, z[i]) for i in range(n)])
-    arc = np.where(np.isfinite(apex), apex - z_liftoff, np.nan)
+    return rise, np.where(np.isfinite(apex), apex - z_liftoff, np.nan)
 
-    mean = lambda v: _last_mean(v, complete, last_hops)
-    hops = complete.sum(axis=1)
 
-    # -- speed over the last window before the end (or the fall) --------------
-    end = fall_index
+def _mean_velocity(qpos, t_state, end, speed_window) -> np.ndarray:
+    """(N, 2) m/s, horizontal base velocity over the last window before the end (or the fall)."""
     start = np.searchsorted(t_state, t_state[end] - speed_window)
     span = t_state[end] - t_state[start]
-    rows = np.arange(n)
+    rows = np.arange(qpos.shape[0])
     with np.errstate(invalid="ignore", divide="ignore"):
-        velocity = (qpos[rows, end, :2] - qpos[rows, start, :2]) / np.where(span > 0, span, np.nan)[:, None]
+        return (qpos[rows, end, :2] - qpos[rows, start, :2]) / np.where(span > 0, span, np.nan)[:, None]
 
-    # -- energy and cost of transport -------------------------------------------
-    travel = np.linalg.norm(qpos[rows, end, :2] - qpos[:, 0, :2], axis=1)
+
+def _check_work(work, mass) -> None:
+    if work is not None and (mass is None or not mass > 0):
+        raise ValueError("the cost of transport needs the robot's mass (kg) along with the work")
+
+
+def _mechanical_power(n: int, t_state, work, mass) -> np.ndarray:
+    """(N,) W/kg: the motors' work over the whole record, per second and kilogram (NaN without work)."""
+    _check_work(work, mass)
+    length = t_state[-1] - t_state[0]
+    if work is None or not length > 0:
+        return np.full(n, np.nan)
+    return np.asarray(work, float) / (mass * length)
+
+
+def _cost_of_transport(qpos, end, g, work, mass) -> np.ndarray:
+    n = qpos.shape[0]
+    _check_work(work, mass)
     if work is None:
-        cost = power = np.full(n, np.nan)
-    else:
-        if mass is None or not mass > 0:
-            raise ValueError("the cost of transport needs the robot's mass (kg) along with the work")
-        work = np.asarray(work, float)
-        record_length = t_state[-1] - t_state[0]
-        power = work / (mass * record_length) if record_length > 0 else np.full(n, np.nan)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            cost = np.where(travel >= MIN_TRANSPORT, work / (mass * g_or_nan * travel), np.nan)
-    hop_period = mean(period)
-
-    return {
-        "hops": hops,
-        "apex_height": mean(rise),
-        "flight_rise": mean(arc),
-        "ballistic_flight_time": mean(2 * np.sqrt(np.maximum(arc, 0.0) * 2 / g_or_nan[:, None])),
-        "flight_time": mean(flight_time),
-        "stance_time": mean(stance_time),
-        "hop_period": hop_period,
-        "duty_factor": mean(stance_time / period),
-        "mean_speed": velocity[:, 0],
-        "mean_speed_y": velocity[:, 1],
-        "tracking_error": np.linalg.norm(velocity - command, axis=1),
-        "max_roll": np.where(upright, np.abs(roll), 0.0).max(axis=1),
-        "max_pitch": np.where(upright, np.abs(pitch), 0.0).max(axis=1),
-        "fell": fell,
-        "fall_time": np.where(fell, t_fall, np.nan),
-        "hops_before_fall": hops,
-        "cost_of_transport": cost,
-        "mechanical_power": power,
-        "energy_per_hop": power * hop_period,
-        "floating": floating,
-    }
+        return np.full(n, np.nan)
+    travel = np.linalg.norm(qpos[np.arange(n), end, :2] - qpos[:, 0, :2], axis=1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(travel >= MIN_TRANSPORT, np.asarray(work, float) / (mass * g * travel), np.nan)

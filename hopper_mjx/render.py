@@ -18,7 +18,8 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
-from hopper_mjx import model, runtime, simulate
+from hopper_mjx import cli, model, runtime
+from hopper_mjx.model import robot
 
 VIDEO_SUFFIXES = (".mp4", ".gif")
 TRACK_HEIGHT = 0.45  # m: the camera looks at the leg's middle, not at the base
@@ -101,22 +102,17 @@ def robot_pixels(m: mujoco.MjModel, qpos, **size) -> np.ndarray:
     return geom & robot_geom[np.where(geom, seg[..., 0], 0)]
 
 
-def stance_qpos(urdf=None) -> np.ndarray:
-    """The core's default initial pose (upright, crouched, foot just above the floor)."""
-    from hopper_mjx import sim
-
-    return sim.stance_qpos(model.load(urdf))
-
-
 def simulate_qpos(args) -> np.ndarray:
-    """(T, nq) poses of instance --instance, simulated by the core as `simulate` does, at --fps.
+    """(T, nq) poses of instance --instance, simulated on the one batch-run path, at --fps.
 
     The core runs the simulation model (`model.load`); the pictures' model adds only visuals."""
+    from hopper_mjx import signals
+
     n = len(args.gravity) * args.num
     if not 0 <= args.instance < n:
         raise ValueError(f"--instance {args.instance} out of range: the batch has {n} (0..{n - 1})")
-    arrays = simulate.run(argparse.Namespace(**{**vars(args), "rate": args.fps}))
-    return arrays["qpos"][args.instance]
+    _, _, traj = cli.run_batch(args, signals.SensorConfig.uniform(args.fps))
+    return traj.qpos[args.instance]
 
 
 def write_video(path: Path, images, fps: float) -> None:
@@ -141,21 +137,15 @@ def parse_size(text: str) -> tuple[int, int]:
 
 
 def parser() -> argparse.ArgumentParser:
-    # Built on simulate's options, so that controller options added there work here too.
     p = argparse.ArgumentParser(prog="python -m hopper_mjx.render", description=__doc__,
-                                formatter_class=argparse.RawDescriptionHelpFormatter,
-                                parents=[simulate.parser()], conflict_handler="resolve")
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    cli.add_batch_options(p, gravity=(9.81,))
     p.add_argument("--still", type=Path, default=None, help="PNG of the robot in its initial stance")
     p.add_argument("--video", type=Path, default=None, help="MP4 or GIF of one simulated instance")
-    p.add_argument("--gravity", type=lambda s: simulate.parse_floats(s, "--gravity"), default=[9.81],
-                   help="gravity magnitudes of the simulated batch, m/s² (instances as in simulate)")
     p.add_argument("--instance", type=int, default=0, help="which instance of the batch the video shows")
-    p.add_argument("--duration", type=float, default=2.0, help="simulated time of the video, s")
     p.add_argument("--fps", type=float, default=25.0,
                    help="video frames per simulated second; must divide the physics rate (1000 Hz)")
     p.add_argument("--size", type=parse_size, default=(640, 480), help="image WIDTHxHEIGHT in pixels")
-    for unused in ("--rate", "--out"):  # simulate's; --fps, --still and --video take their place
-        p.add_argument(unused, help=argparse.SUPPRESS)
     return p
 
 
@@ -173,15 +163,14 @@ def main(argv=None) -> int:
         if args.still is not None:
             import imageio.v2 as imageio
 
-            imageio.imwrite(args.still, still(m, stance_qpos(args.urdf), **size))
+            imageio.imwrite(args.still, still(m, robot.stance_qpos(model.load(args.urdf)), **size))
             print(f"wrote {args.still}")
         if args.video is not None:
             qpos = simulate_qpos(args)
             write_video(args.video, frames(m, qpos, **size), args.fps)
             print(f"wrote {args.video}: {len(qpos)} frames at {args.fps:g} fps")
     except ValueError as err:
-        print(f"error: {err}", file=sys.stderr)
-        return 2
+        return cli.fail(err)
     return 0
 
 

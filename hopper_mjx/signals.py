@@ -1,7 +1,7 @@
-"""IMU, odometry and foot-contact signals of one monoped, read from MJX data.
+"""IMU, odometry and foot-contact signals of one monoped, and what a controller observes.
 
-The functions here take one instance's `mjx.Data` *after* `mjx.forward` and
-before integration, so that positions, velocities, accelerations and contact
+The functions here take one instance's engine data *after* the engine's `forward`
+and before integration, so that positions, velocities, accelerations and contact
 forces all belong to the same instant. The batched core vmaps them over all
 instances. They compute from the state directly rather than through MuJoCo's
 sensor stage, which MJX would otherwise evaluate every physics step; the native
@@ -13,15 +13,11 @@ Frames: world z is up; quaternions are [w, x, y, z] (MuJoCo's order).
 from __future__ import annotations
 
 import dataclasses
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import jax
 import jax.numpy as jnp
 from brax import math as bmath
-from mujoco import mjx
-from mujoco.mjx._src import support  # contact_force: decodes MJX's pyramidal/elliptic efc rows
-
-from hopper_mjx.model.layout import Layout
 
 
 class Imu(NamedTuple):
@@ -57,39 +53,48 @@ class Signals(NamedTuple):
     qvel: jax.Array
 
 
-def imu(layout: Layout, d: mjx.Data, gravity: jax.Array) -> Imu:
-    del layout  # the IMU sits at the origin of the free base, whose qpos/qvel come first
+class Observation(NamedTuple):
+    """What a controller reads of one instance before it acts, whatever the engine.
+
+    The contact is that of the previous physics step, as a real controller reads its
+    sensors before it acts.
+    """
+
+    time: jax.Array  # () s
+    qpos: jax.Array  # (nq,)
+    qvel: jax.Array  # (nv,)
+    contact: Contact
+
+
+def imu(d: Any, gravity: jax.Array) -> Imu:
+    """The IMU at the origin of the free base, whose qpos/qvel come first."""
     rot = bmath.quat_to_3x3(d.qpos[3:7])
     # qacc[:3] is the world acceleration of the base origin over this step.
     return Imu(quat=d.qpos[3:7], gyro=d.qvel[3:6], accel=rot.T @ (d.qacc[:3] - gravity))
 
 
-def odometry(layout: Layout, d: mjx.Data) -> Odometry:
-    del layout
+def odometry(d: Any) -> Odometry:
     quat = d.qpos[3:7]
     return Odometry(pos=d.qpos[:3], quat=quat, linvel=d.qvel[:3], angvel=bmath.rotate(d.qvel[3:6], quat))
 
 
-def contact(layout: Layout, m: mjx.Model, d: mjx.Data) -> Contact:
-    con = d._impl.contact
-    touching = (con.geom == layout.foot_geom).any(axis=-1) & (con.dist < 0)
-    # The contact normal points from the floor (geom1) to the foot (geom2).
-    forces = jnp.stack(
-        [support.contact_force(m, d, i, to_world_frame=True)[:3] for i in range(con.dist.shape[0])]
-    )
-    force = jnp.where(touching[:, None], forces, 0.0).sum(axis=0)
-    weight = touching / jnp.maximum(touching.sum(), 1)
-    return Contact(flag=touching.any(), force=force, pos=weight @ con.pos)
+def contact(engine, model, d) -> Contact:
+    """The foot contact of the engine's last forward (the one foot-contact test, `engine.foot_contact`)."""
+    return Contact(*engine.foot_contact(model, d))
 
 
-def measure(layout: Layout, m: mjx.Model, d: mjx.Data, gravity: jax.Array) -> Signals:
+def measure(engine, model, d, gravity: jax.Array) -> Signals:
     return Signals(
-        imu=imu(layout, d, gravity),
-        odom=odometry(layout, d),
-        contact=contact(layout, m, d),
+        imu=imu(d, gravity),
+        odom=odometry(d),
+        contact=contact(engine, model, d),
         qpos=d.qpos,
         qvel=d.qvel,
     )
+
+
+def observe(engine, model, d) -> Observation:
+    return Observation(time=d.time, qpos=d.qpos, qvel=d.qvel, contact=contact(engine, model, d))
 
 
 @dataclasses.dataclass(frozen=True)
@@ -144,9 +149,15 @@ def _perturb_quat(key, quat, std):
     return noisy / jnp.linalg.norm(noisy, axis=-1, keepdims=True)
 
 
+def noise_keys(key: jax.Array) -> jax.Array:
+    """(6, 2) the keys `add_noise` draws from: orientation, gyro, accel, odometry position,
+    linear and angular velocity."""
+    return jax.random.split(key, 6)
+
+
 def add_noise(cfg: SensorConfig, key: jax.Array, imu_: Imu, odom: Odometry) -> tuple[Imu, Odometry]:
     """Measurement noise for one instance's recorded streams; exact when every std is 0."""
-    k = jax.random.split(key, 6)
+    k = noise_keys(key)
     imu_ = Imu(
         quat=_perturb_quat(k[0], imu_.quat, cfg.orientation_noise),
         gyro=_gauss(k[1], imu_.gyro, cfg.gyro_noise),

@@ -1,8 +1,9 @@
-"""The batched core: N monopeds, each under its own gravity, stepped by MJX.
+"""The batched core: N monopeds, each under its own gravity, stepped by an engine.
 
-    sim = Sim(model.load())
+    sim = Sim(model.load())                       # engine="auto": the best engine for the model
     state = sim.reset(gravity_vectors(...), key=0)
     state, traj = sim.rollout(state, controller, steps=2000)
+    final, traj = sim.run(gravity_vectors(...), controller, params, duration=2.0)   # the one batch-run path
 
 Batching is laid out for CPU hosts: the instance axis is sharded over every
 local device with `shard_map` (XLA does not spread these small ops over cores
@@ -14,7 +15,6 @@ jax 0.10.2). The batch is padded to a whole number of chunks per device.
 
 from __future__ import annotations
 
-import copy
 import math
 from typing import Any, NamedTuple
 
@@ -23,35 +23,26 @@ import jax.numpy as jnp
 import mujoco
 import numpy as np
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
-from mujoco import mjx
 
+from hopper_mjx import engine as engines
 from hopper_mjx import signals
-from hopper_mjx.control.base import Controller, zero_torque
-from hopper_mjx.model.layout import Layout
+from hopper_mjx.control.base import Controller, CState, zero_torque
+from hopper_mjx.model.robot import Robot
 
 AXIS = "instances"
-STANCE_HFE = 0.5  # rad: hip flexion of the default crouched stance
-CLEARANCE = 0.05  # m between the foot and the floor in the default initial state
 DIVERGED_SPEED = 1e6  # rad/s or m/s: beyond this a state is taken as diverged
 # XLA:CPU's newer fusion emitters recompute the chained body transforms of
 # mjx.kinematics inside each fused consumer; the classic emitters keep the step
 # ~35% cheaper here (docs/performance.md). Same arithmetic, so same results.
 CPU_COMPILER_OPTIONS = {"xla_cpu_use_fusion_emitters": False}
 
-_INTEGRATORS = {
-    mujoco.mjtIntegrator.mjINT_EULER: mjx.euler,
-    mujoco.mjtIntegrator.mjINT_IMPLICITFAST: mjx.implicit,
-    mujoco.mjtIntegrator.mjINT_RK4: mjx.rungekutta4,
-}
-
-
 class State(NamedTuple):
     """The batch's state; every leaf has the instance axis first."""
 
-    data: mjx.Data
+    data: Any  # the engine's data (mjx.Data for "mjx"), every leaf batched
     gravity: jax.Array  # (N, 3) m/s², world frame
     key: jax.Array  # (N, 2) uint32, per-instance PRNG key for sensor noise
-    cstate: Any  # controller state (with per-instance parameters)
+    cstate: CState  # the controller's state (with its per-instance parameters)
     diverged: jax.Array  # (N,) bool, the instance's state went non-finite
 
 
@@ -66,33 +57,17 @@ class Trajectory(NamedTuple):
     time: dict  # stream name -> (T_stream,) seconds
 
 
-def stance_qpos(mj_model: mujoco.MjModel, clearance: float = CLEARANCE, hfe: float = STANCE_HFE) -> np.ndarray:
-    """qpos upright at rest: hip flexed by `hfe`, the knee bent so that the whole-robot
-    centre of mass sits straight above the foot, the foot `clearance` m above the floor."""
-    m, lay = mj_model, Layout.of(mj_model)
-    d = mujoco.MjData(m)
+def split_rollout_key(key: jax.Array) -> tuple[jax.Array, jax.Array]:
+    """(this rollout's noise key, the next rollout's key) from an instance's key: the noise
+    draws from the first only, so the second was never used."""
+    noise, following = jax.random.split(key)
+    return noise, following
 
-    def com_ahead_of_foot(kfe: float) -> float:
-        d.qpos[:] = m.qpos0
-        d.qpos[list(lay.joint_qpos)] = (0.0, hfe, kfe)
-        mujoco.mj_kinematics(m, d)
-        mujoco.mj_comPos(m, d)
-        return d.subtree_com[0, 0] - d.geom_xpos[lay.foot_geom, 0]
 
-    lo, hi = lay.joint_range[2]
-    f_lo = com_ahead_of_foot(lo)
-    if f_lo * com_ahead_of_foot(hi) > 0:
-        raise ValueError(f"no knee angle puts the centre of mass above the foot at hfe={hfe}")
-    for _ in range(60):  # bisection on the knee angle
-        mid = 0.5 * (lo + hi)
-        f_mid = com_ahead_of_foot(mid)
-        if f_lo * f_mid <= 0:
-            hi = mid
-        else:
-            lo, f_lo = mid, f_mid
-    com_ahead_of_foot(0.5 * (lo + hi))
-    d.qpos[2] += clearance - (d.geom_xpos[lay.foot_geom, 2] - lay.foot_radius)
-    return d.qpos.copy()
+def steps_for(duration: float, timestep: float, sensors: signals.SensorConfig) -> int:
+    """Physics steps closest to `duration` s that hold a whole number of every stream's period (at least one)."""
+    whole = math.lcm(*sensors.periods(timestep).values())
+    return max(1, int(round(duration / timestep / whole))) * whole
 
 
 def gravity_vectors(magnitudes) -> np.ndarray:
@@ -123,29 +98,21 @@ def _check_gravity(gravity) -> np.ndarray:
 class Sim:
     """A compiled monoped model batched over instances and local devices."""
 
-    def __init__(self, mj_model: mujoco.MjModel, *, chunk: int = 256, devices=None):
+    def __init__(self, mj_model: mujoco.MjModel, *, engine: str = "auto", chunk: int = 256, devices=None):
         if chunk < 1:
             raise ValueError("chunk must be >= 1")
         self.mj_model = mj_model
-        self.layout = Layout.of(mj_model)
-        # Signals are computed from the state (see signals.py): MuJoCo's sensor
-        # stage would be dead weight in every MJX step.
-        self._mjx_source = _without_sensors(mj_model)
-        self.integrate = _INTEGRATORS[mujoco.mjtIntegrator(mj_model.opt.integrator)]
+        self.robot = Robot.of(mj_model)  # the robot facts, measured once and passed down
+        self.layout = self.robot.layout
+        self.engine = engines.make(engine, mj_model)
         self.devices = tuple(devices or jax.local_devices())
         self.mesh = Mesh(np.array(self.devices), (AXIS,))
-        # Placed on this process's devices (the default device may be another process's).
-        self.model = jax.device_put(mjx.put_model(self._mjx_source, device=self.devices[0]),
-                                    NamedSharding(self.mesh, PartitionSpec()))
+        self.model = jax.device_put(self.engine.model, NamedSharding(self.mesh, PartitionSpec()))
         self.chunk = chunk
         self._compiled = {}
         self.limp = zero_torque(self.layout)  # the default controller, one object so one compile
 
     # -- state ----------------------------------------------------------------
-    def stance_qpos(self, clearance: float = CLEARANCE, hfe: float = STANCE_HFE) -> np.ndarray:
-        """`stance_qpos` of this Sim's model."""
-        return stance_qpos(self.mj_model, clearance, hfe)
-
     def reset(
         self,
         gravity,
@@ -159,24 +126,23 @@ class Sim:
         """Initial state for N = len(gravity) instances.
 
         gravity: (N, 3) m/s²; qpos/qvel: (nq,) or (N, nq) / (nv,) or (N, nv),
-        default upright at rest with the foot `CLEARANCE` above the floor;
-        params: per-instance controller parameters (leading axis N) or None.
+        default the robot's stance (upright at rest, the foot `model.robot.CLEARANCE`
+        above the floor); params: per-instance controller parameters (leading axis N) or None.
         """
         g = _check_gravity(gravity)
         n = g.shape[0]
-        qpos = self.stance_qpos() if qpos is None else qpos
+        qpos = self.robot.stance_qpos if qpos is None else qpos
         qvel = np.zeros(self.layout.nv) if qvel is None else qvel
         qpos = np.broadcast_to(np.asarray(qpos, dtype=np.float32), (n, self.layout.nq))
         qvel = np.broadcast_to(np.asarray(qvel, dtype=np.float32), (n, self.layout.nv))
         if not (np.isfinite(qpos).all() and np.isfinite(qvel).all()):
             raise ValueError("initial qpos/qvel must be finite")
-        data0 = mjx.make_data(self._mjx_source, device=self.devices[0])
-        data = jax.tree_util.tree_map(lambda x: jnp.broadcast_to(x, (n,) + x.shape), data0)
-        data = data.replace(qpos=jnp.asarray(qpos), qvel=jnp.asarray(qvel))
+        data = jax.vmap(self.engine.make_data)(jnp.asarray(qpos), jnp.asarray(qvel))
         if not isinstance(key, jax.Array):
             key = jax.random.PRNGKey(key)
         controller = controller or self.limp
-        cstate = jax.vmap(controller.init, in_axes=(0, None if params is None else 0))(data, params)
+        obs = jax.vmap(lambda d: signals.observe(self.engine, self.engine.model, d))(data)
+        cstate = jax.vmap(controller.init, in_axes=(0, None if params is None else 0))(obs, params)
         return State(
             data=data,
             gravity=jnp.asarray(g, dtype=jnp.float32),
@@ -217,10 +183,30 @@ class Sim:
         times = {k: t0 + dt * np.arange(0, steps, p) for k, p in periods.items()}
         return final, Trajectory(*traj, time=times)
 
+    def run(
+        self,
+        gravity,
+        controller: Controller | None = None,
+        params: Any = None,
+        *,
+        duration: float,
+        sensors: signals.SensorConfig = signals.SensorConfig(),
+        key: int | jax.Array = 0,
+        qpos=None,
+        qvel=None,
+    ) -> tuple[State, Trajectory]:
+        """The batch-run path of every tool: N = len(gravity) instances from `reset` for
+        `duration` s, rounded to whole periods of every stream (`steps_for`)."""
+        if not (math.isfinite(duration) and duration > 0):
+            raise ValueError(f"duration must be > 0 s, got {duration}")
+        state = self.reset(gravity, key=key, controller=controller, params=params, qpos=qpos, qvel=qvel)
+        steps = steps_for(duration, self.layout.timestep, sensors)
+        return self.rollout(state, controller, steps=steps, sensors=sensors)
+
     def _compiled_rollout(self, controller, steps, tick, periods, sensors, chunk):
         cache_key = (controller, steps, sensors, chunk)  # tick and periods follow from sensors
         if cache_key not in self._compiled:
-            one = _instance_rollout(self.layout, self.integrate, controller, steps, tick, periods, sensors)
+            one = _instance_rollout(self.engine, controller, steps, tick, periods, sensors)
 
             def per_device(model, state):
                 n_local = state.gravity.shape[0]
@@ -242,12 +228,6 @@ class Sim:
         return self._compiled[cache_key]
 
 
-def _without_sensors(m: mujoco.MjModel) -> mujoco.MjModel:
-    m = copy.deepcopy(m)
-    m.opt.disableflags |= mujoco.mjtDisableBit.mjDSBL_SENSOR
-    return m
-
-
 def _pad(state: State, size: int) -> State:
     n = state.gravity.shape[0]
     if n == size:
@@ -257,16 +237,15 @@ def _pad(state: State, size: int) -> State:
     )
 
 
-def _instance_rollout(layout, integrate, controller, steps, tick, periods, sensors):
+def _instance_rollout(engine, controller, steps, tick, periods, sensors):
     """One instance's rollout: `steps` physics steps, a record every `tick` steps."""
 
     def physics_step(model, state, record):
-        m = model.replace(opt=model.opt.replace(gravity=state.gravity))
         d = state.data
-        ctrl, cstate = controller.act(state.cstate, d, state.gravity)
-        d1 = mjx.forward(m, d.replace(ctrl=ctrl))
-        sig = signals.measure(layout, m, d1, state.gravity) if record else None
-        d1 = integrate(m, d1)
+        ctrl, cstate = controller.act(state.cstate, signals.observe(engine, model, d), state.gravity)
+        d1 = engine.forward(model, d.replace(ctrl=ctrl), state.gravity)
+        sig = signals.measure(engine, model, d1, state.gravity) if record else None
+        d1 = engine.integrate(model, d1, state.gravity)
         finite = (
             jnp.isfinite(d1.qpos).all()
             & jnp.isfinite(d1.qvel).all()
@@ -275,12 +254,7 @@ def _instance_rollout(layout, integrate, controller, steps, tick, periods, senso
         bad = state.diverged | ~finite
         # A diverged instance is frozen at its last finite state; the others never see it.
         keep = lambda new, old: jnp.where(bad, old, new)
-        d1 = d1.replace(
-            qpos=keep(d1.qpos, d.qpos),
-            qvel=keep(d1.qvel, d.qvel),
-            act=keep(d1.act, d.act),
-            qacc_warmstart=keep(d1.qacc_warmstart, d.qacc_warmstart),
-        )
+        d1 = d1.replace(**{f: keep(getattr(d1, f), getattr(d, f)) for f in engine.freeze_fields})
         cstate = jax.tree_util.tree_map(keep, cstate, state.cstate)
         return state._replace(data=d1, cstate=cstate, diverged=bad), sig
 
@@ -297,10 +271,10 @@ def _instance_rollout(layout, integrate, controller, steps, tick, periods, senso
         (_, state), sig = jax.lax.scan(one_tick, (model, state), None, length=steps // tick)
         every = {k: p // tick for k, p in periods.items()}
         decimate = lambda tree, stream: jax.tree_util.tree_map(lambda x: x[:: every[stream]], tree)
-        imu, odom = signals.add_noise(sensors, state.key, decimate(sig.imu, "imu"), decimate(sig.odom, "odom"))
+        noise_key, next_key = split_rollout_key(state.key)
+        imu, odom = signals.add_noise(sensors, noise_key, decimate(sig.imu, "imu"), decimate(sig.odom, "odom"))
         contact = decimate(sig.contact, "contact")
-        key = jax.random.split(state.key)[0]  # fresh noise for the next rollout
         traj = (imu, odom, contact, sig.qpos[:: every["state"]], sig.qvel[:: every["state"]])
-        return state._replace(key=key), traj
+        return state._replace(key=next_key), traj
 
     return run

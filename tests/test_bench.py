@@ -6,7 +6,7 @@ import math
 import numpy as np
 import pytest
 
-from hopper_mjx import bench
+from hopper_mjx.perf import bench
 
 
 @pytest.fixture(scope="module")

@@ -3,13 +3,14 @@
 import copy
 
 import jax
+import jax.numpy as jnp
 import mujoco
 import numpy as np
 import pytest
 
 from hopper_mjx import signals, simulate
 from hopper_mjx.control.base import hold, zero_torque
-from hopper_mjx.sim import gravity_vectors
+from hopper_mjx.sim import gravity_vectors, split_rollout_key
 
 G = np.array([1.62, 3.71, 9.81])  # Moon, Mars, Earth, m/s²
 DROP = 0.05  # m, foot clearance of the default initial state
@@ -166,6 +167,20 @@ def test_sensor_noise_has_its_configured_spread_per_instance(sim, limp):
     assert np.std(noise_pos) == pytest.approx(0.01, rel=0.1)
     assert not np.allclose(gyro[0], gyro[1])  # per-instance keys
     np.testing.assert_array_equal(np.asarray(traj.imu.quat), np.asarray(traj.qpos[:, :, 3:7]))  # orientation noise 0
+
+
+def test_the_next_rollout_key_was_never_used_for_noise(sim, limp):
+    """The key a rollout hands on is none of the keys its noise drew from (under jax 0.9.2,
+    split(key)[0] is bit-identical to split(key, 6)[0]: handing on split(key)[0] while drawing
+    the noise from `key` itself reused the orientation noise's key)."""
+    cfg = signals.SensorConfig.uniform(1000, orientation_noise=0.01)
+    state = sim.reset(gravity_vectors(G), key=5, controller=limp)
+    final, _ = sim.rollout(state, limp, steps=10, sensors=cfg)
+    for key, handed_on in zip(np.asarray(state.key), np.asarray(final.key)):
+        noise_key, next_key = split_rollout_key(jnp.asarray(key))
+        np.testing.assert_array_equal(handed_on, next_key)  # what the rollout did
+        used = np.concatenate([np.asarray(noise_key)[None], np.asarray(signals.noise_keys(noise_key)), key[None]])
+        assert not (used == handed_on).all(axis=1).any(), f"key {handed_on} reused"
 
 
 @pytest.mark.parametrize("gravity", [[[0, 0, np.nan]], [[0, 0, np.inf]], [[0, 0, 9.81]], np.zeros((0, 3))])

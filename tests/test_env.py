@@ -16,8 +16,7 @@ import pytest
 from brax.envs.wrappers import training
 from mujoco import mjx
 
-from hopper_mjx.envs import MonopedConfig, MonopedEnv, randomize_gravity
-from hopper_mjx.envs import monoped
+from hopper_mjx.envs import MonopedConfig, MonopedEnv, monoped, randomize_gravity
 
 N = 4  # environments, a multiple of the 2 host devices
 
@@ -234,13 +233,14 @@ def test_a_rerun_resumes_from_the_last_checkpoint(trained, capsys):
 
 
 def test_policy_runs_as_a_core_controller(trained, mj_model, sim):
-    from hopper_mjx.control import policy
+    from hopper_mjx.envs import policy
     from hopper_mjx.sim import gravity_vectors
 
     out, _ = trained
     controller = policy.policy_controller(mj_model, os.path.relpath(out))  # relative, as typed on a command line
-    params = policy.policy_params(mj_model, 3, height=0.2, speed=(0.1, 0.0))
-    np.testing.assert_allclose(np.asarray(params[0]), [monoped.stance_qpos(mj_model)[2] + 0.2, 0.1, 0.0], rtol=1e-6)
+    params = policy.policy_params(sim.robot, 3, height=0.2, speed=(0.1, 0.0))
+    standing = monoped.stance_qpos(mj_model)[2]
+    np.testing.assert_allclose(np.asarray(params.command[0]), [standing + 0.2, 0.1, 0.0], rtol=1e-6)
     state = sim.reset(gravity_vectors([9.81, 3.71, 1.62]), key=0, controller=controller, params=params)
     final, traj = sim.rollout(state, controller, steps=100)
     assert not np.asarray(final.diverged).any() and np.isfinite(np.asarray(traj.qpos)).all()
@@ -252,10 +252,41 @@ def test_policy_runs_as_a_core_controller(trained, mj_model, sim):
     assert (np.abs(np.asarray(cs.last_action)) <= 1).all() and np.abs(np.asarray(cs.last_action)).sum() > 0
 
 
-def test_policy_path_errors_name_the_problem(tmp_path, mj_model):
-    from hopper_mjx.control import policy
+def test_policy_path_errors_name_the_problem(tmp_path, mj_model, sim):
+    from hopper_mjx.envs import policy
 
     with pytest.raises(ValueError, match="not a trained policy"):
         policy.policy_controller(mj_model, tmp_path)
     with pytest.raises(ValueError, match="speed"):
-        policy.policy_params(mj_model, 2, height=0.1, speed=(0.1,))
+        policy.policy_params(sim.robot, 2, height=0.1, speed=(0.1,))
+
+
+def test_evaluation_kicks_are_the_sweeps():
+    """The evaluation claims the sweep's kicks: replicate r gets the sweep's kick for replicate r."""
+    from hopper_mjx.sweep.grid import KICK, SweepSpec, expand
+
+    g, qvel = train_ppo.evaluation_batch([9.81, 1.62], 3, seed=4, nv=9)
+    sweep = expand(SweepSpec(kind="gravity", gravity=(9.81, 1.62), num=3, duration=10.0, height=0.1,
+                             speed=(0.0, 0.0), seed=4), 9)
+    np.testing.assert_array_equal(g, sweep.gravity)
+    np.testing.assert_array_equal(qvel, sweep.qvel)
+    np.testing.assert_array_equal(qvel[:3], qvel[3:])  # common random numbers across gravities
+    assert 0 < np.abs(qvel[:, [0, 1, 3, 4]]).max() < 6 * KICK and not qvel[:, [2, 5, 6, 7, 8]].any()
+
+
+def test_env_and_metrics_falls_are_different_measures(mj_model):
+    """The env ends an episode on the angle of the base z axis from vertical; the metrics call a fall
+    on |roll| or |pitch| each. A base rolled and pitched 0.7 rad each (1.0 rad from vertical) is
+    fallen to the env and upright to the metrics; the two are named apart."""
+    from hopper_mjx import metrics
+
+    roll = pitch = 0.7
+    # ZYX Euler (yaw 0): q = q_y(pitch) * q_x(roll), [w, x, y, z]
+    cr, sr, cp, sp = np.cos(roll / 2), np.sin(roll / 2), np.cos(pitch / 2), np.sin(pitch / 2)
+    quat = (cp * cr, cp * sr, sp * cr, -sp * sr)
+    d = _state(mj_model, height=1.0, quat=quat)
+    np.testing.assert_allclose(metrics.roll_pitch(np.asarray(quat)), (roll, pitch), atol=1e-6)
+    np.testing.assert_allclose(float(monoped.tilt_from_vertical(d)), np.arccos(np.cos(roll) * np.cos(pitch)),
+                               atol=1e-5)
+    assert bool(monoped.fallen(MonopedConfig(), d))
+    assert max(roll, pitch) < metrics.FALL_ROLL_PITCH

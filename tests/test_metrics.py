@@ -72,7 +72,8 @@ def test_falls_stop_the_count():
                             standing_height=STAND)
     assert m["fell"].tolist() == [False, False, True, True]
     np.testing.assert_allclose(m["fall_time"][2:], 5.0)
-    assert np.all(m["hops_before_fall"][2:] == 7)  # touchdowns at 1.2, 1.8, ..., 4.8 s
+    assert np.all(m["hops"][2:] == 7)  # touchdowns at 1.2, 1.8, ..., 4.8 s; instance 0, the same hops unfallen, has 15
+    assert m["hops"][0] == 15
     assert m["apex_height"][2] == pytest.approx(m["apex_height"][0])
     assert m["max_pitch"][3] == pytest.approx(1.0)  # up to and including the fall sample
     assert m["mean_speed"][2] == pytest.approx(SPEED)  # over the 5 s before the fall
@@ -104,6 +105,17 @@ def test_zero_gravity_floats_and_divides_by_nothing():
     assert m["ballistic_flight_time"][3] == pytest.approx(FLIGHT * DT, rel=1e-9)
 
 
+def test_every_metric_is_its_own_array():
+    """No metric is another under a second name (an alias can never disagree, so a test comparing
+    the two could never fail)."""
+    traj, _ = _trajectory()
+    m = metrics.hop_metrics(traj, np.full(4, G), standing_height=STAND, work=np.full(4, 100.0), mass=6.8)
+    names = sorted(m)
+    for i, a in enumerate(names):
+        for b in names[i + 1:]:
+            assert not np.shares_memory(m[a], m[b]), (a, b)
+
+
 def test_bad_arguments():
     traj, _ = _trajectory()
     with pytest.raises(ValueError, match="gravity"):
@@ -113,4 +125,6 @@ def test_bad_arguments():
 
 
 def test_standing_height_is_the_stance_with_the_foot_down(mj_model):
-    assert metrics.standing_height(mj_model) == pytest.approx(0.8823, abs=1e-3)
+    from hopper_mjx.model.robot import standing_height
+
+    assert standing_height(mj_model) == pytest.approx(0.8823, abs=1e-3)

@@ -105,7 +105,8 @@ def test_timestep_is_configurable():
         (lambda t: t.replace('<joint name="hfe_joint" type="revolute">', '<joint name="hfe_joint" type="prismatic">'),
          "'hfe_joint' must be revolute"),
     ],
-    ids=["xml", "missing-joint", "no-inertia", "negative-mass", "no-foot", "no-transmission", "bad-effort", "prismatic"],
+    ids=["xml", "missing-joint", "no-inertia", "negative-mass", "no-foot", "no-transmission", "bad-effort",
+         "prismatic"],
 )
 def test_bad_urdf_is_rejected_with_a_clear_message(tmp_path, edit, message):
     path = tmp_path / "bad.urdf"
@@ -130,3 +131,34 @@ def test_export_cli_reports_bad_urdf_without_traceback(tmp_path):
                            "--urdf", str(path)], capture_output=True, text=True)
     assert done.returncode == 2
     assert "error:" in done.stderr and "Traceback" not in done.stderr
+
+
+def test_reversed_transmissions_clip_each_joint_at_its_own_limit(tmp_path):
+    """Transmissions listed kfe, hfe, haa (actuators in reverse joint order) with reductions 2, 1, 4:
+    every joint still saturates at its own URDF effort (haa 40, hfe 80, kfe 80 N·m) and an unsaturated
+    torque reaches its joint exactly, whatever the actuator order and gear."""
+    from hopper_mjx.control.base import clip_to_limits
+
+    blocks = re.findall(r"  <transmission.*?</transmission>\n", SEED_URDF, flags=re.S)
+    assert len(blocks) == 3
+    one = "<mechanicalReduction>1</mechanicalReduction>"
+    geared = [b.replace(one, f"<mechanicalReduction>{r}</mechanicalReduction>")
+              for b, r in zip(blocks, (4, 1, 2))]  # haa, hfe, kfe
+    text = SEED_URDF
+    for b in blocks:
+        text = text.replace(b, "")
+    text = text.replace("</robot>", "".join(reversed(geared)) + "</robot>")
+    path = tmp_path / "reversed.urdf"
+    path.write_text(text)
+    m = model.load(path)
+    lay = Layout.of(m)
+    assert lay.actuator_of_joint == (2, 1, 0) and lay.gear == (4.0, 1.0, 2.0)
+    assert lay.effort_limit == (40.0, 80.0, 80.0)
+    dofs = list(lay.joint_dof)
+    d = mujoco.MjData(m)
+    saturated = ([1000.0, -1000.0, 1000.0], [40.0, -80.0, 80.0])
+    within = ([-30.0, 70.0, -55.0], [-30.0, 70.0, -55.0])
+    for torque, expected in (saturated, within):
+        d.ctrl[:] = np.asarray(clip_to_limits(lay, np.array(torque, np.float32)))
+        mujoco.mj_forward(m, d)
+        np.testing.assert_allclose(d.qfrc_actuator[dofs], expected, rtol=1e-6)

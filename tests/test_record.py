@@ -15,8 +15,10 @@ import matplotlib.image
 import numpy as np
 import pytest
 
-from hopper_mjx import echo, msgdefs, plots, record, simulate
+from hopper_mjx import simulate
 from hopper_mjx.model.layout import Layout
+from hopper_mjx.ros import echo, msgdefs, plots, record
+from hopper_mjx.ros.messages import MSGTYPES, topic_names
 
 GRAVITY = "9.81,1.62"
 DURATION = 0.4  # s: both robots touch down within it (Earth at ~0.1 s, Moon at ~0.25 s)
@@ -84,7 +86,8 @@ def read_with_mcap(path):
     (mcap_file,) = Path(path).glob("*.mcap")
     types, messages = {}, defaultdict(list)
     with open(mcap_file, "rb") as f:
-        for schema, channel, message, msg in make_reader(f, decoder_factories=[DecoderFactory()]).iter_decoded_messages():
+        reader = make_reader(f, decoder_factories=[DecoderFactory()])
+        for schema, channel, message, msg in reader.iter_decoded_messages():
             types[channel.topic] = schema.name
             messages[channel.topic].append((message.log_time, msg))
     return types, messages
@@ -145,10 +148,10 @@ def expected(kind: str, saved: dict, layout: Layout, i: int) -> np.ndarray:
 @pytest.mark.parametrize("fmt", ["ros1", "mcap"])
 def test_every_topic_has_its_type_and_rate_times_duration_messages(recorded, fmt):
     types, messages = read_with_rosbags(recorded[fmt])
-    want = {"/clock": (record.MSGTYPES["clock"], RATES["imu"] * DURATION)}  # /clock: the fastest stream
+    want = {"/clock": (MSGTYPES["clock"], RATES["imu"] * DURATION)}  # /clock: the fastest stream
     for i in (0, 1):
-        for kind, topic in record.topic_names(i).items():
-            want[topic] = (record.MSGTYPES[kind], RATES[kind] * DURATION)
+        for kind, topic in topic_names(i).items():
+            want[topic] = (MSGTYPES[kind], RATES[kind] * DURATION)
     assert set(types) == set(want)
     for topic, (msgtype, count) in want.items():
         assert types[topic] == msgtype, topic
@@ -179,7 +182,7 @@ def test_values_and_stamps_equal_the_simulate_run(recorded, saved, mj_model, rea
     _, messages = read(recorded[fmt])
     layout = Layout.of(mj_model)
     for i in (0, 1):
-        for kind, topic in record.topic_names(i).items():
+        for kind, topic in topic_names(i).items():
             msgs = [m for _, m in messages[topic]]
             want = expected(kind, saved, layout, i)
             got = np.array([values(kind, m) for m in msgs])
@@ -193,7 +196,7 @@ def test_values_and_stamps_equal_the_simulate_run(recorded, saved, mj_model, rea
     # Not vacuous: both robots landed, carrying their weight along the floor's normal.
     contact = saved["contact"][:, :: REFERENCE_RATE // RATES["contact"]]
     assert contact[:, -5:].any(axis=1).all()
-    first_touch = [m for _, m in messages[record.topic_names(1)["contact"]] if m.states][0]
+    first_touch = [m for _, m in messages[topic_names(1)["contact"]] if m.states][0]
     assert xyz(first_touch.states[0].contact_normals[0]) == [0.0, 0.0, 1.0]
 
 
@@ -218,7 +221,7 @@ def test_echo_cli_stdout_is_genpys_formatting_byte_for_byte(recorded):
     prints for every message of the topic, each closed by '---' as rostopic echo does."""
     _, messages = read_with_ros_rosbag(recorded["ros1"])
     for topic in ("/monoped_1/lowerleg_contactsensor_state", "/monoped_0/imu/data"):
-        done = subprocess.run([sys.executable, "-m", "hopper_mjx.echo", str(recorded["ros1"]), topic],
+        done = subprocess.run([sys.executable, "-m", "hopper_mjx.ros.echo", str(recorded["ros1"]), topic],
                               capture_output=True, timeout=120)
         assert done.returncode == 0, done.stderr.decode()[-2000:]
         want = "".join(f"{msg}\n---\n" for _, msg in messages[topic])
@@ -233,7 +236,7 @@ def genmsg_definitions(search: dict) -> dict:
     from genpy.genmsg import gentools, msg_loader
 
     out = {}
-    for msgtype in record.MSGTYPES.values():
+    for msgtype in MSGTYPES.values():
         context = msg_loader.MsgContext.create_default()
         spec = msg_loader.load_msg_by_type(context, msgdefs.ros1_name(msgtype), search)
         msg_loader.load_depends(context, spec, search)

@@ -31,20 +31,28 @@ def _in_fresh_process(fn, *args, **kwargs):
 
 
 def _still_and_robot_mask(width, height):
-    from hopper_mjx import render
+    from hopper_mjx import (
+        model,
+        render,  # first: it picks the GL backend
+    )
+    from hopper_mjx.model import robot
 
     m = render.scene_model()
-    qpos = render.stance_qpos()
+    qpos = robot.stance_qpos(model.load())
     return render.still(m, qpos, width=width, height=height), render.robot_pixels(m, qpos, width=width, height=height)
 
 
 def _write_video(path, heights, fps):
     """A video of the stance pose lifted to each base height (the simulated poses of `--video`
-    come from `simulate.run`, tested elsewhere; compiling a rollout here would add ~30 s)."""
-    from hopper_mjx import render
+    come from `cli.run_batch`, tested elsewhere; compiling a rollout here would add ~30 s)."""
+    from hopper_mjx import (
+        model,
+        render,  # first: it picks the GL backend
+    )
+    from hopper_mjx.model import robot
 
     m = render.scene_model()
-    poses = [render.stance_qpos() + np.r_[0, 0, dz, np.zeros(m.nq - 3)] for dz in heights]
+    poses = [robot.stance_qpos(model.load()) + np.r_[0, 0, dz, np.zeros(m.nq - 3)] for dz in heights]
     render.write_video(path, render.frames(m, poses, width=160, height=120), fps=fps)
 
 

@@ -15,9 +15,9 @@ from hopper_mjx.sweep.__main__ import main
 
 # Tiny but real: 2 gravities x 3 replicates, 3 chunks of 2 (one compile), 3 s of hopping.
 TINY = ["--values", "3.71,9.81", "--num", "3", "--duration", "3", "--chunk", "2", "--seed", "5", "--no-progress"]
-EXPECTED_COLUMNS = ["gravity", "replicate", "seed", "apex_height", "flight_rise", "flight_time", "ballistic_flight_time", "stance_time", "hop_period",
-                    "duty_factor", "mean_speed", "tracking_error", "max_roll", "max_pitch", "hops", "fell",
-                    "diverged", "cost_of_transport"]
+EXPECTED_COLUMNS = ["gravity", "replicate", "seed", "apex_height", "flight_rise", "flight_time",
+                    "ballistic_flight_time", "stance_time", "hop_period", "duty_factor", "mean_speed",
+                    "tracking_error", "max_roll", "max_pitch", "hops", "fell", "diverged", "cost_of_transport"]
 
 
 def _sweep_cmd(out, *extra):
@@ -48,10 +48,14 @@ def test_tiny_sweep_writes_every_output(tiny):
     assert summary["groups"][0]["label"] == "Mars" and summary["groups"][1]["label"] == "Earth"
     assert summary["versions"]["mujoco"] == summary["versions"]["mujoco-mjx"]
     assert summary["run"]["steps_per_s"] > 0
+    # One row per instance, in the grid's order (gravity-major), with the run's seed.
+    assert [(float(r["gravity"]), int(r["replicate"]), int(r["seed"])) for r in rows] == [
+        (g, k, 5) for g in (3.71, 9.81) for k in range(3)]
     for r in rows:
-        assert r["fell"] in ("0", "1") and r["diverged"] == "0"
-        assert int(r["hops"]) >= 0
-        assert abs(float(r["max_roll"])) < np.pi and abs(float(r["max_pitch"])) < np.pi
+        # The default kick is small: every replicate hops upright near the commanded 0.10 m apex rise.
+        assert r["fell"] == "0" and r["diverged"] == "0", r
+        assert int(r["hops"]) >= 3 and float(r["apex_height"]) == pytest.approx(0.10, rel=0.2), r
+        assert float(r["max_roll"]) < 0.3 and float(r["max_pitch"]) < 0.3, r
 
 
 def test_sweep_numbers_are_physical(tiny):

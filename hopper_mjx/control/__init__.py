@@ -1,0 +1,33 @@
+"""Controllers of the batched core, and the registry every tool builds them through."""
+
+from __future__ import annotations
+
+from hopper_mjx.control import pid, raibert
+from hopper_mjx.control.base import Controller, hold, zero_torque
+from hopper_mjx.model.robot import Robot
+
+NAMES = ("none", "hold", "pid", "raibert")
+
+
+def make(name: str, robot: Robot, n: int, *, height: float = raibert.DEFAULT_HEIGHT,
+         speed=(0.0, 0.0)) -> tuple[Controller, object]:
+    """(controller, per-instance params or None) for n instances of `robot`.
+
+    none: limp; hold: PD to the initial joint angles; pid: the seed's joint position
+    controllers (monoped.yaml) holding them; raibert: hop at `height` m of apex rise
+    over the standing height and `speed` (vx, vy) m/s.
+    """
+    if name == "none":
+        return zero_torque(robot.layout), None
+    if name == "hold":
+        return hold(robot.layout), None
+    if name == "pid":
+        return pid.pid(robot.layout), None
+    if name == "raibert":
+        if len(speed) != 2:
+            raise ValueError(f"speed needs two values VX,VY in m/s, got {list(speed)}")
+        return raibert.raibert(robot), raibert.raibert_params(n, height=height, speed=speed)
+    raise ValueError(f"unknown controller {name!r}; choose from: {', '.join(NAMES)}")
+
+
+__all__ = ["NAMES", "Controller", "make"]

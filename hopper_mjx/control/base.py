@@ -1,15 +1,15 @@
-"""The controller protocol of the batched core, and the two trivial controllers.
+"""The controller protocol of the batched core, the one PD law, and the two trivial controllers.
 
 A controller is a pair of pure functions for one instance, vmapped by the core:
 
-- ``init(data, params) -> cstate``: per-instance controller state; per-instance
+- ``init(obs, params) -> cstate``: per-instance controller state; per-instance
   parameters (gains, commands) live inside it, so they can differ across the batch;
-- ``act(cstate, data, gravity) -> (ctrl, cstate)``: joint torques (N·m, in actuator
-  order) from the instance's MJX data. Contacts in ``data`` are those of the
-  previous physics step, as a real controller reads its sensors before it acts.
+- ``act(cstate, obs, gravity) -> (ctrl, cstate)``: actuator controls (actuator order)
+  from the instance's `Observation` (time, qpos, qvel and the foot contact of the
+  previous physics step, as a real controller reads its sensors before it acts).
 
-Controllers are built by factories from a `Layout` and compared by identity, so
-one built controller reuses one compiled rollout.
+Controllers are built by factories and compared by identity, so one built
+controller reuses one compiled rollout.
 """
 
 from __future__ import annotations
@@ -19,9 +19,9 @@ from typing import Any, Callable
 
 import jax
 import jax.numpy as jnp
-from mujoco import mjx
 
 from hopper_mjx.model.layout import Layout
+from hopper_mjx.signals import Observation
 
 CState = Any  # a pytree of arrays, one instance's worth
 
@@ -29,23 +29,50 @@ CState = Any  # a pytree of arrays, one instance's worth
 @dataclass(frozen=True, eq=False)
 class Controller:
     name: str
-    init: Callable[[mjx.Data, Any], CState]
-    act: Callable[[CState, mjx.Data, jax.Array], tuple[jax.Array, CState]]
+    init: Callable[[Observation, Any], CState]
+    act: Callable[[CState, Observation, jax.Array], tuple[jax.Array, CState]]
+
+
+def pd(kp, kd, error: jax.Array, rate: jax.Array, bias: jax.Array | None = None) -> jax.Array:
+    """The PD law of every joint controller here: kp·error (+ bias) - kd·rate.
+
+    kp N·m/rad, kd N·m·s/rad, error rad, rate rad/s (the joint's, or the leg's in the world);
+    bias N·m, e.g. a PID's integral term.
+    """
+    torque = kp * error
+    if bias is not None:
+        torque = torque + bias
+    return torque - kd * rate
+
+
+def joint_state(layout: Layout, obs: Observation) -> tuple[jax.Array, jax.Array]:
+    """(angles rad, rates rad/s) of haa, hfe, kfe."""
+    return obs.qpos[jnp.asarray(layout.joint_qpos)], obs.qvel[jnp.asarray(layout.joint_dof)]
+
+
+def saturate(layout: Layout, torque_by_joint: jax.Array) -> jax.Array:
+    """Joint torques (haa, hfe, kfe), N·m, clipped at each joint's effort limit."""
+    limit = jnp.asarray(layout.effort_limit)
+    return jnp.clip(torque_by_joint, -limit, limit)
+
+
+def to_ctrl(layout: Layout, torque_by_joint: jax.Array) -> jax.Array:
+    """Joint torques (haa, hfe, kfe) -> actuator controls (actuator order, torque / gear)."""
+    ctrl = torque_by_joint / jnp.asarray(layout.gear)
+    return jnp.zeros(layout.nu).at[jnp.asarray(layout.actuator_of_joint)].set(ctrl)
 
 
 def clip_to_limits(layout: Layout, torque_by_joint: jax.Array) -> jax.Array:
     """Joint torques (haa, hfe, kfe) -> actuator controls, saturated at the effort limits."""
-    limit = jnp.asarray(layout.effort_limit)
-    ctrl = jnp.zeros(layout.nu).at[jnp.asarray(layout.actuator_of_joint)].set(torque_by_joint)
-    return jnp.clip(ctrl, -limit, limit)
+    return to_ctrl(layout, saturate(layout, torque_by_joint))
 
 
 def zero_torque(layout: Layout) -> Controller:
     """`none`: every joint limp."""
     return Controller(
         name="none",
-        init=lambda data, params: (),
-        act=lambda cstate, data, gravity: (jnp.zeros(layout.nu), cstate),
+        init=lambda obs, params: (),
+        act=lambda cstate, obs, gravity: (jnp.zeros(layout.nu), cstate),
     )
 
 
@@ -54,10 +81,9 @@ HOLD_GAINS = {"p": 400.0, "d": 8.0}  # N·m/rad and N·m·s/rad; stiff enough to
 
 def hold(layout: Layout, p: float = HOLD_GAINS["p"], d: float = HOLD_GAINS["d"]) -> Controller:
     """`hold`: PD back to the joint angles the instance started with."""
-    qadr, dadr = jnp.asarray(layout.joint_qpos), jnp.asarray(layout.joint_dof)
 
-    def act(target, data, gravity):
-        torque = p * (target - data.qpos[qadr]) - d * data.qvel[dadr]
-        return clip_to_limits(layout, torque), target
+    def act(target, obs, gravity):
+        q, qd = joint_state(layout, obs)
+        return clip_to_limits(layout, pd(p, d, target - q, qd)), target
 
-    return Controller(name="hold", init=lambda data, params: data.qpos[qadr], act=act)
+    return Controller(name="hold", init=lambda obs, params: joint_state(layout, obs)[0], act=act)

@@ -13,96 +13,10 @@ articulated leg as a telescopic one:  L² = thigh² + shank² + 2·thigh·shank�
 
 from __future__ import annotations
 
-import functools
-from dataclasses import dataclass
-
 import jax
 import jax.numpy as jnp
-import mujoco
-import numpy as np
 
-from hopper_mjx.model.layout import Layout
-
-
-@dataclass(frozen=True)
-class LegGeometry:
-    """Static lengths of a monoped leg (m), hashable like `Layout`."""
-
-    haa_below_base: float  # base origin -> haa axis
-    hfe_below_haa: float  # haa axis -> hfe axis, along the leg at zero haa
-    thigh: float  # hfe -> kfe
-    shank: float  # kfe -> foot centre
-    foot_radius: float
-    standing_height: float  # base height at rest: default stance, foot on the floor
-    # Mass (kg) and centre of mass (m, in the link's frame at zero angles, from its
-    # joint axis; for the base from the haa axis point) of base, hip, thigh, shank+foot.
-    link_mass: tuple[float, ...]
-    link_com: tuple[tuple[float, float, float], ...]
-    link_inertia: tuple[tuple[float, float, float], ...]  # kg·m², principal, about each link's COM
-
-    @classmethod
-    def of(cls, m: mujoco.MjModel) -> "LegGeometry":
-        """Measures a compiled monoped at its default stance (`sim.stance_qpos(m, clearance=0)`)."""
-        from hopper_mjx.sim import stance_qpos  # the stance pose is the core's definition
-
-        layout = Layout.of(m)
-        d = mujoco.MjData(m)
-        mujoco.mj_kinematics(m, d)  # reference pose: every joint at zero, frames aligned
-        joints = [m.joint(name) for name in ("haa_joint", "hfe_joint", "kfe_joint")]
-        anchor = [d.xanchor[j.id].copy() for j in joints]
-        base = int(m.jnt_bodyid[0])
-        groups = [[base]] + [[int(j.bodyid[0])] for j in joints]
-        groups[-1] += [b for b in range(m.nbody) if b not in sum(groups, []) and m.body_rootid[b] == base]
-        mass = [float(m.body_mass[g].sum()) for g in groups]
-        com = [(m.body_mass[g][:, None] * d.xipos[g]).sum(axis=0) / mm for g, mm in zip(groups, mass)]
-        # Each group's inertia about its own COM (parallel-axis), frames aligned at zero angles.
-        inertia = []
-        for g, c in zip(groups, com):
-            total = np.zeros((3, 3))
-            for b in g:
-                rot = d.ximat[b].reshape(3, 3)
-                r = d.xipos[b] - c
-                total += rot @ np.diag(m.body_inertia[b]) @ rot.T + m.body_mass[b] * (r @ r * np.eye(3) - np.outer(r, r))
-            inertia.append(tuple(float(v) for v in np.diag(total)))
-        origin = [anchor[0]] + anchor  # the base's COM is taken from the haa axis point too
-        return cls(
-            haa_below_base=float(np.linalg.norm(anchor[0] - d.xpos[base])),
-            hfe_below_haa=float(np.linalg.norm(anchor[1] - anchor[0])),
-            thigh=layout.thigh,
-            shank=layout.shank,
-            foot_radius=layout.foot_radius,
-            standing_height=float(stance_qpos(m, clearance=0.0)[2]),
-            link_mass=tuple(mass),
-            link_com=tuple(tuple(float(v) for v in c - o) for c, o in zip(com, origin)),
-            link_inertia=tuple(inertia),
-        )
-
-    def matches(self, layout: Layout) -> bool:
-        close = lambda a, b: abs(a - b) < 1e-6
-        return (
-            close(self.haa_below_base + self.hfe_below_haa, layout.hip_below_base)
-            and close(self.thigh, layout.thigh)
-            and close(self.shank, layout.shank)
-            and close(self.foot_radius, layout.foot_radius)
-        )
-
-
-@functools.lru_cache(maxsize=1)
-def _shipped() -> LegGeometry:
-    from hopper_mjx import model
-
-    return LegGeometry.of(model.load())
-
-
-def geometry_for(layout: Layout, leg: LegGeometry | None = None) -> LegGeometry:
-    """`leg`, or the shipped monoped's geometry; either must agree with `layout`."""
-    leg = leg or _shipped()
-    if not leg.matches(layout):
-        raise ValueError(
-            "the leg geometry does not match this model's layout; "
-            "pass leg=LegGeometry.of(mj_model) for a model built from another URDF"
-        )
-    return leg
+from hopper_mjx.model.robot import LegGeometry
 
 
 def leg_length(leg: LegGeometry, kfe: jax.Array) -> jax.Array:

@@ -14,6 +14,7 @@ instance: they live in the controller state next to the targets.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 from typing import NamedTuple
 
@@ -22,7 +23,7 @@ import jax.numpy as jnp
 import numpy as np
 import yaml
 
-from hopper_mjx.control.base import Controller, clip_to_limits
+from hopper_mjx.control.base import Controller, clip_to_limits, joint_state, pd
 from hopper_mjx.model.layout import Layout
 from hopper_mjx.model.loader import JOINTS, read_text
 
@@ -105,11 +106,11 @@ def gains_of(gains: dict[str, dict[str, float]] | None = None) -> PidGains:
     return PidGains(*(jnp.asarray([gains[j][k] for j in JOINTS], dtype=jnp.float32) for k in GAIN_KEYS))
 
 
-def effort(gains: PidGains, error: jax.Array, error_rate: jax.Array, i_term: jax.Array,
+def effort(gains: PidGains, error: jax.Array, rate: jax.Array, i_term: jax.Array,
            dt: float) -> tuple[jax.Array, jax.Array]:
-    """One control_toolbox::Pid update -> (unsaturated effort, new integral term)."""
+    """One control_toolbox::Pid update for a set point (ė = -q̇) -> (unsaturated effort, new integral term)."""
     i_term = jnp.clip(i_term + gains.i * error * dt, -gains.i_clamp, gains.i_clamp)
-    return gains.p * error + i_term + gains.d * error_rate, i_term
+    return pd(gains.p, gains.d, error, rate, bias=i_term), i_term
 
 
 class PidState(NamedTuple):
@@ -118,7 +119,23 @@ class PidState(NamedTuple):
     i_term: jax.Array  # (3,) N·m
 
 
-def pid_params(n: int, target, gains: dict[str, dict[str, float]] | None = None, **per_instance) -> dict:
+@jax.tree_util.register_dataclass
+@dataclass(frozen=True)
+class PidParams:
+    """Per-instance parameters of `pid`, each (3,) per instance (haa, hfe, kfe), (n, 3) batched."""
+
+    target: jax.Array  # rad, joint set points
+    p: jax.Array  # N·m/rad
+    i: jax.Array  # N·m/(rad·s)
+    d: jax.Array  # N·m·s/rad
+    i_clamp: jax.Array  # N·m, bound on the integral term
+
+    @property
+    def gains(self) -> PidGains:
+        return PidGains(self.p, self.i, self.d, self.i_clamp)
+
+
+def pid_params(n: int, target, gains: dict[str, dict[str, float]] | None = None, **per_instance) -> PidParams:
     """Per-instance parameters for `pid`: targets (3,) or (n, 3) rad, and gains.
 
     `per_instance` may override any of p, i, d, i_clamp with a (3,) or (n, 3) array.
@@ -139,7 +156,7 @@ def pid_params(n: int, target, gains: dict[str, dict[str, float]] | None = None,
             raise ValueError(f"PID {key} must be finite")
         if key != "target" and np.any(batched[key] < 0):
             raise ValueError(f"PID gain {key} must be >= 0")
-    return batched
+    return PidParams(**batched)
 
 
 def pid(layout: Layout, gains: dict[str, dict[str, float]] | None = None) -> Controller:
@@ -148,20 +165,18 @@ def pid(layout: Layout, gains: dict[str, dict[str, float]] | None = None) -> Con
     params: None (hold the joint angles each instance starts with, `gains` for
     all) or `pid_params(...)` (per-instance targets and gains).
     """
-    qadr, dadr = jnp.asarray(layout.joint_qpos), jnp.asarray(layout.joint_dof)
     lower, upper = (jnp.asarray(r) for r in zip(*layout.joint_range))
     shared = gains_of(gains)
 
-    def init(data, params):
+    def init(obs, params: PidParams | None):
         if params is None:
-            return PidState(target=data.qpos[qadr], gains=shared, i_term=jnp.zeros(len(JOINTS)))
-        per = PidGains(*(params[k] for k in GAIN_KEYS))
-        return PidState(target=params["target"], gains=per, i_term=jnp.zeros(len(JOINTS)))
+            return PidState(target=joint_state(layout, obs)[0], gains=shared, i_term=jnp.zeros(len(JOINTS)))
+        return PidState(target=params.target, gains=params.gains, i_term=jnp.zeros(len(JOINTS)))
 
-    def act(state, data, gravity):
+    def act(state, obs, gravity):
+        q, qd = joint_state(layout, obs)
         target = jnp.clip(state.target, lower, upper)
-        torque, i_term = effort(state.gains, target - data.qpos[qadr], -data.qvel[dadr], state.i_term,
-                                layout.timestep)
+        torque, i_term = effort(state.gains, target - q, qd, state.i_term, layout.timestep)
         return clip_to_limits(layout, torque), state._replace(i_term=i_term)
 
     return Controller(name="pid", init=init, act=act)

@@ -43,15 +43,19 @@ so the tilt swings about level instead of from level to one side. The stiffness
 falls with g: leveling the body pushes the robot sideways through the foot, and
 what undoes that push, leaning over the foot placed in flight, works in
 proportion to g; √g (measured against g and 1) keeps the Moon's servo stiff
-enough to lean the body back at 0.5 m/s without upsetting it sideways. The servo's torque is capped at `traction`·leg force·L, a share
+enough to lean the body back at 0.5 m/s without upsetting it sideways. The servo's
+torque is capped at `traction`·leg force·L, a share
 of the friction cone: at touchdown the leg force is still small, and a hip
 torque beyond the floor's grip makes the foot slip or bounce.
 
 Every gravity-dependent quantity uses the instance's own g, its downward (vertical)
-part, floored at `MIN_GRAVITY` so that a weightless robot gets finite commands.
-Contact is read in `act` from the MJX contact rows of the foot (distance < 0), the
-definition of `hopper_mjx.signals.contact`; like the joint readings it is one step
-(1 ms) old.
+part, floored at `MIN_GRAVITY` so that a weightless robot gets finite commands. Contact is the
+observation's (`signals.Observation.contact`, the engine's one foot-contact test);
+like the joint readings it is one step (1 ms) old.
+
+`act` composes pure per-part functions, each tested on its own: `sense` (what the
+body is doing), `next_phase`, `height_update` and `speed_update` (the bookkeeping of
+parts 1 and 2), `stance_torque` and `flight_torque`.
 """
 
 from __future__ import annotations
@@ -66,23 +70,31 @@ import jax.numpy as jnp
 import numpy as np
 from brax import math as bmath
 
-from hopper_mjx.control import kinematics, pid
-from hopper_mjx.control.base import Controller, clip_to_limits
-from hopper_mjx.control.kinematics import LegGeometry
-from hopper_mjx.model.layout import Layout
+from hopper_mjx.control import kinematics
+from hopper_mjx.control.base import Controller, joint_state, pd, saturate, to_ctrl
+from hopper_mjx.model.robot import LegGeometry, Robot
+from hopper_mjx.signals import Observation
 
 FLIGHT, COMPRESSION, THRUST, UNLOADING = 0, 1, 2, 3
-PHASES = ("flight", "compression", "thrust", "unloading")
 MIN_PHASE_TIME = 0.01  # s in flight / stance before contact may end it (debounce)
 EARTH_GRAVITY = 9.81  # m/s², where the attitude stiffness holds as given
 MIN_GRAVITY = 0.1  # m/s², floor under g in the formulas (g = 0 has no hops)
-STANCE_HFE, STANCE_KFE = 0.5, -0.95  # rad, the core's default stance (for the robot's inertia)
+# rad (haa, hfe, kfe): the nominal stance at which the robot's inertia is taken (the
+# computed stance, `Robot.stance_joints`, has kfe -0.9502; the gains were tuned with this one).
+INERTIA_POSE = (0.0, 0.5, -0.95)
 MAX_PLACEMENT = 0.25  # m, bound on the foot placement from the COM
+MAX_HEIGHT_BIAS = 0.3  # m, bound on the adapted apex-target bias
+MAX_SPEED_OFFSET = 0.1  # m, bound on the integral part of the foot placement
+MIN_SQUEEZE = 0.02  # m, floor under the remaining thrust stroke the extra force is spread over
+# The flight PD: the shipped position controllers' p and d (hopper_mjx/control/monoped.yaml), no i.
+FLIGHT_KP = (400.0, 400.0, 200.0)  # N·m/rad, haa, hfe, kfe
+FLIGHT_KD = (18.0, 15.0, 4.0)  # N·m·s/rad
 
 
+@jax.tree_util.register_dataclass
 @dataclass(frozen=True)
 class RaibertConfig:
-    """Gains of the three-part controller; all may be overridden per instance."""
+    """Gains of the three-part controller; all may be overridden per instance (then each is an array)."""
 
     leg_length: float = 0.64  # m, virtual leg length at touchdown and lift-off
     retract: float = 0.0  # m the leg is shortened while rising in flight
@@ -101,16 +113,22 @@ class RaibertConfig:
     traction: float = 0.3  # attitude hip torque <= traction · leg force · L (a share of the friction cone)
 
 
-def default_config() -> RaibertConfig:
-    return RaibertConfig()
-
-
 GAINS = tuple(f.name for f in dataclasses.fields(RaibertConfig))
 DEFAULT_HEIGHT = 0.10  # m, commanded apex rise over the standing height when none is given
 
 
+@jax.tree_util.register_dataclass
+@dataclass(frozen=True)
+class RaibertParams:
+    """Per-instance commands and gains; each leaf has a leading axis n when batched."""
+
+    height: jax.Array  # m, commanded apex rise over the standing height
+    speed: jax.Array  # (2,) m/s, commanded (vx, vy)
+    gains: RaibertConfig  # every gain, one value per instance
+
+
 class RaibertState(NamedTuple):
-    params: dict  # "height" () m, "speed" (2,) m/s, and every RaibertConfig field
+    params: RaibertParams
     phase: jax.Array  # int32, one of FLIGHT..UNLOADING
     phase_start: jax.Array  # s, simulation time the phase began
     touchdown_time: jax.Array  # s, simulation time of the last touchdown
@@ -123,8 +141,29 @@ class RaibertState(NamedTuple):
     work: jax.Array  # J, ∫ Σ|τ·q̇| dt of the three motors (for the cost of transport)
 
 
+def _batch(n: int, name: str, value, shape: tuple) -> np.ndarray:
+    value = np.asarray(value, dtype=np.float32)
+    try:
+        out = np.broadcast_to(value, (n,) + shape).copy()
+    except ValueError:
+        raise ValueError(f"{name} must be a scalar or shape {(n,) + shape}, got {value.shape}") from None
+    if not np.all(np.isfinite(out)):
+        raise ValueError(f"{name} must be finite")
+    return out
+
+
+def _check_gains(gains: RaibertConfig) -> None:
+    for name in ("leg_length", "sag"):
+        if np.any(getattr(gains, name) <= 0):
+            raise ValueError(f"{name} must be > 0 m")
+    if np.any(gains.tilt_budget <= 0):
+        raise ValueError("tilt_budget must be > 0 rad")
+    if np.any((gains.tilt_lead < 0) | (gains.tilt_lead > 1)):
+        raise ValueError("tilt_lead must be in [0, 1]")
+
+
 def raibert_params(n: int, *, height, speed=(0.0, 0.0), config: RaibertConfig | None = None,
-                   **gain_overrides) -> dict:
+                   **gain_overrides) -> RaibertParams:
     """Per-instance commands and gains, every leaf with leading axis n.
 
     height: apex rise over the standing height, m, scalar or (n,);
@@ -136,31 +175,13 @@ def raibert_params(n: int, *, height, speed=(0.0, 0.0), config: RaibertConfig | 
     unknown = set(gain_overrides) - set(GAINS)
     if unknown:
         raise ValueError(f"unknown Raibert gain(s) {sorted(unknown)}; expected some of {list(GAINS)}")
-    config = config or default_config()
-
-    def batch(name, value, shape):
-        value = np.asarray(value, dtype=np.float32)
-        try:
-            out = np.broadcast_to(value, (n,) + shape).copy()
-        except ValueError:
-            raise ValueError(f"{name} must be a scalar or shape {(n,) + shape}, got {value.shape}") from None
-        if not np.all(np.isfinite(out)):
-            raise ValueError(f"{name} must be finite")
-        return out
-
-    params = {"height": batch("height", height, ()), "speed": batch("speed", speed, (2,))}
-    if np.any(params["height"] < 0):
+    config = config or RaibertConfig()
+    heights = _batch(n, "height", height, ())
+    if np.any(heights < 0):
         raise ValueError("height (apex rise) must be >= 0 m")
-    for name in GAINS:
-        params[name] = batch(name, gain_overrides.get(name, getattr(config, name)), ())
-    for name in ("leg_length", "sag"):
-        if np.any(params[name] <= 0):
-            raise ValueError(f"{name} must be > 0 m")
-    if np.any(params["tilt_budget"] <= 0):
-        raise ValueError("tilt_budget must be > 0 rad")
-    if np.any((params["tilt_lead"] < 0) | (params["tilt_lead"] > 1)):
-        raise ValueError("tilt_lead must be in [0, 1]")
-    return params
+    gains = RaibertConfig(**{k: _batch(n, k, gain_overrides.get(k, getattr(config, k)), ()) for k in GAINS})
+    _check_gains(gains)
+    return RaibertParams(height=heights, speed=_batch(n, "speed", speed, (2,)), gains=gains)
 
 
 def _tilt(rot: jax.Array) -> tuple[jax.Array, jax.Array]:
@@ -168,179 +189,225 @@ def _tilt(rot: jax.Array) -> tuple[jax.Array, jax.Array]:
     return jnp.arctan2(rot[2, 1], rot[2, 2]), -jnp.arcsin(jnp.clip(rot[2, 0], -1.0, 1.0))
 
 
-def foot_contact(layout: Layout, data) -> jax.Array:
-    """The foot touches the floor (MJX contact rows of the foot with distance < 0)."""
-    con = data._impl.contact
-    return ((con.geom == layout.foot_geom).any(axis=-1) & (con.dist < 0)).any()
+class Body(NamedTuple):
+    """What the controller derives from one observation (base frame unless said)."""
+
+    q: jax.Array  # (3,) joint angles, rad
+    qd: jax.Array  # (3,) joint rates, rad/s
+    z: jax.Array  # base height, m
+    zdot: jax.Array  # m/s
+    gyro: jax.Array  # (3,) base angular velocity, rad/s
+    com: jax.Array  # (3,) whole-robot COM from the haa axis point, m
+    rot: jax.Array  # (3, 3) body -> world
+    unturn: jax.Array  # (3, 3) world -> heading frame
+    level: jax.Array  # (3, 3) body -> level frame (roll and pitch only)
+    v: jax.Array  # (2,) horizontal COM velocity, world, m/s
+    roll: jax.Array
+    pitch: jax.Array
+    length: jax.Array  # virtual leg length, m
+    length_rate: jax.Array  # m/s
+    foot: jax.Array  # (3,) foot centre from the haa axis point, m
 
 
-def raibert(layout: Layout, config: RaibertConfig | None = None, *, leg: LegGeometry | None = None) -> Controller:
+def sense(robot: Robot, obs: Observation) -> Body:
+    q, qd = joint_state(robot.layout, obs)
+    leg = robot.leg
+    gyro = obs.qvel[3:6]
+    com, com_rate = jax.jvp(lambda a: kinematics.com_position(leg, a), (q,), (qd,))
+    from_base = com + jnp.array([0.0, 0.0, -leg.haa_below_base])
+    rot = bmath.quat_to_3x3(obs.qpos[3:7])  # body -> world ([w, x, y, z] quaternion)
+    unturn = _unturn(rot)
+    # Horizontal velocity of the COM (constant through a flight, unlike the base's).
+    v = (obs.qvel[:3] + rot @ (jnp.cross(gyro, from_base) + com_rate))[:2]
+    roll, pitch = _tilt(rot)
+    return Body(q=q, qd=qd, z=obs.qpos[2], zdot=obs.qvel[2], gyro=gyro, com=com, rot=rot, unturn=unturn,
+                level=unturn @ rot, v=v, roll=roll, pitch=pitch, length=kinematics.leg_length(leg, q[2]),
+                length_rate=kinematics.leg_length_rate(leg, q[2], qd[2]), foot=kinematics.foot_position(leg, q))
+
+
+class Events(NamedTuple):
+    touchdown: jax.Array
+    liftoff: jax.Array
+    bottom: jax.Array  # compression ended: the leg stopped shortening
+    extended: jax.Array  # thrust ended: the leg reached its touchdown length
+
+
+def next_phase(phase: jax.Array, touching: jax.Array, elapsed: jax.Array, length: jax.Array,
+               length_rate: jax.Array, leg_length: jax.Array) -> tuple[jax.Array, Events]:
+    """The phase after this observation, and which transitions fired."""
+    in_stance = phase != FLIGHT
+    settled = elapsed > MIN_PHASE_TIME
+    events = Events(
+        touchdown=~in_stance & touching & settled,
+        liftoff=in_stance & ~touching & settled,
+        bottom=(phase == COMPRESSION) & (length_rate >= 0) & settled,
+        extended=(phase == THRUST) & (length >= leg_length),
+    )
+    new = jnp.where(events.touchdown, COMPRESSION, phase)
+    new = jnp.where(events.bottom, THRUST, new)
+    new = jnp.where(events.extended, UNLOADING, new)
+    return jnp.where(events.liftoff, FLIGHT, new), events
+
+
+def height_update(s: RaibertState, ev: Events, body: Body, g, stiffness, mass: float,
+                  standing_height: float) -> tuple[jax.Array, jax.Array]:
+    """Part 1: (apex-target bias adapted at touchdown, extra thrust force sized at the bottom, N)."""
+    p = s.params
+    rise = s.apex - standing_height
+    adapted = jnp.clip(s.height_bias + p.gains.height_adapt * (p.height - rise), -MAX_HEIGHT_BIAS, MAX_HEIGHT_BIAS)
+    height_bias = jnp.where(ev.touchdown, adapted, s.height_bias)
+    squeeze = jnp.maximum(p.gains.leg_length - body.length, 0.0)
+    target_z = standing_height + p.height + height_bias
+    needed = mass * g * (target_z - body.z) - 0.5 * mass * body.zdot**2 - 0.5 * stiffness * squeeze**2
+    thrust = jnp.maximum(needed, 0.0) / jnp.maximum(squeeze, MIN_SQUEEZE)
+    return height_bias, jnp.where(ev.bottom, thrust, s.thrust_force)
+
+
+class Speed(NamedTuple):
+    stance_time: jax.Array  # s
+    touchdown_time: jax.Array  # s
+    gain: jax.Array  # k_v, s
+    reference: jax.Array  # (2,) m/s
+    error: jax.Array  # (2,) m/s
+    offset: jax.Array  # (2,) m
+
+
+def speed_update(s: RaibertState, ev: Events, v: jax.Array, time: jax.Array, g) -> Speed:
+    """Part 2 bookkeeping: stance time at lift-off, the reference ramp and placement integral at touchdown."""
+    p = s.params.gains
+    # Before the first lift-off: half a period of the virtual spring-mass.
+    stance_time = jnp.where(s.stance_time > 0, s.stance_time, math.pi * jnp.sqrt(p.sag / EARTH_GRAVITY))
+    touchdown_time = jnp.where(ev.touchdown, time, s.touchdown_time)
+    stance_time = jnp.where(ev.liftoff, time - touchdown_time, stance_time)
+    gain = p.speed_gain * p.leg_length / (g * stance_time)
+    step = jnp.clip(s.params.speed - s.speed_reference, -p.speed_step, p.speed_step)
+    reference = jnp.where(ev.touchdown, s.speed_reference + step, s.speed_reference)
+    error = v - reference
+    offset = jnp.clip(s.speed_offset + p.speed_integral * gain * error, -MAX_SPEED_OFFSET, MAX_SPEED_OFFSET)
+    return Speed(stance_time, touchdown_time, gain, reference, error, jnp.where(ev.touchdown, offset, s.speed_offset))
+
+
+class Inertia(NamedTuple):
+    """The robot's rotational facts at `INERTIA_POSE`, computed once per controller."""
+
+    robot: jax.Array  # (3,) kg·m², whole-robot inertia about each base axis
+    alpha: jax.Array  # (2,) body turn-back per hip swing (haa/roll, hfe/pitch)
+    swing_tilt: jax.Array  # (2,) α/(1-α)
+
+
+def inertia_facts(leg: LegGeometry) -> Inertia:
+    pose = jnp.array(INERTIA_POSE)
+    momentum = lambda rates, gyro: kinematics.angular_momentum(leg, pose, rates, gyro)
+    robot = jax.vmap(lambda axis: momentum(jnp.zeros(3), axis))(jnp.eye(3)).diagonal()
+    # In flight a hip swing of Δ turns the body back by α·Δ (zero angular momentum),
+    # so a leg that swings its world angle by Δθ tilts the body by -α/(1-α)·Δθ.
+    leg_momentum = jax.vmap(lambda hip: momentum(hip, jnp.zeros(3)))(jnp.eye(3)).diagonal()
+    alpha = (leg_momentum / robot)[:2]
+    return Inertia(robot=robot, alpha=alpha, swing_tilt=alpha / (1.0 - alpha))
+
+
+def stance_torque(leg: LegGeometry, gains: RaibertConfig, phase, body: Body, spin, speed: Speed, thrust_force,
+                  g, stiffness, mass: float, swing_tilt) -> jax.Array:
+    """Joint torques (3,) N·m in compression, thrust and unloading: the leg force through J^T
+    plus the hip attitude servo; in unloading only a brake."""
+    # The floor's push is aimed at the COM (not the hip), so that it does not
+    # spin the robot; the spring acts on the virtual leg length.
+    spring = stiffness * (gains.leg_length - body.length)
+    damping = 2.0 * gains.damping_ratio * jnp.sqrt(stiffness * mass) * body.length_rate
+    leg_force = jnp.select([phase == COMPRESSION, phase == THRUST], [spring - damping, spring + thrust_force], 0.0)
+    leg_force = jnp.maximum(leg_force, 0.0)  # a foot can only push on the floor
+    to_com = body.com - body.foot
+    floor_push = leg_force * to_com / jnp.linalg.norm(to_com)
+    servo = (phase == COMPRESSION) | (phase == THRUST)
+    lean = jnp.sqrt(g / EARTH_GRAVITY)  # the stiffness falls with g (see the module docstring)
+    # The next flight swings the leg from about -x_f to +x_f (x_f = v·T_s/2, the
+    # neutral placement) and so tilts the body by swing_tilt·2x_f/L: leaving the
+    # floor leaned the other way by half of that centres the tilt on level.
+    neutral = body.unturn[:2, :2] @ (body.v * speed.stance_time / 2) / gains.leg_length
+    lean_ref = gains.tilt_lead * swing_tilt * jnp.stack([neutral[1], -neutral[0]])
+    # The damping acts on the whole robot's rotation rate H / I, not the body's.
+    attitude = jnp.stack([lean * gains.roll_kp * (body.roll - lean_ref[0]) + gains.roll_kd * spin[0],
+                          lean * gains.pitch_kp * (body.pitch - lean_ref[1]) + gains.pitch_kd * spin[1], 0.0])
+    # A hip torque τ pushes the foot sideways with τ/L: beyond the floor's grip the foot slides.
+    grip = gains.traction * leg_force * body.length
+    attitude = attitude * jnp.minimum(1.0, grip / (jnp.linalg.norm(attitude) + 1e-6))
+    brake = -jnp.asarray(FLIGHT_KD) * body.qd  # unloading: let the joints coast to rest, no push
+    push = -kinematics.jacobian(leg, body.q).T @ floor_push
+    return jnp.where(phase == UNLOADING, brake, push + jnp.where(servo, attitude, 0.0))
+
+
+def flight_torque(leg: LegGeometry, gains: RaibertConfig, body: Body, spin, speed: Speed, g,
+                  inertia: Inertia) -> jax.Array:
+    """Joint torques (3,) N·m in flight: PD to the joint angles that place the foot (part 2)."""
+    placement = body.v * speed.stance_time / 2 + speed.gain * speed.error + speed.offset
+    placement = body.unturn[:2, :2] @ jnp.clip(placement, -MAX_PLACEMENT, MAX_PLACEMENT)
+    foot_height = body.z + (body.rot @ (body.foot - jnp.array([0.0, 0.0, leg.haa_below_base])))[2] - leg.foot_radius
+    time_left = (body.zdot + jnp.sqrt(body.zdot**2 + 2.0 * g * jnp.maximum(foot_height, 0.0))) / g  # to touchdown
+    drift = jnp.stack([body.roll, body.pitch]) + spin[:2] * time_left / (1.0 - inertia.alpha)  # tilt at touchdown
+    placement = _within_tilt_budget(placement, (body.level @ (body.foot - body.com))[:2], drift,
+                                    inertia.swing_tilt, gains.tilt_budget, gains.leg_length)
+    flight_length = gains.leg_length - jnp.where(body.zdot > 0, gains.retract, 0.0)
+    target = _placement_angles(leg, body.level, placement, flight_length, body.com)
+    leg_rate = body.qd + jnp.concatenate([body.gyro[:2], jnp.zeros(1)])  # the leg's rate in the world
+    return pd(jnp.asarray(FLIGHT_KP), jnp.asarray(FLIGHT_KD), target - body.q, leg_rate)
+
+
+def initial_state(params: RaibertParams, obs: Observation) -> RaibertState:
+    params = jax.tree_util.tree_map(lambda v: jnp.asarray(v, dtype=jnp.float32), params)
+    now = jnp.asarray(obs.time, dtype=jnp.float32)
+    return RaibertState(
+        params=params,
+        phase=jnp.int32(FLIGHT),
+        phase_start=now,
+        touchdown_time=now,
+        stance_time=jnp.float32(0.0),  # none measured yet
+        apex=jnp.asarray(obs.qpos[2], dtype=jnp.float32),
+        height_bias=jnp.float32(0.0),
+        speed_offset=jnp.zeros(2, dtype=jnp.float32),
+        speed_reference=jnp.zeros(2, dtype=jnp.float32),
+        thrust_force=jnp.float32(0.0),
+        work=jnp.float32(0.0),
+    )
+
+
+def raibert(robot: Robot, config: RaibertConfig | None = None) -> Controller:
     """`raibert`: hops at the per-instance commanded apex rise and speed.
 
     params: `raibert_params(...)` or None (`config` gains, DEFAULT_HEIGHT in place).
-    leg: the leg geometry (default: the shipped monoped's, checked against `layout`).
     """
-    config = config or default_config()
-    leg = kinematics.geometry_for(layout, leg)
-    qadr, dadr = jnp.asarray(layout.joint_qpos), jnp.asarray(layout.joint_dof)
-    flight_gains = pid.gains_of()._replace(i=jnp.zeros(3))  # the seed's position controllers, PD only
+    layout, leg = robot.layout, robot.leg
     mass, dt = layout.total_mass, layout.timestep
-    stance = jnp.array([0.0, STANCE_HFE, STANCE_KFE])
-    robot_inertia = jax.vmap(lambda axis: kinematics.angular_momentum(leg, stance, jnp.zeros(3), axis))(jnp.eye(3)).diagonal()
-    # In flight a hip swing of Δ turns the body back by α·Δ (zero angular momentum),
-    # so a leg that swings its world angle by Δθ tilts the body by -α/(1-α)·Δθ.
-    leg_momentum = jax.vmap(lambda hip: kinematics.angular_momentum(leg, stance, hip, jnp.zeros(3)))(jnp.eye(3)).diagonal()
-    alpha = (leg_momentum / robot_inertia)[:2]  # (haa/roll, hfe/pitch)
-    swing_tilt = alpha / (1.0 - alpha)
-    defaults = {k: v[0] for k, v in raibert_params(1, height=DEFAULT_HEIGHT, config=config).items()}
+    inertia = inertia_facts(leg)
+    defaults = jax.tree_util.tree_map(lambda v: v[0], raibert_params(1, height=DEFAULT_HEIGHT, config=config))
 
-    def init(data, params):
-        params = defaults if params is None else params
-        params = {k: jnp.asarray(v, dtype=jnp.float32) for k, v in params.items()}
-        return RaibertState(
-            params=params,
-            phase=jnp.int32(FLIGHT),
-            phase_start=jnp.asarray(data.time, dtype=jnp.float32),
-            touchdown_time=jnp.asarray(data.time, dtype=jnp.float32),
-            stance_time=jnp.float32(0.0),  # none measured yet
-            apex=jnp.asarray(data.qpos[2], dtype=jnp.float32),
-            height_bias=jnp.float32(0.0),
-            speed_offset=jnp.zeros(2, dtype=jnp.float32),
-            speed_reference=jnp.zeros(2, dtype=jnp.float32),
-            thrust_force=jnp.float32(0.0),
-            work=jnp.float32(0.0),
-        )
-
-    def act(s: RaibertState, data, gravity):
-        p = s.params
+    def act(s: RaibertState, obs: Observation, gravity):
+        gains = s.params.gains
         # The floor is level, so hops and flights follow gravity's vertical part; a sideways
         # part only pushes the robot along, which the speed loop sees as an error.
         g = jnp.maximum(-gravity[2], MIN_GRAVITY)
-        q, qd = data.qpos[qadr], data.qvel[dadr]
-        z, zdot = data.qpos[2], data.qvel[2]
-        # Horizontal velocity of the COM (constant through a flight, unlike the base's).
-        gyro = data.qvel[3:6]
-        com, com_rate = jax.jvp(lambda a: kinematics.com_position(leg, a), (q,), (qd,))
-        from_base = com + jnp.array([0.0, 0.0, -leg.haa_below_base])
-        rot = bmath.quat_to_3x3(data.qpos[3:7])  # body -> world ([w, x, y, z] quaternion)
-        unturn = _unturn(rot)  # world -> heading frame
-        level = unturn @ rot  # body -> level frame: roll and pitch only
-        heading = lambda xy: unturn[:2, :2] @ xy  # a horizontal world vector in the heading frame
-        v = (data.qvel[:3] + rot @ (jnp.cross(gyro, from_base) + com_rate))[:2]
-        roll, pitch = _tilt(rot)
-        length = kinematics.leg_length(leg, q[2])
-        length_rate = kinematics.leg_length_rate(leg, q[2], qd[2])
-        stiffness = mass * EARTH_GRAVITY / p["sag"]
-        touching = foot_contact(layout, data)
-        elapsed = data.time - s.phase_start
-
-        # -- phase transitions -------------------------------------------------
-        in_stance = s.phase != FLIGHT
-        touchdown = ~in_stance & touching & (elapsed > MIN_PHASE_TIME)
-        liftoff = in_stance & ~touching & (elapsed > MIN_PHASE_TIME)
-        bottom = (s.phase == COMPRESSION) & (length_rate >= 0) & (elapsed > MIN_PHASE_TIME)
-        extended = (s.phase == THRUST) & (length >= p["leg_length"])
-        phase = jnp.where(touchdown, COMPRESSION, s.phase)
-        phase = jnp.where(bottom, THRUST, phase)
-        phase = jnp.where(extended, UNLOADING, phase)
-        phase = jnp.where(liftoff, FLIGHT, phase)
-        changed = phase != s.phase
-
-        # Part 1 bookkeeping: adapt the apex target at touchdown, size the thrust at the bottom.
-        rise = s.apex - leg.standing_height
-        height_bias = jnp.where(
-            touchdown, jnp.clip(s.height_bias + p["height_adapt"] * (p["height"] - rise), -0.3, 0.3), s.height_bias
-        )
-        squeeze = jnp.maximum(p["leg_length"] - length, 0.0)
-        target_z = leg.standing_height + p["height"] + height_bias
-        needed = mass * g * (target_z - z) - 0.5 * mass * zdot**2 - 0.5 * stiffness * squeeze**2
-        thrust_force = jnp.where(bottom, jnp.maximum(needed, 0.0) / jnp.maximum(squeeze, 0.02), s.thrust_force)
-
-        # Part 2 bookkeeping: stance time at lift-off, the placement integral at touchdown.
-        # Before the first lift-off: half a period of the virtual spring-mass.
-        stance_time = jnp.where(s.stance_time > 0, s.stance_time, math.pi * jnp.sqrt(p["sag"] / EARTH_GRAVITY))
-        touchdown_time = jnp.where(touchdown, data.time, s.touchdown_time)
-        stance_time = jnp.where(liftoff, data.time - touchdown_time, stance_time)
-        speed_gain = p["speed_gain"] * p["leg_length"] / (g * stance_time)
-        step = jnp.clip(p["speed"] - s.speed_reference, -p["speed_step"], p["speed_step"])
-        speed_reference = jnp.where(touchdown, s.speed_reference + step, s.speed_reference)
-        speed_error = v - speed_reference
-        speed_offset = jnp.where(
-            touchdown,
-            jnp.clip(s.speed_offset + p["speed_integral"] * speed_gain * speed_error, -0.1, 0.1),
-            s.speed_offset,
-        )
-        apex = jnp.where(liftoff, z, jnp.where(phase == FLIGHT, jnp.maximum(s.apex, z), s.apex))
-
-        # -- stance: leg force through J^T, hip attitude servo -------------------
-        # The floor's push is aimed at the COM (not the hip), so that it does not
-        # spin the robot; the spring acts on the virtual leg length.
-        spring = stiffness * (p["leg_length"] - length)
-        damping = 2.0 * p["damping_ratio"] * jnp.sqrt(stiffness * mass) * length_rate
-        leg_force = jnp.select(
-            [phase == COMPRESSION, phase == THRUST], [spring - damping, spring + thrust_force], 0.0
-        )
-        leg_force = jnp.maximum(leg_force, 0.0)  # a foot can only push on the floor
-        foot = kinematics.foot_position(leg, q)
-        to_com = com - foot
-        floor_push = leg_force * to_com / jnp.linalg.norm(to_com)
-        servo = (phase == COMPRESSION) | (phase == THRUST)
-        # The damping acts on the whole robot's rotation rate H / I, not the body's:
-        # the leg carries as much angular momentum as the body, and what H is at
-        # lift-off is how fast the robot will tumble through the flight.
-        # The stiffness falls with g (as √g, see the module docstring).
-        spin = kinematics.angular_momentum(leg, q, qd, gyro) / robot_inertia
-        lean = jnp.sqrt(g / EARTH_GRAVITY)
-        # The next flight swings the leg from about -x_f to +x_f (x_f = v·T_s/2, the
-        # neutral placement) and so tilts the body by swing_tilt·2x_f/L: leaving the
-        # floor leaned the other way by half of that centres the tilt on level.
-        neutral = heading(v * stance_time / 2) / p["leg_length"]
-        lean_ref = p["tilt_lead"] * swing_tilt * jnp.stack([neutral[1], -neutral[0]])
-        attitude = jnp.stack([lean * p["roll_kp"] * (roll - lean_ref[0]) + p["roll_kd"] * spin[0],
-                              lean * p["pitch_kp"] * (pitch - lean_ref[1]) + p["pitch_kd"] * spin[1], 0.0])
-        # A hip torque τ pushes the foot sideways with τ/L: beyond the floor's grip
-        # (friction 1 times the leg force) the foot slides and the hop is lost.
-        grip = p["traction"] * leg_force * length
-        attitude = attitude * jnp.minimum(1.0, grip / (jnp.linalg.norm(attitude) + 1e-6))
-        brake = -flight_gains.d * qd  # unloading: let the joints coast to rest, no push
-        stance_torque = jnp.where(
-            phase == UNLOADING, brake,
-            -kinematics.jacobian(leg, q).T @ floor_push + jnp.where(servo, attitude, 0.0),
-        )
-
-        # -- flight: foot placement by IK, joint PD -----------------------------
-        placement = v * stance_time / 2 + speed_gain * speed_error + speed_offset
-        placement = heading(jnp.clip(placement, -MAX_PLACEMENT, MAX_PLACEMENT))
-        foot_height = z + (rot @ (foot - jnp.array([0.0, 0.0, leg.haa_below_base])))[2] - leg.foot_radius
-        time_left = (zdot + jnp.sqrt(zdot**2 + 2.0 * g * jnp.maximum(foot_height, 0.0))) / g  # to touchdown
-        drift = jnp.stack([roll, pitch]) + spin[:2] * time_left / (1.0 - alpha)  # tilt at touchdown, leg held
-        placement = _within_tilt_budget(placement, (level @ (foot - com))[:2], drift, swing_tilt,
-                                        p["tilt_budget"], p["leg_length"])
-        flight_length = p["leg_length"] - jnp.where(zdot > 0, p["retract"], 0.0)
-        target = _placement_angles(leg, level, placement, flight_length, com)
-        leg_rate = qd + jnp.concatenate([gyro[:2], jnp.zeros(1)])  # the leg's rate in the world
-        flight_torque, _ = pid.effort(flight_gains, target - q, -leg_rate, jnp.zeros(3), dt)
-
-        ctrl = clip_to_limits(layout, jnp.where(phase == FLIGHT, flight_torque, stance_torque))
-        torque = ctrl[jnp.asarray(layout.actuator_of_joint)]
+        body = sense(robot, obs)
+        stiffness = mass * EARTH_GRAVITY / gains.sag
+        phase, ev = next_phase(s.phase, obs.contact.flag, obs.time - s.phase_start, body.length,
+                               body.length_rate, gains.leg_length)
+        height_bias, thrust_force = height_update(s, ev, body, g, stiffness, mass, robot.standing_height)
+        speed = speed_update(s, ev, body.v, obs.time, g)
+        apex = jnp.where(ev.liftoff, body.z, jnp.where(phase == FLIGHT, jnp.maximum(s.apex, body.z), s.apex))
+        spin = kinematics.angular_momentum(leg, body.q, body.qd, body.gyro) / inertia.robot
+        stance = stance_torque(leg, gains, phase, body, spin, speed, thrust_force, g, stiffness, mass,
+                               inertia.swing_tilt)
+        flight = flight_torque(leg, gains, body, spin, speed, g, inertia)
+        torque = saturate(layout, jnp.where(phase == FLIGHT, flight, stance))
+        ctrl = to_ctrl(layout, torque)
         state = RaibertState(
-            params=p,
-            phase=phase,
-            phase_start=jnp.where(changed, data.time, s.phase_start),
-            touchdown_time=touchdown_time,
-            stance_time=stance_time,
-            apex=apex,
-            height_bias=height_bias,
-            speed_offset=speed_offset,
-            speed_reference=speed_reference,
-            thrust_force=thrust_force,
-            work=s.work + jnp.abs(torque * qd).sum() * dt,
+            params=s.params, phase=phase, phase_start=jnp.where(phase != s.phase, obs.time, s.phase_start),
+            touchdown_time=speed.touchdown_time, stance_time=speed.stance_time, apex=apex,
+            height_bias=height_bias, speed_offset=speed.offset, speed_reference=speed.reference,
+            thrust_force=thrust_force, work=s.work + jnp.abs(torque * body.qd).sum() * dt,
         )
         return ctrl, state
 
-    return Controller(name="raibert", init=init, act=act)
-
-
+    return Controller(name="raibert", init=lambda obs, params: initial_state(
+        defaults if params is None else params, obs), act=act)
 def _within_tilt_budget(wanted: jax.Array, now: jax.Array, drift: jax.Array, swing_tilt: jax.Array,
                         budget: jax.Array, length: jax.Array) -> jax.Array:
     """The placement `wanted` moved, if need be, so that the body lands tilted <= `budget`.

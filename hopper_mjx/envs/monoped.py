@@ -7,7 +7,7 @@
   `timestep` (2 ms for training; the core evaluates at its own 1 ms); the policy acts
   every `n_frames` physics steps (default 50 Hz).
 - **Actions** (3, in [-1, 1]) are joint position targets around the standing pose
-  (`Sim.stance_qpos`), `target = stance + action_scale * action`, clipped to the
+  (`model.robot.stance_qpos`), `target = stance + action_scale * action`, clipped to the
   joint range and tracked by a PD law at the physics rate (`pd_torque`), saturated
   at the effort limits like the seed's position controllers on its effort joints.
 - **Observations** (`observe`) are what a real robot reads: the IMU (orientation,
@@ -36,11 +36,15 @@ import numpy as np
 from brax.envs.base import Env, State
 from mujoco import mjx
 
+from hopper_mjx import metrics
 from hopper_mjx import model as hopper_model
-from hopper_mjx import metrics, signals
-from hopper_mjx.control.base import clip_to_limits
+from hopper_mjx.control.base import joint_state, pd, saturate, to_ctrl
+from hopper_mjx.engine.mjx import foot_contact
+from hopper_mjx.model import robot
 from hopper_mjx.model.layout import Layout
-from hopper_mjx.sim import stance_qpos as sim_stance_qpos
+from hopper_mjx.signals import Contact, Observation
+
+MAX_TILT_FROM_VERTICAL = 0.8  # rad between the base's z axis and the vertical that ends an episode
 
 
 @dataclasses.dataclass(frozen=True)
@@ -68,8 +72,9 @@ class MonopedConfig:
     w_action_rate: float = 0.02
     w_spin: float = 0.01  # times |angular rate|², rad²/s²
     fall_penalty: float = 10.0
-    # A fall: the base tilted beyond this, or its origin this low (m).
-    max_tilt: float = metrics.FALL_TILT  # rad, angle of the base z axis from vertical
+    # A fall: the base's z axis this far from vertical (rad; not the metrics' per-axis roll/pitch
+    # bound, see docs/learning.md), or its origin this low (m).
+    max_tilt: float = MAX_TILT_FROM_VERTICAL
     min_base_height: float = metrics.FALL_HEIGHT  # m
     initial_clearance: tuple[float, float] = (0.0, 0.1)  # m, foot above the floor at reset
     initial_joint_noise: float = 0.05  # rad
@@ -111,7 +116,7 @@ def decimation(layout: Layout, cfg: MonopedConfig) -> int:
     return int(round(steps))
 
 
-# -- the pieces shared with the policy controller (hopper_mjx.control.policy) ------------------
+# -- the pieces shared with the policy controller (hopper_mjx.envs.policy) ------------------
 
 
 def joint_targets(layout: Layout, cfg: MonopedConfig, stance: jax.Array, action: jax.Array) -> jax.Array:
@@ -121,31 +126,32 @@ def joint_targets(layout: Layout, cfg: MonopedConfig, stance: jax.Array, action:
     return jnp.clip(target, rng[:, 0], rng[:, 1])
 
 
-def pd_torque(layout: Layout, cfg: MonopedConfig, target: jax.Array, d: mjx.Data) -> jax.Array:
-    """PD on joint angles -> actuator controls, saturated at the effort limits."""
-    q = d.qpos[jnp.asarray(layout.joint_qpos)]
-    qd = d.qvel[jnp.asarray(layout.joint_dof)]
-    return clip_to_limits(layout, jnp.asarray(cfg.kp) * (target - q) - jnp.asarray(cfg.kd) * qd)
+def pd_torque(layout: Layout, cfg: MonopedConfig, target: jax.Array, obs) -> jax.Array:
+    """The PD law on joint angles -> joint torques (haa, hfe, kfe), saturated at the effort limits."""
+    q, qd = joint_state(layout, obs)
+    return saturate(layout, pd(jnp.asarray(cfg.kp), jnp.asarray(cfg.kd), target - q, qd))
 
 
-def observe(
-    layout: Layout, cfg: MonopedConfig, m: mjx.Model, d: mjx.Data, gravity: jax.Array,
-    command: jax.Array, last_action: jax.Array,
-) -> jax.Array:
-    """The policy's input, from the robot's own signals, roughly unit-scaled."""
-    imu = signals.imu(layout, d, gravity)
-    odom = signals.odometry(layout, d)
-    foot = signals.contact(layout, m, d)
+def observation_of(foot_geom: int, m: mjx.Model, d: mjx.Data) -> Observation:
+    """The controller's `Observation` of MJX data after a forward (the env steps MJX itself)."""
+    return Observation(time=d.time, qpos=d.qpos, qvel=d.qvel, contact=Contact(*foot_contact(foot_geom, m, d)))
+
+
+def observe(layout: Layout, cfg: MonopedConfig, obs: Observation, gravity: jax.Array,
+            command: jax.Array, last_action: jax.Array) -> jax.Array:
+    """The policy's input, from the robot's own signals, roughly unit-scaled: the IMU's
+    orientation and rate, the odometry's height and velocity, the foot contact, the joints."""
     weight = layout.total_mass * 9.81
+    q, qd = joint_state(layout, obs)
     parts = [
-        imu.quat,
-        0.25 * imu.gyro,
-        odom.pos[2:3],
-        odom.linvel,
-        foot.flag[None].astype(jnp.float32),
-        foot.force / weight,
-        d.qpos[jnp.asarray(layout.joint_qpos)],
-        0.1 * d.qvel[jnp.asarray(layout.joint_dof)],
+        obs.qpos[3:7],
+        0.25 * obs.qvel[3:6],
+        obs.qpos[2:3],
+        obs.qvel[:3],
+        obs.contact.flag[None].astype(jnp.float32),
+        obs.contact.force / weight,
+        q,
+        0.1 * qd,
         command,
         last_action,
     ]
@@ -160,7 +166,7 @@ def predicted_apex(d: mjx.Data, g: jax.Array) -> jax.Array:
     return d.qpos[2] + vz**2 / (2.0 * jnp.maximum(g, 0.1))
 
 
-def tilt(d: mjx.Data) -> jax.Array:
+def tilt_from_vertical(d: mjx.Data) -> jax.Array:
     """Angle (rad) between the base's z axis and the world's vertical."""
     w, x, y, _ = d.qpos[3:7]
     cos = 1.0 - 2.0 * (x * x + y * y)  # z-component of the body z axis
@@ -169,7 +175,7 @@ def tilt(d: mjx.Data) -> jax.Array:
 
 def fallen(cfg: MonopedConfig, d: mjx.Data) -> jax.Array:
     finite = jnp.isfinite(d.qpos).all() & jnp.isfinite(d.qvel).all()
-    return ~finite | (tilt(d) > cfg.max_tilt) | (d.qpos[2] < cfg.min_base_height)
+    return ~finite | (tilt_from_vertical(d) > cfg.max_tilt) | (d.qpos[2] < cfg.min_base_height)
 
 
 def reward_terms(
@@ -182,7 +188,7 @@ def reward_terms(
     return {
         "apex": cfg.w_apex * jnp.exp(-apex_error / cfg.apex_scale),
         "speed": cfg.w_speed * jnp.exp(-speed_error / cfg.speed_scale**2),
-        "upright": cfg.w_upright * jnp.exp(-((tilt(d) / cfg.upright_scale) ** 2)),
+        "upright": cfg.w_upright * jnp.exp(-((tilt_from_vertical(d) / cfg.upright_scale) ** 2)),
         "effort": -cfg.w_effort * effort,
         "action_rate": -cfg.w_action_rate * jnp.sum((action - last_action) ** 2),
         "spin": -cfg.w_spin * jnp.sum(d.qvel[3:6] ** 2),
@@ -209,14 +215,10 @@ def training_model(mj_model: mujoco.MjModel, cfg: MonopedConfig) -> mujoco.MjMod
     return m
 
 
-def physics_model(mj_model: mujoco.MjModel, cfg: MonopedConfig) -> mjx.Model:
-    return mjx.put_model(training_model(mj_model, cfg))
-
-
 def stance_qpos(mj_model: mujoco.MjModel) -> np.ndarray:
-    """The core's standing pose with the foot on the floor; its joint angles are the
+    """The robot's standing pose with the foot on the floor; its joint angles are the
     centre of the action space."""
-    return sim_stance_qpos(mj_model, clearance=0.0).astype(np.float32)
+    return robot.stance_qpos(mj_model, clearance=0.0).astype(np.float32)
 
 
 # -- the environment -------------------------------------------------------------------------
@@ -262,7 +264,8 @@ class MonopedEnv(Env):
         data = mjx.forward(self.sys, mjx.make_data(self.sys).replace(qpos=qpos))
         command = sample_command(cfg, k_cmd)
         last_action = jnp.zeros(3)
-        obs = observe(lay, cfg, self.sys, data, self.sys.opt.gravity, command, last_action)
+        obs = observe(lay, cfg, observation_of(lay.foot_geom, self.sys, data), self.sys.opt.gravity, command,
+                      last_action)
         zero = jnp.zeros(())
         metrics = {k: zero for k in reward_terms(cfg, data, zero, command, last_action, last_action, zero, zero > 0)}
         info = {"command": command, "last_action": last_action}
@@ -275,8 +278,8 @@ class MonopedEnv(Env):
 
         def physics_step(carry, _):
             d, effort = carry
-            ctrl = pd_torque(lay, cfg, target, d)
-            return (mjx.step(m, d.replace(ctrl=ctrl)), effort + jnp.mean((ctrl / limit) ** 2)), None
+            torque = pd_torque(lay, cfg, target, d)
+            return (mjx.step(m, d.replace(ctrl=to_ctrl(lay, torque))), effort + jnp.mean((torque / limit) ** 2)), None
 
         (data, effort), _ = jax.lax.scan(physics_step, (state.pipeline_state, jnp.zeros(())), None, self.n_frames)
         g = -m.opt.gravity[2]
@@ -284,7 +287,7 @@ class MonopedEnv(Env):
         command, last_action = state.info["command"], state.info["last_action"]
         terms = reward_terms(cfg, data, g, command, action, last_action, effort / self.n_frames, fell)
         reward = jnp.nan_to_num(sum(terms.values()), nan=-cfg.fall_penalty)
-        obs = observe(lay, cfg, m, data, m.opt.gravity, command, action)
+        obs = observe(lay, cfg, observation_of(lay.foot_geom, m, data), m.opt.gravity, command, action)
         info = {**state.info, "last_action": action}
         return state.replace(pipeline_state=data, obs=obs, reward=reward, done=fell.astype(jnp.float32),
                              metrics={**state.metrics, **terms}, info=info)

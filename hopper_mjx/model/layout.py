@@ -23,7 +23,8 @@ class Layout:
     joint_qpos: tuple[int, ...]  # qpos address of haa, hfe, kfe
     joint_dof: tuple[int, ...]  # qvel address of haa, hfe, kfe
     joint_range: tuple[tuple[float, float], ...]  # rad
-    effort_limit: tuple[float, ...]  # N·m, one per actuator, in JOINTS order
+    effort_limit: tuple[float, ...]  # N·m of joint torque, haa, hfe, kfe (the URDF's <limit effort>)
+    gear: tuple[float, ...]  # joint torque per unit of control, haa, hfe, kfe (mechanicalReduction)
     actuator_of_joint: tuple[int, ...]  # actuator index driving haa, hfe, kfe
     foot_geom: int
     floor_geom: int
@@ -53,7 +54,8 @@ class Layout:
         anchor = [d.xanchor[j.id] for j in joints]
         foot_centre = d.geom_xpos[foot.id]
         base_pos = d.xpos[m.jnt_bodyid[0]]
-        ctrl_range = m.actuator_ctrlrange[act] * m.actuator_gear[act, :1]
+        gear = m.actuator_gear[act, 0]
+        torque_range = m.actuator_ctrlrange[act] * gear[:, None]  # rows in joint order
         return cls(
             nq=m.nq,
             nv=m.nv,
@@ -62,7 +64,8 @@ class Layout:
             joint_qpos=tuple(int(j.qposadr[0]) for j in joints),
             joint_dof=tuple(int(j.dofadr[0]) for j in joints),
             joint_range=tuple((float(j.range[0]), float(j.range[1])) for j in joints),
-            effort_limit=tuple(float(v) for v in ctrl_range[:, 1]),
+            effort_limit=tuple(float(v) for v in torque_range[:, 1]),
+            gear=tuple(float(v) for v in gear),
             actuator_of_joint=tuple(act),
             foot_geom=int(foot.id),
             floor_geom=int(m.geom(FLOOR_GEOM).id),

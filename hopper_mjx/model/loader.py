@@ -16,7 +16,6 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import mujoco
-import numpy as np
 
 DEFAULT_URDF = Path(__file__).with_name("monoped.urdf")
 JOINTS = ("haa_joint", "hfe_joint", "kfe_joint")
@@ -67,16 +66,6 @@ class LegDescription:
     transmissions: tuple[Transmission, ...]
 
 
-def _floats(text: str | None, n: int, where: str) -> np.ndarray:
-    try:
-        values = np.array([float(v) for v in (text or "").split()])
-    except ValueError:
-        raise URDFError(f"{where}: expected {n} numbers, got {text!r}") from None
-    if values.shape != (n,) or not np.all(np.isfinite(values)):
-        raise URDFError(f"{where}: expected {n} finite numbers, got {text!r}")
-    return values
-
-
 def _number(element: ET.Element | None, attr: str, where: str) -> float:
     if element is None or element.get(attr) is None:
         raise URDFError(f"{where}: missing '{attr}'")
@@ -106,6 +95,36 @@ def _check_inertial(link: ET.Element) -> None:
     diag = [_number(inertia, k, f"link '{name}' <inertia>") for k in ("ixx", "iyy", "izz")]
     if min(diag) <= 0:
         raise URDFError(f"link '{name}' has a non-positive principal inertia {diag}")
+
+
+def _transmissions(robot: ET.Element, joints: dict[str, ET.Element]) -> list[Transmission]:
+    """The URDF's EffortJointInterface transmissions, each with its joint's effort limit."""
+    transmissions = []
+    for trans in robot.findall("transmission"):
+        joint = trans.find("joint")
+        jname = None if joint is None else joint.get("name")
+        if jname not in joints:
+            raise URDFError(f"transmission '{trans.get('name')}' drives the unknown joint {jname!r}")
+        interfaces = " ".join(h.text or "" for h in trans.iter("hardwareInterface"))
+        if "EffortJointInterface" not in interfaces:
+            raise URDFError(
+                f"transmission '{trans.get('name')}' is not an EffortJointInterface; "
+                "only torque-driven joints are supported"
+            )
+        actuator = trans.find("actuator")
+        reduction = actuator.findtext("mechanicalReduction") if actuator is not None else None
+        effort = _number(joints[jname].find("limit"), "effort", f"joint '{jname}' <limit>")
+        if effort <= 0:
+            raise URDFError(f"joint '{jname}' has effort limit {effort}: it must be positive")
+        transmissions.append(
+            Transmission(
+                joint=jname,
+                actuator=(actuator.get("name") if actuator is not None else None) or f"{jname}_motor",
+                reduction=float(reduction) if reduction else 1.0,
+                effort=effort,
+            )
+        )
+    return transmissions
 
 
 def describe(urdf_text: str, source: str = "<string>") -> LegDescription:
@@ -168,31 +187,7 @@ def describe(urdf_text: str, source: str = "<string>") -> LegDescription:
             f"expected exactly one <sphere> collision (the foot) on {contact_links}, found {len(feet)}"
         )
 
-    transmissions = []
-    for trans in robot.findall("transmission"):
-        joint = trans.find("joint")
-        jname = None if joint is None else joint.get("name")
-        if jname not in joints:
-            raise URDFError(f"transmission '{trans.get('name')}' drives the unknown joint {jname!r}")
-        interfaces = " ".join(h.text or "" for h in trans.iter("hardwareInterface"))
-        if "EffortJointInterface" not in interfaces:
-            raise URDFError(
-                f"transmission '{trans.get('name')}' is not an EffortJointInterface; "
-                "only torque-driven joints are supported"
-            )
-        actuator = trans.find("actuator")
-        reduction = actuator.findtext("mechanicalReduction") if actuator is not None else None
-        effort = _number(joints[jname].find("limit"), "effort", f"joint '{jname}' <limit>")
-        if effort <= 0:
-            raise URDFError(f"joint '{jname}' has effort limit {effort}: it must be positive")
-        transmissions.append(
-            Transmission(
-                joint=jname,
-                actuator=(actuator.get("name") if actuator is not None else None) or f"{jname}_motor",
-                reduction=float(reduction) if reduction else 1.0,
-                effort=effort,
-            )
-        )
+    transmissions = _transmissions(robot, joints)
     undriven = [name for name in JOINTS if name not in {t.joint for t in transmissions}]
     if undriven:
         raise URDFError(f"no EffortJointInterface <transmission> drives {undriven}")

@@ -15,8 +15,7 @@ import time
 from datetime import datetime, timezone
 from pathlib import Path
 
-from hopper_mjx import runtime
-from hopper_mjx.simulate import parse_floats
+from hopper_mjx import cli, runtime
 from hopper_mjx.sweep.grid import DEFAULT_GRAVITY, KICK
 
 
@@ -24,18 +23,19 @@ def parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="python -m hopper_mjx.sweep", description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = p.add_subparsers(dest="kind", required=True)
-    for kind, gravity, num, duration in (("gravity", DEFAULT_GRAVITY, 112, 10.0), ("gains", (1.62, 3.71, 9.81), 32, 10.0)):
+    kinds = (("gravity", DEFAULT_GRAVITY, 112, 10.0), ("gains", (1.62, 3.71, 9.81), 32, 10.0))
+    for kind, gravity, num, duration in kinds:
         s = sub.add_parser(kind, help=f"sweep {kind}")
         flag = "--values" if kind == "gravity" else "--gravity"
-        s.add_argument(flag, dest="gravity", type=lambda t: parse_floats(t, flag), default=list(gravity),
+        s.add_argument(flag, dest="gravity", type=cli.floats(flag), default=list(gravity),
                        help=f"gravity values in m/s² (default: {','.join(map(str, gravity))})")
         if kind == "gains":
             s.add_argument("--param", required=True, help="Raibert gain to sweep (a RaibertConfig field)")
-            s.add_argument("--values", type=lambda t: parse_floats(t, "--values"), required=True, help="its values")
+            s.add_argument("--values", type=cli.floats("--values"), required=True, help="its values")
         s.add_argument("--num", type=int, default=num, help=f"replicates per grid point (default {num})")
         s.add_argument("--duration", type=float, default=duration, help="simulated seconds per instance")
         s.add_argument("--height", type=float, default=0.10, help="commanded apex rise over standing height, m")
-        s.add_argument("--speed", type=lambda t: parse_floats(t, "--speed"), default=[0.0, 0.0], help="VX,VY m/s")
+        s.add_argument("--speed", type=cli.floats("--speed"), default=[0.0, 0.0], help="VX,VY m/s")
         s.add_argument("--kick", type=float, default=KICK, help="std of the random initial velocity, m/s and rad/s")
         s.add_argument("--seed", type=int, default=0)
         s.add_argument("--chunk", type=int, default=256, help="instances per compiled call")
@@ -59,8 +59,7 @@ def main(argv=None) -> int:
                          chunk=args.chunk, param=getattr(args, "param", None),
                          values=tuple(args.values) if args.kind == "gains" else ())
     except ValueError as err:
-        print(f"error: {err}", file=sys.stderr)
-        return 2
+        return cli.fail(err)
     if args.coordinator:
         import jax
 
@@ -70,8 +69,7 @@ def main(argv=None) -> int:
     try:
         instances, table, facts = runner.run(spec, out, progress=not args.no_progress)
     except runner.ManifestMismatch as err:
-        print(f"error: {err}", file=sys.stderr)
-        return 2
+        return cli.fail(err)
     except KeyboardInterrupt:
         print(f"\ninterrupted: finished chunks are saved in {out}; rerun the same command to resume",
               file=sys.stderr)
@@ -82,7 +80,8 @@ def main(argv=None) -> int:
     text = report.write(out, spec, instances, table, runner.COLUMNS, facts)
     print(text)
     rate = f", {facts['steps_per_s']:,.0f} steps/s" if facts["steps_per_s"] else " (all chunks were already done)"
-    print(f"\n{len(instances)} instances x {spec.duration:g} s in {facts['total_wall_s']:.0f} s{rate}; outputs in {out}/")
+    print(f"\n{len(instances)} instances x {spec.duration:g} s in {facts['total_wall_s']:.0f} s{rate}; "
+          f"outputs in {out}/")
     return 0
 
 

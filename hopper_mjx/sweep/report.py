@@ -13,7 +13,7 @@ import numpy as np
 
 from hopper_mjx.sweep.grid import PLANETS, Instances, SweepSpec
 
-INTEGER_COLUMNS = {"replicate", "seed", "hops", "hops_before_fall", "fell", "diverged"}
+INTEGER_COLUMNS = {"replicate", "seed", "hops", "fell", "diverged"}
 
 
 def rows(spec: SweepSpec, inst: Instances, table: np.ndarray, columns: tuple[str, ...]) -> tuple[list[str], list[list]]:
@@ -56,7 +56,8 @@ def group_summary(spec: SweepSpec, inst: Instances, table: np.ndarray, columns: 
             record = {"gravity": g, "label": PLANETS.get(g, "")}
             if spec.kind == "gains":
                 record[spec.param] = value
-            record.update(n=int(sel.sum()), survival=float(alive[sel].mean()), diverged=int(table[sel, columns.index("diverged")].sum()))
+            record.update(n=int(sel.sum()), survival=float(alive[sel].mean()),
+                          diverged=int(table[sel, columns.index("diverged")].sum()))
             # Hop metrics describe steady hopping: the survivors' (a fallen run's last hops are its collapse).
             steady = sel & alive
             for c, name in enumerate(columns):
@@ -75,9 +76,10 @@ def versions() -> dict:
 
 def table_text(spec: SweepSpec, groups: list[dict]) -> str:
     cols = [("g m/s²", "gravity", "{:.2f}"), ("", "label", "{}"), ("n", "n", "{}"), ("alive", "survival", "{:.0%}"),
-            ("hops", "hops", "{:.1f}"), ("apex m", "apex_height", "{:.3f}"), ("arc m", "flight_rise", "{:.3f}"), ("flight s", "flight_time", "{:.3f}"),
-            ("stance s", "stance_time", "{:.3f}"), ("period s", "hop_period", "{:.3f}"), ("duty", "duty_factor", "{:.2f}"),
-            ("v m/s", "mean_speed", "{:+.2f}"), ("|v err|", "tracking_error", "{:.2f}"), ("CoT", "cost_of_transport", "{:.2f}")]
+            ("hops", "hops", "{:.1f}"), ("apex m", "apex_height", "{:.3f}"), ("arc m", "flight_rise", "{:.3f}"),
+            ("flight s", "flight_time", "{:.3f}"), ("stance s", "stance_time", "{:.3f}"),
+            ("period s", "hop_period", "{:.3f}"), ("duty", "duty_factor", "{:.2f}"), ("v m/s", "mean_speed", "{:+.2f}"),
+            ("|v err|", "tracking_error", "{:.2f}"), ("CoT", "cost_of_transport", "{:.2f}")]
     if spec.kind == "gains":
         cols.insert(0, (spec.param, spec.param, "{:g}"))
     cells = [[h for h, _, _ in cols]]

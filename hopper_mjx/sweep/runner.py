@@ -11,7 +11,6 @@ needed), which writes the merged outputs.
 from __future__ import annotations
 
 import json
-import math
 import os
 import time
 from pathlib import Path
@@ -22,7 +21,7 @@ from tqdm import tqdm
 
 from hopper_mjx import metrics, model, signals
 from hopper_mjx.control.raibert import raibert, raibert_params
-from hopper_mjx.sim import Sim, gravity_vectors
+from hopper_mjx.sim import Sim, gravity_vectors, steps_for
 from hopper_mjx.sweep.grid import Instances, SweepSpec, expand
 
 MANIFEST = "manifest.json"
@@ -46,8 +45,9 @@ def claim(out: Path, spec: SweepSpec) -> None:
         wanted = json.loads(json.dumps(spec.to_json()))  # tuples -> lists, as saved
         if saved != wanted:
             diff = {k: (saved.get(k), v) for k, v in wanted.items() if saved.get(k) != v}
+            changes = ", ".join(f"{k}: {a!r} -> {b!r}" for k, (a, b) in diff.items())
             raise ManifestMismatch(
-                f"{out} holds a different sweep (differs in {', '.join(f'{k}: {a!r} -> {b!r}' for k, (a, b) in diff.items())}); "
+                f"{out} holds a different sweep (differs in {changes}); "
                 "use another --out, or the same arguments to resume"
             )
         return
@@ -73,11 +73,8 @@ class ChunkRunner:
 
     def __init__(self, spec: SweepSpec, instances: Instances, sim: Sim):
         self.spec, self.instances, self.sim = spec, instances, sim
-        self.controller = raibert(sim.layout)
-        self.qpos = sim.stance_qpos()
-        self.standing_height = metrics.standing_height(sim.mj_model)
-        whole = math.lcm(*SENSORS.periods(sim.layout.timestep).values())  # a whole period of every stream
-        self.steps = max(1, round(spec.duration / sim.layout.timestep / whole)) * whole
+        self.controller = raibert(sim.robot)
+        self.steps = steps_for(spec.duration, sim.layout.timestep, SENSORS)
 
     def __call__(self, index: np.ndarray) -> np.ndarray:
         """Metrics (len(index), len(COLUMNS)) of the given instances."""
@@ -86,11 +83,12 @@ class ChunkRunner:
         inst = self.instances
         gains = {self.spec.param: inst.value[full]} if self.spec.kind == "gains" else {}
         params = raibert_params(len(full), height=self.spec.height, speed=self.spec.speed, **gains)
-        state = self.sim.reset(gravity_vectors(inst.gravity[full]), key=self.spec.seed, controller=self.controller,
-                               params=params, qpos=self.qpos, qvel=inst.qvel[full])
-        final, traj = self.sim.rollout(state, self.controller, steps=self.steps, sensors=SENSORS)
+        final, traj = self.sim.run(gravity_vectors(inst.gravity[full]), self.controller, params,
+                                   duration=self.spec.duration, sensors=SENSORS, key=self.spec.seed,
+                                   qvel=inst.qvel[full])
         result = metrics.hop_metrics(traj, inst.gravity[full], command_speed=self.spec.speed,
-                                     standing_height=self.standing_height, work=np.asarray(final.cstate.work),
+                                     standing_height=self.sim.robot.standing_height,
+                                     work=np.asarray(final.cstate.work),
                                      mass=self.sim.layout.total_mass)
         result["diverged"] = np.asarray(final.diverged)
         return np.stack([np.asarray(result[c], dtype=np.float64) for c in COLUMNS], axis=1)[:n]

@@ -1,6 +1,6 @@
-"""python -m hopper_mjx.profile_step: where the batched MJX step spends its time.
+"""python -m hopper_mjx.perf.profile: where the batched MJX step spends its time.
 
-    python -m hopper_mjx.profile_step --num 256
+    python -m hopper_mjx.perf.profile --num 256
 
 An ablation of the compiled, fused step as the core runs it (vmapped over one
 chunk of instances, XLA:CPU options of `Sim`, a `lax.scan` over `--steps`
@@ -60,9 +60,10 @@ def measure(num: int, steps: int, settle: int) -> dict:
     import jax
 
     from hopper_mjx import model
-    from hopper_mjx.bench import GRAVITY_SPAN
     from hopper_mjx.control.base import hold
-    from hopper_mjx.sim import Sim, _without_sensors, gravity_vectors
+    from hopper_mjx.engine.mjx import without_sensors
+    from hopper_mjx.perf.bench import GRAVITY_SPAN
+    from hopper_mjx.sim import Sim, gravity_vectors
 
     if num < 1 or steps < 1:
         raise ValueError(f"--num and --steps must be >= 1, got {num}, {steps}")
@@ -73,7 +74,7 @@ def measure(num: int, steps: int, settle: int) -> dict:
     standing, _ = sim.rollout(state, controller, steps=settle)
     costs = {}
     for name, flag in VARIANTS:
-        variant = _without_sensors(mj_model)  # as the core: it computes its own signals
+        variant = without_sensors(mj_model)  # as the core: it computes its own signals
         variant.opt.disableflags |= flag
         costs[name] = rollout_cost(variant, standing.data.qpos, standing.data.qvel, standing.gravity, steps)
     return {"num": num, "steps": steps, "constraint_rows": int(standing.data._impl.efc_J.shape[1]), "us": costs}
@@ -96,7 +97,7 @@ def table(record: dict) -> str:
 
 
 def main(argv=None) -> None:
-    p = argparse.ArgumentParser(prog="python -m hopper_mjx.profile_step", description=__doc__.split("\n")[0])
+    p = argparse.ArgumentParser(prog="python -m hopper_mjx.perf.profile", description=__doc__.split("\n")[0])
     p.add_argument("--num", type=int, default=256, help="instances in the batch (the core's chunk)")
     p.add_argument("--steps", type=int, default=200, help="steps per timed rollout")
     p.add_argument("--settle", type=int, default=300, help="physics steps holding the stance before timing")

@@ -1,7 +1,7 @@
-"""python -m hopper_mjx.echo BAG TOPIC: print a topic's messages laid out as `rostopic echo` does.
+"""python -m hopper_mjx.ros.echo BAG TOPIC: print a topic's messages laid out as `rostopic echo` does.
 
-    python -m hopper_mjx.echo monoped.bag /monoped/imu/data -n 1
-    python -m hopper_mjx.echo monoped_mcap /odom
+    python -m hopper_mjx.ros.echo monoped.bag /monoped/imu/data -n 1
+    python -m hopper_mjx.ros.echo monoped_mcap /odom
 
 BAG is a ROS 1 .bag file or a ROS 2 bag folder (or the .mcap file inside it).
 Messages are decoded with the definitions stored in the bag, so any bag works.
@@ -126,7 +126,7 @@ def echo(path: str | Path, topic: str, count: int | None = None, out=None) -> in
 
 
 def parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="python -m hopper_mjx.echo", description=__doc__,
+    p = argparse.ArgumentParser(prog="python -m hopper_mjx.ros.echo", description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("bag", help="a ROS 1 .bag file or a ROS 2 bag folder")
     p.add_argument("topic", help="e.g. /monoped/imu/data")

@@ -1,7 +1,7 @@
-"""python -m hopper_mjx.plots BAG: PNG plots of a recording's IMU, odometry and contact signals.
+"""python -m hopper_mjx.ros.plots BAG: PNG plots of a recording's IMU, odometry and contact signals.
 
-    python -m hopper_mjx.plots monoped.bag --out signals.png
-    python -m hopper_mjx.plots run.bag --instances 0,2 --out signals.png   # a multi-robot bag
+    python -m hopper_mjx.ros.plots monoped.bag --out signals.png
+    python -m hopper_mjx.ros.plots run.bag --instances 0,2 --out signals.png   # a multi-robot bag
 
 The plots show what the bag holds (as the seed's figures 5.2-5.4 showed the
 published topics), read back with rosbags, one column per recorded robot.
@@ -15,7 +15,8 @@ from pathlib import Path
 
 import numpy as np
 
-from hopper_mjx import echo, record
+from hopper_mjx import cli
+from hopper_mjx.ros import echo, messages
 
 AXES = ("x", "y", "z")
 
@@ -30,7 +31,7 @@ def _stamp(msg) -> float:
 
 def read_signals(path: str | Path, instance: int | None = None) -> dict[str, np.ndarray]:
     """One robot's streams from a bag written by `record`, as arrays with their own stamps (s)."""
-    topics = record.topic_names(instance)
+    topics = messages.topic_names(instance)
     out: dict[str, list] = {k: [] for k in ("imu_t", "gyro", "accel", "odom_t", "pos", "linvel",
                                             "contact_t", "contact", "force")}
     with echo.open_bag(path) as reader:
@@ -97,7 +98,7 @@ def plot_bag(path: str | Path, out: str | Path, instances: list[int] | None = No
     """Writes the PNG of the chosen robots of a bag (default: the single robot of the seed's topics),
     each column titled by its namespace or by `labels`."""
     chosen = [None] if instances is None else instances
-    names = [f"/{record.ROBOT}" if i is None else f"/{record.ROBOT}_{i}" for i in chosen]
+    names = [f"/{messages.ROBOT}" if i is None else f"/{messages.ROBOT}_{i}" for i in chosen]
     if labels is not None and len(labels) != len(chosen):
         raise ValueError(f"{len(labels)} labels for {len(chosen)} plotted robots")
     fig = figure([(title, read_signals(path, i)) for title, i in zip(labels or names, chosen)])
@@ -106,10 +107,10 @@ def plot_bag(path: str | Path, out: str | Path, instances: list[int] | None = No
 
 
 def parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="python -m hopper_mjx.plots", description=__doc__,
+    p = argparse.ArgumentParser(prog="python -m hopper_mjx.ros.plots", description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("bag", help="a bag written by python -m hopper_mjx.record (.bag file or MCAP folder)")
-    p.add_argument("--instances", type=record.parse_indices, default=None,
+    p.add_argument("bag", help="a bag written by python -m hopper_mjx.ros.record (.bag file or MCAP folder)")
+    p.add_argument("--instances", type=cli.parse_indices, default=None,
                    help="robots of a multi-robot bag to plot, e.g. 0,2 (default: the single robot)")
     p.add_argument("--labels", type=lambda s: s.split(","), default=None,
                    help="comma-separated column titles, one per plotted robot (default: namespaces)")
@@ -123,8 +124,7 @@ def main(argv=None) -> int:
     try:
         path = plot_bag(args.bag, args.out, args.instances, args.dpi, args.labels)
     except ValueError as err:
-        print(f"error: {err}", file=sys.stderr)
-        return 2
+        return cli.fail(err)
     print(f"wrote {path}")
     return 0
 

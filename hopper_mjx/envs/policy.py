@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import json
 import math
+from dataclasses import dataclass
 from pathlib import Path
 from typing import NamedTuple
 
@@ -27,9 +28,11 @@ from brax.training.acme import running_statistics
 from brax.training.agents.ppo import checkpoint as ppo_checkpoint
 from brax.training.agents.ppo import networks as ppo_networks
 
-from hopper_mjx.control.base import Controller
+from hopper_mjx.control.base import Controller, joint_state, to_ctrl
 from hopper_mjx.envs import monoped
 from hopper_mjx.model.layout import Layout
+from hopper_mjx.model.robot import Robot
+from hopper_mjx.signals import Observation
 
 ENV_CONFIG = "hopper_env.json"
 NETWORK_CONFIG = "ppo_network_config.json"  # written by brax's ppo checkpoint.save
@@ -89,15 +92,22 @@ def default_command(config: monoped.MonopedConfig) -> jnp.ndarray:
     return jnp.array([0.5 * sum(config.apex_range), 0.0, 0.0])
 
 
-def policy_params(mj_model: mujoco.MjModel, n: int, *, height: float, speed=(0.0, 0.0)) -> jnp.ndarray:
-    """(n, 3) commands from the Raibert controller's terms: `height` m of apex rise above the
-    standing height (`metrics.standing_height`), `speed` (vx, vy) m/s."""
+@jax.tree_util.register_dataclass
+@dataclass(frozen=True)
+class PolicyParams:
+    """Per-instance command of a trained policy, (3,) per instance, (n, 3) batched."""
+
+    command: jax.Array  # apex height of the base (m, above the floor), vx, vy (m/s)
+
+
+def policy_params(robot: Robot, n: int, *, height: float, speed=(0.0, 0.0)) -> PolicyParams:
+    """Commands from the Raibert controller's terms: `height` m of apex rise above the
+    standing height (`Robot.standing_height`), `speed` (vx, vy) m/s."""
     if len(speed) != 2:
         raise ValueError(f"speed needs two values (vx, vy) in m/s, got {speed}")
     if not (math.isfinite(height) and height >= 0):
         raise ValueError(f"height must be a finite apex rise >= 0 m, got {height}")
-    standing = float(monoped.stance_qpos(mj_model)[2])
-    return jnp.tile(jnp.array([standing + height, *speed], dtype=jnp.float32), (n, 1))
+    return PolicyParams(jnp.tile(jnp.array([robot.standing_height + height, *speed], dtype=jnp.float32), (n, 1)))
 
 
 def policy_controller(mj_model: mujoco.MjModel, path) -> Controller:
@@ -106,19 +116,19 @@ def policy_controller(mj_model: mujoco.MjModel, path) -> Controller:
     layout = Layout.of(mj_model)
     every = monoped.decimation(layout, cfg)  # raises if the policy rate does not divide the physics rate
     stance = jnp.asarray(monoped.stance_qpos(mj_model)[list(layout.joint_qpos)])
-    m = monoped.physics_model(mj_model, cfg)  # observe() reads only its contact settings
 
-    def init(data, params):
-        command = default_command(cfg) if params is None else jnp.asarray(params, dtype=jnp.float32)
+    def init(obs, params: PolicyParams | None):
+        command = default_command(cfg) if params is None else jnp.asarray(params.command, dtype=jnp.float32)
         return PolicyState(command, stance, jnp.zeros(3), jnp.zeros((), jnp.int32), jnp.zeros(()))
 
-    def act(cs: PolicyState, data, gravity):
-        obs = monoped.observe(layout, cfg, m, data, gravity, cs.command, cs.last_action)
+    def act(cs: PolicyState, obs: Observation, gravity):
+        features = monoped.observe(layout, cfg, obs, gravity, cs.command, cs.last_action)
         decide = cs.tick % every == 0
-        action = jnp.where(decide, policy(obs), cs.last_action)
+        action = jnp.where(decide, policy(features), cs.last_action)
         target = jnp.where(decide, monoped.joint_targets(layout, cfg, stance, action), cs.target)
-        ctrl = monoped.pd_torque(layout, cfg, target, data)
-        power = jnp.abs(ctrl[jnp.asarray(layout.actuator_of_joint)] * data.qvel[jnp.asarray(layout.joint_dof)]).sum()
-        return ctrl, PolicyState(cs.command, target, action, cs.tick + 1, cs.work + power * layout.timestep)
+        torque = monoped.pd_torque(layout, cfg, target, obs)
+        power = jnp.abs(torque * joint_state(layout, obs)[1]).sum()
+        work = cs.work + power * layout.timestep
+        return to_ctrl(layout, torque), PolicyState(cs.command, target, action, cs.tick + 1, work)
 
     return Controller(name=f"policy:{path}", init=init, act=act)

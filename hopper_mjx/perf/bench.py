@@ -1,7 +1,7 @@
-"""python -m hopper_mjx.bench: the batched MJX core against native multithreaded MuJoCo.
+"""python -m hopper_mjx.perf.bench: the batched MJX core against native multithreaded MuJoCo.
 
-    python -m hopper_mjx.bench --num 4096 --steps 1000 --json bench.json
-    python -m hopper_mjx.bench --scaling 64,256,1024,4096,16384 --steps 500 --plot scaling.png
+    python -m hopper_mjx.perf.bench --num 4096 --steps 1000 --json bench.json
+    python -m hopper_mjx.perf.bench --scaling 64,256,1024,4096,16384 --steps 500 --plot scaling.png
 
 Both sides step the same compiled model, the same N instances for the same T
 steps from the same initial state, instance i under the same gravity:
@@ -151,24 +151,19 @@ class CompileClock:
 
 def controller_pair(name: str, sim, gravity):
     """(MJX controller, params, native MjModel, native ctrl (nu,)) for a --controller value."""
-    from hopper_mjx.control import base
+    from hopper_mjx import control
+    from hopper_mjx.control.base import HOLD_GAINS
 
     layout = sim.layout
-    if name == "hold":
-        gains = base.HOLD_GAINS
-        q0 = sim.stance_qpos()[list(layout.joint_qpos)]
-        ctrl = np.zeros(layout.nu)
-        ctrl[list(layout.actuator_of_joint)] = q0
-        return base.hold(layout), None, native_hold_model(sim.mj_model, layout, **gains), ctrl
+    if name not in ("hold", "raibert", "none"):
+        raise ValueError(f"unknown controller {name!r}; choose from: hold, raibert, none")
+    controller, params = control.make(name, sim.robot, len(gravity))
     if name == "none":
-        return base.zero_torque(layout), None, sim.mj_model, np.zeros(layout.nu)
-    if name == "raibert":  # no C twin: native keeps the (cheaper) hold law, see the module doc
-        from hopper_mjx.control import raibert
-
-        n = len(gravity)
-        params = raibert.raibert_params(n, height=raibert.DEFAULT_HEIGHT)
-        return (raibert.raibert(layout), params) + controller_pair("hold", sim, gravity)[2:]
-    raise ValueError(f"unknown controller {name!r}; choose from: hold, raibert, none")
+        return controller, params, sim.mj_model, np.zeros(layout.nu)
+    # raibert has no C twin: native keeps the (cheaper) hold law, see the module doc.
+    ctrl = np.zeros(layout.nu)
+    ctrl[list(layout.actuator_of_joint)] = sim.robot.stance_joints
+    return controller, params, native_hold_model(sim.mj_model, layout, **HOLD_GAINS), ctrl
 
 
 def timed(fn):
@@ -183,7 +178,7 @@ def peak_rss_mb() -> float:
 
 
 def run(num: int, steps: int, *, controller: str = "hold", chunk: int = 256, repeat: int = 2,
-        threads: int | None = None, timestep: float = 1e-3, native: bool = True) -> dict:
+        threads: int | None = None, timestep: float = 1e-3) -> dict:
     """One side-by-side measurement; returns the JSON record."""
     import jax
 
@@ -207,22 +202,19 @@ def run(num: int, steps: int, *, controller: str = "hold", chunk: int = 256, rep
 
     first_s = timed(run_mjx)[0]
     compile_s = clock.seconds
-    pool = NativeRollout(native_model, gravity, sim.stance_qpos(), native_ctrl, threads) if native else None
+    pool = NativeRollout(native_model, gravity, np.asarray(sim.robot.stance_qpos), native_ctrl, threads)
     mjx_runs, native_runs = [], []
     for _ in range(repeat):  # interleaved, so that both sides see the same background load
         wall, cpu, final = timed(run_mjx)
         mjx_runs.append((wall, cpu))
-        if pool:
-            wall, cpu, native_qpos = timed(lambda: pool.run(steps))
-            native_runs.append((wall, cpu))
-    if pool:
-        pool.close()
+        wall, cpu, native_qpos = timed(lambda: pool.run(steps))
+        native_runs.append((wall, cpu))
+    pool.close()
     total = num * steps
     mjx_s, native_s = [w for w, _ in mjx_runs], [w for w, _ in native_runs]
-    mjx_rate = total / min(mjx_s)
-    native_rate = total / min(native_s) if native_s else float("nan")
+    mjx_rate, native_rate = total / min(mjx_s), total / min(native_s)
     mjx_cpu = min(c for _, c in mjx_runs) / total * 1e6
-    native_cpu = min(c for _, c in native_runs) / total * 1e6 if native_runs else float("nan")
+    native_cpu = min(c for _, c in native_runs) / total * 1e6
     qpos = np.asarray(final.data.qpos)
     record = {
         "num": num,
@@ -252,7 +244,7 @@ def run(num: int, steps: int, *, controller: str = "hold", chunk: int = 256, rep
         "jax": jax.__version__,
         "python": platform.python_version(),
     }
-    if native_s and controller != "raibert":  # same law on both sides: same trajectories
+    if controller != "raibert":  # same law on both sides: same trajectories
         record["native_final_base_height_m"] = float(np.median(native_qpos[:, 2]))
         record["max_final_qpos_gap"] = float(np.abs(native_qpos - qpos).max())
     import mujoco
@@ -265,7 +257,8 @@ def format_table(record: dict) -> str:
     rows = [
         ("instances x steps", f"{record['num']} x {record['steps']}  (controller {record['controller']})"),
         ("MJX steps/s", f"{record['mjx_steps_per_s']:,.0f}  on {record['devices']} {record['device_kind']} device(s)"),
-        ("native steps/s", f"{record['native_steps_per_s']:,.0f}  mujoco.rollout, {record['native_threads']} thread(s)"),
+        ("native steps/s",
+         f"{record['native_steps_per_s']:,.0f}  mujoco.rollout, {record['native_threads']} thread(s)"),
         ("ratio MJX / native", f"{record['ratio']:.2f}"),
         ("CPU us per step", f"MJX {record['mjx_cpu_us_per_step']:.2f}, native {record['native_cpu_us_per_step']:.2f}  "
                             f"(ratio {record['cpu_ratio']:.2f})"),
@@ -288,7 +281,7 @@ def scaling(nums: list[int], steps: int, extra_args: list[str]) -> list[dict]:
     with tempfile.TemporaryDirectory() as tmp:
         for num in nums:
             out = Path(tmp) / f"{num}.json"
-            cmd = [sys.executable, "-m", "hopper_mjx.bench", "--num", str(num), "--steps", str(steps),
+            cmd = [sys.executable, "-m", "hopper_mjx.perf.bench", "--num", str(num), "--steps", str(steps),
                    "--json", str(out), *extra_args]
             subprocess.run(cmd, check=True)
             records.append(json.loads(out.read_text()))
@@ -336,7 +329,7 @@ def plot_scaling(records: list[dict], path: str) -> None:
 
 
 def parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="python -m hopper_mjx.bench", description=__doc__,
+    p = argparse.ArgumentParser(prog="python -m hopper_mjx.perf.bench", description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--num", type=int, default=4096, help="instances N")
     p.add_argument("--steps", type=int, default=1000, help="physics steps T per instance (multiple of 20)")

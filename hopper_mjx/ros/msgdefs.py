@@ -4,7 +4,7 @@ A ROS 1 bag stores, per connection, the message definition: the type's .msg
 text followed by that of every type it embeds (genmsg's "full text"). ROS's
 tools compare it with the installed definitions, and `rosbag check` asks for a
 migration when the text differs, even if only in comments. So the .msg files
-under `ros/msg/<package>/` are ROS's own: std_msgs, geometry_msgs, sensor_msgs,
+under `msg/<package>/` are ROS's own: std_msgs, geometry_msgs, sensor_msgs,
 nav_msgs and rosgraph_msgs from ROS's Debian packages (ros-*-msgs, the Noetic
 releases), gazebo_msgs from gazebo_ros_pkgs' noetic-devel branch. Their md5 sums
 (which ignore comments) are what rosbags computes from its own type store.
@@ -16,7 +16,7 @@ import re
 from functools import cache
 from pathlib import Path
 
-MSG_DIR = Path(__file__).parent / "ros" / "msg"
+MSG_DIR = Path(__file__).with_name("msg")
 SEPARATOR = "=" * 80 + "\n"
 BUILTIN_TYPES = frozenset({
     "bool", "byte", "char", "int8", "uint8", "int16", "uint16", "int32", "uint32", "int64", "uint64",

@@ -1,0 +1,79 @@
+"""The generic engine: MuJoCo MJX's own pipeline, for any model (the reference and the fallback).
+
+Per instance and pure, as the core vmaps it: `forward` runs `mjx.forward` under
+the instance's gravity, `integrate` the model's integrator, and `foot_contact`
+reads the foot's rows of MJX's contact and constraint arrays.
+"""
+
+from __future__ import annotations
+
+import copy
+
+import jax
+import jax.numpy as jnp
+import mujoco
+from mujoco import mjx
+from mujoco.mjx._src import support  # contact_force: decodes MJX's pyramidal/elliptic efc rows
+
+from hopper_mjx.model.layout import Layout
+
+_INTEGRATORS = {
+    mujoco.mjtIntegrator.mjINT_EULER: mjx.euler,
+    mujoco.mjtIntegrator.mjINT_IMPLICITFAST: mjx.implicit,
+    mujoco.mjtIntegrator.mjINT_RK4: mjx.rungekutta4,
+}
+
+
+def without_sensors(mj_model: mujoco.MjModel) -> mujoco.MjModel:
+    """A copy with MuJoCo's sensor stage off: the core measures its signals from the state
+    (hopper_mjx.signals), so the stage would be dead weight in every step."""
+    m = copy.deepcopy(mj_model)
+    m.opt.disableflags |= mujoco.mjtDisableBit.mjDSBL_SENSOR
+    return m
+
+
+def with_gravity(model: mjx.Model, gravity: jax.Array) -> mjx.Model:
+    return model.replace(opt=model.opt.replace(gravity=gravity))
+
+
+def foot_contact(foot_geom: int, model: mjx.Model, data: mjx.Data):
+    """(flag, force, pos) of the foot from MJX data after a forward: the foot touches when one
+    of its contact rows has distance < 0; force (3,) N floor-on-foot and the mean contact
+    point (3,) m, world frame (zeros when not touching)."""
+    con = data._impl.contact
+    touching = (con.geom == foot_geom).any(axis=-1) & (con.dist < 0)
+    # The contact normal points from the floor (geom1) to the foot (geom2).
+    forces = jnp.stack(
+        [support.contact_force(model, data, i, to_world_frame=True)[:3] for i in range(con.dist.shape[0])]
+    )
+    force = jnp.where(touching[:, None], forces, 0.0).sum(axis=0)
+    weight = touching / jnp.maximum(touching.sum(), 1)
+    return touching.any(), force, weight @ con.pos
+
+
+class MjxEngine:
+    """MJX's generic step behind the engine interface (see hopper_mjx.engine)."""
+
+    name = "mjx"
+    # A diverged instance keeps these from its last finite state (the rest is recomputed).
+    freeze_fields = ("qpos", "qvel", "act", "qacc_warmstart")
+
+    def __init__(self, mj_model: mujoco.MjModel):
+        self.source = without_sensors(mj_model)
+        self.foot_geom = Layout.of(mj_model).foot_geom
+        self._integrate = _INTEGRATORS[mujoco.mjtIntegrator(mj_model.opt.integrator)]
+        # On this process's first device: under jax.distributed the default device may be another process's.
+        self.device = jax.local_devices()[0]
+        self.model = mjx.put_model(self.source, device=self.device)
+
+    def make_data(self, qpos: jax.Array, qvel: jax.Array) -> mjx.Data:
+        return mjx.make_data(self.source, device=self.device).replace(qpos=qpos, qvel=qvel)
+
+    def forward(self, model: mjx.Model, data: mjx.Data, gravity: jax.Array) -> mjx.Data:
+        return mjx.forward(with_gravity(model, gravity), data)
+
+    def integrate(self, model: mjx.Model, data: mjx.Data, gravity: jax.Array) -> mjx.Data:
+        return self._integrate(with_gravity(model, gravity), data)
+
+    def foot_contact(self, model: mjx.Model, data: mjx.Data):
+        return foot_contact(self.foot_geom, model, data)

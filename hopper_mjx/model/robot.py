@@ -1,0 +1,136 @@
+"""Robot facts computed once from a compiled monoped and passed down to every layer.
+
+The stance pose, the standing height and the leg geometry belong to the robot,
+not to the simulator or a controller: they are measured here from the `MjModel`
+with MuJoCo C, once, and everything above takes them as arguments.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import mujoco
+import numpy as np
+
+from hopper_mjx.model.layout import Layout
+
+STANCE_HFE = 0.5  # rad: hip flexion of the default crouched stance
+CLEARANCE = 0.05  # m between the foot and the floor in the default initial state
+
+
+def stance_qpos(mj_model: mujoco.MjModel, clearance: float = CLEARANCE, hfe: float = STANCE_HFE) -> np.ndarray:
+    """qpos upright at rest: hip flexed by `hfe`, the knee bent so that the whole-robot
+    centre of mass sits straight above the foot, the foot `clearance` m above the floor."""
+    m, lay = mj_model, Layout.of(mj_model)
+    d = mujoco.MjData(m)
+
+    def com_ahead_of_foot(kfe: float) -> float:
+        d.qpos[:] = m.qpos0
+        d.qpos[list(lay.joint_qpos)] = (0.0, hfe, kfe)
+        mujoco.mj_kinematics(m, d)
+        mujoco.mj_comPos(m, d)
+        return d.subtree_com[0, 0] - d.geom_xpos[lay.foot_geom, 0]
+
+    lo, hi = lay.joint_range[2]
+    f_lo = com_ahead_of_foot(lo)
+    if f_lo * com_ahead_of_foot(hi) > 0:
+        raise ValueError(f"no knee angle puts the centre of mass above the foot at hfe={hfe}")
+    for _ in range(60):  # bisection on the knee angle
+        mid = 0.5 * (lo + hi)
+        f_mid = com_ahead_of_foot(mid)
+        if f_lo * f_mid <= 0:
+            hi = mid
+        else:
+            lo, f_lo = mid, f_mid
+    com_ahead_of_foot(0.5 * (lo + hi))
+    d.qpos[2] += clearance - (d.geom_xpos[lay.foot_geom, 2] - lay.foot_radius)
+    return d.qpos.copy()
+
+
+def standing_height(mj_model: mujoco.MjModel) -> float:
+    """Base height (m) of the model standing still in the default stance, foot on the floor."""
+    return float(stance_qpos(mj_model, clearance=0.0)[2])
+
+
+def _link_groups(m: mujoco.MjModel, joints) -> list[list[int]]:
+    """Bodies of base, hip, thigh and shank (+ everything rooted below the shank, e.g. the foot)."""
+    base = int(m.jnt_bodyid[0])
+    groups = [[base]] + [[int(j.bodyid[0])] for j in joints]
+    groups[-1] += [b for b in range(m.nbody) if b not in sum(groups, []) and m.body_rootid[b] == base]
+    return groups
+
+
+def _group_inertia(m: mujoco.MjModel, d: mujoco.MjData, group, com) -> tuple[float, float, float]:
+    """Principal inertia of a body group about its own COM (parallel-axis), frames aligned at zero angles."""
+    total = np.zeros((3, 3))
+    for b in group:
+        rot = d.ximat[b].reshape(3, 3)
+        r = d.xipos[b] - com
+        total += rot @ np.diag(m.body_inertia[b]) @ rot.T + m.body_mass[b] * (r @ r * np.eye(3) - np.outer(r, r))
+    return tuple(float(v) for v in np.diag(total))
+
+
+@dataclass(frozen=True)
+class LegGeometry:
+    """Static lengths of a monoped leg (m), hashable like `Layout`."""
+
+    haa_below_base: float  # base origin -> haa axis
+    hfe_below_haa: float  # haa axis -> hfe axis, along the leg at zero haa
+    thigh: float  # hfe -> kfe
+    shank: float  # kfe -> foot centre
+    foot_radius: float
+    standing_height: float  # base height at rest: default stance, foot on the floor
+    # Mass (kg) and centre of mass (m, in the link's frame at zero angles, from its
+    # joint axis; for the base from the haa axis point) of base, hip, thigh, shank+foot.
+    link_mass: tuple[float, ...]
+    link_com: tuple[tuple[float, float, float], ...]
+    link_inertia: tuple[tuple[float, float, float], ...]  # kg·m², principal, about each link's COM
+
+    @classmethod
+    def of(cls, m: mujoco.MjModel) -> "LegGeometry":
+        """Measures a compiled monoped at its reference pose (every joint at zero)."""
+        layout = Layout.of(m)
+        d = mujoco.MjData(m)
+        mujoco.mj_kinematics(m, d)  # reference pose: frames aligned
+        joints = [m.joint(name) for name in ("haa_joint", "hfe_joint", "kfe_joint")]
+        anchor = [d.xanchor[j.id].copy() for j in joints]
+        groups = _link_groups(m, joints)
+        mass = [float(m.body_mass[g].sum()) for g in groups]
+        com = [(m.body_mass[g][:, None] * d.xipos[g]).sum(axis=0) / mm for g, mm in zip(groups, mass)]
+        origin = [anchor[0]] + anchor  # the base's COM is taken from the haa axis point too
+        return cls(
+            haa_below_base=float(np.linalg.norm(anchor[0] - d.xpos[m.jnt_bodyid[0]])),
+            hfe_below_haa=float(np.linalg.norm(anchor[1] - anchor[0])),
+            thigh=layout.thigh,
+            shank=layout.shank,
+            foot_radius=layout.foot_radius,
+            standing_height=standing_height(m),
+            link_mass=tuple(mass),
+            link_com=tuple(tuple(float(v) for v in c - o) for c, o in zip(com, origin)),
+            link_inertia=tuple(_group_inertia(m, d, g, c) for g, c in zip(groups, com)),
+        )
+
+
+@dataclass(frozen=True)
+class Robot:
+    """Everything the layers above read about one compiled monoped; hashable, so a static argument."""
+
+    layout: Layout
+    leg: LegGeometry
+    stance_qpos: tuple[float, ...]  # the default initial pose (foot `CLEARANCE` above the floor)
+    standing_height: float  # m, base height in that stance with the foot on the floor
+
+    @classmethod
+    def of(cls, mj_model: mujoco.MjModel) -> "Robot":
+        leg = LegGeometry.of(mj_model)
+        return cls(
+            layout=Layout.of(mj_model),
+            leg=leg,
+            stance_qpos=tuple(float(v) for v in stance_qpos(mj_model)),
+            standing_height=leg.standing_height,
+        )
+
+    @property
+    def stance_joints(self) -> np.ndarray:
+        """(3,) rad, haa, hfe, kfe of the stance."""
+        return np.asarray(self.stance_qpos)[list(self.layout.joint_qpos)]

@@ -1,0 +1,58 @@
+"""The engine seam: names, the choice, and one step of the generic engine against MuJoCo C."""
+
+import copy
+
+import jax
+import jax.numpy as jnp
+import mujoco
+import numpy as np
+import pytest
+
+from hopper_mjx import engine
+from hopper_mjx.model.robot import stance_qpos
+
+
+def test_names_and_the_fallback(mj_model):
+    assert {"auto", "mjx"} <= set(engine.names())
+    assert engine.make("auto", mj_model).name == "mjx"
+    with pytest.raises(ValueError, match="unknown engine 'bogus'; choose from: auto, mjx"):
+        engine.make("bogus", mj_model)
+
+
+def test_sim_rejects_an_unknown_engine_before_building_anything(mj_model):
+    from hopper_mjx.sim import Sim
+
+    with pytest.raises(ValueError, match="unknown engine"):
+        Sim(mj_model, engine="warp")
+
+
+def test_one_mjx_step_in_contact_equals_mujoco_c(mj_model):
+    """Foot pressed 2 mm into the floor under the Moon's gravity, a control on every joint."""
+    eng = engine.make("mjx", mj_model)
+    g = np.array([0.0, 0.0, -1.62])
+    qpos = stance_qpos(mj_model, clearance=-0.002)
+    ctrl = np.array([5.0, -10.0, 20.0])
+    m = copy.deepcopy(mj_model)
+    m.opt.gravity[:] = g
+    d = mujoco.MjData(m)
+    d.qpos[:], d.ctrl[:] = qpos, ctrl
+    mujoco.mj_forward(m, d)
+    touch = np.zeros(6)
+    mujoco.mj_contactForce(m, d, 0, touch)
+    mujoco.mj_step(m, d)
+
+    @jax.jit
+    def step(q, v, u, gravity):
+        data = eng.forward(eng.model, eng.make_data(q, v).replace(ctrl=u), gravity)
+        return eng.integrate(eng.model, data, gravity), eng.foot_contact(eng.model, data)
+
+    data, (flag, force, pos) = step(jnp.asarray(qpos, jnp.float32), jnp.zeros(mj_model.nv), jnp.asarray(ctrl),
+                                    jnp.asarray(g, jnp.float32))
+    np.testing.assert_allclose(np.asarray(data.qpos), d.qpos, atol=1e-5)
+    np.testing.assert_allclose(np.asarray(data.qvel), d.qvel, atol=2e-3)
+    assert float(data.time) == pytest.approx(mj_model.opt.timestep)
+    assert bool(flag)
+    # MuJoCo's contact frame: normal first, pointing from the floor (geom1) to the foot.
+    assert float(force[2]) == pytest.approx(touch[0], rel=1e-3)
+    assert float(pos[2]) == pytest.approx(-0.001, abs=2e-4)  # midway through the 2 mm overlap
+    assert eng.freeze_fields == ("qpos", "qvel", "act", "qacc_warmstart")

@@ -1,0 +1,132 @@
+"""The package's imports run one way: each layer imports only layers below it, and no modules form a cycle.
+
+Pure Python (the standard library's `ast`): every `import` in hopper_mjx/ and
+experiments/, at module level or inside a function, counts.
+"""
+
+import ast
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+PACKAGE = "hopper_mjx"
+# Bottom to top, as the data flows: description -> compiled model -> engine -> signals ->
+# controllers -> metrics -> the batched core -> environments -> command-line support -> tools.
+LAYERS = (
+    ("startup", "runtime", "model"),  # startup: what must precede the first import of MuJoCo
+    ("engine",),
+    ("signals",),
+    ("control",),
+    ("metrics",),
+    ("sim",),
+    ("envs",),
+    ("__init__",),  # the package's public surface
+    ("cli",),
+)
+# Tools sit on top and may not import one another; a part not listed above is a tool.
+# The experiments (training scripts) sit above the tools and may use them.
+TOOL_LAYER = len(LAYERS)
+EXPERIMENTS = "experiments"
+
+
+def layer_of(part: str) -> int:
+    if part == EXPERIMENTS:
+        return TOOL_LAYER + 1
+    return next((i for i, parts in enumerate(LAYERS) if part in parts), TOOL_LAYER)
+
+
+def module_name(path: Path) -> str:
+    parts = list(path.relative_to(ROOT).with_suffix("").parts)
+    if parts[-1] == "__init__" and len(parts) > 1:
+        parts.pop()
+    return ".".join(parts)
+
+
+def sources() -> dict[str, Path]:
+    files = sorted((ROOT / PACKAGE).rglob("*.py")) + sorted((ROOT / "experiments").rglob("*.py"))
+    return {module_name(p): p for p in files}
+
+
+def imported(path: Path, modules: set[str]) -> list[tuple[int, str]]:
+    """(line, module) of every import of a module of ours, resolved to the most specific module."""
+    out = []
+    for node in ast.walk(ast.parse(path.read_text(), str(path))):
+        if isinstance(node, ast.Import):
+            out += [(node.lineno, a.name) for a in node.names if a.name.split(".")[0] == PACKAGE]
+        elif isinstance(node, ast.ImportFrom) and node.module and node.module.split(".")[0] == PACKAGE:
+            for alias in node.names:
+                sub = f"{node.module}.{alias.name}"
+                out.append((node.lineno, sub if sub in modules else node.module))
+    return out
+
+
+def part_of(module: str) -> str:
+    """The top-level part of the package a module belongs to ("__init__" for the package itself)."""
+    if module == PACKAGE:
+        return "__init__"
+    head, _, rest = module.partition(".")
+    return rest.split(".")[0] if head == PACKAGE else head
+
+
+def upstream_imports(graph: dict[str, list[tuple[int, str]]], files: dict[str, Path]) -> list[str]:
+    problems = []
+    for module, targets in graph.items():
+        here = part_of(module)
+        for line, target in targets:
+            there = part_of(target)
+            if there == here:
+                continue
+            if layer_of(there) >= layer_of(here):
+                problems.append(f"{files[module].relative_to(ROOT)}:{line}: {here} (layer {layer_of(here)}) "
+                                f"imports {there} (layer {layer_of(there)}), which is not below it")
+    return problems
+
+
+def cycles(graph: dict[str, list[tuple[int, str]]]) -> list[str]:
+    """One cycle per strongly connected group of modules that import one another."""
+    found, state = [], {}
+
+    def visit(module, stack):
+        state[module] = "open"
+        stack.append(module)
+        for _, target in graph.get(module, ()):
+            if state.get(target) == "open":
+                found.append(" -> ".join(stack[stack.index(target):] + [target]))
+            elif target not in state:
+                visit(target, stack)
+        stack.pop()
+        state[module] = "done"
+
+    for module in sorted(graph):
+        if module not in state:
+            visit(module, [])
+    return found
+
+
+def import_graph():
+    files = sources()
+    return {m: imported(p, set(files)) for m, p in files.items()}, files
+
+
+def test_no_module_imports_from_a_layer_above_it():
+    graph, files = import_graph()
+    assert len(graph) > 30  # the package and the experiments were found
+    problems = upstream_imports(graph, files)
+    assert not problems, "upstream imports:\n" + "\n".join(problems)
+
+
+def test_no_import_cycles():
+    graph, _ = import_graph()
+    found = cycles({m: [(line, t) for line, t in targets if t != m] for m, targets in graph.items()})
+    assert not found, "import cycles:\n" + "\n".join(found)
+
+
+def test_the_check_sees_an_upstream_import_and_a_cycle():
+    """The checker itself: a controller importing the core, and two modules importing each other."""
+    files = {"hopper_mjx.control.raibert": ROOT / "hopper_mjx/control/raibert.py",
+             "hopper_mjx.sim": ROOT / "hopper_mjx/sim.py"}
+    graph = {"hopper_mjx.control.raibert": [(1, "hopper_mjx.sim")],
+             "hopper_mjx.sim": [(2, "hopper_mjx.control.raibert")]}
+    assert upstream_imports(graph, files) == [
+        "hopper_mjx/control/raibert.py:1: control (layer 3) imports sim (layer 5), which is not below it"]
+    assert cycles(graph) == ["hopper_mjx.control.raibert -> hopper_mjx.sim -> hopper_mjx.control.raibert"]
+    assert layer_of("view") == TOOL_LAYER and layer_of("ros") == layer_of("perf") == TOOL_LAYER

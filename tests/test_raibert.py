@@ -1,0 +1,164 @@
+"""Raibert's controller part by part: each pure function against an oracle derived independently
+(phase logic by its truth table, energy and spring-mass formulas, virtual work, the leg's geometry)."""
+
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from hopper_mjx.control import kinematics, raibert
+from hopper_mjx.control.raibert import COMPRESSION, FLIGHT, THRUST, UNLOADING
+from hopper_mjx.model.robot import Robot
+from hopper_mjx.signals import Contact, Observation
+
+L0 = 0.64  # m, the default touchdown leg length
+
+
+@pytest.fixture(scope="module")
+def robot(mj_model):
+    return Robot.of(mj_model)
+
+
+def _state(params=None, **fields):
+    params = params or raibert.raibert_params(1, height=0.1, speed=(0.4, 0.0))
+    obs = Observation(time=jnp.float32(0.0), qpos=jnp.zeros(10), qvel=jnp.zeros(9),
+                      contact=Contact(jnp.bool_(False), jnp.zeros(3), jnp.zeros(3)))
+    s = raibert.initial_state(jax.tree_util.tree_map(lambda v: v[0], params), obs)
+    return s._replace(**{k: jnp.asarray(v, dtype=jnp.float32) for k, v in fields.items()})
+
+
+def _obs(robot, *, z=1.0, joints=None, qvel=None):
+    qpos = np.array(robot.stance_qpos, dtype=np.float32)
+    qpos[2] = z
+    if joints is not None:
+        qpos[list(robot.layout.joint_qpos)] = joints
+    qvel = np.zeros(robot.layout.nv, np.float32) if qvel is None else np.asarray(qvel, np.float32)
+    return Observation(time=jnp.float32(1.0), qpos=jnp.asarray(qpos), qvel=jnp.asarray(qvel),
+                       contact=Contact(jnp.bool_(False), jnp.zeros(3), jnp.zeros(3)))
+
+
+# -- phases -----------------------------------------------------------------------
+@pytest.mark.parametrize("phase, touching, elapsed, length, rate, expected", [
+    (FLIGHT, True, 0.02, 0.6, -0.1, COMPRESSION),  # touchdown
+    (FLIGHT, True, 0.005, 0.6, -0.1, FLIGHT),  # too soon after the last change: debounced
+    (FLIGHT, False, 0.5, 0.6, 0.0, FLIGHT),
+    (COMPRESSION, True, 0.05, 0.58, -0.2, COMPRESSION),  # still shortening
+    (COMPRESSION, True, 0.05, 0.58, 0.0, THRUST),  # the bottom
+    (THRUST, True, 0.05, 0.63, 0.3, THRUST),
+    (THRUST, True, 0.05, 0.641, 0.3, UNLOADING),  # back to the touchdown length
+    (UNLOADING, False, 0.02, 0.64, 0.0, FLIGHT),  # lift-off
+    (COMPRESSION, False, 0.02, 0.6, 0.0, FLIGHT),  # lift-off wins over the bottom
+])
+def test_next_phase_follows_its_truth_table(phase, touching, elapsed, length, rate, expected):
+    new, ev = raibert.next_phase(jnp.int32(phase), jnp.bool_(touching), jnp.float32(elapsed),
+                                 jnp.float32(length), jnp.float32(rate), jnp.float32(L0))
+    assert int(new) == expected
+    assert bool(ev.touchdown) == (phase == FLIGHT and expected == COMPRESSION)
+    assert bool(ev.liftoff) == (phase != FLIGHT and expected == FLIGHT)
+
+
+# -- part 1: height -------------------------------------------------------------------
+def _events(**fired):
+    return raibert.Events(**{k: jnp.bool_(fired.get(k, False)) for k in raibert.Events._fields})
+
+
+def test_thrust_supplies_the_energy_missing_for_the_apex(robot):
+    mass, g, stiffness = robot.layout.total_mass, 3.71, 200.0  # a soft spring: it stores less than is missing
+    s = _state(height_bias=0.02)
+    body = raibert.sense(robot, _obs(robot, z=0.8, joints=(0.0, 0.6, -1.4), qvel=np.r_[0, 0, -0.3, np.zeros(6)]))
+    bias, force = raibert.height_update(s, _events(bottom=True), body, g, stiffness, mass, robot.standing_height)
+    squeeze = L0 - float(body.length)
+    assert squeeze > raibert.MIN_SQUEEZE
+    apex = robot.standing_height + 0.1 + 0.02
+    # Energy at the bottom plus the thrust's work over the stroke = potential energy at the apex.
+    energy = mass * g * float(body.z) + 0.5 * mass * 0.3**2 + 0.5 * stiffness * squeeze**2 + float(force) * squeeze
+    assert energy == pytest.approx(mass * g * apex, rel=1e-5)
+    assert float(force) > 0
+    assert float(bias) == pytest.approx(0.02)  # adapted at touchdown only
+
+
+def test_apex_bias_adapts_at_touchdown_and_is_bounded(robot):
+    body = raibert.sense(robot, _obs(robot))
+    adapt = raibert.RaibertConfig().height_adapt
+    s = _state(apex=robot.standing_height + 0.08, height_bias=0.01)  # 2 cm short of the commanded 0.10
+    bias, _ = raibert.height_update(s, _events(touchdown=True), body, 9.81, 2000.0, 6.8, robot.standing_height)
+    assert float(bias) == pytest.approx(0.01 + adapt * 0.02, abs=1e-6)
+    s = _state(apex=robot.standing_height - 5.0, height_bias=0.25)
+    bias, _ = raibert.height_update(s, _events(touchdown=True), body, 9.81, 2000.0, 6.8, robot.standing_height)
+    assert float(bias) == pytest.approx(raibert.MAX_HEIGHT_BIAS)
+
+
+# -- part 2: speed bookkeeping ------------------------------------------------------------
+def test_stance_time_starts_at_half_a_spring_mass_period_then_is_measured():
+    cfg = raibert.RaibertConfig()
+    s = _state()
+    first = raibert.speed_update(s, _events(), jnp.zeros(2), jnp.float32(0.3), 9.81)
+    # k = m·9.81/sag: half a period π·√(m/k) = π·√(sag/9.81)
+    assert float(first.stance_time) == pytest.approx(math.pi * math.sqrt(cfg.sag / 9.81), rel=1e-6)
+    s = _state(touchdown_time=1.0, stance_time=0.2)
+    out = raibert.speed_update(s, _events(liftoff=True), jnp.zeros(2), jnp.float32(1.17), 9.81)
+    assert float(out.stance_time) == pytest.approx(0.17, abs=1e-6)
+    assert float(out.gain) == pytest.approx(cfg.speed_gain * cfg.leg_length / (9.81 * 0.17), rel=1e-5)
+
+
+def test_speed_reference_ramps_and_the_placement_integral_is_bounded():
+    cfg = raibert.RaibertConfig()
+    s = _state(speed_reference=[0.1, 0.0], speed_offset=[0.095, 0.0], stance_time=0.2)
+    v = jnp.array([0.9, 0.0])
+    out = raibert.speed_update(s, _events(touchdown=True), v, jnp.float32(2.0), 9.81)
+    np.testing.assert_allclose(out.reference, [0.1 + cfg.speed_step, 0.0], atol=1e-6)  # one step towards 0.4
+    np.testing.assert_allclose(out.error, v - out.reference, atol=1e-6)
+    gain = cfg.speed_gain * cfg.leg_length / (9.81 * 0.2)
+    np.testing.assert_allclose(out.offset, [0.095 + cfg.speed_integral * gain * 0.75, 0.0], rtol=1e-5)
+    far_too_fast = raibert.speed_update(s, _events(touchdown=True), jnp.array([5.0, 0.0]), jnp.float32(2.0), 9.81)
+    np.testing.assert_allclose(far_too_fast.offset, [raibert.MAX_SPEED_OFFSET, 0.0], atol=1e-6)
+    still = raibert.speed_update(s, _events(), v, jnp.float32(2.0), 9.81)  # not at touchdown: nothing moves
+    np.testing.assert_allclose(still.reference, [0.1, 0.0])
+    np.testing.assert_allclose(still.offset, [0.095, 0.0])
+
+
+# -- stance and flight torques ---------------------------------------------------------------
+def _speed(stance_time=0.2):
+    z2 = jnp.zeros(2)
+    return raibert.Speed(jnp.float32(stance_time), jnp.float32(0.0), jnp.float32(0.0), z2, z2, z2)
+
+
+def test_stance_torque_is_the_leg_force_through_the_jacobian(robot):
+    """Level body, no spin, no speed: the attitude servo is idle and τ = -Jᵀ·F, F along foot -> COM;
+    by virtual work, τ·δq = -F·δfoot for any small joint motion."""
+    cfg, leg = raibert.RaibertConfig(), robot.leg
+    body = raibert.sense(robot, _obs(robot, joints=(0.05, 0.6, -1.3)))
+    stiffness, thrust = 2000.0, 30.0
+    torque = raibert.stance_torque(leg, cfg, jnp.int32(THRUST), body, jnp.zeros(3), _speed(), thrust, 9.81,
+                                   stiffness, 6.8, jnp.ones(2))
+    force = (stiffness * (L0 - float(body.length)) + thrust)
+    direction = np.asarray(body.com - body.foot) / np.linalg.norm(np.asarray(body.com - body.foot))
+    dq = jnp.array([1e-3, -2e-3, 1.5e-3])
+    _, dfoot = jax.jvp(lambda q: kinematics.foot_position(leg, q), (body.q,), (dq,))
+    assert float(torque @ dq) == pytest.approx(-force * float(direction @ np.asarray(dfoot)), rel=1e-4)
+    unloading = raibert.stance_torque(leg, cfg, jnp.int32(UNLOADING), body._replace(qd=jnp.array([1.0, -2.0, 3.0])),
+                                      jnp.zeros(3), _speed(), thrust, 9.81, stiffness, 6.8, jnp.ones(2))
+    np.testing.assert_allclose(unloading, -np.array(raibert.FLIGHT_KD) * [1.0, -2.0, 3.0], rtol=1e-6)
+
+
+def test_flight_torque_drives_the_foot_to_the_neutral_placement(robot):
+    """Moving at v with the last stance T_s, the PD's target puts the foot v·T_s/2 ahead of the COM
+    on a virtual leg of the touchdown length (read back from the torque: target = q + τ/kp at rest)."""
+    cfg, leg = raibert.RaibertConfig(), robot.leg
+    body = raibert.sense(robot, _obs(robot, qvel=np.r_[0.5, 0, 0, np.zeros(6)]))
+    inertia = raibert.inertia_facts(leg)
+    torque = raibert.flight_torque(leg, cfg, body, jnp.zeros(3), _speed(0.2), 9.81, inertia)
+    target = body.q + torque / jnp.asarray(raibert.FLIGHT_KP)
+    foot = kinematics.foot_position(leg, target)
+    np.testing.assert_allclose(np.asarray(foot - body.com)[:2], [0.5 * 0.2 / 2, 0.0], atol=1e-4)
+    assert float(kinematics.leg_length(leg, target[2])) == pytest.approx(cfg.leg_length, abs=1e-4)
+
+
+def test_flight_gains_are_the_shipped_position_controllers(robot):
+    from hopper_mjx.control import pid
+
+    gains = pid.load_gains()
+    assert raibert.FLIGHT_KP == tuple(gains[j]["p"] for j in ("haa_joint", "hfe_joint", "kfe_joint"))
+    assert raibert.FLIGHT_KD == tuple(gains[j]["d"] for j in ("haa_joint", "hfe_joint", "kfe_joint"))

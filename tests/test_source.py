@@ -1,0 +1,44 @@
+"""The source holds no dead names: every module-level function, class and constant of the package is used
+somewhere (the package, the experiments, the tests) or documented (README, docs/). Pure Python."""
+
+import ast
+import re
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def test_every_module_level_name_is_used_or_documented():
+    code = {p: p.read_text() for p in [*ROOT.glob("hopper_mjx/**/*.py"), *ROOT.glob("experiments/*.py"),
+                                       *ROOT.glob("tests/*.py")]}
+    uses = {}
+    for text in code.values():
+        for word in re.findall(r"\w+", text):
+            uses[word] = uses.get(word, 0) + 1
+    documented = set(re.findall(r"\w+", " ".join(p.read_text() for p in [ROOT / "README.md", *ROOT.glob("docs/*.md")])))
+    dead = []
+    for path in sorted(ROOT.glob("hopper_mjx/**/*.py")):
+        for node in ast.parse(code[path]).body:
+            if isinstance(node, (ast.FunctionDef, ast.ClassDef)):
+                names = [node.name]
+            elif isinstance(node, ast.Assign):
+                names = [t.id for t in node.targets if isinstance(t, ast.Name)]
+            else:
+                continue
+            dead += [f"{path.relative_to(ROOT)}:{node.lineno} {name}" for name in names
+                     if uses.get(name, 0) <= 1 and name not in documented and not name.startswith("__")]
+    assert not dead, "defined, never used:\n" + "\n".join(dead)
+
+
+MAX_FUNCTION_LINES = 80
+
+
+def test_functions_are_at_most_80_lines():
+    long = []
+    for path in sorted([*ROOT.glob("hopper_mjx/**/*.py"), *ROOT.glob("experiments/*.py")]):
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                lines = node.end_lineno - node.lineno + 1
+                if lines > MAX_FUNCTION_LINES:
+                    long.append(f"{path.relative_to(ROOT)}:{node.lineno} {node.name}: {lines} lines")
+    assert not long, "\n".join(long)
