@@ -20,8 +20,6 @@ import os
 import platform
 from pathlib import Path
 
-import jax
-
 CACHE_DIR = Path(os.environ.get("HOPPER_MJX_CACHE", Path.home() / ".cache" / "hopper_mjx" / "jax"))
 
 
@@ -44,6 +42,8 @@ def cpu_cache_dir(base: Path | str) -> Path:
 
 def configure(*, devices: int | None = None, cache_dir: Path | str | None = CACHE_DIR) -> None:
     """Call before the first JAX computation of the process."""
+    import jax  # here, not at module level: commands check their arguments before importing JAX
+
     if "xla_force_host_platform_device_count" not in os.environ.get("XLA_FLAGS", ""):
         jax.config.update("jax_num_cpu_devices", devices or os.cpu_count() or 1)
     if cache_dir is not None:

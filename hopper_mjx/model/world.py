@@ -51,6 +51,18 @@ class World:
     ignored: tuple[str, ...]  # elements with no effect here, as paths like physics/real_time_factor
 
 
+def gravity_vectors(magnitudes) -> np.ndarray:
+    """(N,) magnitudes in m/s², pointing down -> (N, 3) vectors; rejects bad values."""
+    g = np.asarray(magnitudes, dtype=float).reshape(-1)
+    if g.size == 0:
+        raise ValueError("no gravity values: need at least one instance")
+    if not np.all(np.isfinite(g)):
+        raise ValueError(f"gravity must be finite, got {g[~np.isfinite(g)][:3]}")
+    if np.any(g < 0):
+        raise ValueError(f"gravity magnitudes point down and must be >= 0, got {g[g < 0][:3]}")
+    return np.stack([np.zeros_like(g), np.zeros_like(g), -g], axis=1)
+
+
 def _vector(text: str | None, n: int, where: str) -> tuple[float, ...]:
     try:
         values = tuple(float(v) for v in (text or "").split())
