@@ -16,15 +16,20 @@ import numpy as np
 from hopper_mjx import cli, runtime
 
 
-def run(args) -> dict[str, np.ndarray]:
-    """Simulates as the arguments say and returns the arrays saved to the .npz file."""
+def sensor_config(args):
     from hopper_mjx import signals
 
-    sensors = signals.SensorConfig.uniform(args.rate, gyro_noise=args.gyro_noise, accel_noise=args.accel_noise)
-    _, final, traj = cli.run_batch(args, sensors)
+    return signals.SensorConfig.uniform(args.rate, gyro_noise=args.gyro_noise, accel_noise=args.accel_noise)
+
+
+def run(args, batch: cli.Batch | None = None) -> dict[str, np.ndarray]:
+    """Simulates as the arguments say and returns the arrays saved to the .npz file."""
+    sensors = sensor_config(args)
+    batch = batch or cli.check_batch(args)
+    _, final, traj = cli.run_batch(args, batch, sensors)
     out = {
         "time": traj.time["state"],
-        "gravity": cli.batch_gravity(args),
+        "gravity": batch.gravity,
         "qpos": traj.qpos,
         "qvel": traj.qvel,
         "imu_quat": traj.imu.quat,
@@ -43,8 +48,7 @@ def run(args) -> dict[str, np.ndarray]:
 
 
 def parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="python -m hopper_mjx.simulate", description=__doc__,
-                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = cli.parser("python -m hopper_mjx.simulate", __doc__)
     cli.add_batch_options(p)
     p.add_argument("--rate", type=float, default=100.0, help="Hz of the saved signals")
     p.add_argument("--out", default="simulation.npz", help="output .npz file")
@@ -53,9 +57,13 @@ def parser() -> argparse.ArgumentParser:
 
 def main(argv=None) -> int:
     args = parser().parse_args(argv)
-    runtime.configure()
     try:
-        arrays = run(args)
+        cli.check_range("--rate", args.rate, low=0, open_low=True)
+        cli.check_writable("--out", args.out)
+        batch = cli.check_batch(args)
+        cli.check_rates(sensor_config(args), batch)
+        runtime.configure()
+        arrays = run(args, batch)
     except ValueError as err:  # includes URDFError
         return cli.fail(err)
     np.savez_compressed(args.out, **arrays)

@@ -318,5 +318,5 @@ def test_simulate_options_reach_the_controller_unchanged():
     defaults = vars(simulate.parser().parse_args([]))
     ours = vars(record.parser().parse_args([]))
     for name, value in defaults.items():
-        if name not in ("gravity", "rate", "out"):  # record's own defaults: one robot, 50 Hz, a bag
+        if name not in ("gravity", "default_gravity", "rate", "out"):  # record's own defaults: one robot, 50 Hz, a bag
             assert ours[name] == value, name

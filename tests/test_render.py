@@ -125,6 +125,6 @@ def test_simulate_options_reach_the_controller_unchanged():
     defaults = vars(simulate.parser().parse_args([]))
     ours = vars(render.parser().parse_args([]))
     for name, value in defaults.items():
-        if name not in ("gravity", "rate", "out"):
+        if name not in ("gravity", "default_gravity", "rate", "out"):
             assert ours[name] == value, name
     assert render.parser().parse_args(["--size", "320x240"]).size == (320, 240)

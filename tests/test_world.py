@@ -107,3 +107,21 @@ def test_world_gravities_in_one_batch(sim):
         np.testing.assert_allclose(qpos[i, airborne, 0], qpos[i, 0, 0] + gx * steps_down[airborne], atol=5e-5)
     imu = jax.tree_util.tree_map(np.asarray, traj.imu)
     np.testing.assert_allclose(imu.accel[0], 0.0, atol=1e-4)  # weightless and at rest: no specific force
+
+
+def test_world_files_give_the_results_of_gravity_values(tmp_path):
+    """`simulate --world low_gravity.world mars.world` is `simulate --gravity 0,3.71`, to the bit, in one
+    batch. (Two instances, 0.4 s, hold at 100 Hz: test_record's reference run, so one compiled rollout.)"""
+    from hopper_mjx import simulate
+
+    mars = tmp_path / "mars.world"
+    mars.write_text(MARS)
+    common = ["--duration", "0.4", "--controller", "hold", "--rate", "100"]
+    by_world = simulate.run(simulate.parser().parse_args(["--world", str(LOW_GRAVITY), str(mars), *common]))
+    by_value = simulate.run(simulate.parser().parse_args(["--gravity", "0,3.71", *common]))
+    assert by_world.keys() == by_value.keys()
+    for key, value in by_value.items():
+        np.testing.assert_array_equal(by_world[key], value, err_msg=key)
+    qpos, contact = by_world["qpos"], by_world["contact"]
+    np.testing.assert_array_equal(qpos[0], np.broadcast_to(qpos[0, :1], qpos[0].shape))  # floats, still
+    assert not contact[0].any() and contact[1].any()  # Mars pulls its robot down onto the floor

@@ -19,6 +19,8 @@ from typing import Iterator
 import numpy as np
 import yaml
 
+from hopper_mjx import cli
+
 TIME_TYPES = ("builtin_interfaces/msg/Time", "builtin_interfaces/msg/Duration")
 ROS2_METADATA = "metadata.yaml"  # what makes a folder a rosbag2 bag
 
@@ -126,8 +128,7 @@ def echo(path: str | Path, topic: str, count: int | None = None, out=None) -> in
 
 
 def parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="python -m hopper_mjx.ros.echo", description=__doc__,
-                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = cli.parser("python -m hopper_mjx.ros.echo", __doc__)
     p.add_argument("bag", help="a ROS 1 .bag file or a ROS 2 bag folder")
     p.add_argument("topic", help="e.g. /monoped/imu/data")
     p.add_argument("-n", dest="count", type=int, default=None, help="print only the first COUNT messages")
@@ -139,8 +140,7 @@ def main(argv=None) -> int:
     try:
         echo(args.bag, args.topic, args.count)
     except ValueError as err:
-        print(f"error: {err}", file=sys.stderr)
-        return 2
+        return cli.fail(err)
     except BrokenPipeError:  # e.g. piped into head
         return 0
     return 0
