@@ -242,9 +242,13 @@ def check_batch(args) -> Batch:
     return Batch(gravity=np.repeat(rows, args.num, axis=0), model_options=options, gains=gains)
 
 
-def check_rates(sensors, batch: Batch) -> None:
-    """Every stream's rate divides the batch's physics rate (SensorConfig.periods says which does not)."""
-    sensors.periods(batch.model_options["timestep"])
+def check_rates(flags: str, sensors, batch: Batch) -> None:
+    """Every stream's rate divides the batch's physics rate (SensorConfig.periods says which does not);
+    `flags` names the options that set the rates."""
+    try:
+        sensors.periods(batch.model_options["timestep"])
+    except ValueError as err:
+        raise ValueError(f"{flags}: {err}") from None
 
 
 def make_controller(args, sim, batch: Batch):

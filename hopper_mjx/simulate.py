@@ -61,7 +61,7 @@ def main(argv=None) -> int:
         cli.check_range("--rate", args.rate, low=0, open_low=True)
         cli.check_writable("--out", args.out)
         batch = cli.check_batch(args)
-        cli.check_rates(sensor_config(args), batch)
+        cli.check_rates("--rate", sensor_config(args), batch)
         runtime.configure()
         arrays = run(args, batch)
     except ValueError as err:  # includes URDFError
