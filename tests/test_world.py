@@ -125,3 +125,14 @@ def test_world_files_give_the_results_of_gravity_values(tmp_path):
     qpos, contact = by_world["qpos"], by_world["contact"]
     np.testing.assert_array_equal(qpos[0], np.broadcast_to(qpos[0, :1], qpos[0].shape))  # floats, still
     assert not contact[0].any() and contact[1].any()  # Mars pulls its robot down onto the floor
+
+
+def test_sweep_takes_downward_worlds_as_its_gravity_grid(tmp_path):
+    from hopper_mjx.sweep import __main__ as sweep
+
+    (tmp_path / "mars.world").write_text(MARS)
+    (tmp_path / "moon.world").write_text(sdf("<gravity>0 0 -1.62</gravity>"))
+    args = sweep.parser().parse_args(["gravity", "--world", str(tmp_path / "moon.world"), str(tmp_path / "mars.world"),
+                                      "--out", str(tmp_path / "run")])
+    spec, out = sweep.check(args)
+    assert spec.gravity == (1.62, 3.71) and out == tmp_path / "run" and not out.exists()
