@@ -144,13 +144,12 @@ class LiveBatch:
         self.reset()
 
     @classmethod
-    def build(cls, args, sensors=None) -> LiveBatch:
-        """The batch the command-line arguments describe (`cli.build_batch`), streams at `sensors`' rates."""
+    def build(cls, args, batch, sensors=None) -> LiveBatch:
+        """The checked batch (`cli.Batch`) of the command-line arguments, streams at `sensors`' rates."""
         from hopper_mjx import cli
 
-        cli.check_batch(args)
-        sim, gravity, controller, params = cli.build_batch(args)
-        return cls(sim, controller, params, gravity, seed=args.seed, sensors=sensors)
+        sim, controller, params = cli.build_batch(args, batch)
+        return cls(sim, controller, params, batch.gravity, seed=args.seed, sensors=sensors)
 
     @property
     def n(self) -> int:

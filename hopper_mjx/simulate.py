@@ -47,13 +47,13 @@ def arrays(traj, gravity, diverged) -> dict[str, np.ndarray]:
     return {k: np.asarray(v) for k, v in out.items()}
 
 
-def run(args) -> dict[str, np.ndarray]:
-    """Simulates as the arguments say and returns the arrays saved to the .npz file."""
-    _, final, traj = cli.run_batch(args, sensor_config(args))
-    return arrays(traj, cli.batch_gravity(args), final.diverged)
+def run(args, batch: cli.Batch) -> dict[str, np.ndarray]:
+    """Simulates the checked batch and returns the arrays saved to the .npz file."""
+    _, final, traj = cli.run_batch(args, batch, sensor_config(args))
+    return arrays(traj, batch.gravity, final.diverged)
 
 
-def run_live(args, stream) -> dict[str, np.ndarray]:
+def run_live(args, batch: cli.Batch, stream) -> dict[str, np.ndarray]:
     """The same batch played live at --speed-factor x real time and streamed to Foxglove as it
     plays; returns the arrays `run` saves, joined from the played chunks."""
     import time
@@ -61,26 +61,25 @@ def run_live(args, stream) -> dict[str, np.ndarray]:
     from hopper_mjx import live
     from hopper_mjx.sim import steps_for
 
-    batch = live.LiveBatch.build(args, sensor_config(args))
-    stream.attach(batch)
+    playing = live.LiveBatch.build(args, batch, sensor_config(args))
+    stream.attach(playing)
     print(f"streaming instances {stream.instances} to Foxglove on ws://127.0.0.1:{stream.port}", flush=True)
-    end = steps_for(args.duration, batch.sim.layout.timestep, batch.sensors) * batch.sim.layout.timestep
+    end = steps_for(args.duration, playing.sim.layout.timestep, playing.sensors) * playing.sim.layout.timestep
     played: list = []  # the chunks, in order
 
     def keep(chunk, t_from, t_to):
         if not played or played[-1] is not chunk:
             played.append(chunk)
 
-    with live.LiveRun(batch, factor=args.speed_factor, sinks=[keep, stream]) as run_:
+    with live.LiveRun(playing, factor=args.speed_factor, sinks=[keep, stream]) as run_:
         while run_.played_until < end - 1e-9:
             run_.poll()
             time.sleep(run_.seconds_to_next())
-    return arrays(live.joined(played, end), batch.gravity, played[-1].diverged)
+    return arrays(live.joined(played, end), playing.gravity, played[-1].diverged)
 
 
 def parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="python -m hopper_mjx.simulate", description=__doc__,
-                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = cli.parser("python -m hopper_mjx.simulate", __doc__)
     from hopper_mjx.live import SHOWN
 
     cli.add_batch_options(p)
@@ -97,10 +96,13 @@ def main(argv=None) -> int:
     from hopper_mjx.ros import foxglove
 
     try:
-        cli.check_batch(args)
-        with foxglove.listening(args, live.spread(args.num * len(args.gravity), live.SHOWN)) as stream:
+        cli.check_range("--rate", args.rate, low=0, open_low=True)
+        cli.check_writable("--out", args.out)
+        batch = cli.check_batch(args)
+        cli.check_rates("--rate", sensor_config(args), batch)
+        with foxglove.listening(args, live.spread(len(batch.gravity), live.SHOWN)) as stream:
             runtime.configure()
-            saved = run(args) if stream is None else run_live(args, stream)
+            saved = run(args, batch) if stream is None else run_live(args, batch, stream)
     except ValueError as err:  # includes URDFError and a busy --foxglove port
         return cli.fail(err)
     np.savez_compressed(args.out, **saved)

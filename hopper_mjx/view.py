@@ -232,17 +232,17 @@ def main(argv=None) -> int:
     from hopper_mjx.ros import foxglove
 
     try:
-        cli.check_batch(args)
+        checked = cli.check_batch(args)
         if not 1 <= args.show <= SHOWN:
             raise ValueError(f"--show must be in 1..{SHOWN}, got {args.show}")
-        shown = spread(args.num * len(args.gravity), args.show)
+        shown = spread(len(checked.gravity), args.show)
         with foxglove.listening(args, shown) as stream:
             why = needs_display()
             if why:
                 return cli.fail(f"view needs a display: {why}; for pictures and videos without one use "
                                 "python -m hopper_mjx.render")
             runtime.configure()
-            batch = LiveBatch.build(args)
+            batch = LiveBatch.build(args, checked)
             if stream is not None:
                 stream.attach(batch)
                 print(f"streaming to Foxglove on ws://127.0.0.1:{stream.port}", flush=True)

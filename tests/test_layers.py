@@ -13,7 +13,7 @@ PACKAGE = "hopper_mjx"
 # controllers -> metrics -> the batched core -> environments -> command-line support -> live runs
 # and ROS I/O -> tools.
 LAYERS = (
-    ("runtime", "model"),
+    ("startup", "runtime", "model"),  # startup: what must precede the first import of MuJoCo
     ("engine",),
     ("signals",),
     ("control",),
@@ -77,8 +77,10 @@ def upstream_imports(graph: dict[str, list[tuple[int, str]]], files: dict[str, P
             there = part_of(target)
             if there == here:
                 continue
-            if layer_of(there) >= layer_of(here):
-                problems.append(f"{files[module].relative_to(ROOT)}:{line}: {here} (layer {layer_of(here)}) "
+            # A `__main__` module is a command: a tool, whatever part it sits in.
+            layer = TOOL_LAYER if module.endswith(".__main__") else layer_of(here)
+            if layer_of(there) >= layer:
+                problems.append(f"{files[module].relative_to(ROOT)}:{line}: {here} (layer {layer}) "
                                 f"imports {there} (layer {layer_of(there)}), which is not below it")
     return problems
 
