@@ -7,13 +7,17 @@ PY := $(VENV)/bin/python
 install: $(VENV)/.installed
 
 # Headless rendering (hopper_mjx.render): EGL with Mesa's software rasteriser, no display or GPU.
-RENDER_DEBS := libegl1 libopengl0 libgl1-mesa-dri
+# The viewer's test (hopper_mjx.view) runs it on a virtual X display driven by scripted key presses.
+RENDER_DEBS := libegl1 libopengl0 libgl1-mesa-dri xvfb xdotool
+# ROS's own message definitions (.msg files only): tests compare our bags' definitions with them.
+ROS_MSG_DEBS := ros-std-msgs ros-geometry-msgs ros-sensor-msgs ros-nav-msgs ros-rosgraph-msgs
+SYSTEM_DEBS := $(RENDER_DEBS) $(ROS_MSG_DEBS)
 
 $(VENV)/.installed: pyproject.toml
-	@if command -v dpkg >/dev/null && ! dpkg -s $(RENDER_DEBS) >/dev/null 2>&1; then \
+	@if command -v dpkg >/dev/null && ! dpkg -s $(SYSTEM_DEBS) >/dev/null 2>&1; then \
 	  if [ "$$(id -u)" = 0 ]; then \
-	    apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends $(RENDER_DEBS) >/dev/null; \
-	  else echo "note: rendering needs: sudo apt-get install $(RENDER_DEBS)"; fi; \
+	    apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends $(SYSTEM_DEBS) >/dev/null; \
+	  else echo "note: rendering and the ROS tests need: sudo apt-get install $(SYSTEM_DEBS)"; fi; \
 	fi
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install -q --upgrade pip

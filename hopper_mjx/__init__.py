@@ -1,12 +1,35 @@
 """hopper_mjx: batched MJX simulation of the seed monoped under per-instance gravity.
 
 The few names a user needs; everything else lives in its module (see the README's module map).
+They are loaded on first use, so that `python -m hopper_mjx.<command>` checks its arguments
+before JAX and MuJoCo are imported (about 2 s).
 Importing the package changes no JAX setting: the command-line entry points call
-`hopper_mjx.runtime.configure()` themselves.
+`hopper_mjx.runtime.configure()` themselves. It does choose MuJoCo's OpenGL backend
+(EGL on Linux, unless MUJOCO_GL is set) and keeps MJX's import notices off stdout:
+both must be settled before MuJoCo is first imported (see `hopper_mjx.startup`).
 """
 
-from hopper_mjx.model import URDFError, load
-from hopper_mjx.signals import SensorConfig
-from hopper_mjx.sim import Sim, State, Trajectory, gravity_vectors
+import importlib
 
-__all__ = ["SensorConfig", "Sim", "State", "Trajectory", "URDFError", "gravity_vectors", "load"]
+from hopper_mjx import startup
+
+startup.prepare()
+
+_PUBLIC = {
+    "SensorConfig": "hopper_mjx.signals",
+    "Sim": "hopper_mjx.sim",
+    "State": "hopper_mjx.sim",
+    "Trajectory": "hopper_mjx.sim",
+    "URDFError": "hopper_mjx.model",
+    "gravity_vectors": "hopper_mjx.model.world",
+    "load": "hopper_mjx.model",
+}
+__all__ = sorted(_PUBLIC)
+
+
+def __getattr__(name: str):
+    if name not in _PUBLIC:
+        raise AttributeError(f"module 'hopper_mjx' has no attribute {name!r}")
+    value = getattr(importlib.import_module(_PUBLIC[name]), name)
+    globals()[name] = value  # later lookups skip this function
+    return value

@@ -19,6 +19,17 @@ are over the last `last_hops` hops before it, the speed window ends at it.
 Undefined values are NaN: an instance that never completes a hop has NaN apex
 and timing metrics (and hops = 0); a cost of transport needs the motors' work
 and a displacement of at least `MIN_TRANSPORT`.
+
+Gravity enters through its downward part g = -g_z (the floor is level: a
+sideways part pushes the robot along but does not change its hops). With g = 0
+(the seed's zero-gravity world) the robot floats: `floating` is True, and the
+values defined through g (ballistic flight time, cost of transport) are NaN
+rather than a division by zero.
+
+Energy, from the motors' work W (J, e.g. the Raibert controller's ∫Σ|τ·q̇|dt over
+the whole record): `mechanical_power` = W / (mass · record length) in W/kg, and
+`energy_per_hop` = that power times the mean hop period, in J/kg. Both are
+meaningful when the robot hops in place, where the cost of transport is not.
 """
 
 from __future__ import annotations
@@ -103,9 +114,11 @@ def hop_metrics(
     t_contact = np.asarray(traj.time["contact"], dtype=float)
     n = qpos.shape[0]
     g = np.asarray(gravity, dtype=float)
-    g = np.linalg.norm(g, axis=-1) if g.ndim == 2 else g.reshape(-1)
+    g = -g[:, 2] if g.ndim == 2 and g.shape[1:] == (3,) else g.reshape(-1)  # downward part, m/s²
     if g.shape != (n,):
         raise ValueError(f"gravity must be (N, 3) or (N,) with N={n}, got {np.shape(gravity)}")
+    floating = ~(g > 0)
+    g = np.where(floating, np.nan, g)  # nothing that divides by g is defined while floating
     command = np.broadcast_to(np.asarray(command_speed, dtype=float), (n, 2))
     if last_hops < 1 or speed_window <= 0:
         raise ValueError("last_hops must be >= 1 and speed_window > 0")
@@ -115,6 +128,7 @@ def hop_metrics(
     rise, arc = _apexes(qpos[:, :, 2], flag, t_state, t_contact, hops.liftoff, standing_height)
     mean = lambda v: _last_mean(v, hops.complete, last_hops)
     velocity = _mean_velocity(qpos, t_state, fall.index, speed_window)
+    power = _mechanical_power(n, t_state, work, mass)
     return {
         "hops": hops.complete.sum(axis=1),
         "apex_height": mean(rise),
@@ -132,6 +146,9 @@ def hop_metrics(
         "fell": fall.fell,
         "fall_time": np.where(fall.fell, fall.t_fall, np.nan),
         "cost_of_transport": _cost_of_transport(qpos, fall.index, g, work, mass),
+        "mechanical_power": power,
+        "energy_per_hop": power * mean(hops.period),
+        "floating": floating,
     }
 
 
@@ -199,12 +216,25 @@ def _mean_velocity(qpos, t_state, end, speed_window) -> np.ndarray:
         return (qpos[rows, end, :2] - qpos[rows, start, :2]) / np.where(span > 0, span, np.nan)[:, None]
 
 
+def _check_work(work, mass) -> None:
+    if work is not None and (mass is None or not mass > 0):
+        raise ValueError("the cost of transport needs the robot's mass (kg) along with the work")
+
+
+def _mechanical_power(n: int, t_state, work, mass) -> np.ndarray:
+    """(N,) W/kg: the motors' work over the whole record, per second and kilogram (NaN without work)."""
+    _check_work(work, mass)
+    length = t_state[-1] - t_state[0]
+    if work is None or not length > 0:
+        return np.full(n, np.nan)
+    return np.asarray(work, float) / (mass * length)
+
+
 def _cost_of_transport(qpos, end, g, work, mass) -> np.ndarray:
     n = qpos.shape[0]
+    _check_work(work, mass)
     if work is None:
         return np.full(n, np.nan)
-    if mass is None or not mass > 0:
-        raise ValueError("the cost of transport needs the robot's mass (kg) along with the work")
     travel = np.linalg.norm(qpos[np.arange(n), end, :2] - qpos[:, 0, :2], axis=1)
     with np.errstate(invalid="ignore", divide="ignore"):
         return np.where(travel >= MIN_TRANSPORT, np.asarray(work, float) / (mass * g * travel), np.nan)

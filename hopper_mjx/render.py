@@ -5,58 +5,29 @@
 
 The still shows the robot in its initial stance; the video (MP4 or GIF, by the
 file name) shows one instance simulated by the core. Headless machines render
-through EGL (software Mesa on a CPU-only box).
-MuJoCo picks its OpenGL backend when it is first imported, so this module sets
-MUJOCO_GL=egl by default before importing it (an explicit MUJOCO_GL wins).
+through EGL (software Mesa on a CPU-only box): importing `hopper_mjx` chooses it
+before MuJoCo is loaded, unless MUJOCO_GL is set (see `hopper_mjx.startup`).
 """
 
 from __future__ import annotations
 
-import os
+import argparse
+import sys
+from pathlib import Path
 
-os.environ.setdefault("MUJOCO_GL", "egl")
+import mujoco
+import numpy as np
 
-import argparse  # noqa: E402 (MUJOCO_GL must be set before mujoco is imported)
-import sys  # noqa: E402
-from pathlib import Path  # noqa: E402
-
-import mujoco  # noqa: E402
-import numpy as np  # noqa: E402
-
-from hopper_mjx import cli, model, runtime  # noqa: E402
-from hopper_mjx.model import robot  # noqa: E402
+from hopper_mjx import cli, model, runtime
+from hopper_mjx.model import robot, scene
 
 VIDEO_SUFFIXES = (".mp4", ".gif")
 TRACK_HEIGHT = 0.45  # m: the camera looks at the leg's middle, not at the base
-# The URDF has no colours; these tell the links apart (RGBA).
-LINK_COLOURS = {
-    "base": (0.20, 0.38, 0.65, 1),
-    "hipassembly": (0.85, 0.45, 0.10, 1),
-    "upperleg": (0.85, 0.85, 0.82, 1),
-    "lowerleg": (0.85, 0.45, 0.10, 1),
-    "foot": (0.12, 0.12, 0.12, 1),
-}
 
 
 def scene_model(urdf=None) -> mujoco.MjModel:
-    """The simulated monoped plus what only pictures need: a checkered floor and a sky."""
-    spec = model.build_spec(urdf)
-    spec.add_texture(name="checker", type=mujoco.mjtTexture.mjTEXTURE_2D, builtin=mujoco.mjtBuiltin.mjBUILTIN_CHECKER,
-                     rgb1=[0.82, 0.84, 0.86], rgb2=[0.62, 0.66, 0.70], width=256, height=256)
-    spec.add_texture(name="sky", type=mujoco.mjtTexture.mjTEXTURE_SKYBOX, builtin=mujoco.mjtBuiltin.mjBUILTIN_GRADIENT,
-                     rgb1=[0.55, 0.70, 0.90], rgb2=[0.95, 0.97, 1.0], width=256, height=256)
-    floor = spec.add_material(name="floor", texrepeat=[4, 4], texuniform=True)
-    floor.textures[mujoco.mjtTextureRole.mjTEXROLE_RGB] = "checker"
-    spec.geom(model.FLOOR_GEOM).material = "floor"
-    for body, rgba in LINK_COLOURS.items():
-        if spec.body(body) is not None:  # another URDF may name its links differently
-            for geom in spec.body(body).geoms:
-                geom.rgba = rgba
-    spec.visual.headlight.ambient = [0.4, 0.4, 0.4]
-    spec.visual.headlight.diffuse = [0.5, 0.5, 0.5]
-    spec.visual.global_.offwidth = 1920
-    spec.visual.global_.offheight = 1080
-    return spec.compile()
+    """The simulated monoped plus what only pictures need: a checkered floor, a sky, link colours."""
+    return scene.dress(model.build_spec(urdf)).compile()
 
 
 def camera(base_pos, distance: float = 2.0, azimuth: float = 135.0, elevation: float = -12.0) -> mujoco.MjvCamera:
@@ -107,17 +78,31 @@ def robot_pixels(m: mujoco.MjModel, qpos, **size) -> np.ndarray:
     return geom & robot_geom[np.where(geom, seg[..., 0], 0)]
 
 
-def simulate_qpos(args) -> np.ndarray:
+def video_sensors(args):
+    from hopper_mjx import signals
+
+    return signals.SensorConfig.uniform(args.fps)
+
+
+def simulate_qpos(args, batch: cli.Batch | None = None) -> np.ndarray:
     """(T, nq) poses of instance --instance, simulated on the one batch-run path, at --fps.
 
     The core runs the simulation model (`model.load`); the pictures' model adds only visuals."""
-    from hopper_mjx import signals
-
-    n = len(args.gravity) * args.num
-    if not 0 <= args.instance < n:
-        raise ValueError(f"--instance {args.instance} out of range: the batch has {n} (0..{n - 1})")
-    _, _, traj = cli.run_batch(args, signals.SensorConfig.uniform(args.fps))
+    batch = batch or check_video(args)
+    _, _, traj = cli.run_batch(args, batch, video_sensors(args))
     return traj.qpos[args.instance]
+
+
+def check_video(args) -> cli.Batch:
+    """--video and the batch it shows, checked before anything is built."""
+    if args.video.suffix.lower() not in VIDEO_SUFFIXES:
+        raise ValueError(f"--video must end in {' or '.join(VIDEO_SUFFIXES)}, got {args.video}")
+    cli.check_writable("--video", args.video)
+    cli.check_range("--fps", args.fps, low=0, open_low=True)
+    batch = cli.check_batch(args)
+    cli.check_indices("--instance", [args.instance], len(batch.gravity))
+    cli.check_rates("--fps", video_sensors(args), batch)
+    return batch
 
 
 def write_video(path: Path, images, fps: float) -> None:
@@ -142,8 +127,7 @@ def parse_size(text: str) -> tuple[int, int]:
 
 
 def parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="python -m hopper_mjx.render", description=__doc__,
-                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = cli.parser("python -m hopper_mjx.render", __doc__)
     cli.add_batch_options(p, gravity=(9.81,))
     p.add_argument("--still", type=Path, default=None, help="PNG of the robot in its initial stance")
     p.add_argument("--video", type=Path, default=None, help="MP4 or GIF of one simulated instance")
@@ -158,12 +142,14 @@ def main(argv=None) -> int:
     args = parser().parse_args(argv)
     if args.still is None and args.video is None:
         parser().error("nothing to do: give --still PATH and/or --video PATH")
-    runtime.configure()
     size = dict(zip(("width", "height"), args.size))
     try:
-        if args.video is not None and args.video.suffix.lower() not in VIDEO_SUFFIXES:
-            raise ValueError(f"--video must end in {' or '.join(VIDEO_SUFFIXES)}, got {args.video}")
         _check_size(**size)
+        if args.still is not None:
+            cli.check_writable("--still", args.still)
+            cli.check_urdf(args.urdf)
+        batch = check_video(args) if args.video is not None else None
+        runtime.configure()
         m = scene_model(args.urdf)
         if args.still is not None:
             import imageio.v2 as imageio
@@ -171,7 +157,7 @@ def main(argv=None) -> int:
             imageio.imwrite(args.still, still(m, robot.stance_qpos(model.load(args.urdf)), **size))
             print(f"wrote {args.still}")
         if args.video is not None:
-            qpos = simulate_qpos(args)
+            qpos = simulate_qpos(args, batch)
             write_video(args.video, frames(m, qpos, **size), args.fps)
             print(f"wrote {args.video}: {len(qpos)} frames at {args.fps:g} fps")
     except ValueError as err:

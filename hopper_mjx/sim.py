@@ -27,7 +27,10 @@ from jax.sharding import Mesh, NamedSharding, PartitionSpec
 from hopper_mjx import engine as engines
 from hopper_mjx import signals
 from hopper_mjx.control.base import Controller, CState, zero_torque
+from hopper_mjx.model import world
 from hopper_mjx.model.robot import Robot
+
+gravity_vectors = world.gravity_vectors  # the gravity convention lives beside the world files
 
 AXIS = "instances"
 DIVERGED_SPEED = 1e6  # rad/s or m/s: beyond this a state is taken as diverged
@@ -68,18 +71,6 @@ def steps_for(duration: float, timestep: float, sensors: signals.SensorConfig) -
     """Physics steps closest to `duration` s that hold a whole number of every stream's period (at least one)."""
     whole = math.lcm(*sensors.periods(timestep).values())
     return max(1, int(round(duration / timestep / whole))) * whole
-
-
-def gravity_vectors(magnitudes) -> np.ndarray:
-    """(N,) magnitudes in m/s², pointing down -> (N, 3) vectors; rejects bad values."""
-    g = np.asarray(magnitudes, dtype=float).reshape(-1)
-    if g.size == 0:
-        raise ValueError("no gravity values: need at least one instance")
-    if not np.all(np.isfinite(g)):
-        raise ValueError(f"gravity must be finite, got {g[~np.isfinite(g)][:3]}")
-    if np.any(g < 0):
-        raise ValueError(f"gravity magnitudes point down and must be >= 0, got {g[g < 0][:3]}")
-    return np.stack([np.zeros_like(g), np.zeros_like(g), -g], axis=1)
 
 
 def _check_gravity(gravity) -> np.ndarray:

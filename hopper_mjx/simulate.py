@@ -2,8 +2,11 @@
 
     python -m hopper_mjx.simulate --gravity 9.81,3.71,1.62 --num 4 --duration 2 \
         --controller hold --rate 100 --out run.npz
+    python -m hopper_mjx.simulate --controller raibert --duration 20 --rate 50 --foxglove   # live, ws://127.0.0.1:8765
 
-Instances are laid out gravity-major: instance i has gravity value i // num.
+Instances are laid out gravity-major: instance i has gravity value i // num. With --foxglove the
+batch is played live (`hopper_mjx.live`, paced at --speed-factor x real time) and up to 16 of
+its instances stream the ROS topics of `ros.record` at --rate; the .npz holds the same arrays.
 """
 
 from __future__ import annotations
@@ -16,15 +19,17 @@ import numpy as np
 from hopper_mjx import cli, runtime
 
 
-def run(args) -> dict[str, np.ndarray]:
-    """Simulates as the arguments say and returns the arrays saved to the .npz file."""
+def sensor_config(args):
     from hopper_mjx import signals
 
-    sensors = signals.SensorConfig.uniform(args.rate, gyro_noise=args.gyro_noise, accel_noise=args.accel_noise)
-    _, final, traj = cli.run_batch(args, sensors)
+    return signals.SensorConfig.uniform(args.rate, gyro_noise=args.gyro_noise, accel_noise=args.accel_noise)
+
+
+def arrays(traj, gravity, diverged) -> dict[str, np.ndarray]:
+    """The arrays saved to the .npz file, from a trajectory of the batch."""
     out = {
         "time": traj.time["state"],
-        "gravity": cli.batch_gravity(args),
+        "gravity": gravity,
         "qpos": traj.qpos,
         "qvel": traj.qvel,
         "imu_quat": traj.imu.quat,
@@ -37,30 +42,72 @@ def run(args) -> dict[str, np.ndarray]:
         "contact": traj.contact.flag,
         "contact_force": traj.contact.force,
         "contact_pos": traj.contact.pos,
-        "diverged": final.diverged,
+        "diverged": diverged,
     }
     return {k: np.asarray(v) for k, v in out.items()}
 
 
+def run(args, batch: cli.Batch) -> dict[str, np.ndarray]:
+    """Simulates the checked batch and returns the arrays saved to the .npz file."""
+    _, final, traj = cli.run_batch(args, batch, sensor_config(args))
+    return arrays(traj, batch.gravity, final.diverged)
+
+
+def run_live(args, batch: cli.Batch, stream) -> dict[str, np.ndarray]:
+    """The same batch played live at --speed-factor x real time and streamed to Foxglove as it
+    plays; returns the arrays `run` saves, joined from the played chunks."""
+    import time
+
+    from hopper_mjx import live
+    from hopper_mjx.sim import steps_for
+
+    playing = live.LiveBatch.build(args, batch, sensor_config(args))
+    stream.attach(playing)
+    print(f"streaming instances {stream.instances} to Foxglove on ws://127.0.0.1:{stream.port}", flush=True)
+    end = steps_for(args.duration, playing.sim.layout.timestep, playing.sensors) * playing.sim.layout.timestep
+    played: list = []  # the chunks, in order
+
+    def keep(chunk, t_from, t_to):
+        if not played or played[-1] is not chunk:
+            played.append(chunk)
+
+    with live.LiveRun(playing, factor=args.speed_factor, sinks=[keep, stream]) as run_:
+        while run_.played_until < end - 1e-9:
+            run_.poll()
+            time.sleep(run_.seconds_to_next())
+    return arrays(live.joined(played, end), playing.gravity, played[-1].diverged)
+
+
 def parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="python -m hopper_mjx.simulate", description=__doc__,
-                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = cli.parser("python -m hopper_mjx.simulate", __doc__)
+    from hopper_mjx.live import SHOWN
+
     cli.add_batch_options(p)
     p.add_argument("--rate", type=float, default=100.0, help="Hz of the saved signals")
     p.add_argument("--out", default="simulation.npz", help="output .npz file")
+    cli.add_live_options(p, foxglove_help=f"run live and stream up to {SHOWN} instances' ROS topics "
+                                          "(spread over the batch) at --rate")
     return p
 
 
 def main(argv=None) -> int:
     args = parser().parse_args(argv)
-    runtime.configure()
+    from hopper_mjx import live
+    from hopper_mjx.ros import foxglove
+
     try:
-        arrays = run(args)
-    except ValueError as err:  # includes URDFError
+        cli.check_range("--rate", args.rate, low=0, open_low=True)
+        cli.check_writable("--out", args.out)
+        batch = cli.check_batch(args)
+        cli.check_rates("--rate", sensor_config(args), batch)
+        with foxglove.listening(args, live.spread(len(batch.gravity), live.SHOWN)) as stream:
+            runtime.configure()
+            saved = run(args, batch) if stream is None else run_live(args, batch, stream)
+    except ValueError as err:  # includes URDFError and a busy --foxglove port
         return cli.fail(err)
-    np.savez_compressed(args.out, **arrays)
-    cli.warn_diverged(arrays["diverged"])
-    print(f"wrote {args.out}: {arrays['qpos'].shape[0]} instances x {arrays['time'].size} samples")
+    np.savez_compressed(args.out, **saved)
+    cli.warn_diverged(saved["diverged"])
+    print(f"wrote {args.out}: {saved['qpos'].shape[0]} instances x {saved['time'].size} samples")
     return 0
 
 

@@ -33,27 +33,54 @@ MAX_OVERSHOOT = 0.10  # fraction of the step
 
 
 # -- PID ----------------------------------------------------------------------
-def test_load_gains_reads_the_seed_layout(tmp_path):
+def test_load_gains_reads_the_shipped_file():
     gains = pid.load_gains()
     assert set(gains) == {"haa_joint", "hfe_joint", "kfe_joint"}
     assert all(set(g) == {"p", "i", "d", "i_clamp"} and g["p"] > 0 for g in gains.values())
-    seed = tmp_path / "monoped.yaml"  # the seed's file: namespace, joint_state_controller, no i_clamp
-    seed.write_text(
-        "monoped:\n"
-        "  joint_state_controller: {type: joint_state_controller/JointStateController, publish_rate: 50}\n"
-        + "".join(
-            f"  {j}_position_controller:\n    type: effort_controllers/JointPositionController\n"
-            f"    joint: {j}\n    pid: {{p: 100.0, i: 0.01, d: 10.0}}\n"
-            for j in ("haa_joint", "hfe_joint", "kfe_joint")
-        )
-    )
-    assert pid.load_gains(seed)["kfe_joint"] == {"p": 100.0, "i": 0.01, "d": 10.0, "i_clamp": 0.0}
+
+
+# The seed's config/monoped.yaml as ros_control tutorials lay it out: a namespace, comment
+# banners, a joint_state_controller, and gains without i_clamp.
+SEED_YAML = """\
+monoped:
+  # Publish all joint states -----------------------------------
+  joint_state_controller:
+    type: joint_state_controller/JointStateController
+    publish_rate: 50
+
+  # Position Controllers ---------------------------------------
+  haa_joint_position_controller:
+    type: effort_controllers/JointPositionController
+    joint: haa_joint
+    pid: {p: 100.0, i: 0.01, d: 10.0}
+  hfe_joint_position_controller:
+    type: effort_controllers/JointPositionController
+    joint: hfe_joint
+    pid: {p: 100.0, i: 0.01, d: 10.0}
+  kfe_joint_position_controller:
+    type: effort_controllers/JointPositionController
+    joint: kfe_joint
+    pid: {p: 100.0, i: 0.01, d: 10.0}
+"""
+
+
+@pytest.mark.parametrize("name", ["monoped.yaml", "monoped.yml"])
+def test_the_seeds_file_loads_as_is_under_either_spelling(tmp_path, name):
+    package = tmp_path / "my_legged_robots_sims"
+    (package / "config").mkdir(parents=True)
+    (package / "config" / name).write_text(SEED_YAML)
+    expected = {j: {"p": 100.0, "i": 0.01, "d": 10.0, "i_clamp": 0.0} for j in ("haa_joint", "hfe_joint", "kfe_joint")}
+    for path in (package / "config" / name, package / "config", package):  # the file, or a folder holding it
+        assert pid.load_gains(path) == expected
+    with pytest.raises(ValueError, match="no monoped.yaml or monoped.yml in the folder"):
+        pid.load_gains(tmp_path)
 
 
 @pytest.mark.parametrize(
     "text, message",
     [
         ("a: [", "not valid YAML"),
+        (b"\xff\xfe\x00binary", "is not a text"),
         ("x_position_controller: {type: effort_controllers/JointPositionController, joint: elbow, "
          "pid: {p: 1}}", "unknown joint"),
         ("haa_joint_position_controller: {type: effort_controllers/JointPositionController, "
@@ -64,9 +91,10 @@ def test_load_gains_reads_the_seed_layout(tmp_path):
 )
 def test_load_gains_rejects_bad_files(tmp_path, text, message):
     path = tmp_path / "bad.yaml"
-    path.write_text(text)
-    with pytest.raises(ValueError, match=message):
+    path.write_bytes(text) if isinstance(text, bytes) else path.write_text(text)
+    with pytest.raises(ValueError, match=message) as err:
         pid.load_gains(path)
+    assert "\n" not in str(err.value)
 
 
 @pytest.fixture(scope="module")

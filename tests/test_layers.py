@@ -10,9 +10,10 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGE = "hopper_mjx"
 # Bottom to top, as the data flows: description -> compiled model -> engine -> signals ->
-# controllers -> metrics -> the batched core -> environments -> command-line support -> tools.
+# controllers -> metrics -> the batched core -> environments -> command-line support -> live runs
+# and ROS I/O -> tools.
 LAYERS = (
-    ("runtime", "model"),
+    ("startup", "runtime", "model"),  # startup: what must precede the first import of MuJoCo
     ("engine",),
     ("signals",),
     ("control",),
@@ -21,6 +22,7 @@ LAYERS = (
     ("envs",),
     ("__init__",),  # the package's public surface
     ("cli",),
+    ("live", "ros"),  # live runs of the batch, ROS messages and streams: used by several tools
 )
 # Tools sit on top and may not import one another; a part not listed above is a tool.
 # The experiments (training scripts) sit above the tools and may use them.
@@ -75,8 +77,10 @@ def upstream_imports(graph: dict[str, list[tuple[int, str]]], files: dict[str, P
             there = part_of(target)
             if there == here:
                 continue
-            if layer_of(there) >= layer_of(here):
-                problems.append(f"{files[module].relative_to(ROOT)}:{line}: {here} (layer {layer_of(here)}) "
+            # A `__main__` module is a command: a tool, whatever part it sits in.
+            layer = TOOL_LAYER if module.endswith(".__main__") else layer_of(here)
+            if layer_of(there) >= layer:
+                problems.append(f"{files[module].relative_to(ROOT)}:{line}: {here} (layer {layer}) "
                                 f"imports {there} (layer {layer_of(there)}), which is not below it")
     return problems
 
@@ -129,4 +133,5 @@ def test_the_check_sees_an_upstream_import_and_a_cycle():
     assert upstream_imports(graph, files) == [
         "hopper_mjx/control/raibert.py:1: control (layer 3) imports sim (layer 5), which is not below it"]
     assert cycles(graph) == ["hopper_mjx.control.raibert -> hopper_mjx.sim -> hopper_mjx.control.raibert"]
-    assert layer_of("view") == TOOL_LAYER and layer_of("ros") == layer_of("perf") == TOOL_LAYER
+    assert layer_of("view") == layer_of("simulate") == layer_of("perf") == TOOL_LAYER
+    assert layer_of("cli") < layer_of("ros") == layer_of("live") < TOOL_LAYER

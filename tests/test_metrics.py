@@ -79,6 +79,32 @@ def test_falls_stop_the_count():
     assert m["mean_speed"][2] == pytest.approx(SPEED)  # over the 5 s before the fall
 
 
+def test_energy_per_hop_is_the_mean_power_over_one_period():
+    traj, t = _trajectory()
+    work = np.array([100.0, 50.0, 100.0, 100.0])
+    m = metrics.hop_metrics(traj, np.full(4, G), standing_height=STAND, work=work, mass=6.8)
+    power = work / (6.8 * t[-1])  # W/kg over the whole record
+    np.testing.assert_allclose(m["mechanical_power"], power)
+    assert m["energy_per_hop"][0] == pytest.approx(power[0] * (STANCE + FLIGHT) * DT)
+    assert np.isnan(m["energy_per_hop"][1])  # no hop, no energy per hop; the power is still known
+
+
+def test_zero_gravity_floats_and_divides_by_nothing():
+    """The seed's zero-gravity world: the robot floats; values defined through g are NaN, not inf,
+    and no numpy warning is raised. A sideways part of gravity does not count as downward pull."""
+    traj, _ = _trajectory()
+    gravity = np.array([[0, 0, 0], [0, 0, 0], [3.0, 0, -G], [0, 0, -G]], dtype=float)
+    with np.errstate(all="raise"):
+        m = metrics.hop_metrics(traj, gravity, standing_height=STAND, work=np.full(4, 100.0), mass=6.8)
+    assert m["floating"].tolist() == [True, True, False, False]
+    assert np.isnan(m["ballistic_flight_time"][0]) and np.isnan(m["cost_of_transport"][0])
+    assert m["apex_height"][0] == pytest.approx(G * (FLIGHT * DT / 2) ** 2 / 2)  # geometry needs no g
+    # The tilted gravity (3 m/s² sideways) times the flight by its downward part, as the level floor sees it.
+    straight = metrics.hop_metrics(traj, gravity[[3, 3, 3, 3]], standing_height=STAND)
+    assert m["ballistic_flight_time"][2] == straight["ballistic_flight_time"][2]
+    assert m["ballistic_flight_time"][3] == pytest.approx(FLIGHT * DT, rel=1e-9)
+
+
 def test_every_metric_is_its_own_array():
     """No metric is another under a second name (an alias can never disagree, so a test comparing
     the two could never fail)."""

@@ -115,9 +115,13 @@ def test_bad_urdf_is_rejected_with_a_clear_message(tmp_path, edit, message):
         model.load(path)
 
 
-def test_missing_file_is_a_urdf_error(tmp_path):
-    with pytest.raises(model.URDFError, match="cannot read URDF"):
+def test_missing_or_binary_file_is_a_urdf_error_naming_it(tmp_path):
+    with pytest.raises(model.URDFError, match="cannot read URDF .*nope.urdf"):
         model.load(tmp_path / "nope.urdf")
+    binary = tmp_path / "binary.urdf"
+    binary.write_bytes(b"\x89PNG\r\n\x1a\n\xff\xfe\x00")
+    with pytest.raises(model.URDFError, match="binary.urdf is not a text"):
+        model.load(binary)
 
 
 def test_export_cli_reports_bad_urdf_without_traceback(tmp_path):

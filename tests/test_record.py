@@ -6,6 +6,8 @@ the same run through `simulate` is the reference for every value.
 """
 
 import io
+import subprocess
+import sys
 from collections import defaultdict
 from pathlib import Path
 
@@ -15,7 +17,7 @@ import pytest
 
 from hopper_mjx import simulate
 from hopper_mjx.model.layout import Layout
-from hopper_mjx.ros import echo, plots, record
+from hopper_mjx.ros import echo, msgdefs, plots, record
 from hopper_mjx.ros.messages import MSGTYPES, topic_names
 
 GRAVITY = "9.81,1.62"
@@ -214,6 +216,55 @@ def test_echo_prints_each_topics_first_message_as_rostopic_does(recorded):
         assert out.getvalue() == f"{msgs[0][1]}\n---\n", topic
 
 
+def test_echo_cli_stdout_is_genpys_formatting_byte_for_byte(recorded):
+    """As a user pipes it: the whole of stdout (no library import notices) equals what ROS's genpy
+    prints for every message of the topic, each closed by '---' as rostopic echo does."""
+    _, messages = read_with_ros_rosbag(recorded["ros1"])
+    for topic in ("/monoped_1/lowerleg_contactsensor_state", "/monoped_0/imu/data"):
+        done = subprocess.run([sys.executable, "-m", "hopper_mjx.ros.echo", str(recorded["ros1"]), topic],
+                              capture_output=True, timeout=120)
+        assert done.returncode == 0, done.stderr.decode()[-2000:]
+        want = "".join(f"{msg}\n---\n" for _, msg in messages[topic])
+        assert done.stdout == want.encode(), topic
+
+
+ROS_MSG_PACKAGES = ("std_msgs", "geometry_msgs", "sensor_msgs", "nav_msgs", "rosgraph_msgs")
+
+
+def genmsg_definitions(search: dict) -> dict:
+    """msgtype -> (full text, md5) of every type we record, computed by ROS's genmsg from .msg files."""
+    from genpy.genmsg import gentools, msg_loader
+
+    out = {}
+    for msgtype in MSGTYPES.values():
+        context = msg_loader.MsgContext.create_default()
+        spec = msg_loader.load_msg_by_type(context, msgdefs.ros1_name(msgtype), search)
+        msg_loader.load_depends(context, spec, search)
+        text, md5 = gentools.compute_full_text(context, spec), gentools.compute_md5(context, spec)
+        out[msgdefs.ros1_name(msgtype)] = (text, md5)
+    return out
+
+
+def test_bag_definitions_are_ros_own_text_and_md5(recorded):
+    """`rosbag check` asks for a migration when a bag's definition text differs from the installed
+    one, even in comments only. Text and md5 of every connection against ROS's genmsg, on ROS's own
+    .msg files (Debian's ros-*-msgs, installed by the Makefile) and, for gazebo_msgs, on ours."""
+    import rosbag
+
+    with rosbag.Bag(str(recorded["ros1"])) as bag:
+        stored = {c.datatype: (c.msg_def, c.md5sum) for c in bag._connections.values()}
+    ours = genmsg_definitions({p: [str(msgdefs.MSG_DIR / p)] for p in (*ROS_MSG_PACKAGES, "gazebo_msgs")})
+    assert stored == ours
+    assert stored["sensor_msgs/Imu"][1] == "6a62c6daae103f4ff57a132d6f95cec2"  # the md5 every ROS 1 tool knows
+    assert "# This is a message to hold data from an IMU" in stored["sensor_msgs/Imu"][0]  # comments kept
+    system = Path("/usr/share")
+    if not all((system / p / "msg").is_dir() for p in ROS_MSG_PACKAGES):
+        pytest.skip("ROS's message packages are not installed (make install installs them)")
+    ros = genmsg_definitions({p: [str(system / p / "msg")] for p in ROS_MSG_PACKAGES}
+                             | {"gazebo_msgs": [str(msgdefs.MSG_DIR / "gazebo_msgs")]})
+    assert stored == ros
+
+
 def test_echo_cli_on_an_mcap_bag(recorded, capsys):
     _, messages = read_with_rosbags(recorded["mcap"])
     for topic in messages:
@@ -251,6 +302,14 @@ def test_bad_requests_name_the_problem(recorded, tmp_path, capsys):
     (tmp_path / "junk.bag").write_text("not a bag")
     with pytest.raises(ValueError, match="cannot read"):
         echo.echo(tmp_path / "junk.bag", "/clock")
+    (mcap_file,) = Path(recorded["mcap"]).glob("*.mcap")
+    (tmp_path / "lone").mkdir()
+    lone = tmp_path / "lone" / mcap_file.name
+    lone.write_bytes(mcap_file.read_bytes())  # the storage file without its folder's metadata.yaml
+    with pytest.raises(ValueError, match="storage file without its bag folder"):
+        echo.echo(lone, "/clock")
+    with pytest.raises(ValueError, match="folder but not a ROS 2 bag"):
+        echo.echo(tmp_path / "lone", "/clock")
     assert record.main(["--out", str(recorded["ros1"])]) == 2  # refused before simulating
     assert "exists" in capsys.readouterr().err
 
@@ -259,5 +318,6 @@ def test_simulate_options_reach_the_controller_unchanged():
     defaults = vars(simulate.parser().parse_args([]))
     ours = vars(record.parser().parse_args([]))
     for name, value in defaults.items():
-        if name not in ("gravity", "rate", "out"):  # record's own defaults: one robot, 50 Hz, a bag
+        # record's own defaults (one robot, 50 Hz, a bag) and simulate's live run
+        if name not in ("gravity", "default_gravity", "rate", "out", "foxglove", "speed_factor"):
             assert ours[name] == value, name

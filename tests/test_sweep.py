@@ -122,3 +122,46 @@ def test_bad_input_gets_a_clear_error(args, message, capsys, tmp_path):
     assert code == 2
     assert message in capsys.readouterr().err
     assert not (tmp_path / "x").exists()
+
+
+# -- pictures (figures from synthetic summaries: no simulation) ----------------------------------
+def _spec(**kw):
+    from hopper_mjx.sweep.grid import SweepSpec
+
+    return SweepSpec(**{"kind": "gravity", "gravity": (9.81, 1.62, 3.71), "num": 4, "duration": 5.0, "height": 0.1,
+                        "speed": (0.0, 0.0), "seed": 0, **kw})
+
+
+def test_gains_heatmap_reads_at_a_glance():
+    """Survival on a fixed 0-1 scale (all survived is the top colour, not the middle of 0.9-1.1),
+    labels dark on pale cells and light on dark ones, both axes ascending."""
+    from hopper_mjx.sweep import report
+
+    spec = _spec(kind="gains", param="speed_gain", values=(0.6, 0.1))
+    groups = [{"speed_gain": v, "gravity": g, "survival": 1.0, "tracking_error": 0.01 * g} for v in spec.values
+              for g in spec.gravity]
+    fig = report.gains_figure(spec, groups)
+    survival, tracking = fig.axes[0], fig.axes[1]
+    assert survival.images[0].get_clim() == (0.0, 1.0)
+    assert [t.get_text() for t in survival.get_xticklabels()] == ["1.62", "3.71", "9.81"]
+    assert [t.get_text() for t in survival.get_yticklabels()] == ["0.1", "0.6"]
+    assert {t.get_color() for t in survival.texts} == {"k"}  # every cell pale yellow (viridis at 1)
+    colours = {t.get_text(): t.get_color() for t in tracking.texts}
+    assert colours["0.02"] == "k" and colours["0.10"] == "w"  # magma_r: pale at the low end, black at the top
+    report.save(fig, "/dev/null")
+
+
+def test_gravity_figure_shows_energy_per_hop_in_place_and_cot_with_a_speed_command():
+    from hopper_mjx.sweep import report
+
+    groups = [{"gravity": g, "survival": 1.0, "energy_per_hop": 0.4 * g, "cost_of_transport": None}
+              for g in (9.81, 1.62, 3.71)]
+    in_place = report.gravity_figure(_spec(), groups)
+    energy = in_place.axes[5]
+    assert energy.get_ylabel() == "motor work per hop (J/kg)"
+    x, y = energy.lines[0].get_data()
+    assert list(x) == [1.62, 3.71, 9.81] and np.allclose(y, [0.648, 1.484, 3.924])  # ascending g, values follow
+    report.save(in_place, "/dev/null")
+    moving = report.gravity_figure(_spec(speed=(0.5, 0.0)), groups)
+    assert moving.axes[5].get_ylabel() == "cost of transport"
+    report.save(moving, "/dev/null")

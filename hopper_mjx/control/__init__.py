@@ -10,19 +10,20 @@ NAMES = ("none", "hold", "pid", "raibert")
 
 
 def make(name: str, robot: Robot, n: int, *, height: float = raibert.DEFAULT_HEIGHT,
-         speed=(0.0, 0.0)) -> tuple[Controller, object]:
+         speed=(0.0, 0.0), gains=None) -> tuple[Controller, object]:
     """(controller, per-instance params or None) for n instances of `robot`.
 
     none: limp; hold: PD to the initial joint angles; pid: the seed's joint position
-    controllers (monoped.yaml) holding them; raibert: hop at `height` m of apex rise
-    over the standing height and `speed` (vx, vy) m/s.
+    controllers holding them, with `gains` (`pid.load_gains`; default the shipped
+    monoped.yaml); raibert: hop at `height` m of apex rise over the standing height
+    and `speed` (vx, vy) m/s.
     """
     if name == "none":
         return zero_torque(robot.layout), None
     if name == "hold":
         return hold(robot.layout), None
     if name == "pid":
-        return pid.pid(robot.layout), None
+        return pid.pid(robot.layout, gains), None
     if name == "raibert":
         if len(speed) != 2:
             raise ValueError(f"speed needs two values VX,VY in m/s, got {list(speed)}")

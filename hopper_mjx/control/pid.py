@@ -25,9 +25,10 @@ import yaml
 
 from hopper_mjx.control.base import Controller, clip_to_limits, joint_state, pd
 from hopper_mjx.model.layout import Layout
-from hopper_mjx.model.loader import JOINTS
+from hopper_mjx.model.loader import JOINTS, read_text
 
 DEFAULT_GAINS = Path(__file__).with_name("monoped.yaml")
+SEED_GAINS_NAMES = ("monoped.yaml", "monoped.yml")
 CONTROLLER_TYPE = "effort_controllers/JointPositionController"
 GAIN_KEYS = ("p", "i", "d", "i_clamp")  # N·m/rad, N·m/(rad·s), N·m·s/rad, N·m
 
@@ -41,20 +42,33 @@ class PidGains(NamedTuple):
     i_clamp: jax.Array
 
 
+def gains_file(path: str | Path) -> Path:
+    """The gains file a path names: the file itself, or in a folder (the seed's package or its
+    ``config/``) ``monoped.yaml`` or ``monoped.yml``; the seed's launch file spells it .yml."""
+    path = Path(path)
+    if not path.is_dir():
+        return path
+    candidates = [folder / name for folder in (path, path / "config") for name in SEED_GAINS_NAMES]
+    found = [c for c in candidates if c.is_file()]
+    if not found:
+        raise ValueError(f"no {' or '.join(SEED_GAINS_NAMES)} in the folder {path} (nor in its config/)")
+    return found[0]
+
+
 def load_gains(path: str | Path | None = None) -> dict[str, dict[str, float]]:
     """joint name -> {p, i, d, i_clamp} from a seed-style monoped.yaml (default: the shipped one).
 
+    `path` is a YAML file (any extension) or a folder holding the seed's file (`gains_file`).
     The controllers may sit under one namespace key (``monoped:`` in the seed)
     or at the top level. ``i_clamp`` defaults to 0 (no integral action), as in
     control_toolbox when it is not given.
     """
-    path = Path(path) if path is not None else DEFAULT_GAINS
+    path = gains_file(path) if path is not None else DEFAULT_GAINS
     try:
-        doc = yaml.safe_load(path.read_text())
-    except OSError as err:
-        raise ValueError(f"cannot read PID gains {path}: {err.strerror}") from None
+        doc = yaml.safe_load(read_text(path, "PID gains file"))
     except yaml.YAMLError as err:
-        raise ValueError(f"{path} is not valid YAML: {err}") from None
+        first_line = str(err).splitlines()[0] if str(err) else type(err).__name__
+        raise ValueError(f"{path} is not valid YAML: {first_line}") from None
     if isinstance(doc, dict) and len(doc) == 1 and not any(k.endswith("_controller") for k in doc):
         doc = next(iter(doc.values()))  # the seed's `monoped:` namespace
     if not isinstance(doc, dict):

@@ -48,7 +48,8 @@ torque is capped at `traction`·leg force·L, a share
 of the friction cone: at touchdown the leg force is still small, and a hip
 torque beyond the floor's grip makes the foot slip or bounce.
 
-Every gravity-dependent quantity uses the instance's own g. Contact is the
+Every gravity-dependent quantity uses the instance's own g, its downward (vertical)
+part, floored at `MIN_GRAVITY` so that a weightless robot gets finite commands. Contact is the
 observation's (`signals.Observation.contact`, the engine's one foot-contact test);
 like the joint readings it is one step (1 ms) old.
 
@@ -381,7 +382,9 @@ def raibert(robot: Robot, config: RaibertConfig | None = None) -> Controller:
 
     def act(s: RaibertState, obs: Observation, gravity):
         gains = s.params.gains
-        g = jnp.maximum(jnp.linalg.norm(gravity), MIN_GRAVITY)
+        # The floor is level, so hops and flights follow gravity's vertical part; a sideways
+        # part only pushes the robot along, which the speed loop sees as an error.
+        g = jnp.maximum(-gravity[2], MIN_GRAVITY)
         body = sense(robot, obs)
         stiffness = mass * EARTH_GRAVITY / gains.sag
         phase, ev = next_phase(s.phase, obs.contact.flag, obs.time - s.phase_start, body.length,

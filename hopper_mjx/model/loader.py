@@ -35,6 +35,18 @@ class URDFError(ValueError):
     """The URDF cannot describe a monoped that this toolkit can simulate."""
 
 
+def read_text(path: str | os.PathLike, what: str, error: type[ValueError] = ValueError) -> str:
+    """A text file's contents; `error` with one line naming the file if it is missing, unreadable or
+    not UTF-8 text (`what`, e.g. "URDF file", says what the file should have been)."""
+    path = Path(path)
+    try:
+        return path.read_text(encoding="utf-8")
+    except UnicodeDecodeError:
+        raise error(f"{path} is not a text (UTF-8) {what}") from None
+    except OSError as err:
+        raise error(f"cannot read {what} {path}: {err.strerror}") from None
+
+
 @dataclass(frozen=True)
 class Transmission:
     joint: str
@@ -189,16 +201,16 @@ def describe(urdf_text: str, source: str = "<string>") -> LegDescription:
     )
 
 
-def build_spec(urdf: str | os.PathLike | None = None, *, timestep: float = DEFAULT_TIMESTEP) -> mujoco.MjSpec:
-    """The monoped as an editable `MjSpec`, with everything the simulation adds."""
+def build_spec(urdf: str | os.PathLike | None = None, *, timestep: float = DEFAULT_TIMESTEP,
+               friction: tuple[float, float] = (FOOT_FRICTION, FOOT_FRICTION)) -> mujoco.MjSpec:
+    """The monoped as an editable `MjSpec`, with everything the simulation adds. `friction`: the foot-floor
+    contact's two sliding coefficients (Gazebo's mu, mu2), which a world file sets (`hopper_mjx.model.world`)."""
     path = Path(urdf) if urdf is not None else DEFAULT_URDF
     if not (isinstance(timestep, (int, float)) and math.isfinite(timestep) and 0 < timestep <= 0.01):
         raise ValueError(f"timestep must be in (0, 0.01] s, got {timestep!r}")
-    try:
-        text = path.read_text()
-    except OSError as err:
-        raise URDFError(f"cannot read URDF {path}: {err.strerror}") from None
-    leg = describe(text, str(path))
+    if len(friction) != 2 or not all(math.isfinite(mu) and mu >= 0 for mu in friction):
+        raise ValueError(f"friction must be two finite coefficients >= 0, got {friction!r}")
+    leg = describe(read_text(path, "URDF file", URDFError), str(path))
     try:
         spec = mujoco.MjSpec.from_file(str(path))
     except ValueError as err:
@@ -237,7 +249,7 @@ def build_spec(urdf: str | os.PathLike | None = None, *, timestep: float = DEFAU
     foot = next(g for g in foot_body.geoms if g.type == mujoco.mjtGeom.mjGEOM_SPHERE)
     foot.name = FOOT_GEOM
     spec.add_pair(geomname1=FLOOR_GEOM, geomname2=FOOT_GEOM, condim=3,
-                  friction=[FOOT_FRICTION, FOOT_FRICTION, 0.005, 1e-4, 1e-4])
+                  friction=[friction[0], friction[1], 0.005, 1e-4, 1e-4])
     for i, geom in enumerate(base.geoms):
         geom.name = geom.name or f"{leg.base_link}_collision{i}"
         spec.add_pair(geomname1=FLOOR_GEOM, geomname2=geom.name, condim=1)
@@ -269,9 +281,10 @@ def build_spec(urdf: str | os.PathLike | None = None, *, timestep: float = DEFAU
     return spec
 
 
-def load(urdf: str | os.PathLike | None = None, *, timestep: float = DEFAULT_TIMESTEP) -> mujoco.MjModel:
+def load(urdf: str | os.PathLike | None = None, *, timestep: float = DEFAULT_TIMESTEP,
+         friction: tuple[float, float] = (FOOT_FRICTION, FOOT_FRICTION)) -> mujoco.MjModel:
     """Compiles a monoped URDF (default: the shipped seed monoped) to an `MjModel`."""
-    spec = build_spec(urdf, timestep=timestep)
+    spec = build_spec(urdf, timestep=timestep, friction=friction)
     try:
         return spec.compile()
     except ValueError as err:

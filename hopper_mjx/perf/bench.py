@@ -29,6 +29,7 @@ from __future__ import annotations
 import argparse
 import copy
 import json
+import math
 import os
 import platform
 import resource
@@ -50,6 +51,9 @@ COMPILE_EVENTS = (
     "/jax/core/compile/jaxpr_to_mlir_module_duration",
     "/jax/core/compile/backend_compile_duration",  # includes a persistent-cache read
 )
+
+
+CONTROLLERS = ("hold", "raibert", "none")
 
 
 def bench_gravities(num: int) -> np.ndarray:
@@ -156,8 +160,8 @@ def controller_pair(name: str, sim, gravity):
     from hopper_mjx.control.base import HOLD_GAINS
 
     layout = sim.layout
-    if name not in ("hold", "raibert", "none"):
-        raise ValueError(f"unknown controller {name!r}; choose from: hold, raibert, none")
+    if name not in CONTROLLERS:
+        raise ValueError(f"unknown controller {name!r}; choose from: {', '.join(CONTROLLERS)}")
     controller, params = control.make(name, sim.robot, len(gravity))
     if name == "none":
         return controller, params, sim.mj_model, np.zeros(layout.nu)
@@ -336,8 +340,7 @@ def plot_scaling(records: list[dict], path: str) -> None:
 
 
 def parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="python -m hopper_mjx.perf.bench", description=__doc__,
-                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = cli.parser("python -m hopper_mjx.perf.bench", __doc__)
     p.add_argument("--num", type=int, default=4096, help="instances N")
     p.add_argument("--steps", type=int, default=1000, help="physics steps T per instance (multiple of 20)")
     p.add_argument("--controller", default="hold",
@@ -353,12 +356,39 @@ def parser() -> argparse.ArgumentParser:
     return p
 
 
+def check(args) -> list[int] | None:
+    """Every option, before anything is built; returns the --scaling sizes (None without it)."""
+    for name in ("num", "steps", "repeat", "chunk") + (("threads",) if args.threads is not None else ()):
+        if getattr(args, name) < 1:
+            raise ValueError(f"--{name} must be >= 1, got {getattr(args, name)}")
+    cli.check_range("--timestep", args.timestep, low=0, high=cli.MAX_TIMESTEP, open_low=True)
+    cli.check_engine(args.engine)
+    if args.controller not in CONTROLLERS:
+        raise ValueError(f"--controller: unknown {args.controller!r}; choose from {', '.join(CONTROLLERS)}")
+    if args.json:
+        cli.check_writable("--json", args.json)
+    if args.plot and not args.scaling:
+        raise ValueError("--plot draws the --scaling records: give --scaling N1,N2,... too")
+    if args.plot:
+        cli.check_writable("--plot", args.plot)
+    nums = cli.parse_indices(args.scaling, "--scaling") if args.scaling else None
+    if nums is not None and (not nums or min(nums) < 1):
+        raise ValueError(f"--scaling needs instance counts >= 1, got {args.scaling!r}")
+    from hopper_mjx.signals import SensorConfig  # last: it imports JAX
+
+    whole = math.lcm(*SensorConfig().periods(args.timestep).values())
+    if args.steps % whole:
+        raise ValueError(f"--steps must be a multiple of {whole} (the streams' period at this timestep), "
+                         f"got {args.steps}")
+    return nums
+
+
 def main(argv=None) -> int:
     args = parser().parse_args(argv)
-    runtime.configure()
     try:
-        if args.scaling:
-            nums = [int(v) for v in args.scaling.split(",") if v.strip()]
+        nums = check(args)
+        runtime.configure()
+        if nums:
             passed = ["--controller", args.controller, "--chunk", str(args.chunk), "--repeat", str(args.repeat),
                       "--engine", args.engine,
                       "--timestep", str(args.timestep)] + (["--threads", str(args.threads)] if args.threads else [])
@@ -371,9 +401,8 @@ def main(argv=None) -> int:
             result = run(args.num, args.steps, controller=args.controller, chunk=args.chunk,
                          repeat=args.repeat, threads=args.threads, timestep=args.timestep, engine=args.engine)
             print(format_table(result))
-    except ValueError as err:
-        print(f"error: {err}", file=sys.stderr)
-        return 2
+    except (ValueError, argparse.ArgumentTypeError) as err:
+        return cli.fail(err)
     if args.json:
         Path(args.json).write_text(json.dumps(result, indent=2) + "\n")
     return 0

@@ -23,13 +23,13 @@ of its last stage alive, so the differences are what each stage costs.
 
 from __future__ import annotations
 
-import argparse
+import sys
 import time
 
 import mujoco
 import numpy as np
 
-from hopper_mjx import runtime
+from hopper_mjx import cli, runtime
 
 REPEATS = 5  # timed rollouts per variant; the best counts (noise only adds time)
 VARIANTS = (
@@ -160,20 +160,24 @@ def _lines(head: str, parts, full: float) -> str:
     return "\n".join(lines)
 
 
-def main(argv=None) -> None:
-    p = argparse.ArgumentParser(prog="python -m hopper_mjx.perf.profile", description=__doc__.split("\n")[0])
+def main(argv=None) -> int:
+    p = cli.parser("python -m hopper_mjx.perf.profile", __doc__.split("\n")[0])
     p.add_argument("--num", type=int, default=256, help="instances in the batch (the core's chunk)")
     p.add_argument("--steps", type=int, default=200, help="steps per timed rollout")
     p.add_argument("--settle", type=int, default=300, help="physics steps holding the stance before timing")
     p.add_argument("--engine", default="mjx", choices=("chain", "mjx"), help="engine to profile (default mjx)")
     args = p.parse_args(argv)
+    for name in ("num", "steps", "settle"):
+        if getattr(args, name) < 1:
+            return cli.fail(ValueError(f"--{name} must be >= 1, got {getattr(args, name)}"))
     runtime.configure()
     try:
         record = measure(args.num, args.steps, args.settle, args.engine)
     except ValueError as err:
-        p.error(str(err))
+        return cli.fail(err)
     print(table(record))
+    return 0
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(main())

@@ -19,7 +19,10 @@ from typing import Iterator
 import numpy as np
 import yaml
 
+from hopper_mjx import cli
+
 TIME_TYPES = ("builtin_interfaces/msg/Time", "builtin_interfaces/msg/Duration")
+ROS2_METADATA = "metadata.yaml"  # what makes a folder a rosbag2 bag
 
 
 def bag_path(path: str | Path) -> Path:
@@ -28,7 +31,12 @@ def bag_path(path: str | Path) -> Path:
     if not path.exists():
         raise ValueError(f"no such bag: {path}")
     if path.is_file() and path.suffix in (".mcap", ".db3", ".yaml"):
+        if not (path.parent / ROS2_METADATA).is_file():
+            raise ValueError(f"{path} is a ROS 2 storage file without its bag folder: no {ROS2_METADATA} "
+                             f"beside it (give the bag folder that rosbag2 wrote)")
         return path.parent
+    if path.is_dir() and not (path / ROS2_METADATA).is_file():
+        raise ValueError(f"{path} is a folder but not a ROS 2 bag: it has no {ROS2_METADATA}")
     return path
 
 
@@ -40,7 +48,7 @@ def open_bag(path: str | Path):
     try:
         reader = AnyReader([bag_path(path)])
         reader.open()
-    except AnyReaderError as err:
+    except (AnyReaderError, OSError) as err:
         raise ValueError(f"cannot read {path} as a ROS bag: {err}") from None
     try:
         yield reader
@@ -120,8 +128,7 @@ def echo(path: str | Path, topic: str, count: int | None = None, out=None) -> in
 
 
 def parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="python -m hopper_mjx.ros.echo", description=__doc__,
-                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = cli.parser("python -m hopper_mjx.ros.echo", __doc__)
     p.add_argument("bag", help="a ROS 1 .bag file or a ROS 2 bag folder")
     p.add_argument("topic", help="e.g. /monoped/imu/data")
     p.add_argument("-n", dest="count", type=int, default=None, help="print only the first COUNT messages")
@@ -133,8 +140,7 @@ def main(argv=None) -> int:
     try:
         echo(args.bag, args.topic, args.count)
     except ValueError as err:
-        print(f"error: {err}", file=sys.stderr)
-        return 2
+        return cli.fail(err)
     except BrokenPipeError:  # e.g. piped into head
         return 0
     return 0

@@ -10,27 +10,14 @@ from typing import Iterator
 
 import numpy as np
 
+from hopper_mjx.ros import msgdefs
+
 ROBOT = "monoped"
 CONTACT_LINK = "lowerleg"  # the seed's contact sensor sits on the lower leg; the foot is fixed to it
 GROUND_COLLISION = "ground_plane::link::collision"
 
-# gazebo_msgs is not among rosbags' built-in types; these are its ROS 1 and ROS 2 definitions.
-GAZEBO_MSGS = {
-    "gazebo_msgs/msg/ContactState": """\
-string info
-string collision1_name
-string collision2_name
-geometry_msgs/Wrench[] wrenches
-geometry_msgs/Wrench total_wrench
-geometry_msgs/Vector3[] contact_positions
-geometry_msgs/Vector3[] contact_normals
-float64[] depths
-""",
-    "gazebo_msgs/msg/ContactsState": """\
-std_msgs/Header header
-gazebo_msgs/ContactState[] states
-""",
-}
+# gazebo_msgs is not among rosbags' built-in types; its definitions come from ROS's own .msg files.
+GAZEBO_MSGS = ("gazebo_msgs/msg/ContactState", "gazebo_msgs/msg/ContactsState")
 
 MSGTYPES = {
     "imu": "sensor_msgs/msg/Imu",
@@ -64,8 +51,8 @@ def typestore(fmt: str):
 
     store = get_typestore(Stores.ROS1_NOETIC if fmt == "ros1" else Stores.ROS2_JAZZY)
     types = {}
-    for name, text in GAZEBO_MSGS.items():
-        types.update(get_types_from_msg(text, name))
+    for name in GAZEBO_MSGS:
+        types.update(get_types_from_msg(msgdefs.text(name), name))
     store.register(types)
     return store
 

@@ -107,8 +107,7 @@ def plot_bag(path: str | Path, out: str | Path, instances: list[int] | None = No
 
 
 def parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="python -m hopper_mjx.ros.plots", description=__doc__,
-                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = cli.parser("python -m hopper_mjx.ros.plots", __doc__)
     p.add_argument("bag", help="a bag written by python -m hopper_mjx.ros.record (.bag file or MCAP folder)")
     p.add_argument("--instances", type=cli.parse_indices, default=None,
                    help="robots of a multi-robot bag to plot, e.g. 0,2 (default: the single robot)")
@@ -122,6 +121,10 @@ def parser() -> argparse.ArgumentParser:
 def main(argv=None) -> int:
     args = parser().parse_args(argv)
     try:
+        cli.check_writable("--out", args.out)
+        if args.dpi < 1:
+            raise ValueError(f"--dpi must be >= 1, got {args.dpi}")
+        echo.bag_path(args.bag)  # exists and is a bag (folder), before anything is read
         path = plot_bag(args.bag, args.out, args.instances, args.dpi, args.labels)
     except ValueError as err:
         return cli.fail(err)

@@ -28,6 +28,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from hopper_mjx import cli, runtime
+from hopper_mjx.ros import msgdefs
 from hopper_mjx.ros.messages import messages, typestore
 
 if TYPE_CHECKING:
@@ -68,14 +69,12 @@ def sensor_config(args):
     )
 
 
-def simulate_batch(args) -> Recording:
-    """Runs the batch the arguments describe (the one batch-run path) at the bag's rates."""
+def recording(sim, traj, gravity, sensors, diverged) -> Recording:
+    """What the messages need of a batch simulated by `sim` (a `hopper_mjx.sim.Sim`)."""
     import mujoco
 
     from hopper_mjx import model
 
-    sensors = sensor_config(args)
-    sim, final, traj = cli.run_batch(args, sensors)
     data = mujoco.MjData(sim.mj_model)
     mujoco.mj_kinematics(sim.mj_model, data)
     floor_normal = data.geom_xmat[sim.layout.floor_geom].reshape(3, 3)[:, 2].copy()  # a plane's normal is its z axis
@@ -83,37 +82,51 @@ def simulate_batch(args) -> Recording:
     clock_time = np.unique(np.concatenate(list(traj.time.values())))
     return Recording(
         traj=traj,
-        gravity=cli.batch_gravity(args),
+        gravity=gravity,
         sensors=sensors,
         joint_names=model.JOINTS,
         joint_qpos=sim.layout.joint_qpos,
         joint_dof=sim.layout.joint_dof,
         floor_normal=floor_normal,
         clock_time=clock_time,
-        diverged=np.asarray(final.diverged),
+        diverged=np.asarray(diverged),
     )
 
 
+def simulate_batch(args, batch: cli.Batch | None = None) -> Recording:
+    """Runs the batch the arguments describe (the one batch-run path) at the bag's rates."""
+    sensors = sensor_config(args)
+    batch = batch or cli.check_batch(args)
+    sim, final, traj = cli.run_batch(args, batch, sensors)
+    return recording(sim, traj, batch.gravity, sensors, final.diverged)
+
+
 # -- bag files -------------------------------------------------------------------------------
+def definition(store, msgtype: str, ros1: bool) -> dict:
+    """add_connection's keywords: for ROS 1, ROS's own definition text (with its comments, which
+    rosbags' generated text lacks) and the md5 sum, which ignores comments; for ROS 2, the type store."""
+    if not ros1:
+        return {"typestore": store}
+    return {"msgdef": msgdefs.full_text(msgtype), "md5sum": store.generate_msgdef(msgtype, ros_version=1)[1]}
+
+
+def check_output(out: str | Path, fmt: str) -> Path:
+    """--out: new, in an existing folder; for mcap a folder name (rosbag2 writes a folder)."""
+    out = cli.check_writable("--out", out, folder=fmt == "mcap", may_exist=False)
+    if fmt == "mcap" and out.suffix == ".mcap":
+        raise ValueError(f"--format mcap writes a ROS 2 bag folder (holding the .mcap file): "
+                         f"give a folder name such as {out.stem}_mcap, not {out.name}")
+    return out
+
+
 def write(rec: Recording, out: str | Path, fmt: str, instances: list[int] | None = None) -> Path:
     """Writes the chosen instances (default: all) as a ROS 1 .bag file or a ROS 2 MCAP bag folder."""
     if fmt not in FORMATS:
         raise ValueError(f"unknown format {fmt!r}; choose from: {', '.join(FORMATS)}")
     n = rec.gravity.shape[0]
     instances = list(range(n)) if instances is None else list(instances)
-    if not instances:
-        raise ValueError("no instances chosen to record")
-    bad = [i for i in instances if not 0 <= i < n]
-    if bad:
-        raise ValueError(f"instances {bad} out of range: the batch has {n} (0..{n - 1})")
-    if len(set(instances)) != len(instances):
-        raise ValueError(f"instances listed twice: {instances}")
-    out = Path(out)
-    if out.exists():
-        raise ValueError(f"{out} exists; remove it or choose another --out")
-    if fmt == "mcap" and out.suffix == ".mcap":
-        raise ValueError(f"--format mcap writes a ROS 2 bag folder (holding the .mcap file): "
-                         f"give a folder name such as {out.stem}_mcap, not {out.name}")
+    cli.check_indices("--instances", instances, n)
+    out = check_output(out, fmt)
     store = typestore(fmt)
     ros1 = fmt == "ros1"
     if ros1:
@@ -132,14 +145,13 @@ def write(rec: Recording, out: str | Path, fmt: str, instances: list[int] | None
         connections = {}
         for topic, msgtype, t, msg in msgs:
             if topic not in connections:
-                connections[topic] = writer.add_connection(topic, msgtype, typestore=store)
+                connections[topic] = writer.add_connection(topic, msgtype, **definition(store, msgtype, ros1))
             writer.write(connections[topic], int(round(t * 1e9)), serialize(msg, msgtype))
     return out
 
 
 def parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="python -m hopper_mjx.ros.record", description=__doc__,
-                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = cli.parser("python -m hopper_mjx.ros.record", __doc__)
     cli.add_batch_options(p, gravity=(9.81,))
     p.add_argument("--rate", type=float, default=50.0, help="Hz of every stream without its own rate (the seed's 50)")
     for stream, what in (("imu", "/imu/data"), ("odom", "/odom"), ("contact", "contact state"),
@@ -156,11 +168,17 @@ def parser() -> argparse.ArgumentParser:
 def main(argv=None) -> int:
     args = parser().parse_args(argv)
     out = args.out or ("monoped.bag" if args.format == "ros1" else "monoped_mcap")
-    runtime.configure()
     try:
-        if Path(out).exists():  # before the simulation, not after it
-            raise ValueError(f"{out} exists; remove it or choose another --out")
-        rec = simulate_batch(args)
+        check_output(out, args.format)
+        for name in ("rate", "imu_rate", "odom_rate", "contact_rate", "joint_rate"):
+            if getattr(args, name) is not None:
+                cli.check_range(f"--{name.replace('_', '-')}", getattr(args, name), low=0, open_low=True)
+        batch = cli.check_batch(args)
+        if args.instances is not None:
+            cli.check_indices("--instances", args.instances, len(batch.gravity))
+        cli.check_rates("--rate, --<stream>-rate", sensor_config(args), batch)
+        runtime.configure()
+        rec = simulate_batch(args, batch)
         path = write(rec, out, args.format, args.instances)
     except ValueError as err:  # includes URDFError
         return cli.fail(err)

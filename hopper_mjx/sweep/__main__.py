@@ -20,15 +20,17 @@ from hopper_mjx.sweep.grid import DEFAULT_GRAVITY, KICK
 
 
 def parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="python -m hopper_mjx.sweep", description=__doc__,
-                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = cli.parser("python -m hopper_mjx.sweep", __doc__)
     sub = p.add_subparsers(dest="kind", required=True)
     kinds = (("gravity", DEFAULT_GRAVITY, 112, 10.0), ("gains", (1.62, 3.71, 9.81), 32, 10.0))
     for kind, gravity, num, duration in kinds:
         s = sub.add_parser(kind, help=f"sweep {kind}")
         flag = "--values" if kind == "gravity" else "--gravity"
-        s.add_argument(flag, dest="gravity", type=cli.floats(flag), default=list(gravity),
+        s.add_argument(flag, dest="gravity", type=cli.floats(flag), default=None,
                        help=f"gravity values in m/s² (default: {','.join(map(str, gravity))})")
+        s.add_argument("--world", type=Path, nargs="+", default=None, metavar="FILE.world",
+                       help=f"Gazebo world files instead of {flag}: their (vertical, non-zero) gravity")
+        s.set_defaults(default_gravity=list(gravity), gravity_flag=flag)
         if kind == "gains":
             s.add_argument("--param", required=True, help="Raibert gain to sweep (a RaibertConfig field)")
             s.add_argument("--values", type=cli.floats("--values"), required=True, help="its values")
@@ -48,24 +50,62 @@ def parser() -> argparse.ArgumentParser:
     return p
 
 
-def main(argv=None) -> int:
-    args = parser().parse_args(argv)
-    runtime.configure()
-    from hopper_mjx.sweep import report, runner
+def gravity_from_worlds(args) -> tuple[float, ...]:
+    """The grid's gravity magnitudes from --world: each world's gravity must point straight down and be
+    non-zero, and the worlds must leave the physics at the sweep's (the default timestep and friction)."""
+    from hopper_mjx.model import loader
+
+    worlds = cli.read_worlds(args.world, args.gravity_flag if args.gravity is not None else None)
+    default = {"timestep": loader.DEFAULT_TIMESTEP, "friction": (loader.FOOT_FRICTION, loader.FOOT_FRICTION)}
+    changed = [key for key, value in worlds.model_options(loader.FOOT_FRICTION).items() if value != default[key]]
+    if changed:
+        raise ValueError(f"--world sets another {' and '.join(changed)} than a sweep runs with "
+                         "(0.001 s, friction 1): simulate and record take it")
+    for w, (gx, gy, gz) in zip(worlds.worlds, worlds.gravity):
+        if gx or gy or not gz < 0:
+            raise ValueError(f"--world {w.source}: gravity {w.gravity} is not a downward pull; a sweep needs one "
+                             "to hop and groups instances by its size (simulate, record and render take any)")
+    if worlds.warning():
+        print(worlds.warning(), file=sys.stderr)
+    return tuple(float(-gz) for gz in worlds.gravity[:, 2])
+
+
+def check(args):
+    """The SweepSpec of the arguments, and the output folder; raises ValueError before anything is built."""
     from hopper_mjx.sweep.grid import SweepSpec
 
+    gravity = gravity_from_worlds(args) if args.world is not None else tuple(args.gravity or args.default_gravity)
+    spec = SweepSpec(kind=args.kind, gravity=gravity, num=args.num, duration=args.duration,
+                     height=args.height, speed=tuple(args.speed), seed=args.seed, kick=args.kick,
+                     chunk=args.chunk, engine=args.engine, param=getattr(args, "param", None),
+                     values=tuple(args.values) if args.kind == "gains" else ())
+    out = args.out or Path("runs") / f"{args.kind}-{datetime.now(timezone.utc):%Y%m%d-%H%M%S}"
+    cli.check_writable("--out", out, folder=True, make_parents=True)
+    if args.num_processes < 1 or not 0 <= args.process_id < args.num_processes:
+        raise ValueError(f"--process-id must be in 0..--num-processes-1 (>= 1 process), "
+                         f"got {args.process_id} of {args.num_processes}")
+    if args.coordinator is not None and not _host_port(args.coordinator):
+        raise ValueError(f"--coordinator must be HOST:PORT, got {args.coordinator!r}")
+    return spec, out
+
+
+def _host_port(text: str) -> bool:
+    host, _, port = text.rpartition(":")
+    return bool(host) and port.isdigit() and 0 < int(port) < 65536
+
+
+def main(argv=None) -> int:
+    args = parser().parse_args(argv)
     try:
-        spec = SweepSpec(kind=args.kind, gravity=tuple(args.gravity), num=args.num, duration=args.duration,
-                         height=args.height, speed=tuple(args.speed), seed=args.seed, kick=args.kick,
-                         chunk=args.chunk, engine=args.engine, param=getattr(args, "param", None),
-                         values=tuple(args.values) if args.kind == "gains" else ())
+        spec, out = check(args)
     except ValueError as err:
         return cli.fail(err)
+    runtime.configure()
+    from hopper_mjx.sweep import report, runner
     if args.coordinator:
         import jax
 
         jax.distributed.initialize(args.coordinator, num_processes=args.num_processes, process_id=args.process_id)
-    out = args.out or Path("runs") / f"{args.kind}-{datetime.now(timezone.utc):%Y%m%d-%H%M%S}"
     start = time.perf_counter()
     try:
         instances, table, facts = runner.run(spec, out, progress=not args.no_progress)

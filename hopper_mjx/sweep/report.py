@@ -90,17 +90,33 @@ def table_text(spec: SweepSpec, groups: list[dict]) -> str:
     return "\n".join([lines[0], "-" * len(lines[0])] + lines[1:])
 
 
-def plot_gravity(path: Path, spec: SweepSpec, groups: list[dict]) -> None:
+def _pyplot():
     import matplotlib
 
-    matplotlib.use("Agg")
+    matplotlib.use("Agg")  # files only, never a window
     import matplotlib.pyplot as plt
 
+    return plt
+
+
+def save(fig, path: Path) -> None:
+    fig.savefig(path, dpi=90)
+    _pyplot().close(fig)
+
+
+def gravity_figure(spec: SweepSpec, groups: list[dict]):
+    """The gravity sweep's figure (a matplotlib Figure; `write` saves it as gravity.png)."""
+    plt = _pyplot()
+    groups = sorted(groups, key=lambda r: r["gravity"])  # the x axis ascends whatever order --values had
     g = np.array([r["gravity"] for r in groups])
     val = lambda k: np.array([np.nan if r.get(k) is None else r[k] for r in groups])
     err = lambda k: np.array([np.nan if r.get(f"{k}_std") is None else r[f"{k}_std"] for r in groups])
+    # Hopping in place travels (almost) nowhere, so work / (m·g·distance) is empty or noise there;
+    # the energy of one hop is meaningful either way.
+    energy = (("cost_of_transport", "cost of transport") if any(spec.speed)
+              else ("energy_per_hop", "motor work per hop (J/kg)"))
     panels = [("apex_height", "apex rise (m)"), ("flight_time", "flight time (s)"), ("hop_period", "hop period (s)"),
-              ("duty_factor", "duty factor"), ("survival", "survival"), ("cost_of_transport", "cost of transport")]
+              ("duty_factor", "duty factor"), ("survival", "survival"), energy]
     fig, axes = plt.subplots(2, 3, figsize=(13, 7), constrained_layout=True)
     for ax, (key, label) in zip(axes.flat, panels):
         ax.errorbar(g, val(key), yerr=None if key == "survival" else err(key), fmt="o-", capsize=3, label="measured")
@@ -116,32 +132,38 @@ def plot_gravity(path: Path, spec: SweepSpec, groups: list[dict]) -> None:
     axes[0, 1].legend(fontsize=8)
     axes[1, 1].set_ylim(-0.05, 1.05)
     fig.suptitle(f"Raibert hopping vs gravity: {spec.num} replicates per g, {spec.duration:g} s each")
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
+    return fig
 
 
-def plot_gains(path: Path, spec: SweepSpec, groups: list[dict]) -> None:
-    import matplotlib
+def _label_colour(rgba) -> str:
+    """Dark text on a pale cell, white on a dark one (by the cell's relative luminance, WCAG)."""
+    linear = [c / 12.92 if c <= 0.04045 else ((c + 0.055) / 1.055) ** 2.4 for c in rgba[:3]]
+    luminance = 0.2126 * linear[0] + 0.7152 * linear[1] + 0.0722 * linear[2]
+    return "k" if luminance > 0.18 else "w"  # 0.18: equal contrast against black and white
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
 
-    shape = (len(spec.values), len(spec.gravity))
+def gains_figure(spec: SweepSpec, groups: list[dict]):
+    """The gains sweep's figure (a matplotlib Figure; `write` saves it as gains.png)."""
+    plt = _pyplot()
+    gravity, values = sorted(spec.gravity), sorted(spec.values)  # both axes ascend
+    at = {(r[spec.param], r["gravity"]): r for r in groups}
     fig, axes = plt.subplots(1, 2, figsize=(12, 4.5), constrained_layout=True)
-    for ax, key, label, cmap in ((axes[0], "survival", "survival", "viridis"),
-                                 (axes[1], "tracking_error", "speed tracking error (m/s)", "magma_r")):
-        grid = np.array([np.nan if r.get(key) is None else r[key] for r in groups]).reshape(shape)
-        im = ax.imshow(grid, origin="lower", aspect="auto", cmap=cmap)
-        ax.set_xticks(range(shape[1]), [f"{g:g}" for g in spec.gravity])
-        ax.set_yticks(range(shape[0]), [f"{v:g}" for v in spec.values])
+    # Survival is a fraction: a fixed 0-1 scale, so that all-survived reads as the top colour.
+    heatmaps = ((axes[0], "survival", "survival", "viridis", (0.0, 1.0)),
+                (axes[1], "tracking_error", "speed tracking error (m/s)", "magma_r", (None, None)))
+    for ax, key, label, cmap, limits in heatmaps:
+        grid = np.array([[np.nan if at[v, g].get(key) is None else at[v, g][key] for g in gravity] for v in values])
+        im = ax.imshow(grid, origin="lower", aspect="auto", cmap=cmap, vmin=limits[0], vmax=limits[1])
+        ax.set_xticks(range(len(gravity)), [f"{g:g}" for g in gravity])
+        ax.set_yticks(range(len(values)), [f"{v:g}" for v in values])
         ax.set_xlabel("gravity g (m/s²)")
         ax.set_ylabel(spec.param)
         ax.set_title(label)
         for (r, c), v in np.ndenumerate(grid):
-            ax.text(c, r, "-" if np.isnan(v) else f"{v:.2f}", ha="center", va="center", fontsize=7, color="w")
+            ax.text(c, r, "-" if np.isnan(v) else f"{v:.2f}", ha="center", va="center", fontsize=8,
+                    color="k" if np.isnan(v) else _label_colour(im.cmap(im.norm(v))))
         fig.colorbar(im, ax=ax)
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
+    return fig
 
 
 def write(out: Path, spec: SweepSpec, inst: Instances, table: np.ndarray, columns: tuple[str, ...], facts: dict) -> str:
@@ -152,10 +174,8 @@ def write(out: Path, spec: SweepSpec, inst: Instances, table: np.ndarray, column
     summary = {"groups": groups, "note": "survival over all replicates; every other aggregate over the survivors",
                "arguments": spec.to_json(), "versions": versions(), "run": facts}
     (out / "summary.json").write_text(json.dumps(summary, indent=1))
-    if spec.kind == "gravity":
-        plot_gravity(out / "gravity.png", spec, groups)
-    else:
-        plot_gains(out / "gains.png", spec, groups)
+    figure = gravity_figure if spec.kind == "gravity" else gains_figure
+    save(figure(spec, groups), out / f"{spec.kind}.png")
     text = table_text(spec, groups)
     (out / "table.txt").write_text(text + "\n")
     return text

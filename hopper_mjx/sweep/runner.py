@@ -27,7 +27,8 @@ from hopper_mjx.sweep.grid import Instances, SweepSpec, expand
 MANIFEST = "manifest.json"
 COLUMNS = ("apex_height", "flight_rise", "flight_time", "ballistic_flight_time", "stance_time", "hop_period",
            "duty_factor", "mean_speed", "tracking_error",
-           "max_roll", "max_pitch", "hops", "fell", "diverged", "cost_of_transport")
+           "max_roll", "max_pitch", "hops", "fell", "diverged", "cost_of_transport",
+           "energy_per_hop", "mechanical_power")
 # Contact and state at the physics rate: events, lift-off heights and apexes to the step (short flights too).
 SENSORS = signals.SensorConfig(imu_rate=100, odom_rate=100, contact_rate=1000, state_rate=1000)
 

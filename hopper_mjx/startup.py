@@ -1,0 +1,74 @@
+"""What must be settled before MuJoCo is first imported in the process (run by `hopper_mjx/__init__.py`).
+
+- **Headless rendering by default.** MuJoCo picks its OpenGL backend once, when it
+  is imported, from MUJOCO_GL. Without it MuJoCo tries GLFW, which needs a display,
+  and `render` then dies with "OpenGL platform library has not been loaded". So on
+  Linux we choose EGL (software Mesa on a CPU-only box) unless the user set
+  MUJOCO_GL themselves; other systems keep MuJoCo's own default.
+- **Clean stdout.** `mujoco.mjx` prints "Failed to import warp: ..." and "Failed to
+  import mujoco_warp: ..." on stdout when the optional NVIDIA Warp backend is not
+  installed (it never is here: we run MJX on JAX). Those two lines would corrupt
+  output meant for pipes, e.g. `echo BAG TOPIC > file`. An import hook runs that
+  one module with its stdout captured, whenever something first imports it: the
+  two notices are dropped, any other line goes to stderr.
+
+Nothing here imports MuJoCo or JAX, so that a command can refuse a bad argument
+before paying for those imports.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import importlib.abc
+import importlib.machinery
+import io
+import os
+import platform
+import sys
+
+WARP_MODULE = "mujoco.mjx.warp"  # prints the notices when it is executed
+# Printed by mujoco/mjx/warp/__init__.py when the optional Warp backend is absent.
+WARP_ABSENT_PREFIXES = ("Failed to import warp:", "Failed to import mujoco_warp:")
+
+
+def choose_gl_backend() -> str | None:
+    """Sets MUJOCO_GL=egl on Linux unless the user chose; returns the value in effect."""
+    if platform.system() == "Linux":
+        os.environ.setdefault("MUJOCO_GL", "egl")
+    return os.environ.get("MUJOCO_GL")
+
+
+def pass_on_unexpected(printed: str) -> None:
+    """Lines a quietly imported module printed: the Warp notices are dropped, the rest go to stderr."""
+    for line in printed.splitlines():
+        if line.strip() and not line.startswith(WARP_ABSENT_PREFIXES):
+            print(line, file=sys.stderr)
+
+
+class QuietWarpImport(importlib.abc.MetaPathFinder):
+    """Finds `mujoco.mjx.warp` as Python would, and executes it with stdout captured."""
+
+    def find_spec(self, name, path, target=None):
+        if name != WARP_MODULE:
+            return None
+        spec = importlib.machinery.PathFinder.find_spec(name, path, target)
+        if spec is None or spec.loader is None:
+            return spec
+        execute = spec.loader.exec_module  # this module's own loader object
+
+        def exec_quietly(module):
+            captured = io.StringIO()
+            try:
+                with contextlib.redirect_stdout(captured):
+                    execute(module)
+            finally:
+                pass_on_unexpected(captured.getvalue())
+
+        spec.loader.exec_module = exec_quietly
+        return spec
+
+
+def prepare() -> None:
+    choose_gl_backend()
+    if WARP_MODULE not in sys.modules and not any(isinstance(f, QuietWarpImport) for f in sys.meta_path):
+        sys.meta_path.insert(0, QuietWarpImport())

@@ -1,0 +1,298 @@
+"""python -m hopper_mjx.view: MuJoCo's interactive viewer on a live batch of the core.
+
+    python -m hopper_mjx.view --gravity 9.81,3.71,1.62 --num 1 --controller raibert
+    python -m hopper_mjx.view --num 342 --show 16 --speed-factor 0.5 --foxglove
+
+The core advances the whole batch in compiled chunks (`hopper_mjx.live`); up to 16 of its
+instances are drawn side by side in a display-only scene, each labelled with its gravity
+and its hops or state. Keys (also listed in the window; MuJoCo's viewer keeps its own letter,
+digit and F1-F7 shortcuts, e.g. 2 hides the robots' geom group):
+
+    Space      pause / run             Enter      one recorded instant (20 ms) while paused
+    Backspace  reset the batch         Page Down  select the next shown instance (or double-click one)
+    Insert     kick the selected instance sideways (+0.5 m/s)
+    Up / Down  commanded speed +- 0.1 m/s     Right / Left  commanded apex rise +- 0.02 m
+    = / -      speed factor x2 / /2    F8         print the live status as one JSON line on stdout
+
+`--foxglove [PORT]` also streams the shown instances' ROS topics (docs/recording.md).
+Closing the window ends the program. Without a display, use `python -m hopper_mjx.render`.
+"""
+
+from __future__ import annotations
+
+import os
+
+os.environ.setdefault("MUJOCO_GL", "glfw")  # the viewer's own backend; before mujoco is imported
+
+import argparse
+import json
+import math
+import sys
+import threading
+import time
+
+import mujoco
+import numpy as np
+
+from hopper_mjx import cli, runtime
+from hopper_mjx.live import HEIGHT_STEP, SHOWN, SPEED_STEP, LiveBatch, LiveRun, spread
+
+SPACING = 1.5  # m between neighbouring robots on the display grid
+LABEL_ABOVE = 0.45  # m above the base centre
+ROBOT_GROUP = 2  # geom group of the robots: MuJoCo's key 2 hides and shows them
+FRAME_TIME = 1 / 60  # s between redraws while paused or waiting
+KEYS_HELP = ("Space\nEnter\nBackspace\nPage Down\nInsert\nUp, Down\nRight, Left\n=, -\nF8",
+             ("pause / run\nstep one instant\nreset\nselect a robot\nkick it +0.5 m/s\nspeed +-0.1 m/s\n"
+              "apex rise +-0.02 m\nspeed factor x2, /2\nprint status"))
+# GLFW key codes. Letters are all MuJoCo viewer shortcuts; these keys are free in its passive mode.
+KEY_SPACE, KEY_EQUAL, KEY_MINUS = 32, 61, 45
+KEY_ENTER, KEY_BACKSPACE, KEY_INSERT = 257, 259, 260
+KEY_RIGHT, KEY_LEFT, KEY_DOWN, KEY_UP, KEY_PAGE_DOWN = 262, 263, 264, 265, 267
+KEY_F8 = 297
+
+
+def grid_offsets(count: int, spacing: float = SPACING) -> np.ndarray:
+    """(count, 2) m: a row-major grid centred on the origin, rows along x: one row up to 4
+    robots (side by side in the default view), else as square as possible."""
+    cols = count if count <= 4 else math.ceil(math.sqrt(count))
+    rows = math.ceil(count / cols)
+    k = np.arange(count)
+    return np.stack([k % cols - (cols - 1) / 2, (rows - 1) / 2 - k // cols], axis=1) * spacing
+
+
+def display_model(urdf, count: int):
+    """(MjModel, qpos address of each copy's free joint, its first body id, bodies per copy):
+    `count` copies of the robot over the pictures' checkered floor, for display only."""
+    from hopper_mjx import model
+    from hopper_mjx.model import scene
+
+    display = scene.dress(model.build_spec(urdf))  # floor, sky, lights and robot copy 0
+    for k in range(1, count):
+        source = scene.dress(model.build_spec(urdf))  # a fresh spec per copy: attaching moves the body
+        display.worldbody.add_frame().attach_body(source.worldbody.first_body(), f"monoped_{k}/", "")
+    m = display.compile()
+    m.geom_group[m.geom_bodyid != 0] = ROBOT_GROUP
+    m.site_rgba[:, 3] = 0  # the IMU and foot sites are for the simulation, not for the eye
+    free = np.flatnonzero(m.jnt_type == mujoco.mjtJoint.mjJNT_FREE)
+    return m, m.jnt_qposadr[free], m.jnt_bodyid[free], (m.nbody - 1) // count
+
+
+def needs_display() -> str | None:
+    """Why no window can open here, or None."""
+    if not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
+        return "no display (DISPLAY is not set)"
+    import glfw
+
+    if not glfw.init():
+        return f"cannot open the display {os.environ.get('DISPLAY') or os.environ.get('WAYLAND_DISPLAY')}"
+    return None
+
+
+class Display:
+    """The viewer window: copies of the shown instances, labels, texts and keys."""
+
+    def __init__(self, viewer, m, qpos_adr, first_body, bodies_per_copy, shown, gravity):
+        self.viewer, self.m = viewer, m
+        self.d = viewer.d
+        self.qpos_adr, self.first_body, self.bodies = qpos_adr, first_body, bodies_per_copy
+        self.shown = shown
+        self.gravity = np.linalg.norm(gravity, axis=1)
+        self.offsets = grid_offsets(len(shown))
+        self.selected = 0  # index into shown
+        self.labels: list[str] = []
+        width = np.ptp(self.offsets, axis=0).max()
+        with viewer.lock():
+            cam = viewer.cam
+            cam.type = mujoco.mjtCamera.mjCAMERA_FREE
+            cam.lookat[:] = (0.0, 0.0, 0.45)
+            cam.distance = 2.5 + 1.3 * width
+            cam.azimuth, cam.elevation = 90.0, -14.0
+
+    def select_from_viewer(self) -> None:
+        """A double-clicked robot becomes the selected one."""
+        body = self.viewer.perturb.select
+        copy = np.flatnonzero((self.first_body <= body) & (body < self.first_body + self.bodies))
+        if body > 0 and copy.size:
+            self.selected = int(copy[0])
+
+    def draw(self, chunk, index: int, texts: tuple[str, str]) -> None:
+        """Poses every copy at the chunk's recorded instant `index` and relabels them."""
+        traj = chunk.traj
+        state = max(int(np.searchsorted(traj.time["state"], chunk.clock[index], side="right")) - 1, 0)
+        qpos = traj.qpos[self.shown, state]
+        self.labels = [self.label(i, chunk) for i in range(len(self.shown))]
+        with self.viewer.lock():
+            for k, adr in enumerate(self.qpos_adr):
+                self.d.qpos[adr:adr + qpos.shape[1]] = qpos[k]
+                self.d.qpos[adr:adr + 2] += self.offsets[k]
+            mujoco.mj_kinematics(self.m, self.d)
+            scn = self.viewer.user_scn
+            scn.ngeom = 0
+            for k, text in enumerate(self.labels):
+                pos = self.d.xpos[self.first_body[k]] + (0, 0, LABEL_ABOVE)
+                geom = scn.geoms[scn.ngeom]
+                mujoco.mjv_initGeom(geom, mujoco.mjtGeom.mjGEOM_LABEL, np.zeros(3), pos, np.eye(3).ravel(),
+                                    np.ones(4, np.float32))
+                geom.label = text
+                scn.ngeom += 1
+        self.show_texts(texts)
+
+    def label(self, k: int, chunk) -> str:
+        i = self.shown[k]
+        status = chunk.status[i]
+        state = f"{chunk.hops[i]} hops" if status in ("hopping", "standing") else status
+        return f"{'> ' if k == self.selected else ''}g {self.gravity[i]:.2f}  {state}"
+
+    def show_texts(self, texts: tuple[str, str]) -> None:
+        self.viewer.set_texts([
+            (mujoco.mjtFontScale.mjFONTSCALE_150, mujoco.mjtGridPos.mjGRID_TOPLEFT, *texts),
+            (mujoco.mjtFontScale.mjFONTSCALE_100, mujoco.mjtGridPos.mjGRID_BOTTOMLEFT, *KEYS_HELP),
+        ])
+
+
+def status_texts(run, n: int, shown: int) -> tuple[str, str]:
+    """The overlay's two columns: speed factor asked and reached, steps/s, time, commands."""
+    factor, steps = run.pacer.reached()
+    chunk = run.chunk
+    command = "none (this controller)" if chunk is None or chunk.command is None else (
+        f"{chunk.command['speed'][0]:+.2f}, {chunk.command['speed'][1]:+.2f} m/s, "
+        f"apex +{chunk.command['height']:.2f} m")
+    reached = "paused" if run.paused else ("-" if math.isnan(factor) else f"x{factor:.2f}")
+    return ("speed factor\nreached\nsteps/s\ntime\ninstances\ncommand",
+            f"x{run.pacer.factor:g}\n{reached}\n{'-' if math.isnan(steps) else f'{steps:,.0f}'}\n"
+            f"{run.time:.2f} s\n{n} ({shown} shown)\n{command}")
+
+
+def status_line(run, display: Display) -> str:
+    """One JSON line: what the window shows, for scripts and tests."""
+    chunk = run.chunk
+    instances = []
+    if chunk is not None:
+        index = max(int(np.searchsorted(chunk.traj.time["odom"], run.time, side="right")) - 1, 0)
+        for k, i in enumerate(display.shown):
+            instances.append({
+                "index": i, "label": display.labels[k] if display.labels else "",
+                "gravity": float(display.gravity[i]), "hops": int(chunk.hops[i]), "status": chunk.status[i],
+                "base_position": chunk.traj.odom.pos[i, index].round(4).tolist(),
+                "base_velocity": chunk.traj.odom.linvel[i, index].round(4).tolist(),
+            })
+    factor, steps = run.pacer.reached()
+    return json.dumps({
+        "time": round(run.time, 6), "paused": run.paused, "speed_factor": run.pacer.factor,
+        "reached_factor": None if math.isnan(factor) else round(factor, 3),
+        "steps_per_s": None if math.isnan(steps) else round(steps),
+        "command": None if chunk is None else chunk.command,
+        "selected": display.shown[display.selected], "instances": instances,
+    })
+
+
+def key_handler(run, display: Display, requests: set):
+    """The viewer's key callback (runs on the viewer's thread: it only queues work)."""
+    def on_key(key: int) -> None:
+        if key == KEY_SPACE:
+            run.toggle_pause()
+        elif key == KEY_ENTER:
+            run.step()
+        elif key == KEY_BACKSPACE:
+            run.reset()
+        elif key == KEY_PAGE_DOWN:
+            display.selected = (display.selected + 1) % len(display.shown)
+        elif key == KEY_INSERT:
+            display.select_from_viewer()
+            instance = display.shown[display.selected]
+            run.act(lambda batch: batch.kick(instance))
+        elif key in (KEY_UP, KEY_DOWN):
+            step = SPEED_STEP if key == KEY_UP else -SPEED_STEP
+            run.act(lambda batch: batch.change_command(speed_step=(step, 0.0)))
+        elif key in (KEY_RIGHT, KEY_LEFT):
+            step = HEIGHT_STEP if key == KEY_RIGHT else -HEIGHT_STEP
+            run.act(lambda batch: batch.change_command(height_step=step))
+        elif key in (KEY_EQUAL, KEY_MINUS):
+            run.set_factor(run.pacer.factor * (2.0 if key == KEY_EQUAL else 0.5))
+        elif key == KEY_F8:
+            requests.add("status")
+
+    return on_key
+
+
+def parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="python -m hopper_mjx.view", description=__doc__,
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    cli.add_batch_options(p)
+    p.set_defaults(controller="raibert", duration=None)
+    cli.add_live_options(p, foxglove_help="also stream the shown instances' ROS topics")
+    p.add_argument("--show", type=int, default=SHOWN,
+                   help=f"instances drawn, spread over the batch (at most {SHOWN})")
+    p.add_argument("--paused", action="store_true", help="start paused (Space runs)")
+    return p
+
+
+def main(argv=None) -> int:
+    args = parser().parse_args(argv)
+    from hopper_mjx.ros import foxglove
+
+    try:
+        checked = cli.check_batch(args)
+        if not 1 <= args.show <= SHOWN:
+            raise ValueError(f"--show must be in 1..{SHOWN}, got {args.show}")
+        shown = spread(len(checked.gravity), args.show)
+        with foxglove.listening(args, shown) as stream:
+            why = needs_display()
+            if why:
+                return cli.fail(f"view needs a display: {why}; for pictures and videos without one use "
+                                "python -m hopper_mjx.render")
+            runtime.configure()
+            batch = LiveBatch.build(args, checked)
+            if stream is not None:
+                stream.attach(batch)
+                print(f"streaming to Foxglove on ws://127.0.0.1:{stream.port}", flush=True)
+            return watch(args, batch, shown, stream)
+    except ValueError as err:  # includes URDFError and a busy --foxglove port
+        return cli.fail(err)
+
+
+def watch(args, batch, shown: list[int], stream) -> int:
+    """Runs the window until it is closed (or --duration is played); prints the factor reached."""
+    import mujoco.viewer
+
+    m, qpos_adr, first_body, bodies = display_model(args.urdf, len(shown))
+    requests: set = set()
+    run = LiveRun(batch, factor=args.speed_factor, sinks=[stream] if stream else [], paused=args.paused)
+    holder = {}
+    viewer = mujoco.viewer.launch_passive(m, mujoco.MjData(m), show_left_ui=False, show_right_ui=False,
+                                          key_callback=lambda key: holder["on_key"](key) if holder else None)
+    display = Display(viewer, m, qpos_adr, first_body, bodies, shown, batch.gravity)
+    holder["on_key"] = key_handler(run, display, requests)
+    announced, reached = False, []
+    with run:
+        while viewer.is_running() and (args.duration is None or run.time < args.duration - 1e-9):
+            played = run.poll()
+            texts = status_texts(run, batch.n, len(shown))
+            if played is not None:
+                display.draw(*played, texts)
+                if not announced:
+                    print(f"view: running {batch.n} instances, {len(shown)} shown", flush=True)
+                    announced = True
+                factor = run.pacer.reached()[0]
+                if not math.isnan(factor):
+                    reached.append(factor)
+            else:
+                display.show_texts(texts)
+            if "status" in requests:
+                requests.discard("status")
+                print(status_line(run, display), flush=True)
+            viewer.sync()
+            time.sleep(run.seconds_to_next() if not run.paused else FRAME_TIME)
+    viewer.close()
+    # The window's thread tears down its GL context after the close; exiting under it aborts the process.
+    for thread in threading.enumerate():
+        if thread.daemon and thread is not threading.current_thread():
+            thread.join(timeout=10)
+    if reached:
+        print(f"view: played {run.time:.2f} s; reached real-time factor x{np.median(reached):.2f} "
+              f"(median over the run) at x{run.pacer.factor:g} asked", flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,128 @@
+"""Bad input, typed as a user types it: each command refuses it in one line on stderr, with exit code 2,
+before building or compiling anything, without a traceback and without writing a file.
+
+"Before anything is compiled" is held by the refusing process's CPU time: under 5 s, where a compile
+alone takes 15 s or more. (CPU rather than wall time, because the machine may be shared: on an idle
+2-core machine the wall time is the same, 0.3 to 3 s.)
+
+Every case runs `python -m hopper_mjx.<command>` in a fresh folder that holds a few prepared
+inputs (a file, a folder, a garbled world, a binary URDF, a lone .mcap file, a bag-less folder).
+"""
+
+import os
+import resource
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from hopper_mjx import cli, control
+from hopper_mjx.model import loader, world
+
+LOW_GRAVITY = str(world.LOW_GRAVITY_WORLD)
+# The commands run from another folder: this checkout's package first, whatever is installed.
+ENV = {**os.environ, "PYTHONPATH": os.pathsep.join([str(Path(__file__).resolve().parents[1]),
+                                                    os.environ.get("PYTHONPATH", "")])}
+MAX_CPU = 5.0  # s of the refusing process's CPU time
+
+# (command, arguments, what the one line must say)
+CASES = [
+    ("simulate", ["--duration", "0"], "--duration must be finite and > 0, got 0"),
+    ("simulate", ["--duration", "-1"], "--duration must be finite and > 0, got -1"),
+    ("simulate", ["--out", "nodir/o.npz"], "--out nodir/o.npz: its folder nodir does not exist"),
+    ("simulate", ["--out", "a_file/o.npz"], "--out a_file/o.npz: its folder a_file is not a folder"),
+    ("simulate", ["--out", "a_folder"], "--out a_folder is a folder; give a file"),
+    ("simulate", ["--gravity", "9.81,nan"], "--gravity: gravity must be finite"),
+    ("simulate", ["--gravity", "-1"], "--gravity: gravity magnitudes point down and must be >= 0"),
+    ("simulate", ["--num", "0"], "--num must be >= 1, got 0"),
+    ("simulate", ["--num", "abc"], "argument --num: invalid int value: 'abc'"),
+    ("simulate", ["--controller", "jump"], "--controller: unknown 'jump'"),
+    ("simulate", ["--rate", "7"], "--rate: imu_rate=7.0 Hz must divide the physics rate 1000 Hz"),
+    ("render", ["--video", "h.gif", "--fps", "30"], "--fps: imu_rate=30.0 Hz must divide the physics rate"),
+    ("simulate", ["--timestep", "0.5"], "--timestep must be finite and > 0 and <= 0.01, got 0.5"),
+    ("simulate", ["--urdf", "binary.urdf"], "--urdf: binary.urdf is not a text (UTF-8) URDF file"),
+    ("simulate", ["--world", "missing.world"], "--world missing.world: no such file"),
+    ("simulate", ["--world", "garbled.world"], "garbled.world is not well-formed XML"),
+    ("simulate", ["--world", LOW_GRAVITY, "--gravity", "1.62"], "give --gravity or --world, not both"),
+    ("simulate", ["--world", LOW_GRAVITY, "--timestep", "0.002"], "contradicts the world's <max_step_size> 0.001"),
+    ("simulate", ["--controller", "pid", "--gains", "a_folder"], "--gains: no monoped.yaml or monoped.yml in"),
+    ("simulate", ["--gains", "a_file"], "--gains sets the pid controller's gains; --controller is hold"),
+    ("model", ["--export", "nodir/m.xml"], "--export nodir/m.xml: its folder nodir does not exist"),
+    ("model", ["--export", "m.xml", "--urdf", "missing.urdf"], "--urdf missing.urdf: no such file"),
+    ("ros.record", ["--instances", "5"], "--instances [5] out of range: the batch has 1 instance(s), 0..0"),
+    ("ros.record", ["--out", "a_file"], "--out a_file exists; remove it or choose another"),
+    ("ros.record", ["--format", "mcap", "--out", "run.mcap"], "give a folder name such as run_mcap"),
+    ("ros.record", ["--duration", "-1"], "--duration must be finite and > 0"),
+    ("ros.echo", ["lone/x.mcap", "/clock"], "lone/x.mcap is a ROS 2 storage file without its bag folder"),
+    ("ros.echo", ["a_folder", "/clock"], "a_folder is a folder but not a ROS 2 bag"),
+    ("ros.echo", ["missing.bag", "/clock"], "no such bag: missing.bag"),
+    ("ros.echo", ["a_file", "/clock", "-n", "0"], "-n must be >= 1, got 0"),
+    ("render", [], "nothing to do: give --still PATH and/or --video PATH"),
+    ("render", ["--video", "h.gif", "--duration", "-1"], "--duration must be finite and > 0"),
+    ("render", ["--video", "h.avi"], "--video must end in .mp4 or .gif, got h.avi"),
+    ("render", ["--still", "nodir/m.png"], "--still nodir/m.png: its folder nodir does not exist"),
+    ("render", ["--video", "h.gif", "--gravity", "9.81,1.62", "--instance", "2"], "--instance [2] out of range"),
+    ("sweep", ["gravity", "--out", "a_file"], "--out a_file is a file; give a folder"),
+    ("sweep", ["gravity", "--values", "0,9.81", "--out", "s"], "gravity values must be finite and > 0"),
+    ("sweep", ["gravity", "--world", LOW_GRAVITY, "--out", "s"], "is not a downward pull"),
+    ("sweep", ["gains", "--param", "bogus", "--values", "1,2", "--out", "s"], "unknown gain 'bogus'"),
+    ("sweep", ["gravity", "--num-processes", "2", "--process-id", "2", "--out", "s"], "--process-id must be in"),
+    ("perf.bench", ["--steps", "30"], "--steps must be a multiple of 20"),
+    ("perf.bench", ["--plot", "p.png"], "--plot draws the --scaling records"),
+    ("perf.bench", ["--controller", "pid"], "--controller: unknown 'pid'"),
+    ("perf.bench", ["--engine", "warp"], "--engine: unknown engine 'warp'"),
+    ("sweep", ["gravity", "--engine", "warp", "--out", "s"], "--engine: unknown engine 'warp'"),
+    ("simulate", ["--engine", "warp"], "--engine: unknown engine 'warp'"),
+    ("perf.bench", ["--json", "nodir/b.json"], "--json nodir/b.json: its folder nodir does not exist"),
+]
+
+
+def prepare(folder: Path) -> None:
+    """The inputs the cases name (everything else they name does not exist)."""
+    (folder / "a_file").write_text("a file\n")
+    (folder / "a_folder").mkdir()
+    (folder / "garbled.world").write_text("<sdf><world><gravity>0 0 -9.8</world></sdf>")
+    (folder / "binary.urdf").write_bytes(b"\x89PNG\r\n\x1a\n\xff\xfe\x00")
+    (folder / "lone").mkdir()
+    (folder / "lone" / "x.mcap").write_bytes(b"\x89MCAP0\r\n")
+
+
+def listing(folder: Path) -> dict[str, int]:
+    return {str(p.relative_to(folder)): p.stat().st_size for p in sorted(folder.rglob("*"))}
+
+
+@pytest.mark.parametrize("command, args, message", CASES,
+                         ids=[f"{c}:{' '.join(a)[:40]}" for c, a, _ in CASES])
+def test_refused_in_one_line_before_anything_is_built(tmp_path, command, args, message):
+    prepare(tmp_path)
+    before = listing(tmp_path)
+    start = resource.getrusage(resource.RUSAGE_CHILDREN)
+    done = subprocess.run([sys.executable, "-m", f"hopper_mjx.{command}", *args], cwd=tmp_path,
+                          env=ENV, capture_output=True, text=True, timeout=60)
+    end = resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu = (end.ru_utime - start.ru_utime) + (end.ru_stime - start.ru_stime)
+    lines = done.stderr.splitlines()
+    assert done.returncode == 2, done.stderr[-2000:]
+    assert len(lines) == 1 and lines[0].startswith("error: ") and message in lines[0], done.stderr[-2000:]
+    assert done.stdout == ""
+    assert listing(tmp_path) == before  # nothing written, nothing created
+    assert cpu < MAX_CPU, f"refused after {cpu:.1f} s of CPU time"
+
+
+def test_the_seeds_gains_folder_is_taken_as_is(tmp_path):
+    """`--gains` names the seed's package, whose config/ spells the file monoped.yml (its launch file's name)."""
+    from test_control import SEED_YAML
+
+    from hopper_mjx import simulate
+
+    (tmp_path / "config").mkdir()
+    (tmp_path / "config" / "monoped.yml").write_text(SEED_YAML)
+    batch = cli.check_batch(simulate.parser().parse_args(["--controller", "pid", "--gains", str(tmp_path)]))
+    assert batch.gains["kfe_joint"] == {"p": 100.0, "i": 0.01, "d": 10.0, "i_clamp": 0.0}
+
+
+def test_the_checks_know_what_the_library_accepts():
+    """cli checks without importing the heavy modules; its copies of their constants must agree."""
+    assert cli.CONTROLLERS == control.NAMES
+    assert cli.DEFAULT_TIMESTEP == loader.DEFAULT_TIMESTEP

@@ -1,0 +1,442 @@
+"""Live runs: the batch played in chunks, the Foxglove stream decoded by ROS's own genpy, and the
+viewer driven by key presses under Xvfb, its screenshot checked against the floor-only background.
+
+One batch (Earth, Mars and Moon robots dropped 5 cm under `hold`) is compiled once: the
+in-process stream tests compile it, the `view` subprocess loads it from the persistent cache.
+"""
+
+import json
+import os
+import shutil
+import socket
+import struct
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from hopper_mjx import live, simulate
+from hopper_mjx.ros.foxglove import FoxgloveStream
+
+GRAVITY = (9.81, 3.71, 1.62)
+ARGS = ["--gravity", ",".join(map(str, GRAVITY)), "--controller", "hold"]
+SETTLED = 1.0  # s: the dropped robots stand still by then (touchdown <= 0.25 s)
+LANDED = 0.3  # s: every robot is on the floor
+PERIOD_NS = 20_000_000  # the seed's 50 Hz on every stream
+ROBOT_BLUE = np.array([51, 97, 166])  # model.scene.LINK_COLOURS["base"] in 8-bit RGB
+
+
+@pytest.fixture(scope="module")
+def batch():
+    return live.LiveBatch.build(simulate.parser().parse_args(ARGS))
+
+
+# -- pacing and hop counting, without physics ----------------------------------------------
+class FakeClock:
+    def __init__(self):
+        self.now = 100.0
+
+    def __call__(self):
+        return self.now
+
+
+def test_pacer_maps_simulated_time_to_wall_time_at_the_factor_and_drops_a_backlog():
+    clock = FakeClock()
+    pacer = live.Pacer(2.0, clock=clock)
+    pacer.rebase(1.0)
+    assert pacer.wait(1.5) == pytest.approx(0.25)  # 0.5 s simulated at x2
+    clock.now += 0.25
+    assert pacer.wait(1.5) == pytest.approx(0.0)
+    for k in range(11):  # play 1 simulated second over 0.5 s of wall time
+        clock.now = 100.25 + 0.05 * k
+        pacer.played(1.5 + 0.1 * k, 1000 * k)
+    factor, steps = pacer.reached()
+    assert factor == pytest.approx(2.0) and steps == pytest.approx(20_000)
+    clock.now += 10.0  # far behind: rebased, so the next instant is due now and not 10 s of catch-up
+    assert pacer.wait(3.0) == 0.0
+    assert pacer.wait(3.5) == pytest.approx(0.25)
+
+
+def test_hops_count_completed_flights_not_the_initial_drop_and_a_fall_latches():
+    counter = live.HopCounter(3)
+    standing = np.array([[0.0, 0, 0.9, 1, 0, 0, 0]] * 3)
+    # robot 0: drop, land, hop, land; robot 1: drop and land; robot 2: lies on the floor
+    flags = np.array([[0, 0, 1, 1, 0, 0, 1], [0, 0, 1, 1, 1, 1, 1], [0, 1, 1, 1, 1, 1, 1]], bool)
+    lying = standing.copy()
+    lying[2, 2] = 0.2
+    status = counter.update(flags[:, :4], standing, np.zeros(3, bool))
+    assert counter.hops.tolist() == [0, 0, 0] and status == ("standing",) * 3
+    status = counter.update(flags[:, 4:], lying, np.array([False, False, False]))
+    assert counter.hops.tolist() == [1, 0, 0]
+    assert status == ("hopping", "standing", "fallen")
+    status = counter.update(np.ones((3, 2), bool), standing, np.array([False, True, False]))
+    assert status == ("hopping", "diverged", "fallen")  # a fall latches until the reset
+
+
+# -- commands and kicks (no rollout) -----------------------------------------------------------
+def test_arrow_key_commands_reach_every_raibert_instance_and_survive_a_reset():
+    args = simulate.parser().parse_args(["--gravity", "9.81,1.62", "--num", "2", "--controller", "raibert",
+                                         "--height", "0.1", "--speed", "0.2,0"])
+    raibert = live.LiveBatch.build(args)
+    assert raibert.command() == {"speed": pytest.approx((0.2, 0.0)), "height": pytest.approx(0.1)}
+    assert raibert.change_command(speed_step=(live.SPEED_STEP, 0.0))
+    assert raibert.change_command(height_step=-2 * live.HEIGHT_STEP)
+    raibert.reset()
+    params = raibert.state.cstate.params
+    np.testing.assert_allclose(np.asarray(params.speed), [[0.3, 0.0]] * 4, atol=1e-6)
+    np.testing.assert_allclose(np.asarray(params.height), [0.06] * 4, atol=1e-6)
+
+
+def test_hold_takes_no_commands_and_a_kick_changes_one_base_velocity(batch):
+    assert not batch.change_command(speed_step=(0.1, 0.0))
+    before = np.asarray(batch.state.data.qvel).copy()
+    batch.kick(1)
+    after = np.asarray(batch.state.data.qvel)
+    want = before.copy()
+    want[1, 1] += live.KICK_SPEED
+    np.testing.assert_array_equal(after, want)
+    batch.reset()
+    assert not np.asarray(batch.state.data.qvel).any()
+
+
+# -- Foxglove stream ---------------------------------------------------------------------
+def xyz(v):
+    return [v.x, v.y, v.z]
+
+
+def compose(frames: dict, child: str) -> np.ndarray:
+    """World position (m) of a frame's origin, chaining the TransformStamped parents up to world."""
+    from scipy.spatial.transform import Rotation
+
+    point = np.zeros(3)
+    while child != "world":
+        t = frames[child].transform
+        rotation = Rotation.from_quat([t.rotation.x, t.rotation.y, t.rotation.z, t.rotation.w])
+        point = rotation.apply(point) + xyz(t.translation)
+        child = frames[child].header.frame_id
+    return point
+
+
+def decoder(channel: dict):
+    """The genpy message class for an advertised channel, from its ros1msg schema."""
+    import genpy.dynamic
+
+    return genpy.dynamic.generate_dynamic(channel["schemaName"], channel["schema"])[channel["schemaName"]]
+
+
+class Client:
+    """A minimal Foxglove WebSocket client: subscribes to topics, collects (log time, message)."""
+
+    def __init__(self, port: int, topics: list[str]):
+        from websockets.sync.client import connect
+
+        self.ws = connect(f"ws://127.0.0.1:{port}", subprotocols=["foxglove.sdk.v1"], open_timeout=30,
+                          legacy=True)  # closed by close(), not by a with-block
+        self.topics, self.channels, self.types = topics, {}, {}
+        self.messages = {t: [] for t in topics}
+
+    def collect(self, until, timeout: float = 180.0) -> None:
+        """Receives until `until(self)` holds (or fails after `timeout` s)."""
+        deadline = time.monotonic() + timeout
+        while not until(self):
+            assert time.monotonic() < deadline, "the stream stopped sending"
+            frame = self.ws.recv(timeout=timeout)
+            if isinstance(frame, str):
+                self._control(json.loads(frame))
+            elif frame[0] == 1:  # message data: opcode, subscription id, log time, payload
+                sub, log_time = struct.unpack_from("<IQ", frame, 1)
+                topic = self.channels[sub]["topic"]
+                msg = self.types[sub]()
+                msg.deserialize(frame[13:])
+                self.messages[topic].append((log_time, msg))
+
+    def _control(self, msg: dict) -> None:
+        if msg["op"] != "advertise":
+            return
+        subscriptions = []
+        for channel in msg["channels"]:
+            if channel["topic"] in self.topics:
+                sub = len(self.channels)
+                self.channels[sub], self.types[sub] = channel, decoder(channel)
+                subscriptions.append({"id": sub, "channelId": channel["id"]})
+        self.ws.send(json.dumps({"op": "subscribe", "subscriptions": subscriptions}))
+
+    def collect_until_closed(self, timeout: float = 180.0) -> None:
+        """Receives until the server goes away (the streaming process ended)."""
+        from websockets.exceptions import ConnectionClosed
+
+        try:
+            self.collect(lambda c: False, timeout=timeout)
+        except ConnectionClosed:
+            pass
+
+    def latest(self, topic: str) -> float:
+        return self.messages[topic][-1][0] * 1e-9 if self.messages[topic] else -1.0
+
+    def close(self) -> None:
+        self.ws.close()
+
+
+@pytest.fixture(scope="module")
+def streaming(batch):
+    """The batch played at 4x real time into a Foxglove stream on a free port, in a thread."""
+    stream = FoxgloveStream.start(0, [0, 1, 2])
+    batch.reset()
+    stream.attach(batch)
+    stop = threading.Event()
+    run = live.LiveRun(batch, factor=4.0, sinks=[stream])
+
+    def play():
+        with run:
+            while not stop.is_set():
+                run.poll()
+                time.sleep(run.seconds_to_next())
+
+    player = threading.Thread(target=play, daemon=True)
+    player.start()
+    yield stream, run
+    stop.set()
+    player.join(timeout=60)
+    stream.close()
+    assert run.error is None
+
+
+def test_foxglove_stream_carries_the_recorded_topics_decoded_by_genpy(streaming, mj_model):
+    from hopper_mjx.model.layout import Layout
+
+    stream, run = streaming
+    kinds = {"imu": "/monoped_0/imu/data", "contact": "/monoped_0/lowerleg_contactsensor_state",
+             "odom": "/monoped_0/odom", "joints": "/monoped_0/joint_states", "clock": "/clock", "tf": "/tf"}
+    mars_contact = "/monoped_1/lowerleg_contactsensor_state"
+    client = Client(stream.port, [*kinds.values(), mars_contact])
+    try:
+        client.collect(lambda c: all(c.latest(t) >= SETTLED + 0.2 for t in c.topics))
+    finally:
+        client.close()
+    types = {c["topic"]: c["schemaName"] for c in client.channels.values()}
+    assert types[kinds["imu"]] == "sensor_msgs/Imu" and types["/clock"] == "rosgraph_msgs/Clock"
+    assert types[kinds["contact"]] == "gazebo_msgs/ContactsState"
+    for topic, msgs in client.messages.items():  # every stream at 50 Hz, stamped in simulated time
+        log_times = np.array([t for t, _ in msgs])
+        assert (np.diff(log_times) == PERIOD_NS).all(), topic
+        stamps = [m.clock if topic == "/clock" else m.transforms[0].header.stamp if topic == "/tf"
+                  else m.header.stamp for _, m in msgs]
+        assert [s.to_nsec() for s in stamps] == log_times.tolist(), topic
+
+    mass = Layout.of(mj_model).total_mass
+    for topic, g in ((kinds["contact"], GRAVITY[0]), (mars_contact, GRAVITY[1])):
+        settled = [m for t, m in client.messages[topic] if t * 1e-9 >= SETTLED]
+        assert all(m.states for m in settled), "the robot stands on the floor"
+        force_z = np.array([m.states[0].total_wrench.force.z for m in settled])
+        np.testing.assert_allclose(force_z, mass * g, rtol=0.02)  # the floor carries the weight
+    imu = [m for t, m in client.messages[kinds["imu"]] if t * 1e-9 >= SETTLED]
+    accel = np.array([[m.linear_acceleration.x, m.linear_acceleration.y, m.linear_acceleration.z] for m in imu])
+    np.testing.assert_allclose(np.linalg.norm(accel, axis=1), GRAVITY[0], rtol=0.02)  # specific force = g at rest
+    assert (accel[:, 2] > 0.95 * GRAVITY[0]).all()  # pointing up in the upright base frame
+
+    # /tf: world -> base is the odometry's pose, and the chain down to the foot ends over the contact point.
+    t, tf = next((t, m) for t, m in client.messages["/tf"] if t * 1e-9 >= SETTLED)
+    odom = dict(client.messages[kinds["odom"]])[t]
+    contact = dict(client.messages[kinds["contact"]])[t].states[0].contact_positions[0]
+    frames = {f.child_frame_id: f for f in tf.transforms}
+    assert {f.header.frame_id for f in tf.transforms} >= {"world", "monoped_0/base", "monoped_2/lowerleg"}
+    foot = compose(frames, "monoped_0/foot")
+    base = frames["monoped_0/base"].transform.translation
+    assert [base.x, base.y, base.z] == xyz(odom.pose.pose.position)
+    assert np.hypot(foot[0] - contact.x, foot[1] - contact.y) < 0.01 and 0 < foot[2] - contact.z < 0.1
+
+
+def test_a_client_leaving_does_not_stop_the_simulation(streaming):
+    stream, run = streaming
+    first = Client(stream.port, ["/clock"])
+    first.collect(lambda c: len(c.messages["/clock"]) >= 3)
+    left_at = first.latest("/clock")
+    first.close()
+    time.sleep(0.5)
+    second = Client(stream.port, ["/clock"])
+    try:
+        second.collect(lambda c: c.latest("/clock") >= left_at + 1.0)
+    finally:
+        second.close()
+    assert run.time >= left_at + 1.0
+
+
+def wait_for_line(proc, prefix: str, timeout: float = 240.0) -> str:
+    """The first line a process prints on stdout that starts with `prefix`."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        line = proc.stdout.readline()
+        if line.startswith(prefix):
+            return line
+        if not line and proc.poll() is not None:
+            break
+    pytest.fail(f"{proc.args[2:4]} never printed {prefix!r}: {proc.stderr.read()[-2000:]}")
+
+
+def test_simulate_streams_live_what_it_saves(tmp_path):
+    """`simulate --foxglove` plays the batch live: every value a client receives is in the .npz."""
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        port = probe.getsockname()[1]
+    out = tmp_path / "live.npz"
+    proc = subprocess.Popen([sys.executable, "-u", "-m", "hopper_mjx.simulate", *ARGS, "--rate", "50",
+                             "--duration", "0.6", "--speed-factor", "2", "--foxglove", str(port), "--out", str(out)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        wait_for_line(proc, "streaming instances [0, 1, 2] to Foxglove")
+        client = Client(port, ["/monoped_0/imu/data", "/monoped_2/odom"])
+        client.collect_until_closed()
+        assert proc.wait(timeout=60) == 0, proc.stderr.read()[-2000:]
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    saved = np.load(out)
+    np.testing.assert_array_equal(saved["time"], np.arange(30) * 0.02)
+    imu, odom = client.messages["/monoped_0/imu/data"], client.messages["/monoped_2/odom"]
+    assert len(imu) >= 10 and len(odom) >= 10
+    for log_time, msg in imu:
+        k = round(log_time / PERIOD_NS)
+        assert xyz(msg.linear_acceleration) == saved["imu_accel"][0, k].tolist()
+    for log_time, msg in odom:
+        k = round(log_time / PERIOD_NS)
+        assert xyz(msg.pose.pose.position) == saved["odom_pos"][2, k].tolist()
+
+
+# -- the command line ------------------------------------------------------------------------
+def run_tool(tool, args, env=None):
+    return subprocess.run([sys.executable, "-m", f"hopper_mjx.{tool}", *args], capture_output=True, text=True,
+                          env=env, timeout=120)
+
+
+@pytest.mark.parametrize("tool", ["view", "simulate"])
+def test_a_busy_foxglove_port_is_one_line_on_stderr(tool):
+    with socket.socket() as busy:
+        busy.bind(("127.0.0.1", 0))
+        busy.listen()
+        port = busy.getsockname()[1]
+        out = run_tool(tool, [*ARGS, "--foxglove", str(port)])
+    assert out.returncode == 2
+    lines = out.stderr.strip().splitlines()
+    assert lines[-1].startswith("error: --foxglove cannot listen on 127.0.0.1:") and str(port) in lines[-1]
+    assert "Traceback" not in out.stderr
+
+
+def test_without_a_display_view_says_so_and_names_render():
+    env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY")}
+    out = run_tool("view", ARGS, env=env)
+    assert out.returncode == 2
+    last = out.stderr.strip().splitlines()[-1]
+    assert last.startswith("error: view needs a display") and "python -m hopper_mjx.render" in last
+
+
+# -- the viewer under Xvfb ------------------------------------------------------------------
+def read_xwd(path: Path) -> np.ndarray:
+    """(height, width, 3) uint8 RGB of an X window dump (Xvfb -fbdir keeps the screen in one)."""
+    raw = path.read_bytes()
+    h = struct.unpack(">25I", raw[:100])
+    header_size, width, height, byte_order, bits_per_pixel, bytes_per_line, ncolors = (
+        h[0], h[4], h[5], h[7], h[11], h[12], h[19])
+    assert bits_per_pixel == 32
+    pixels = np.frombuffer(raw, np.uint8, count=bytes_per_line * height, offset=header_size + 12 * ncolors)
+    pixels = pixels.reshape(height, bytes_per_line)[:, : 4 * width].reshape(height, width, 4)
+    return pixels[..., [2, 1, 0]] if byte_order == 0 else pixels[..., [1, 2, 3]]
+
+
+@pytest.fixture
+def xvfb(tmp_path):
+    if not (shutil.which("Xvfb") and shutil.which("xdotool")):
+        pytest.skip("needs Debian's xvfb and xdotool (make installs them when run as root)")
+    read, write = os.pipe()
+    server = subprocess.Popen(["Xvfb", "-displayfd", str(write), "-screen", "0", "1280x800x24",
+                               "-fbdir", str(tmp_path), "-nolisten", "tcp"], pass_fds=[write],
+                              stderr=subprocess.DEVNULL)
+    os.close(write)
+    with os.fdopen(read) as f:
+        display = f":{f.readline().strip()}"
+    yield display, tmp_path / "Xvfb_screen0"
+    server.terminate()
+    server.wait(timeout=10)
+
+
+class Viewer:
+    """`python -m hopper_mjx.view` on an Xvfb display, driven with xdotool key presses."""
+
+    def __init__(self, display: str, args: list[str]):
+        self.env = {**os.environ, "DISPLAY": display}
+        self.proc = subprocess.Popen([sys.executable, "-u", "-m", "hopper_mjx.view", *args], env=self.env,
+                                     stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        self.window = None
+
+    def wait_for(self, prefix: str) -> str:
+        return wait_for_line(self.proc, prefix)
+
+    def key(self, *keys: str) -> None:
+        if self.window is None:
+            found = subprocess.run(["xdotool", "search", "--sync", "--name", "MuJoCo"], env=self.env,
+                                   capture_output=True, text=True, timeout=60)
+            self.window = found.stdout.split()[0]
+        for key in keys:
+            subprocess.run(["xdotool", "key", "--window", self.window, key], env=self.env, check=True)
+            time.sleep(0.3)
+
+    def status(self) -> dict:
+        self.key("F8")
+        return json.loads(self.wait_for("{"))
+
+    def status_when(self, ready, timeout: float = 240.0) -> dict:
+        """The first status for which `ready(status)` holds (simulated time, not wall time:
+        a loaded machine plays slower than real time)."""
+        deadline = time.monotonic() + timeout
+        while not ready(status := self.status()):
+            assert time.monotonic() < deadline, f"view stuck at {status}"
+            time.sleep(0.2)
+        return status
+
+
+def test_view_shows_the_robots_labelled_with_their_gravity_and_obeys_its_keys(xvfb, tmp_path):
+    display, screen = xvfb
+    viewer = Viewer(display, [*ARGS, "--speed-factor", "4"])
+    try:
+        viewer.wait_for("view: running")
+        viewer.status_when(lambda s: s["time"] >= LANDED)
+        viewer.key("space")  # pause
+        paused = viewer.status()
+        viewer.key("Return")  # one recorded instant
+        stepped = viewer.status_when(lambda s: s["time"] != paused["time"])
+        shown = read_xwd(screen)
+        viewer.key("2")  # MuJoCo's geom group 2: the robots
+        time.sleep(0.5)
+        background = read_xwd(screen)
+        viewer.key("2", "Next", "Insert", "space")  # robots back; select instance 1, kick it, run
+        kicked = viewer.status_when(lambda s: s["time"] >= stepped["time"] + 0.4)  # queued chunks, then the kick
+        viewer.key("ctrl+q")
+        out, err = viewer.proc.communicate(timeout=60)
+    finally:
+        if viewer.proc.poll() is None:
+            viewer.proc.kill()
+    assert viewer.proc.returncode == 0, err[-2000:]
+    assert "reached real-time factor" in out
+
+    assert paused["paused"] and stepped["time"] == pytest.approx(paused["time"] + 0.02, abs=1e-6)
+    assert [i["gravity"] for i in paused["instances"]] == list(GRAVITY)
+    labels = [f"{'> ' if k == 0 else ''}g {g:.2f}  {i['hops']} hops"  # landing bounces count as hops
+              for k, (g, i) in enumerate(zip(GRAVITY, paused["instances"]))]
+    assert [i["label"] for i in paused["instances"]] == labels
+
+    # The robots are the only difference from the floor-only background: three separate figures.
+    import matplotlib.image
+
+    matplotlib.image.imsave(tmp_path / "view.png", shown)
+    robot_blue = lambda img: (np.abs(img.astype(int) - ROBOT_BLUE).max(axis=-1) < 30).sum()
+    assert robot_blue(shown) > 300 and robot_blue(background) == 0
+    columns = np.flatnonzero((np.abs(shown.astype(int) - background).max(axis=-1) > 40).sum(axis=0) > 20)
+    figures = np.split(columns, np.flatnonzero(np.diff(columns) > 15) + 1)  # apart by more than 15 pixels
+    assert len(figures) == len(GRAVITY), f"robot figures at columns {[f.tolist() for f in figures]}"
+    assert all(10 <= f[-1] - f[0] <= 60 for f in figures)  # a robot's width at this distance
+
+    vy = [i["base_velocity"][1] for i in kicked["instances"]]
+    assert kicked["selected"] == 1 and vy[1] > 0.2 and abs(vy[0]) < 0.05 and abs(vy[2]) < 0.05
