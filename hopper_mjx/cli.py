@@ -173,6 +173,12 @@ def add_batch_options(p: argparse.ArgumentParser, *, gravity=(9.81, 3.71, 1.62),
     p.add_argument("--urdf", default=None, help="monoped URDF (default: the shipped one)")
     p.add_argument("--timestep", type=float, default=None, help="physics step, s (default: the world's, or 0.001)")
     p.add_argument("--chunk", type=int, default=256, help="instances per vmapped chunk on a device")
+    add_engine_option(p)
+
+
+def add_engine_option(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--engine", default="auto",
+                   help="physics engine: auto (chain when the model qualifies), chain or mjx (default auto)")
 
 
 @dataclass(frozen=True)
@@ -223,6 +229,7 @@ def check_batch(args) -> Batch:
         check_range(f"--{name.replace('_', '-')}", getattr(args, name), low=0)
     if args.chunk < 1:
         raise ValueError(f"--chunk must be >= 1, got {args.chunk}")
+    check_engine(args.engine)
     if args.timestep is not None:
         check_range("--timestep", args.timestep, low=0, high=MAX_TIMESTEP, open_low=True)
     check_controller(args.controller)
@@ -242,6 +249,15 @@ def check_batch(args) -> Batch:
     if warning:
         print(warning, file=sys.stderr)
     return Batch(gravity=np.repeat(rows, args.num, axis=0), model_options=options, gains=gains)
+
+
+def check_engine(name: str) -> None:
+    from hopper_mjx.engine import check_name
+
+    try:
+        check_name(name)
+    except ValueError as err:
+        raise ValueError(f"--engine: {err}") from None
 
 
 def check_rates(flags: str, sensors, batch: Batch) -> None:
@@ -272,7 +288,7 @@ def build_batch(args, batch: Batch):
     from hopper_mjx import model
     from hopper_mjx.sim import Sim
 
-    sim = Sim(model.load(args.urdf, **batch.model_options), chunk=args.chunk)
+    sim = Sim(model.load(args.urdf, **batch.model_options), engine=args.engine, chunk=args.chunk)
     controller, params = make_controller(args, sim, batch)
     return sim, controller, params
 

@@ -71,6 +71,9 @@ CASES = [
     ("perf.bench", ["--steps", "30"], "--steps must be a multiple of 20"),
     ("perf.bench", ["--plot", "p.png"], "--plot draws the --scaling records"),
     ("perf.bench", ["--controller", "pid"], "--controller: unknown 'pid'"),
+    ("perf.bench", ["--engine", "warp"], "--engine: unknown engine 'warp'"),
+    ("sweep", ["gravity", "--engine", "warp", "--out", "s"], "--engine: unknown engine 'warp'"),
+    ("simulate", ["--engine", "warp"], "--engine: unknown engine 'warp'"),
     ("perf.bench", ["--json", "nodir/b.json"], "--json nodir/b.json: its folder nodir does not exist"),
 ]
 

@@ -24,6 +24,7 @@ def test_json_has_finite_positive_rates(record):
     assert record["ratio"] == pytest.approx(record["mjx_steps_per_s"] / record["native_steps_per_s"])
     assert record["devices"] >= 1 and record["native_threads"] >= 1
     assert record["diverged"] == 0
+    assert record["engine"] == "chain"  # auto picks it for the monoped
 
 
 def test_mjx_and_native_step_the_same_physics(record):
@@ -72,4 +73,6 @@ def test_table_and_plot_from_records(record, tmp_path):
 def test_bad_arguments_exit_with_a_message(capsys):
     assert bench.main(["--num", "0", "--steps", "20"]) == 2
     assert "--num" in capsys.readouterr().err
+    assert bench.main(["--num", "4", "--steps", "20", "--engine", "warp"]) == 2
+    assert "--engine: unknown engine 'warp'" in capsys.readouterr().err
 

@@ -1,4 +1,5 @@
-"""The batched core against analytic oracles and MuJoCo C, three gravities in one batch."""
+"""The batched core against analytic oracles and MuJoCo C, three gravities in one batch,
+on both engines (every physics test runs on chain and on mjx)."""
 
 import copy
 
@@ -18,6 +19,13 @@ FALL_STEPS = 500
 FALL_SENSORS = signals.SensorConfig(imu_rate=100, odom_rate=500, contact_rate=1000, state_rate=1000)
 REST_STEPS = 1000
 REST_SENSORS = signals.SensorConfig.uniform(100)
+
+
+@pytest.fixture(scope="module", params=["chain", "mjx"])
+def sim(request, mj_model):
+    from hopper_mjx.sim import Sim
+
+    return Sim(mj_model, engine=request.param)
 
 
 @pytest.fixture(scope="module")
@@ -108,7 +116,7 @@ def test_odometry_position_is_the_integral_of_its_velocity(sim, fall):
     assert np.abs(pos - integrated).max() < 1e-3
 
 
-def test_mjx_agrees_with_mujoco_c_through_touchdown(mj_model, fall):
+def test_engine_agrees_with_mujoco_c_through_touchdown(mj_model, sim, fall):
     state0, _, traj = fall
     m = copy.deepcopy(mj_model)
     for i, g in enumerate(G):
@@ -121,7 +129,7 @@ def test_mjx_agrees_with_mujoco_c_through_touchdown(mj_model, fall):
             mujoco.mj_step(m, d)
         assert _first_contact(traj)[i] < FALL_STEPS // 2, "the comparison must include touchdown"
         err = np.abs(np.array(base) - traj.qpos[i, :, :3]).max()
-        assert err < 1e-3, f"g={g}: MJX and MuJoCo C differ by {err:.2e} m"
+        assert err < 1e-3, f"g={g}: {sim.engine.name} and MuJoCo C differ by {err:.2e} m"
 
 
 def test_at_rest_imu_and_contact_carry_the_weight(sim, rest):
@@ -197,10 +205,10 @@ def test_bad_rates_are_rejected(sim, limp):
         sim.rollout(state, limp, steps=25, sensors=signals.SensorConfig.uniform(100))
 
 
-def test_simulate_cli_writes_the_documented_arrays(tmp_path, rest):
+def test_simulate_cli_writes_the_documented_arrays(tmp_path, sim, rest):
     out = tmp_path / "run.npz"
     args = ["--gravity", "1.62,3.71,9.81", "--num", "1", "--duration", "1", "--controller", "hold",
-            "--rate", "100", "--out", str(out)]
+            "--rate", "100", "--engine", sim.engine.name, "--out", str(out)]
     assert simulate.main(args) == 0
     saved = np.load(out)
     assert saved["time"].shape == (100,) and saved["gravity"].shape == (3, 3)

@@ -12,10 +12,18 @@ from hopper_mjx import engine
 from hopper_mjx.model.robot import stance_qpos
 
 
-def test_names_and_the_fallback(mj_model):
-    assert {"auto", "mjx"} <= set(engine.names())
-    assert engine.make("auto", mj_model).name == "mjx"
-    with pytest.raises(ValueError, match="unknown engine 'bogus'; choose from: auto, mjx"):
+def test_names_and_the_fallback(mj_model, capsys):
+    assert engine.names() == ("auto", "chain", "mjx")
+    assert engine.make("auto", mj_model).name == "chain"
+    assert capsys.readouterr().err == ""
+    rk4 = copy.deepcopy(mj_model)
+    rk4.opt.integrator = mujoco.mjtIntegrator.mjINT_RK4
+    assert engine.make("auto", rk4).name == "mjx"
+    notice = capsys.readouterr().err
+    assert notice.startswith("note: engine auto uses mjx") and "integrator" in notice and notice.count("\n") == 1
+    with pytest.raises(ValueError, match="not a chain model: the integrator is not Euler"):
+        engine.make("chain", rk4)
+    with pytest.raises(ValueError, match="unknown engine 'bogus'; choose from: auto, chain, mjx"):
         engine.make("bogus", mj_model)
 
 

@@ -14,34 +14,48 @@ Every engine has, per instance and pure (the core vmaps them):
   touching, (3,) N floor-on-foot force and (3,) m contact point, world frame.
 
 `data` is a pytree with `qpos`, `qvel`, `qacc`, `ctrl`, `time` and `.replace(**fields)`.
-"mjx" (MuJoCo MJX, any model) is the reference; "auto" picks the best engine for the
-model and today that is "mjx".
+"mjx" (MuJoCo MJX, any model) is the reference and the fallback; "chain" is MuJoCo's step
+specialised to the monoped's topology (free base, serial chain of hinges, sphere foot on a
+plane; several times faster on CPU); "auto" picks "chain" when the model qualifies and
+otherwise "mjx", with a one-line notice on stderr saying why.
 """
 
 from __future__ import annotations
 
-import importlib.util
+import sys
 
 import mujoco
 
 from hopper_mjx.engine.mjx import MjxEngine
 
+NAMES = ("auto", "chain", "mjx")
+
 
 def names() -> tuple[str, ...]:
     """The engine names `make` accepts."""
-    chain = importlib.util.find_spec("hopper_mjx.engine.chain") is not None
-    return ("auto", "mjx") + (("chain",) if chain else ())
+    return NAMES
+
+
+def check_name(name: str) -> None:
+    """Raises ValueError for an unknown engine name (before any model is built)."""
+    if name not in NAMES:
+        raise ValueError(f"unknown engine {name!r}; choose from: {', '.join(NAMES)}")
 
 
 def make(name: str, mj_model: mujoco.MjModel):
-    """The engine called `name` for a compiled monoped."""
-    if name not in names():
-        raise ValueError(f"unknown engine {name!r}; choose from: {', '.join(names())}")
-    if name == "chain":
+    """The engine called `name` for a compiled monoped; "chain" raises `NotChain` (a
+    ValueError) for a model outside its topology, "auto" falls back to "mjx"."""
+    check_name(name)
+    if name in ("auto", "chain"):
         from hopper_mjx.engine import chain
 
-        return chain.make(mj_model)
+        try:
+            return chain.make(mj_model)
+        except chain.NotChain as err:
+            if name == "chain":
+                raise
+            print(f"note: engine auto uses mjx ({err})", file=sys.stderr)
     return MjxEngine(mj_model)
 
 
-__all__ = ["MjxEngine", "make", "names"]
+__all__ = ["MjxEngine", "check_name", "make", "names"]

@@ -1,4 +1,4 @@
-"""python -m hopper_mjx.perf.bench: the batched MJX core against native multithreaded MuJoCo.
+"""python -m hopper_mjx.perf.bench: the batched core (engine chain or mjx) against native multithreaded MuJoCo.
 
     python -m hopper_mjx.perf.bench --num 4096 --steps 1000 --json bench.json
     python -m hopper_mjx.perf.bench --scaling 64,256,1024,4096,16384 --steps 500 --plot scaling.png
@@ -6,21 +6,22 @@
 Both sides step the same compiled model, the same N instances for the same T
 steps from the same initial state, instance i under the same gravity:
 
-- MJX: `Sim.rollout` with the `hold` controller and the default 50 Hz signals,
-  i.e. the full core (physics, controller, signals, divergence guard), sharded
-  over every local device.
+- core: `Sim.rollout` on `--engine` (auto: chain for the monoped) with the `hold`
+  controller and the default 50 Hz signals, i.e. the full core (physics,
+  controller, signals, divergence guard), sharded over every local device. The
+  JSON keeps the historical `mjx_*` key names for this side; `engine` names it.
 - native: `mujoco.rollout` with one thread per device, per-instance gravity
   given as a list of `MjModel`s. The `hold` law (PD to the initial joint angles,
   saturated at the effort limits) runs inside MuJoCo's C step as affine-bias
   servo actuators with a constant target, so native pays for the same
   closed-loop control law without a Python callback. Native also computes its
   native sensors and writes its full state every step. `--controller raibert`
-  has no C twin: MJX runs Raibert's hopping controller while native keeps the
+  has no C twin: the core runs Raibert's hopping controller while native keeps the
   hold law, which flatters native (cheaper control, fewer contact changes).
 
 Timings interleave the two sides and keep each side's best of `--repeat`
 runs, because the cores are shared and noise only ever adds time. The ratio
-is MJX steps/s over native steps/s.
+is core steps/s over native steps/s.
 """
 
 from __future__ import annotations
@@ -182,7 +183,7 @@ def peak_rss_mb() -> float:
 
 
 def run(num: int, steps: int, *, controller: str = "hold", chunk: int = 256, repeat: int = 2,
-        threads: int | None = None, timestep: float = 1e-3) -> dict:
+        threads: int | None = None, timestep: float = 1e-3, engine: str = "auto") -> dict:
     """One side-by-side measurement; returns the JSON record."""
     import jax
 
@@ -191,8 +192,9 @@ def run(num: int, steps: int, *, controller: str = "hold", chunk: int = 256, rep
 
     if steps < 1 or repeat < 1:
         raise ValueError(f"--steps and --repeat must be >= 1, got {steps} and {repeat}")
+    cli.check_engine(engine)
     clock = CompileClock()
-    sim = Sim(model.load(timestep=timestep), chunk=chunk)
+    sim = Sim(model.load(timestep=timestep), engine=engine, chunk=chunk)
     threads = threads or len(sim.devices)
     gravity = gravity_vectors(bench_gravities(num))
     mjx_controller, params, native_model, native_ctrl = controller_pair(controller, sim, gravity)
@@ -224,6 +226,7 @@ def run(num: int, steps: int, *, controller: str = "hold", chunk: int = 256, rep
         "num": num,
         "steps": steps,
         "controller": controller,
+        "engine": sim.engine.name,
         "native_controller": "none" if controller == "none" else "hold",
         "timestep": timestep,
         "mjx_steps_per_s": mjx_rate,
@@ -260,18 +263,19 @@ def run(num: int, steps: int, *, controller: str = "hold", chunk: int = 256, rep
 def format_table(record: dict) -> str:
     rows = [
         ("instances x steps", f"{record['num']} x {record['steps']}  (controller {record['controller']})"),
-        ("MJX steps/s", f"{record['mjx_steps_per_s']:,.0f}  on {record['devices']} {record['device_kind']} device(s)"),
+        ("core steps/s", f"{record['mjx_steps_per_s']:,.0f}  engine {record['engine']}, on {record['devices']} "
+                         f"{record['device_kind']} device(s)"),
         ("native steps/s",
          f"{record['native_steps_per_s']:,.0f}  mujoco.rollout, {record['native_threads']} thread(s)"),
-        ("ratio MJX / native", f"{record['ratio']:.2f}"),
-        ("CPU us per step", f"MJX {record['mjx_cpu_us_per_step']:.2f}, native {record['native_cpu_us_per_step']:.2f}  "
+        ("ratio core / native", f"{record['ratio']:.2f}"),
+        ("CPU us per step", f"core {record['mjx_cpu_us_per_step']:.2f}, native {record['native_cpu_us_per_step']:.2f}  "
                             f"(ratio {record['cpu_ratio']:.2f})"),
         ("compile", f"{record['compile_s']:.1f} s  ({record['compile_cache_hits']} persistent-cache hit(s))"),
         ("peak RSS", f"{record['peak_rss_mb']:,.0f} MB"),
         ("diverged instances", f"{record['diverged']}"),
     ]
     if "max_final_qpos_gap" in record:
-        rows.append(("final qpos, max |MJX - native|", f"{record['max_final_qpos_gap']:.2e}"))
+        rows.append(("final qpos, max |core - native|", f"{record['max_final_qpos_gap']:.2e}"))
     width = max(len(k) for k, _ in rows)
     return "\n".join(f"{k:<{width}}  {v}" for k, v in rows)
 
@@ -294,12 +298,14 @@ def scaling(nums: list[int], steps: int, extra_args: list[str]) -> list[dict]:
 
 def markdown_table(records: list[dict]) -> str:
     lines = [
-        "| N | MJX steps/s | native steps/s | ratio | CPU µs/step MJX / native | CPU ratio | compile s | peak RSS MB |",
-        "|---:|---:|---:|---:|---:|---:|---:|---:|",
+        "| engine | N | core steps/s | native steps/s | ratio | CPU µs/step core / native | CPU ratio | compile s "
+        "| peak RSS MB |",
+        "|---|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for r in records:
         lines.append(
-            f"| {r['num']} | {r['mjx_steps_per_s']:,.0f} | {r['native_steps_per_s']:,.0f} | {r['ratio']:.2f} | "
+            f"| {r.get('engine', 'mjx')} | {r['num']} "
+            f"| {r['mjx_steps_per_s']:,.0f} | {r['native_steps_per_s']:,.0f} | {r['ratio']:.2f} | "
             f"{r['mjx_cpu_us_per_step']:.1f} / {r['native_cpu_us_per_step']:.1f} | {r['cpu_ratio']:.2f} | "
             f"{r['compile_s']:.1f} | {r['peak_rss_mb']:,.0f} |"
         )
@@ -314,7 +320,8 @@ def plot_scaling(records: list[dict], path: str) -> None:
 
     nums = [r["num"] for r in records]
     fig, (rate, ratio) = plt.subplots(1, 2, figsize=(10, 4))
-    rate.loglog(nums, [r["mjx_steps_per_s"] for r in records], "o-", label=f"MJX, {records[0]['devices']} devices")
+    core = f"core ({records[0].get('engine', 'mjx')}), {records[0]['devices']} devices"
+    rate.loglog(nums, [r["mjx_steps_per_s"] for r in records], "o-", label=core)
     rate.loglog(nums, [r["native_steps_per_s"] for r in records], "s-",
                 label=f"native mujoco.rollout, {records[0]['native_threads']} threads")
     rate.set_xlabel("instances N")
@@ -324,7 +331,7 @@ def plot_scaling(records: list[dict], path: str) -> None:
     ratio.semilogx(nums, [r["ratio"] for r in records], "o-")
     ratio.axhline(1.0, color="gray", linestyle="--")
     ratio.set_xlabel("instances N")
-    ratio.set_ylabel("MJX / native")
+    ratio.set_ylabel("core / native")
     ratio.grid(True, which="both", alpha=0.3)
     fig.suptitle(f"monoped, {records[0]['steps']} steps, controller {records[0]['controller']}")
     fig.tight_layout()
@@ -339,6 +346,7 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--controller", default="hold",
                    help="hold (PD to the initial angles), raibert (hopping; native keeps hold) or none")
     p.add_argument("--chunk", type=int, default=256, help="instances per vmapped chunk on a device")
+    cli.add_engine_option(p)
     p.add_argument("--repeat", type=int, default=2, help="timed runs per side; the best counts")
     p.add_argument("--threads", type=int, default=None, help="native threads (default: one per device)")
     p.add_argument("--timestep", type=float, default=1e-3, help="physics step, s")
@@ -354,6 +362,7 @@ def check(args) -> list[int] | None:
         if getattr(args, name) < 1:
             raise ValueError(f"--{name} must be >= 1, got {getattr(args, name)}")
     cli.check_range("--timestep", args.timestep, low=0, high=cli.MAX_TIMESTEP, open_low=True)
+    cli.check_engine(args.engine)
     if args.controller not in CONTROLLERS:
         raise ValueError(f"--controller: unknown {args.controller!r}; choose from {', '.join(CONTROLLERS)}")
     if args.json:
@@ -381,6 +390,7 @@ def main(argv=None) -> int:
         runtime.configure()
         if nums:
             passed = ["--controller", args.controller, "--chunk", str(args.chunk), "--repeat", str(args.repeat),
+                      "--engine", args.engine,
                       "--timestep", str(args.timestep)] + (["--threads", str(args.threads)] if args.threads else [])
             records = scaling(nums, args.steps, passed)
             print(markdown_table(records))
@@ -389,7 +399,7 @@ def main(argv=None) -> int:
             result = records
         else:
             result = run(args.num, args.steps, controller=args.controller, chunk=args.chunk,
-                         repeat=args.repeat, threads=args.threads, timestep=args.timestep)
+                         repeat=args.repeat, threads=args.threads, timestep=args.timestep, engine=args.engine)
             print(format_table(result))
     except (ValueError, argparse.ArgumentTypeError) as err:
         return cli.fail(err)

@@ -1,7 +1,9 @@
-"""python -m hopper_mjx.perf.profile: where the batched MJX step spends its time.
+"""python -m hopper_mjx.perf.profile: where the batched step spends its time, per engine.
 
-    python -m hopper_mjx.perf.profile --num 256
+    python -m hopper_mjx.perf.profile --num 256 --engine mjx
+    python -m hopper_mjx.perf.profile --num 256 --engine chain
 
+mjx:
 An ablation of the compiled, fused step as the core runs it (vmapped over one
 chunk of instances, XLA:CPU options of `Sim`, a `lax.scan` over `--steps`
 steps): the same rollout is timed with MuJoCo's contact stage disabled, then
@@ -12,6 +14,11 @@ smooth dynamics (kinematics, inertia, bias forces, actuation, integration).
 Each rollout starts from the same standing batch (foot on the floor, after
 `--settle` steps holding the stance); without contacts the robots fall through
 the floor, which is what a timing ablation asks for.
+
+chain: the same standing batch stepped by the chain engine cut after each of
+its stages in turn (kinematics; mass matrix, bias forces and actuation;
+constraint rows; the Newton solve; integration). Each cut keeps every output
+of its last stage alive, so the differences are what each stage costs.
 """
 
 from __future__ import annotations
@@ -32,19 +39,18 @@ VARIANTS = (
 )
 
 
-def rollout_cost(mj_model, qpos, qvel, gravity, steps: int) -> float:
-    """µs per instance-step of a compiled vmapped scan of mjx.step from (qpos, qvel)."""
+CHAIN_STAGES = ("kinematics", "mass matrix, bias forces, actuation", "constraint rows", "Newton solve",
+                "integration")
+
+
+def best_cost(step, data, gravity, steps: int) -> float:
+    """µs per instance-step of a compiled vmapped scan of step(data, gravity) from data."""
     import jax
-    from mujoco import mjx
 
     from hopper_mjx.sim import CPU_COMPILER_OPTIONS
 
-    model = mjx.put_model(mj_model)
-    data = jax.vmap(lambda q, v: mjx.make_data(mj_model).replace(qpos=q, qvel=v))(qpos, qvel)
-
     def one(d, g):
-        m = model.replace(opt=model.opt.replace(gravity=g))
-        return jax.lax.scan(lambda d, _: (mjx.step(m, d), None), d, None, length=steps)[0]
+        return jax.lax.scan(lambda d, _: (step(d, g), None), d, None, length=steps)[0]
 
     f = jax.jit(jax.vmap(one), compiler_options=CPU_COMPILER_OPTIONS)
     jax.block_until_ready(f(data, gravity))  # compiles
@@ -56,7 +62,54 @@ def rollout_cost(mj_model, qpos, qvel, gravity, steps: int) -> float:
     return best / (gravity.shape[0] * steps) * 1e6
 
 
-def measure(num: int, steps: int, settle: int) -> dict:
+def rollout_cost(mj_model, qpos, qvel, gravity, steps: int) -> float:
+    """µs per instance-step of mjx.step from (qpos, qvel)."""
+    import jax
+    from mujoco import mjx
+
+    model = mjx.put_model(mj_model)
+    data = jax.vmap(lambda q, v: mjx.make_data(mj_model).replace(qpos=q, qvel=v))(qpos, qvel)
+    step = lambda d, g: mjx.step(model.replace(opt=model.opt.replace(gravity=g)), d)
+    return best_cost(step, data, gravity, steps)
+
+
+def chain_cut(engine, depth: int):
+    """The chain engine's step cut after its first `depth` stages (CHAIN_STAGES)."""
+    import jax
+    import jax.numpy as jnp
+
+    from hopper_mjx.engine import chain, chain_constraint, chain_smooth
+
+    if depth == len(CHAIN_STAGES):
+        return lambda d, g: engine.integrate(engine.model, engine.forward(engine.model, d, g), g)
+    if depth == len(CHAIN_STAGES) - 1:
+        return lambda d, g: d.replace(qacc_warmstart=engine.forward(engine.model, d, g).qacc)
+    cm, gate = engine.chain, engine.model.gate
+
+    def step(d, g):
+        qpos = tuple(d.qpos[i] for i in range(cm.nq))
+        qvel = tuple(d.qvel[i] for i in range(cm.nv))
+        pose = chain_smooth.kinematics(cm, gate, qpos)
+        outputs = [pose]
+        if depth >= 2:
+            outputs.append(chain._smooth(cm, gate, pose, qpos, qvel, tuple(d.ctrl), tuple(g)))
+        if depth >= 3:
+            outputs.append(chain_constraint.rows(cm, gate, pose, qpos, qvel))
+        leaves = [x for x in jax.tree_util.tree_leaves(outputs) if not isinstance(x, (int, float))]
+        return d.replace(qvel=d.qvel + 1e-12 * sum(jnp.sum(x) for x in leaves))  # keeps every output
+
+    return step
+
+
+def chain_costs(engine, qpos, qvel, gravity, steps: int) -> dict:
+    import jax
+
+    data = jax.vmap(engine.make_data)(qpos, qvel)
+    cumulative = [best_cost(chain_cut(engine, k), data, gravity, steps) for k in range(1, len(CHAIN_STAGES) + 1)]
+    return dict(zip(CHAIN_STAGES, np.diff(cumulative, prepend=0.0))) | {"full step": cumulative[-1]}
+
+
+def measure(num: int, steps: int, settle: int, engine: str = "mjx") -> dict:
     import jax
 
     from hopper_mjx import model
@@ -68,29 +121,40 @@ def measure(num: int, steps: int, settle: int) -> dict:
     if num < 1 or steps < 1:
         raise ValueError(f"--num and --steps must be >= 1, got {num}, {steps}")
     mj_model = model.load()
-    sim = Sim(mj_model, chunk=num, devices=jax.local_devices()[:1])
+    sim = Sim(mj_model, engine=engine, chunk=num, devices=jax.local_devices()[:1])
     controller = hold(sim.layout)
     state = sim.reset(gravity_vectors(np.linspace(*GRAVITY_SPAN, num)), controller=controller)
     standing, _ = sim.rollout(state, controller, steps=settle)
+    record = {"num": num, "steps": steps, "engine": sim.engine.name}
+    if sim.engine.name == "chain":
+        return record | {"us": chain_costs(sim.engine, standing.data.qpos, standing.data.qvel, standing.gravity, steps)}
     costs = {}
     for name, flag in VARIANTS:
         variant = without_sensors(mj_model)  # as the core: it computes its own signals
         variant.opt.disableflags |= flag
         costs[name] = rollout_cost(variant, standing.data.qpos, standing.data.qvel, standing.gravity, steps)
-    return {"num": num, "steps": steps, "constraint_rows": int(standing.data._impl.efc_J.shape[1]), "us": costs}
+    return record | {"constraint_rows": int(standing.data._impl.efc_J.shape[1]), "us": costs}
 
 
 def table(record: dict) -> str:
     us = record["us"]
     full = us["full step"]
+    if record["engine"] == "chain":
+        head = f"{record['num']} standing instances on one device, {record['steps']} steps, engine chain"
+        parts = tuple((name, us[name]) for name in CHAIN_STAGES)
+        return _lines(head, parts, full)
     parts = (
         ("contacts (collision, contact rows, their solve)", us["full step"] - us["no contacts"]),
         ("other constraints (limit rows, the solve itself)", us["no contacts"] - us["no constraints"]),
         ("smooth dynamics (kinematics .. integration)", us["no constraints"]),
     )
-    lines = [f"{record['num']} standing instances on one device, {record['steps']} steps, "
-             f"{record['constraint_rows']} constraint rows per instance",
-             f"{'part of the step':50s} {'µs':>7s} {'share':>6s}"]
+    head = (f"{record['num']} standing instances on one device, {record['steps']} steps, engine mjx, "
+            f"{record['constraint_rows']} constraint rows per instance")
+    return _lines(head, parts, full)
+
+
+def _lines(head: str, parts, full: float) -> str:
+    lines = [head, f"{'part of the step':50s} {'µs':>7s} {'share':>6s}"]
     lines += [f"{name:50s} {cost:7.2f} {cost / full:6.0%}" for name, cost in parts]
     lines.append(f"{'full step (one instance-step)':50s} {full:7.2f}")
     return "\n".join(lines)
@@ -101,13 +165,14 @@ def main(argv=None) -> int:
     p.add_argument("--num", type=int, default=256, help="instances in the batch (the core's chunk)")
     p.add_argument("--steps", type=int, default=200, help="steps per timed rollout")
     p.add_argument("--settle", type=int, default=300, help="physics steps holding the stance before timing")
+    p.add_argument("--engine", default="mjx", choices=("chain", "mjx"), help="engine to profile (default mjx)")
     args = p.parse_args(argv)
     for name in ("num", "steps", "settle"):
         if getattr(args, name) < 1:
             return cli.fail(ValueError(f"--{name} must be >= 1, got {getattr(args, name)}"))
     runtime.configure()
     try:
-        record = measure(args.num, args.steps, args.settle)
+        record = measure(args.num, args.steps, args.settle, args.engine)
     except ValueError as err:
         return cli.fail(err)
     print(table(record))

@@ -41,6 +41,7 @@ def parser() -> argparse.ArgumentParser:
         s.add_argument("--kick", type=float, default=KICK, help="std of the random initial velocity, m/s and rad/s")
         s.add_argument("--seed", type=int, default=0)
         s.add_argument("--chunk", type=int, default=256, help="instances per compiled call")
+        cli.add_engine_option(s)
         s.add_argument("--out", type=Path, default=None, help="output folder (default runs/<kind>-<UTC time>)")
         s.add_argument("--no-progress", action="store_true")
         s.add_argument("--coordinator", default=None, help="HOST:PORT of process 0, for a multi-process sweep")
@@ -76,7 +77,7 @@ def check(args):
     gravity = gravity_from_worlds(args) if args.world is not None else tuple(args.gravity or args.default_gravity)
     spec = SweepSpec(kind=args.kind, gravity=gravity, num=args.num, duration=args.duration,
                      height=args.height, speed=tuple(args.speed), seed=args.seed, kick=args.kick,
-                     chunk=args.chunk, param=getattr(args, "param", None),
+                     chunk=args.chunk, engine=args.engine, param=getattr(args, "param", None),
                      values=tuple(args.values) if args.kind == "gains" else ())
     out = args.out or Path("runs") / f"{args.kind}-{datetime.now(timezone.utc):%Y%m%d-%H%M%S}"
     cli.check_writable("--out", out, folder=True, make_parents=True)

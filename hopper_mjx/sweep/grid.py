@@ -36,6 +36,7 @@ class SweepSpec:
     chunk: int = 256  # instances per compiled call; fixed so every chunk reuses one compile
     param: str | None = None  # Raibert gain swept by `gains`
     values: tuple[float, ...] = ()
+    engine: str = "auto"  # hopper_mjx.engine name
 
     def __post_init__(self):
         if self.kind not in ("gravity", "gains"):
@@ -57,6 +58,9 @@ class SweepSpec:
             raise ValueError(f"--kick must be >= 0, got {self.kick}")
         if self.chunk < 1:
             raise ValueError(f"--chunk must be >= 1, got {self.chunk}")
+        from hopper_mjx import cli
+
+        cli.check_engine(self.engine)
         if self.kind == "gains":
             from hopper_mjx.control.raibert import GAINS
 

@@ -99,7 +99,7 @@ def run(spec: SweepSpec, out: Path, *, progress: bool = True) -> tuple[Instances
     out = Path(out)
     claim(out, spec)
     (out / "chunks").mkdir(exist_ok=True)
-    sim = Sim(model.load())
+    sim = Sim(model.load(), engine=spec.engine)
     instances = expand(spec, sim.layout.nv)
     chunks = [np.arange(i, min(i + spec.chunk, len(instances))) for i in range(0, len(instances), spec.chunk)]
     me, procs = jax.process_index(), jax.process_count()

@@ -1,0 +1,160 @@
+"""The chain engine: MuJoCo's step specialised, at trace time, to one monoped's topology.
+
+A free base, a serial chain of hinges and a sphere foot on a plane floor (any URDF the
+loader accepts; `chain_model.describe` says why another model is not one). The step is
+MuJoCo's, stage by stage, written as per-instance scalar arithmetic with the model's
+numbers as constants, so that `vmap` turns every quantity into one contiguous vector over
+instances:
+
+    kinematics -> mass matrix, bias, actuation, damping -> constraint rows -> Newton solve
+    -> (integrate) Euler with implicit joint damping
+
+Each stage's outputs are stored once (`chain_stage.stored`); the engine's `model` pytree
+only carries the run-time true predicate that makes that work.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import mujoco
+
+from hopper_mjx.engine import chain_algebra as al
+from hopper_mjx.engine import chain_constraint, chain_smooth, chain_solver
+from hopper_mjx.engine.chain_model import ChainModel, NotChain, describe
+from hopper_mjx.engine.chain_stage import stored
+
+__all__ = ["ChainData", "ChainEngine", "NotChain", "make"]
+
+
+class ChainParams(NamedTuple):
+    """The compiled function's model argument: a run-time true gate for `stored`."""
+
+    gate: jax.Array
+
+
+@jax.tree_util.register_dataclass
+@dataclasses.dataclass(frozen=True)
+class ChainData:
+    """One instance's state and the last forward's results."""
+
+    qpos: jax.Array  # (nq,)
+    qvel: jax.Array  # (nv,)
+    qacc: jax.Array  # (nv,) of the last forward
+    ctrl: jax.Array  # (nu,)
+    time: jax.Array  # ()
+    qacc_warmstart: jax.Array  # (nv,) the solver's start: the previous step's qacc
+    mass: jax.Array  # (nv (nv + 1) / 2,) M's upper triangle, row by row
+    qfrc_smooth: jax.Array  # (nv,) applied + actuator - bias
+    qfrc_constraint: jax.Array  # (nv,)
+    foot_touching: jax.Array  # () bool
+    foot_force: jax.Array  # (3,) N floor on foot, world
+    foot_pos: jax.Array  # (3,) m contact point, world (zeros when not touching)
+
+    def replace(self, **fields) -> ChainData:
+        return dataclasses.replace(self, **fields)
+
+
+def _vector(values, dtype) -> jax.Array:
+    return jnp.stack([jnp.asarray(v, dtype) for v in values])
+
+
+def _smooth(cm: ChainModel, gate, pose, qpos, qvel, ctrl, gravity):
+    """Mass matrix, qfrc_smooth and the unconstrained acceleration."""
+    mass = chain_smooth.mass_matrix(cm, gate, pose)
+    bias = chain_smooth.bias(cm, gate, pose, qvel, gravity)
+    qfrc_smooth = stored(gate, lambda *a: tuple(
+        al.sub(f, b) for f, b in zip(chain_smooth.applied_forces(cm, *a), bias)), qpos, qvel, ctrl)
+    return mass, qfrc_smooth, chain_solver.solve_spd(gate, mass, qfrc_smooth)
+
+
+def _foot_force(foot: chain_constraint.FootContact, force) -> tuple:
+    total = (0.0, 0.0, 0.0)
+    for row, direction in zip(foot.rows, foot.directions):
+        total = al.vadd(total, al.vscale(force[row], direction))
+    return tuple(jnp.where(foot.touching, x, 0.0) for x in total)
+
+
+class ChainEngine:
+    """MuJoCo's step for the chain topology, behind the engine interface (hopper_mjx.engine)."""
+
+    name = "chain"
+    # A diverged instance keeps these from its last finite state (the rest is recomputed).
+    freeze_fields = ("qpos", "qvel", "qacc_warmstart")
+
+    def __init__(self, mj_model: mujoco.MjModel):
+        self.chain = describe(mj_model)
+        self.nu = int(mj_model.nu)
+        self.model = ChainParams(gate=jnp.array(True))
+
+    def make_data(self, qpos, qvel) -> ChainData:
+        qpos = jnp.asarray(qpos)
+        cm, dtype = self.chain, qpos.dtype
+        zeros = lambda *shape: jnp.zeros(shape, dtype)
+        return ChainData(
+            qpos=qpos, qvel=jnp.asarray(qvel, dtype), qacc=zeros(cm.nv), ctrl=zeros(self.nu), time=zeros(),
+            qacc_warmstart=zeros(cm.nv), mass=zeros(cm.nv * (cm.nv + 1) // 2), qfrc_smooth=zeros(cm.nv),
+            qfrc_constraint=zeros(cm.nv), foot_touching=jnp.zeros((), bool), foot_force=zeros(3), foot_pos=zeros(3),
+        )
+
+    def forward(self, model: ChainParams, data: ChainData, gravity) -> ChainData:
+        cm, gate, dtype = self.chain, model.gate, data.qpos.dtype
+        qpos = tuple(data.qpos[i] for i in range(cm.nq))
+        qvel = tuple(data.qvel[i] for i in range(cm.nv))
+        ctrl = tuple(data.ctrl[i] for i in range(self.nu))
+        gravity = tuple(jnp.asarray(gravity, dtype)[i] for i in range(3))
+        pose = chain_smooth.kinematics(cm, gate, qpos)
+        mass, qfrc_smooth, qacc_smooth = _smooth(cm, gate, pose, qpos, qvel, ctrl, gravity)
+        rows, foot = chain_constraint.rows(cm, gate, pose, qpos, qvel)
+        warm = tuple(data.qacc_warmstart[i] for i in range(cm.nv))
+        sol = chain_solver.solve(gate, mass, qfrc_smooth, qacc_smooth, warm, rows, iterations=cm.iterations,
+                                 ls_iterations=cm.ls_iterations, tolerance=cm.tolerance,
+                                 cost_scale=cm.cost_scale, warmstart=cm.warmstart)
+        upper = [mass[i, j] for i in range(cm.nv) for j in range(i, cm.nv)]
+        return data.replace(
+            qacc=_vector(sol.qacc, dtype), mass=_vector(upper, dtype), qfrc_smooth=_vector(qfrc_smooth, dtype),
+            qfrc_constraint=_vector(sol.qfrc_constraint, dtype), foot_touching=foot.touching,
+            foot_force=_vector(_foot_force(foot, sol.force), dtype), foot_pos=_vector(foot.pos, dtype),
+        )
+
+    def integrate(self, model: ChainParams, data: ChainData, gravity) -> ChainData:
+        """Semi-implicit Euler; joint damping implicit as MuJoCo's: (M + h B) a = qfrc_smooth + qfrc_constraint."""
+        cm, h = self.chain, self.chain.timestep
+        qacc = data.qacc
+        if cm.eulerdamp and any(cm.damping):
+            upper = iter(data.mass[k] for k in range(data.mass.shape[0]))
+            damped = {(i, j): next(upper) + (h * cm.damping[i] if i == j else 0.0)
+                      for i in range(cm.nv) for j in range(i, cm.nv)}
+            total = data.qfrc_smooth + data.qfrc_constraint
+            qacc = _vector(chain_solver.solve_spd(model.gate, damped, tuple(total[i] for i in range(cm.nv))),
+                           data.qvel.dtype)
+        qvel = data.qvel + h * qacc
+        return data.replace(qpos=_advance_qpos(cm, data.qpos, qvel), qvel=qvel, time=data.time + h,
+                            qacc_warmstart=data.qacc)
+
+    def foot_contact(self, model: ChainParams, data: ChainData):
+        return data.foot_touching, data.foot_force, data.foot_pos
+
+
+def _advance_qpos(cm: ChainModel, qpos: jax.Array, qvel: jax.Array) -> jax.Array:
+    """qpos after h with velocity qvel: the base quaternion turned by its body-frame rate."""
+    h = cm.timestep
+    w, x, y, z = (qpos[i] for i in range(3, 7))
+    wx, wy, wz = (qvel[i] for i in range(3, 6))
+    rate = jnp.sqrt(wx * wx + wy * wy + wz * wz)
+    half = 0.5 * h * rate
+    scale = jnp.where(rate > chain_constraint.MINVAL, jnp.sin(half) / jnp.where(rate > 0, rate, 1.0), 0.0)
+    c, ax, ay, az = jnp.cos(half), wx * scale, wy * scale, wz * scale
+    quat = jnp.stack([w * c - x * ax - y * ay - z * az, w * ax + x * c + y * az - z * ay,
+                      w * ay - x * az + y * c + z * ax, w * az + x * ay - y * ax + z * c])
+    quat = quat / jnp.sqrt(jnp.sum(quat * quat))
+    hinges = qpos[7:] + h * qvel[6:]
+    return jnp.concatenate([qpos[:3] + h * qvel[:3], quat, hinges])
+
+
+def make(mj_model: mujoco.MjModel) -> ChainEngine:
+    """The chain engine of `mj_model`; `NotChain` (one line why) when the model is outside it."""
+    return ChainEngine(mj_model)

@@ -1,0 +1,166 @@
+"""Constraint rows of the chain: joint limits and floor contacts, with MuJoCo's equations.
+
+Every row that can ever exist has a fixed slot (a limit per limited hinge; per contact
+pair one slot for a sphere, four for a box's lowest corners; four pyramid edges or one
+frictionless row each). A row that does not exist this step gets D = 0, which takes it
+out of the cost, gradient and Hessian exactly as if MuJoCo had not created it.
+
+Per row, as MuJoCo's mj_makeImpedance / mj_referenceConstraint:
+    imp  = solimp's sigmoid of |pos - margin| / width
+    R    = max(mjMINVAL, invweight0 * (1 - imp) / imp),   D = 1 / R
+    aref = -B * (J qvel) - K * imp * (pos - margin),  K, B from solref (refsafe-clamped)
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import jax.numpy as jnp
+
+from hopper_mjx.engine import chain_algebra as al
+from hopper_mjx.engine.chain_model import ChainModel, ContactPair, SolParams
+from hopper_mjx.engine.chain_smooth import Pose, dof_body
+from hopper_mjx.engine.chain_stage import stored
+
+MINVAL = 1e-15  # mujoco.mjMINVAL
+MINIMP, MAXIMP = 0.0001, 0.9999  # mujoco.mjMINIMP, mjMAXIMP
+
+
+class Rows(NamedTuple):
+    jac: tuple  # per row: nv scalars (constant 0 where the row cannot reach the dof)
+    weight: tuple  # per row: D, 0 when the row does not exist
+    aref: tuple  # per row: reference acceleration
+
+
+class FootContact(NamedTuple):
+    touching: object  # () bool: foot-floor distance < 0
+    pos: tuple  # contact point, world (zeros when not touching)
+    rows: tuple  # indices of the foot's rows in Rows
+    directions: tuple  # per foot row: world direction of its force on the foot
+
+
+def _stiffness_damping(cm: ChainModel, sol: SolParams) -> tuple[float, float, float, float]:
+    """(K, B, dmin, dmax) of a row, constants of the model."""
+    timeconst, dampratio = sol.solref
+    dmin, dmax = (min(max(v, MINIMP), MAXIMP) for v in sol.solimp[:2])
+    if timeconst > 0:
+        if cm.refsafe:
+            timeconst = max(timeconst, 2 * cm.timestep)
+        k = 1 / (dmax * dmax * timeconst * timeconst * dampratio * dampratio)
+        b = 2 / (dmax * timeconst)
+    else:
+        k, b = -timeconst / (dmax * dmax), -dampratio / dmax
+    return k, b, dmin, dmax
+
+
+def _impedance(sol: SolParams, dmin: float, dmax: float, violation):
+    """MuJoCo's getimpedance: the sigmoid of solimp over |pos - margin| / width."""
+    width, mid, power = sol.solimp[2], min(max(sol.solimp[3], MINIMP), MAXIMP), max(1.0, sol.solimp[4])
+    if dmin == dmax or width <= MINVAL:
+        return 0.5 * (dmin + dmax)
+    x = jnp.abs(violation) / width
+    powf = (lambda v: v * v) if power == 2 else (lambda v: v ** power)
+    low = powf(x) / mid ** (power - 1)
+    high = 1 - powf(1 - x) / (1 - mid) ** (power - 1)
+    y = jnp.where(x <= mid, low, high)
+    return jnp.where(x >= 1, dmax, dmin + y * (dmax - dmin))
+
+
+def _row(cm, sol, invweight, jac, qvel, violation, exists):
+    """(D, aref) of one row; violation = pos - margin."""
+    k, b, dmin, dmax = _stiffness_damping(cm, sol)
+    imp = _impedance(sol, dmin, dmax, violation)
+    r = jnp.maximum(MINVAL, invweight * (1 - imp) / imp)
+    vel = al.dot(jac, qvel)
+    aref = al.sub(al.mul(-b, vel), k * imp * violation)
+    return jnp.where(exists, 1 / r, 0.0), aref
+
+
+def _limit_rows(cm: ChainModel, qpos, qvel):
+    jac, weight, aref = [], [], []
+    for link in cm.links:
+        h = link.hinge
+        if h is None or h.limit is None:
+            continue
+        lo, hi, margin = h.limit
+        q = qpos[h.qpos_adr]
+        to_lower, to_upper = q - lo, hi - q
+        pos = jnp.minimum(to_lower, to_upper)
+        row = [0.0] * cm.nv
+        row[h.dof] = jnp.where(to_lower < to_upper, 1.0, -1.0)
+        d, a = _row(cm, h.sol, h.invweight, tuple(row), qvel, pos - margin, pos < margin)
+        jac.append(tuple(row)), weight.append(d), aref.append(a)
+    return jac, weight, aref
+
+
+def _point_jacobian(cm: ChainModel, pose: Pose, body: int, point, direction) -> tuple:
+    """direction . (velocity of the body point at `point`) per dof (point relative to O)."""
+    lever = al.cross(point, direction)
+    return tuple(
+        al.add(al.dot(direction, pose.dof_v[j]), al.dot(pose.dof_w[j], lever)) if b <= body else 0.0
+        for j, b in enumerate(dof_body(cm))
+    )
+
+
+def _slots(pair: ContactPair, pose: Pose, normal, height):
+    """Per contact slot of the pair: (distance, point relative to O)."""
+    rot = al.matmul(pose.rot[pair.body], pair.rot)
+    centre = al.vadd(pose.origin[pair.body], al.matvec(pose.rot[pair.body], pair.pos))
+    centre_dist = al.add(al.dot(normal, centre), height)
+    if pair.kind == "sphere":
+        dist = centre_dist - pair.size[0]
+        return [(dist, al.vsub(centre, al.vscale(pair.size[0] + 0.5 * dist, normal)))]
+    slots = []
+    sx, sy, sz = pair.size
+    for k in range(4):  # corners k and 7 - k are opposite; MuJoCo keeps the lower of each pair
+        corner = al.matvec(rot, ((sx if k & 1 else -sx), (sy if k & 2 else -sy), -sz))
+        below = al.dot(normal, corner)
+        sign = jnp.where(below <= 0, 1.0, -1.0)
+        dist = centre_dist - jnp.abs(below)
+        slots.append((dist, al.vsub(al.vadd(centre, al.vscale(sign, corner)), al.vscale(0.5 * dist, normal))))
+    return slots
+
+
+def _directions(cm: ChainModel, pair: ContactPair) -> tuple:
+    """World directions of the pair's rows: the normal, or the pyramid's edges n +- mu t."""
+    frame = cm.contact_frame
+    normal = frame[0:3]
+    if pair.condim == 1:
+        return (normal,)
+    out = []
+    for t, mu in ((frame[3:6], pair.friction[0]), (frame[6:9], pair.friction[1])):
+        out.append(tuple(n + mu * ti for n, ti in zip(normal, t)))
+        out.append(tuple(n - mu * ti for n, ti in zip(normal, t)))
+    return tuple(out)
+
+
+def _all_slots(cm: ChainModel, pose: Pose):
+    normal = cm.contact_frame[0:3]
+    height = al.dot(normal, al.vsub(pose.base_pos, cm.floor_point))  # base origin above the floor
+    return tuple(tuple(_slots(pair, pose, normal, height)) for pair in cm.pairs)
+
+
+def _assemble(cm: ChainModel, pose: Pose, qpos, qvel, slots) -> tuple[Rows, FootContact]:
+    jac, weight, aref = _limit_rows(cm, qpos, qvel)
+    foot = None
+    for pair, pair_slots in zip(cm.pairs, slots):
+        directions = _directions(cm, pair)
+        for dist, point in pair_slots:
+            exists = dist <= pair.include_margin
+            first = len(jac)
+            for direction in directions:
+                row = _point_jacobian(cm, pose, pair.body, point, direction)
+                d, a = _row(cm, pair.sol, pair.invweight, row, qvel, dist - pair.include_margin, exists)
+                jac.append(row), weight.append(d), aref.append(a)
+            if pair.is_foot:
+                touching = dist < 0
+                world = al.vadd(point, pose.base_pos)
+                foot = FootContact(touching, tuple(jnp.where(touching, x, 0.0) for x in world),
+                                   tuple(range(first, len(jac))), directions)
+    return Rows(tuple(jac), tuple(weight), tuple(aref)), foot
+
+
+def rows(cm: ChainModel, gate, pose: Pose, qpos, qvel) -> tuple[Rows, FootContact]:
+    """All constraint rows (MuJoCo's order: limits, then contacts by pair) and the foot's."""
+    slots = stored(gate, lambda p: _all_slots(cm, p), pose)
+    return stored(gate, lambda *a: _assemble(cm, *a), pose, qpos, qvel, slots)

@@ -1,0 +1,283 @@
+"""The chain engine's view of a compiled model: every number it needs, as Python constants.
+
+`describe(mj_model)` reads the topology the chain engine is written for (a free base, a
+serial chain of bodies each with at most one hinge, explicit plane-sphere / plane-box
+contact pairs with the floor, Euler with implicit joint damping, Newton on a pyramidal
+cone) and raises `NotChain` with one line saying why when the model is outside it. The
+result is a frozen dataclass of floats and tuples: the step reads it at trace time, so
+every axis, offset, inertia and solver parameter is a constant of the compiled function.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import mujoco
+import numpy as np
+
+from hopper_mjx.engine.chain_algebra import const_mat
+from hopper_mjx.model.loader import FOOT_GEOM
+
+Sym6 = tuple  # symmetric 3x3 as (xx, yy, zz, xy, xz, yz)
+
+
+class NotChain(ValueError):
+    """The model is outside the chain engine's topology."""
+
+
+@dataclass(frozen=True)
+class SolParams:
+    solref: tuple[float, float]
+    solimp: tuple[float, float, float, float, float]
+
+
+@dataclass(frozen=True)
+class Hinge:
+    axis: tuple[float, float, float]  # body frame, unit
+    pos: tuple[float, float, float]  # body frame
+    qpos_adr: int
+    dof: int
+    qpos0: float
+    limit: tuple[float, float, float] | None  # (lower, upper, margin) rad, None if unlimited
+    sol: SolParams
+    invweight: float  # dof_invweight0: the limit row's approximate inverse mass
+
+
+@dataclass(frozen=True)
+class Link:
+    """One body after the base: placed on its parent, optionally turned by a hinge."""
+
+    pos: tuple[float, float, float]  # in the parent's frame
+    rot: tuple  # 3x3 row-major, in the parent's frame
+    hinge: Hinge | None
+    mass: float
+    com: tuple[float, float, float]  # body frame
+    inertia: Sym6  # about the COM, body frame
+
+
+@dataclass(frozen=True)
+class ContactPair:
+    """An explicit floor-geom pair: sphere (radius) or box (half sizes) on chain body `body`."""
+
+    body: int  # 0 = base, k = links[k - 1]
+    kind: str  # "sphere" or "box"
+    size: tuple[float, float, float]
+    pos: tuple[float, float, float]  # geom in body frame
+    rot: tuple  # geom in body frame
+    condim: int  # 1 (frictionless) or 3 (pyramid of 4 edges)
+    friction: tuple[float, float]
+    margin: float  # detection margin
+    include_margin: float  # margin - gap: rows are built below this distance
+    sol: SolParams
+    invweight: float  # row's approximate inverse mass, MuJoCo's diagApprox rule
+    is_foot: bool
+
+
+@dataclass(frozen=True)
+class ChainModel:
+    nq: int
+    nv: int
+    base_mass: float
+    base_com: tuple[float, float, float]
+    base_inertia: Sym6
+    links: tuple[Link, ...]
+    damping: tuple[float, ...]  # (nv,)
+    armature: tuple[float, ...]  # (nv,)
+    actuators: tuple[tuple, ...]  # (dof, gear, gain, bias0, bias1, bias2, ctrl range|None, force range|None)
+    actuator_qpos: tuple[int, ...]  # qpos address of each actuator's joint (affine bias)
+    joint_force_range: tuple[tuple[int, float, float], ...]  # (dof, lo, hi) per limited hinge
+    floor_normal: tuple[float, float, float]
+    floor_point: tuple[float, float, float]
+    contact_frame: tuple  # 3x3 rows: normal, tangent 1, tangent 2 (MuJoCo's mju_makeFrame)
+    pairs: tuple[ContactPair, ...]
+    timestep: float
+    iterations: int
+    ls_iterations: int
+    tolerance: float
+    cost_scale: float  # MuJoCo's 1 / (meaninertia * nv): the solver's cost and gradient scale
+    impratio: float
+    warmstart: bool
+    refsafe: bool
+    eulerdamp: bool
+
+
+_ALLOWED_DISABLE = (
+    mujoco.mjtDisableBit.mjDSBL_SENSOR | mujoco.mjtDisableBit.mjDSBL_WARMSTART
+    | mujoco.mjtDisableBit.mjDSBL_REFSAFE | mujoco.mjtDisableBit.mjDSBL_EULERDAMP
+    | mujoco.mjtDisableBit.mjDSBL_MIDPHASE | mujoco.mjtDisableBit.mjDSBL_FILTERPARENT
+    | mujoco.mjtDisableBit.mjDSBL_AUTORESET | mujoco.mjtDisableBit.mjDSBL_NATIVECCD
+)
+
+
+_SHAPES = {int(mujoco.mjtGeom.mjGEOM_SPHERE): "sphere", int(mujoco.mjtGeom.mjGEOM_BOX): "box"}
+_BIASES = (int(mujoco.mjtBias.mjBIAS_NONE), int(mujoco.mjtBias.mjBIAS_AFFINE))
+
+
+def _require(ok: bool, why: str) -> None:
+    if not ok:
+        raise NotChain(f"not a chain model: {why}")
+
+
+def _sym(diag, quat) -> Sym6:
+    r = np.array(const_mat(_quat_mat(quat))).reshape(3, 3)
+    full = r @ np.diag(diag) @ r.T
+    return tuple(float(full[i, j]) for i, j in ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2)))
+
+
+def _quat_mat(quat) -> np.ndarray:
+    out = np.zeros(9)
+    mujoco.mju_quat2Mat(out, np.asarray(quat, dtype=float))
+    return out
+
+
+def _vec(v) -> tuple[float, float, float]:
+    return tuple(float(x) for x in v)
+
+
+def _sol(solref, solimp) -> SolParams:
+    return SolParams(tuple(float(x) for x in solref), tuple(float(x) for x in solimp))
+
+
+def _make_frame(normal) -> tuple:
+    """MuJoCo's mju_makeFrame for a contact normal: rows normal, tangent 1, tangent 2 (the
+    pyramid's edges lie along the tangents, so they must be MuJoCo's)."""
+    n = np.asarray(normal, dtype=float) / np.linalg.norm(normal)
+    y = np.array([0.0, 1.0, 0.0]) if abs(n[1]) < 0.5 else np.array([0.0, 0.0, 1.0])
+    y = y - n * (n @ y)
+    y /= np.linalg.norm(y)
+    return tuple(float(x) for x in np.concatenate([n, y, np.cross(n, y)]))
+
+
+def _check_options(m: mujoco.MjModel) -> None:
+    opt = m.opt
+    _require(opt.integrator == mujoco.mjtIntegrator.mjINT_EULER, "the integrator is not Euler")
+    _require(opt.solver == mujoco.mjtSolver.mjSOL_NEWTON, "the solver is not Newton")
+    _require(opt.cone == mujoco.mjtCone.mjCONE_PYRAMIDAL, "the friction cone is not pyramidal")
+    _require(opt.disableflags & ~int(_ALLOWED_DISABLE) == 0, f"disable flags {opt.disableflags} are set")
+    _require(opt.enableflags == 0, f"enable flags {opt.enableflags} are set")
+    _require(opt.noslip_iterations == 0, "noslip iterations are set")
+    _require(opt.density == 0 and opt.viscosity == 0 and not np.any(opt.wind), "the medium is not empty")
+    _require(m.neq == 0 and m.ntendon == 0 and m.nflex == 0, "it has equalities, tendons or flexes")
+    _require(not np.any(m.dof_frictionloss) and not np.any(m.jnt_stiffness), "it has friction loss or springs")
+    _require(not np.any(m.body_gravcomp) and m.nmocap == 0 and m.na == 0, "it has gravcomp, mocap or actuator state")
+
+
+def _check_tree(m: mujoco.MjModel) -> None:
+    _require(m.nbody >= 2 and all(m.body_parentid[b] == b - 1 for b in range(1, m.nbody)),
+             "the bodies are not one serial chain from the world")
+    _require(m.njnt >= 1 and m.jnt_type[0] == mujoco.mjtJoint.mjJNT_FREE and m.jnt_bodyid[0] == 1,
+             "the first body has no free joint")
+    _require(not np.any(m.jnt_pos[0]), "the free joint is not at the base origin")
+    _require(m.body_jntnum[1] == 1, "the base has more than its free joint")
+    for j in range(1, m.njnt):
+        _require(m.jnt_type[j] == mujoco.mjtJoint.mjJNT_HINGE, f"joint {m.joint(j).name!r} is not a hinge")
+    _require(all(m.body_jntnum[b] <= 1 for b in range(2, m.nbody)), "a link has more than one joint")
+
+
+def _hinge(m: mujoco.MjModel, j: int) -> Hinge:
+    dof = int(m.jnt_dofadr[j])
+    limit = None
+    if m.jnt_limited[j]:
+        lo, hi = (float(x) for x in m.jnt_range[j])
+        margin = float(m.jnt_margin[j])
+        _require(hi - lo > 2 * margin, f"joint {m.joint(j).name!r} has both limits active at once")
+        limit = (lo, hi, margin)
+    return Hinge(
+        axis=_vec(m.jnt_axis[j]), pos=_vec(m.jnt_pos[j]), qpos_adr=int(m.jnt_qposadr[j]), dof=dof,
+        qpos0=float(m.qpos0[m.jnt_qposadr[j]]), limit=limit, sol=_sol(m.jnt_solref[j], m.jnt_solimp[j]),
+        invweight=float(m.dof_invweight0[dof]),
+    )
+
+
+def _links(m: mujoco.MjModel) -> tuple[Link, ...]:
+    links = []
+    for b in range(2, m.nbody):
+        joint = int(m.body_jntadr[b]) if m.body_jntnum[b] else None
+        links.append(Link(
+            pos=_vec(m.body_pos[b]), rot=const_mat(_quat_mat(m.body_quat[b])),
+            hinge=None if joint is None else _hinge(m, joint), mass=float(m.body_mass[b]),
+            com=_vec(m.body_ipos[b]), inertia=_sym(m.body_inertia[b], m.body_iquat[b]),
+        ))
+    return tuple(links)
+
+
+def _pairs(m: mujoco.MjModel, floor: int) -> tuple[ContactPair, ...]:
+    pairs = []
+    for p in range(m.npair):
+        g1, g2 = int(m.pair_geom1[p]), int(m.pair_geom2[p])
+        _require(g1 == floor, f"contact pair {p} does not have the floor plane as its first geom")
+        kind = _SHAPES.get(int(m.geom_type[g2]))
+        _require(kind is not None, f"contact pair {p} is not with a sphere or a box")
+        condim = int(m.pair_dim[p])
+        _require(condim in (1, 3), f"contact pair {p} has condim {condim} (1 or 3 supported)")
+        body = int(m.geom_bodyid[g2]) - 1
+        invweight = float(m.body_invweight0[body + 1, 0])  # the floor is on the world: no share
+        friction = (float(m.pair_friction[p, 0]), float(m.pair_friction[p, 1]))
+        if condim == 3:  # MuJoCo's pyramid: one approximate inverse mass for all edges
+            _require(friction[0] > 0 and friction[1] > 0, f"contact pair {p} has zero friction with condim 3")
+            mu = friction[0]
+            invweight = invweight * (1 + mu * mu) * 2 * mu * mu / float(m.opt.impratio)
+        margin, gap = float(m.pair_margin[p]), float(m.pair_gap[p])
+        pairs.append(ContactPair(
+            body=body, kind=kind, size=_vec(m.geom_size[g2]), pos=_vec(m.geom_pos[g2]),
+            rot=const_mat(_quat_mat(m.geom_quat[g2])), condim=condim, friction=friction, margin=margin,
+            include_margin=margin - gap, sol=_sol(m.pair_solref[p], m.pair_solimp[p]), invweight=invweight,
+            is_foot=m.geom(g2).name == FOOT_GEOM,
+        ))
+    _require(sum(p.is_foot for p in pairs) == 1 and any(p.is_foot and p.kind == "sphere" for p in pairs),
+             f"no sphere foot geom {FOOT_GEOM!r} paired with the floor")
+    return tuple(pairs)
+
+
+def _floor(m: mujoco.MjModel) -> int:
+    planes = [g for g in range(m.ngeom) if m.geom_type[g] == mujoco.mjtGeom.mjGEOM_PLANE]
+    _require(len(planes) == 1 and m.geom_bodyid[planes[0]] == 0, "there is not exactly one floor plane on the world")
+    for a in range(m.ngeom):
+        for b in range(a + 1, m.ngeom):
+            filtered = (m.geom_contype[a] & m.geom_conaffinity[b]) | (m.geom_contype[b] & m.geom_conaffinity[a])
+            _require(not filtered, "geoms collide outside the explicit contact pairs")
+    return planes[0]
+
+
+def _actuators(m: mujoco.MjModel):
+    acts, qadr = [], []
+    for a in range(m.nu):
+        _require(m.actuator_trntype[a] == mujoco.mjtTrn.mjTRN_JOINT and m.actuator_trnid[a, 0] >= 1,
+                 f"actuator {a} does not drive a hinge")
+        _require(m.actuator_dyntype[a] == mujoco.mjtDyn.mjDYN_NONE
+                 and m.actuator_gaintype[a] == mujoco.mjtGain.mjGAIN_FIXED
+                 and int(m.actuator_biastype[a]) in _BIASES,
+                 f"actuator {a} is not a plain motor or affine servo")
+        joint = int(m.actuator_trnid[a, 0])
+        ctrl = tuple(float(x) for x in m.actuator_ctrlrange[a]) if m.actuator_ctrllimited[a] else None
+        force = tuple(float(x) for x in m.actuator_forcerange[a]) if m.actuator_forcelimited[a] else None
+        bias = m.actuator_biasprm[a, :3] if m.actuator_biastype[a] == mujoco.mjtBias.mjBIAS_AFFINE else np.zeros(3)
+        acts.append((int(m.jnt_dofadr[joint]), float(m.actuator_gear[a, 0]), float(m.actuator_gainprm[a, 0]),
+                     *(float(x) for x in bias), ctrl, force))
+        qadr.append(int(m.jnt_qposadr[joint]))
+    frc = tuple((int(m.jnt_dofadr[j]), float(m.jnt_actfrcrange[j, 0]), float(m.jnt_actfrcrange[j, 1]))
+                for j in range(1, m.njnt) if m.jnt_actfrclimited[j])
+    return tuple(acts), tuple(qadr), frc
+
+
+def describe(m: mujoco.MjModel) -> ChainModel:
+    """The chain engine's constants of `m`, or `NotChain` saying why the model is outside it."""
+    _check_options(m)
+    _check_tree(m)
+    floor = _floor(m)
+    normal = _quat_mat(m.geom_quat[floor]).reshape(3, 3)[:, 2]
+    acts, act_qpos, frc = _actuators(m)
+    opt = m.opt
+    dis = mujoco.mjtDisableBit
+    return ChainModel(
+        nq=int(m.nq), nv=int(m.nv), base_mass=float(m.body_mass[1]), base_com=_vec(m.body_ipos[1]),
+        base_inertia=_sym(m.body_inertia[1], m.body_iquat[1]), links=_links(m),
+        damping=tuple(float(x) for x in m.dof_damping), armature=tuple(float(x) for x in m.dof_armature),
+        actuators=acts, actuator_qpos=act_qpos, joint_force_range=frc,
+        floor_normal=_vec(normal), floor_point=_vec(m.geom_pos[floor]), contact_frame=_make_frame(normal),
+        pairs=_pairs(m, floor), timestep=float(opt.timestep), iterations=int(opt.iterations),
+        ls_iterations=int(opt.ls_iterations), tolerance=float(opt.tolerance),
+        cost_scale=1.0 / (float(m.stat.meaninertia) * max(1, int(m.nv))), impratio=float(opt.impratio),
+        warmstart=not opt.disableflags & dis.mjDSBL_WARMSTART,
+        refsafe=not opt.disableflags & dis.mjDSBL_REFSAFE, eulerdamp=not opt.disableflags & dis.mjDSBL_EULERDAMP,
+    )

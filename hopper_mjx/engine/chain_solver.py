@@ -1,0 +1,205 @@
+"""MuJoCo's primal Newton solve over the chain's rows, in scalar arithmetic.
+
+Minimises, over the joint accelerations a,
+    0.5 (a - a0)' M (a - a0) + sum over active rows 0.5 D (J a - aref)^2,
+a row being active when J a - aref < 0 (limits and pyramid edges are one-sided). From the
+better of the warm start and a0 = M^-1 qfrc_smooth, each iteration takes the Newton
+direction of the current active set (the 9x9 Hessian M + J' D J, Cholesky-factorised
+unrolled) and an exact line search along it. The cost along a line is a convex piecewise
+quadratic, so its derivative is piecewise linear: the search brackets the root and steps
+to the root of the bracketing pieces (Newton from either end, else the secant), which
+lands on the exact minimiser once the bracket holds one piece.
+Symmetric matrices are dicts {(i, j): value} over i <= j.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+
+from hopper_mjx.engine import chain_algebra as al
+from hopper_mjx.engine.chain_constraint import MINVAL, Rows
+from hopper_mjx.engine.chain_stage import stored
+
+FAR = 1e30  # the search's upper end before any point past the minimum is found
+UNROLLED_LINE_SEARCH = 8  # up to this many steps, each is its own stored stage (measured faster than a loop)
+
+
+class Solution(NamedTuple):
+    qacc: tuple
+    force: tuple  # per row
+    qfrc_constraint: tuple
+
+
+def _column(a: dict, b, low: dict, y, j: int):
+    """Column j of the Cholesky factor of a, the inverse of its diagonal, and entry j of
+    L^-1 b (the forward substitution rides along the factorisation)."""
+    n = len(b)
+    pivot = al.sub(a[j, j], al.total(al.mul(low[j, k], low[j, k]) for k in range(j)))
+    inv = 1.0 / al.sqrt(pivot) if al.is_const(pivot) else 1 / jnp.sqrt(pivot)
+    column = tuple(al.mul(al.sub(a[j, i], al.total(al.mul(low[i, k], low[j, k]) for k in range(j))), inv)
+                   for i in range(j + 1, n))
+    y_j = al.mul(al.sub(b[j], al.total(al.mul(low[j, k], y[k]) for k in range(j))), inv)
+    return inv, column, y_j
+
+
+def solve_spd(gate, a: dict, b) -> tuple:
+    """x = a^-1 b for symmetric positive definite a (dict over i <= j): Cholesky, one stored
+    stage per column and per back-substitution row (each depends on all before it)."""
+    n = len(b)
+    low, inv, y = {}, [], []
+    for j in range(n):
+        inv_j, column, y_j = stored(gate, lambda a_, b_, l_, y_, j=j: _column(a_, b_, l_, y_, j),
+                                    a, tuple(b), dict(low), tuple(y))
+        inv.append(inv_j)
+        y.append(y_j)
+        low.update({(i, j): v for i, v in zip(range(j + 1, n), column)})
+    x = [0.0] * n
+    for i in reversed(range(n)):
+        later = tuple(x[i + 1:])
+        x[i] = stored(gate, lambda y_i, l_, later, inv_i, i=i: al.mul(
+            al.sub(y_i, al.total(al.mul(l_[k, i], later[k - i - 1]) for k in range(i + 1, n))), inv_i),
+            y[i], dict(low), later, inv[i])
+    return tuple(x)
+
+
+def sym_matvec(a: dict, v, n: int) -> tuple:
+    return tuple(al.total(al.mul(a[min(i, j), max(i, j)], v[j]) for j in range(n)) for i in range(n))
+
+
+def _residuals(rows: Rows, qacc):
+    return tuple(al.sub(al.dot(j, qacc), a) for j, a in zip(rows.jac, rows.aref))
+
+
+def _forces(rows: Rows, residual):
+    """Row forces -D r of the active rows (r < 0) and their joint-space sum J' f."""
+    force = tuple(jnp.where(r < 0, -w * r, 0.0) for w, r in zip(rows.weight, residual))
+    nv = len(rows.jac[0])
+    return force, tuple(al.total(al.mul(j[i], f) for j, f in zip(rows.jac, force)) for i in range(nv))
+
+
+def _cost(gate, mass, qfrc_smooth, qacc_smooth, rows: Rows, qacc):
+    residual, ma = stored(gate, lambda r, x: (_residuals(r, x), sym_matvec(mass, x, len(x))), rows, qacc)
+    gauss = 0.5 * al.dot(al.vsub(ma, qfrc_smooth), al.vsub(qacc, qacc_smooth))
+    return gauss + al.total(jnp.where(r < 0, 0.5 * w * r * r, 0.0) for w, r in zip(rows.weight, residual))
+
+
+def _line(weight, residual, slope, g1, g2, alpha):
+    """(alpha, cost up to a constant, derivative, curvature) along the search direction."""
+    d1, d2, cost = g1 + alpha * g2, g2, alpha * (g1 + 0.5 * alpha * g2)
+    for w, r, s in zip(weight, residual, slope):  # rows that do not exist have w = 0
+        x = r + alpha * s
+        on = x < 0
+        d1 = d1 + jnp.where(on, w * s * x, 0.0)
+        d2 = d2 + jnp.where(on, w * s * s, 0.0)
+        cost = cost + jnp.where(on, 0.5 * w * x * x, 0.0)
+    return alpha, cost, d1, jnp.maximum(d2, MINVAL)
+
+
+def _pick(c, p, q):
+    return tuple(jnp.where(c, x, y) for x, y in zip(p, q))
+
+
+def _bracket(line, bracket):
+    """One line-search step: evaluate the candidate, keep it as the lower or upper end, and
+    choose the next candidate (Newton from either end inside the bracket, else the secant)."""
+    lo, hi, found_hi, candidate = bracket
+    p = line(candidate)
+    below = p[2] < 0
+    lo, hi = _pick(below, p, lo), _pick(below, hi, p)
+    found_hi = found_hi | ~below
+    from_lo, from_hi = lo[0] - lo[2] / lo[3], hi[0] - hi[2] / hi[3]
+    secant = lo[0] - lo[2] * (hi[0] - lo[0]) / jnp.maximum(hi[2] - lo[2], MINVAL)
+    inside = lambda a: (a > lo[0]) & (a < hi[0])
+    candidate = jnp.where(~found_hi | inside(from_lo), from_lo, jnp.where(inside(from_hi), from_hi, secant))
+    return lo, hi, found_hi, candidate
+
+
+def _line_search(gate, weight, residual, slope, g1, g2, iterations: int):
+    """The step along the search direction that minimises the cost (see the module doc), and
+    the cost's decrease."""
+    line = lambda a, args: _line(*args, a)
+    args = (weight, residual, slope, g1, g2)
+    lo = stored(gate, line, jnp.zeros_like(g1), args)
+    hi = (jnp.full_like(g1, FAR), jnp.full_like(g1, FAR), jnp.full_like(g1, FAR), jnp.ones_like(g1))
+    bracket = (lo, hi, jnp.zeros_like(g1, dtype=bool), -lo[2] / lo[3])
+    one_step = lambda b: _bracket(lambda x: line(x, args), b)
+    if iterations <= UNROLLED_LINE_SEARCH:
+        for _ in range(iterations):
+            bracket = stored(gate, one_step, bracket)
+    else:  # a long search (a converged reference) as a loop: one trace, a smaller program
+        bracket = jax.lax.fori_loop(0, iterations, lambda _, b: one_step(b), bracket)
+
+    def best(bracket, args, start_cost):
+        lo, hi, found_hi, candidate = bracket
+        last = line(candidate, args)
+        out = _pick(last[1] < lo[1], last, lo)
+        out = _pick(found_hi & (hi[1] < out[1]), hi, out)
+        return out[0], start_cost - out[1]
+    return stored(gate, best, bracket, args, lo[1])
+
+
+class _Iterate(NamedTuple):
+    """The solver's state at one point: the rows' residuals, forces and the cost's gradient."""
+
+    qacc: tuple
+    residual: tuple
+    active: tuple  # D of the active rows, 0 elsewhere
+    ma: tuple  # M qacc
+    force: tuple
+    qfrc_constraint: tuple
+    grad: tuple
+
+
+def _evaluate(gate, mass, qfrc_smooth, rows: Rows, qacc) -> _Iterate:
+    def residuals(rows, qacc):
+        residual = _residuals(rows, qacc)
+        active = tuple(jnp.where(r < 0, w, 0.0) for w, r in zip(rows.weight, residual))
+        return residual, active, sym_matvec(mass, qacc, len(qacc))
+    residual, active, ma = stored(gate, residuals, rows, qacc)
+    force, qfrc_c = stored(gate, _forces, rows, residual)
+    grad = stored(gate, lambda *a: tuple(al.sub(al.sub(m, s), c) for m, s, c in zip(*a)), ma, qfrc_smooth, qfrc_c)
+    return _Iterate(tuple(qacc), residual, active, ma, force, qfrc_c, grad)
+
+
+def _newton_step(gate, mass, qfrc_smooth, rows: Rows, ls_iterations: int, it: _Iterate):
+    """The next point along the Newton direction of the current active set, and the cost's decrease."""
+    n = len(it.qacc)
+    hessian = stored(gate, lambda act, jac: {
+        (i, j): al.add(mass[i, j], al.total(al.mul(w, al.mul(jr[i], jr[j])) for w, jr in zip(act, jac)))
+        for i in range(n) for j in range(i, n)}, it.active, rows.jac)
+    search = tuple(-x for x in solve_spd(gate, hessian, it.grad))
+
+    def along(search, ma):
+        slope = tuple(al.dot(j, search) for j in rows.jac)
+        return slope, al.dot(search, al.vsub(ma, qfrc_smooth)), al.dot(search, sym_matvec(mass, search, n))
+    slope, g1, g2 = stored(gate, along, search, it.ma)
+    alpha, decrease = _line_search(gate, rows.weight, it.residual, slope, g1, g2, ls_iterations)
+    return tuple(al.add(a, al.mul(alpha, s)) for a, s in zip(it.qacc, search)), decrease
+
+
+def solve(gate, mass: dict, qfrc_smooth, qacc_smooth, qacc_warmstart, rows: Rows, *, iterations: int,
+          ls_iterations: int, tolerance: float, cost_scale: float, warmstart: bool = True) -> Solution:
+    """The constrained accelerations and the rows' forces. Like MuJoCo, an instance stops
+    iterating once the scaled cost decrease or gradient falls below the tolerance."""
+    qacc = qacc_smooth
+    if warmstart:
+        better = _cost(gate, mass, qfrc_smooth, qacc_smooth, rows, qacc_warmstart) < _cost(
+            gate, mass, qfrc_smooth, qacc_smooth, rows, qacc_smooth)
+        qacc = stored(gate, lambda w, s: tuple(jnp.where(better, a, b) for a, b in zip(w, s)),
+                      qacc_warmstart, qacc_smooth)
+    start = _evaluate(gate, mass, qfrc_smooth, rows, tuple(jnp.asarray(x) for x in qacc))
+
+    def body(carry):
+        it, _, count = carry
+        qacc, decrease = _newton_step(gate, mass, qfrc_smooth, rows, ls_iterations, it)
+        it = _evaluate(gate, mass, qfrc_smooth, rows, qacc)
+        gradient = jnp.sqrt(al.dot(it.grad, it.grad))
+        return it, (cost_scale * decrease < tolerance) | (cost_scale * gradient < tolerance), count + 1
+
+    # Under vmap the loop runs until every instance is done; finished ones are held.
+    it, _, _ = jax.lax.while_loop(lambda c: ~c[1] & (c[2] < iterations), body,
+                                  (start, jnp.zeros((), bool), jnp.zeros((), jnp.int32)))
+    return Solution(it.qacc, it.force, it.qfrc_constraint)

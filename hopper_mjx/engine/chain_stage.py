@@ -1,0 +1,42 @@
+"""Store a stage's outputs once: `stored(gate, fn, *args)`.
+
+XLA:CPU fusion recomputes a shared subexpression inside every fused consumer (the chain's
+sines and cosines were evaluated over a hundred times per step). A `lax.cond` whose
+predicate is only known at run time (`gate`, a boolean of the engine's model pytree, true
+in practice) is a boundary fusion cannot cross, so the stage's outputs are computed once
+and stored. `optimization_barrier` would say the same but XLA:CPU drops it before fusion.
+
+Constant leaves (Python floats: the model numbers the algebra folds) pass around the
+conditional untouched, so folding keeps working across stages.
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+
+from hopper_mjx.engine.chain_algebra import is_const
+
+
+def stored(gate: jax.Array, fn, *args):
+    """fn(*args), with its traced outputs materialised behind a run-time true conditional."""
+    arg_leaves, arg_tree = jax.tree_util.tree_flatten(args)
+    traced_at = [i for i, x in enumerate(arg_leaves) if not is_const(x)]
+    box = {}
+
+    def run(traced):
+        leaves = list(arg_leaves)
+        for i, x in zip(traced_at, traced):
+            leaves[i] = x
+        out_leaves, box["tree"] = jax.tree_util.tree_flatten(fn(*jax.tree_util.tree_unflatten(arg_tree, leaves)))
+        box["leaves"] = out_leaves
+        return [x for x in out_leaves if not is_const(x)]
+
+    traced_in = [jnp.asarray(arg_leaves[i]) for i in traced_at]
+    # Trace the Python once; the conditional's branch replays the recorded primitives.
+    closed = jax.make_jaxpr(run)(traced_in)
+    replay = lambda t: jax.core.eval_jaxpr(closed.jaxpr, closed.consts, *t)
+    zeros = lambda _: [jnp.zeros(v.aval.shape, v.aval.dtype) for v in closed.jaxpr.outvars]
+    outs = iter(jax.lax.cond(gate, replay, zeros, traced_in))
+    leaves = [x if is_const(x) else next(outs) for x in box["leaves"]]
+    return jax.tree_util.tree_unflatten(box["tree"], leaves)

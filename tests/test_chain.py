@@ -1,0 +1,274 @@
+"""The chain engine against MuJoCo C, stage by stage and over trajectories.
+
+Random states include foot contact, a joint past its limit, a tilted base and (a few) the
+base box touching the floor. In float64 (jax x64, scoped to one fixture) every stage agrees
+with C to 1e-9 once both solve their constraints to convergence; in float32, at the model's
+own solver options, to 1e-4 relative. Trajectories through touchdown stay within 1e-3 m of C.
+"""
+
+from __future__ import annotations
+
+import copy
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import mujoco
+import numpy as np
+import pytest
+
+from hopper_mjx import model
+from hopper_mjx.engine import chain, chain_smooth
+from hopper_mjx.engine.chain_model import NotChain, describe
+from hopper_mjx.model.robot import stance_qpos
+
+SECOND_URDF = Path(__file__).parent / "data" / "long_shin_hopper.urdf"
+N_STATES = 12
+HOLD_P, HOLD_D = np.array([400.0, 400.0, 200.0]), np.array([18.0, 15.0, 4.0])
+GRAVITIES = (9.81, 3.71, 1.62)
+TRAJ_STEPS = 1000  # 1 s
+
+
+def converged(m: mujoco.MjModel, ls_iterations: int) -> mujoco.MjModel:
+    """A copy whose Newton solve runs to convergence (the reference for constraint forces)."""
+    m = copy.deepcopy(m)
+    m.opt.iterations, m.opt.ls_iterations, m.opt.tolerance = 100, ls_iterations, 1e-15
+    return m
+
+
+def _lowest(m, d, geom_ids) -> float:
+    """Lowest point of the geoms above the floor (spheres and boxes), m."""
+    mujoco.mj_kinematics(m, d)
+    low = np.inf
+    for g in geom_ids:
+        if m.geom_type[g] == mujoco.mjtGeom.mjGEOM_SPHERE:
+            low = min(low, d.geom_xpos[g, 2] - m.geom_size[g, 0])
+        else:
+            corners = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)]) * m.geom_size[g]
+            low = min(low, (d.geom_xpos[g] + corners @ d.geom_xmat[g].reshape(3, 3).T)[:, 2].min())
+    return low
+
+
+def random_states(m: mujoco.MjModel, n: int, seed: int):
+    """(qpos, qvel, ctrl, gravity) batches: tilted bases with the foot 0-5 mm into the floor,
+    every third state with a joint 5-30 mrad past its lower limit, and the last two fallen
+    over (base nearly upside down, its box 0-5 mm into the floor, the leg in the air)."""
+    rng = np.random.default_rng(seed)
+    foot = [m.geom("foot").id]
+    base = [g for g in range(m.ngeom) if m.geom_bodyid[g] == 1]
+    d = mujoco.MjData(m)
+    qpos = np.tile(stance_qpos(m), (n, 1))
+    for i in range(n):
+        fallen = i >= n - 2
+        axis = np.r_[rng.normal(size=2), 0.0 if fallen else rng.normal()]
+        angle = np.pi - rng.uniform(0.1, 0.3) if fallen else rng.uniform(0.05, 0.35)
+        qpos[i, 3:7] = np.r_[np.cos(angle / 2), np.sin(angle / 2) * axis / np.linalg.norm(axis)]
+        qpos[i, 7:] += rng.normal(size=3) * 0.2
+        if i % 3 == 0:
+            joint = 1 + (i // 3) % 3
+            qpos[i, 6 + joint] = m.jnt_range[joint, 0] - rng.uniform(0.005, 0.03)
+        d.qpos[:] = qpos[i]
+        qpos[i, 2] -= _lowest(m, d, base if fallen else foot) + rng.uniform(0, 0.005)
+    qvel = np.concatenate([rng.normal(size=(n, 6)) * 0.5, rng.normal(size=(n, 3))], axis=1)
+    ctrl = rng.uniform(-30, 30, size=(n, m.nu))
+    gravity = np.stack([np.zeros(n), np.zeros(n), -rng.uniform(1.0, 12.0, n)], axis=1)
+    return qpos, qvel, ctrl, gravity
+
+
+def mujoco_c(m: mujoco.MjModel, qpos, qvel, ctrl, gravity) -> dict:
+    """MuJoCo C's stages for each state: forward, then one step."""
+    m = copy.deepcopy(m)
+    out = {k: [] for k in ("xpos", "xmat", "mass", "qacc", "qfrc_constraint", "qpos", "qvel", "ncon",
+                           "foot_force", "qfrc_smooth")}
+    for q, v, u, g in zip(qpos, qvel, ctrl, gravity):
+        m.opt.gravity[:] = g
+        d = mujoco.MjData(m)
+        d.qpos[:], d.qvel[:], d.ctrl[:] = q, v, u
+        mujoco.mj_forward(m, d)
+        out["foot_force"].append(_foot_force(m, d))
+        full = np.zeros((m.nv, m.nv))
+        mujoco.mj_fullM(m, d, full)
+        for key, value in (("xpos", d.xpos[1:]), ("xmat", d.xmat[1:]), ("mass", full), ("qfrc_smooth", d.qfrc_smooth),
+                           ("qacc", d.qacc), ("qfrc_constraint", d.qfrc_constraint), ("ncon", d.ncon)):
+            out[key].append(np.array(value))
+        d = mujoco.MjData(m)
+        d.qpos[:], d.qvel[:], d.ctrl[:] = q, v, u
+        mujoco.mj_step(m, d)
+        out["qpos"].append(d.qpos.copy())
+        out["qvel"].append(d.qvel.copy())
+    return {k: np.array(v) for k, v in out.items()}
+
+
+def _foot_force(m, d) -> np.ndarray:
+    """Floor-on-foot force in the world frame from MuJoCo's contact forces."""
+    total, wrench = np.zeros(3), np.zeros(6)
+    for i in range(d.ncon):
+        if d.contact[i].geom[1] == m.geom("foot").id:
+            mujoco.mj_contactForce(m, d, i, wrench)
+            total += d.contact[i].frame.reshape(3, 3).T @ wrench[:3]
+    return total
+
+
+def chain_stages(engine: chain.ChainEngine):
+    """A compiled, vmapped function: the chain's stages for a batch of states and warm starts."""
+    cm = engine.chain
+    upper = [(i, j) for i in range(cm.nv) for j in range(i, cm.nv)]
+
+    def one(params, qpos, qvel, ctrl, gravity, warmstart):
+        pose = chain_smooth.kinematics(cm, params.gate, tuple(qpos[i] for i in range(cm.nq)))
+        data = engine.make_data(qpos, qvel).replace(ctrl=ctrl, qacc_warmstart=warmstart)
+        data = engine.forward(params, data, gravity)
+        after = engine.integrate(params, data, gravity)
+        vec = lambda v: jnp.stack([jnp.asarray(x, qpos.dtype) for x in v])
+        mass = jnp.zeros((cm.nv, cm.nv), qpos.dtype).at[tuple(np.array(upper).T)].set(data.mass)
+        return {
+            "xpos": jnp.stack([vec(o) for o in pose.origin]) + qpos[:3],
+            "xmat": jnp.stack([vec(r) for r in pose.rot]),
+            "mass": mass + jnp.triu(mass, 1).T, "qfrc_smooth": data.qfrc_smooth, "qacc": data.qacc,
+            "qfrc_constraint": data.qfrc_constraint, "qpos": after.qpos, "qvel": after.qvel,
+            "foot_touching": data.foot_touching, "foot_force": data.foot_force,
+        }
+
+    return jax.jit(jax.vmap(one, in_axes=(None, 0, 0, 0, 0, 0)))
+
+
+def run_chain(engine, states, dtype, fn=None) -> dict:
+    fn = fn or chain_stages(engine)
+    args = [jnp.asarray(x, dtype) for x in states]
+    out = fn(engine.model, *args, jnp.zeros_like(args[1]))
+    return {k: np.asarray(v) for k, v in out.items()}
+
+
+@pytest.fixture(scope="module")
+def seed_model():
+    return model.load()
+
+
+@pytest.fixture(scope="module")
+def seed_states(seed_model):
+    return random_states(seed_model, N_STATES, seed=7)
+
+
+@pytest.fixture(scope="module")
+def float64_results(seed_model, seed_states):
+    """Chain in float64 (x64 only inside this fixture) for the seed and the second URDF,
+    both solving to convergence, with MuJoCo C's converged answers."""
+    second = model.load(SECOND_URDF)
+    second_states = random_states(second, 6, seed=11)
+    c_seed = mujoco_c(converged(seed_model, 50), *seed_states)
+    c_second = mujoco_c(converged(second, 50), *second_states)
+    jax.config.update("jax_enable_x64", True)
+    try:
+        seed = run_chain(chain.make(converged(seed_model, 20)), seed_states, jnp.float64)
+        other = run_chain(chain.make(converged(second, 20)), second_states, jnp.float64)
+    finally:
+        jax.config.update("jax_enable_x64", False)
+    return {"seed": (seed, c_seed), "second": (other, c_second)}
+
+
+@pytest.fixture(scope="module")
+def own_engine(seed_model):
+    return chain.make(seed_model)
+
+
+@pytest.fixture(scope="module")
+def own_stages(own_engine):
+    return chain_stages(own_engine)
+
+
+@pytest.fixture(scope="module")
+def float32_results(seed_model, seed_states, own_engine, own_stages):
+    """Chain in float32 at the model's own solver options, with C at the same options."""
+    return run_chain(own_engine, seed_states, jnp.float32, own_stages), mujoco_c(seed_model, *seed_states)
+
+
+def test_states_cover_contacts_limits_and_tilt(seed_model, seed_states, float32_results):
+    _, c = float32_results
+    qpos = seed_states[0]
+    assert (c["ncon"] >= 1).all(), "every state touches the floor"
+    assert (c["ncon"][-2:] >= 1).all() and (qpos[-2:, 3] < 0.2).all(), "the last states lie on the base box"
+    assert (np.abs(qpos[:, 4:7]).max(axis=1) > 0.02).all(), "every base is tilted"
+    assert (qpos[:, 7:] < seed_model.jnt_range[1:, 0]).any(axis=1).sum() >= N_STATES // 3
+
+
+STAGES = ("xpos", "xmat", "mass", "qfrc_smooth", "qacc", "qfrc_constraint", "qpos", "qvel")
+
+
+@pytest.mark.parametrize("urdf", ["seed", "second"])
+@pytest.mark.parametrize("stage", STAGES)
+def test_float64_stages_match_mujoco_c(float64_results, urdf, stage):
+    ours, c = float64_results[urdf]
+    err = np.abs(ours[stage] - c[stage]).max()
+    assert err <= 1e-9, f"{urdf} {stage}: chain and MuJoCo C differ by {err:.2e}"
+
+
+@pytest.mark.parametrize("stage", STAGES)
+def test_float32_stages_at_the_models_own_iterations_match_mujoco_c(float32_results, stage):
+    ours, c = float32_results
+    scale = np.maximum(np.abs(c[stage]).reshape(N_STATES, -1).max(axis=1), 1.0)
+    err = (np.abs(ours[stage] - c[stage]).reshape(N_STATES, -1).max(axis=1) / scale).max()
+    assert err <= 1e-4, f"{stage}: relative difference {err:.2e}"
+
+
+def test_foot_force_matches_mujoco_c(float32_results):
+    ours, c = float32_results
+    foot = np.abs(c["foot_force"]).max(axis=1) > 0
+    assert foot.sum() >= N_STATES - 2 and (ours["foot_touching"] == foot).all()
+    err = np.abs(ours["foot_force"] - c["foot_force"]).max() / np.abs(c["foot_force"]).max()
+    assert err <= 1e-4, f"foot force: relative difference {err:.2e}"
+
+
+@pytest.fixture(scope="module")
+def trajectories(seed_model, own_engine, own_stages):
+    """1 s from 5 and 12 cm above the floor at three gravities, limp and holding the stance by PD,
+    chain (float32, the compiled stages reused, warm-started like C) and C side by side."""
+    n = N_STATES  # the batch size of the float32 stage test: the same compiled function
+    cases = [(g, hold, drop) for g in GRAVITIES for hold in (False, True) for drop in (0.05, 0.12)]
+    gravity = np.array([[0, 0, -g] for g, _, _ in cases])
+    hold = np.array([h for _, h, _ in cases])
+    q0 = stance_qpos(seed_model)
+    qpos = np.tile(q0, (n, 1))
+    qpos[:, 2] += np.array([drop - 0.05 for _, _, drop in cases])
+    m = copy.deepcopy(seed_model)
+    cdata = [mujoco.MjData(m) for _ in range(n)]
+    for d, q in zip(cdata, qpos):
+        d.qpos[:] = q
+    qvel, warm = np.zeros((n, 9)), np.zeros((n, 9))
+    ours, theirs, touched = [], [], np.zeros(n, bool)
+    f32 = lambda x: jnp.asarray(x, jnp.float32)
+    for _ in range(TRAJ_STEPS):
+        ctrl = np.where(hold[:, None], HOLD_P * (q0[7:] - qpos[:, 7:]) - HOLD_D * qvel[:, 6:], 0.0)
+        out = own_stages(own_engine.model, f32(qpos), f32(qvel), f32(ctrl), f32(gravity), f32(warm))
+        qpos, qvel, warm = np.asarray(out["qpos"]), np.asarray(out["qvel"]), np.asarray(out["qacc"])
+        touched |= np.asarray(out["foot_touching"])
+        for i, d in enumerate(cdata):
+            m.opt.gravity[:] = gravity[i]
+            d.ctrl[:] = np.where(hold[i], HOLD_P * (q0[7:] - d.qpos[7:]) - HOLD_D * d.qvel[6:], 0.0)
+            mujoco.mj_step(m, d)
+        ours.append(qpos)
+        theirs.append(np.array([d.qpos.copy() for d in cdata]))
+    return np.array(ours), np.array(theirs), touched
+
+
+def test_trajectories_through_touchdown_match_mujoco_c(trajectories):
+    ours, theirs, touched = trajectories
+    assert touched.all(), "every run must include the touchdown"
+    base_err = np.abs(ours[:, :, :3] - theirs[:, :, :3]).max()
+    joint_err = np.abs(ours[:, :, 7:] - theirs[:, :, 7:]).max()
+    assert base_err < 1e-3, f"base position differs from MuJoCo C by {base_err:.2e} m"
+    assert joint_err < 1e-2, f"joint angles differ from MuJoCo C by {joint_err:.2e} rad"
+
+
+def test_models_outside_the_topology_are_refused_with_one_line(seed_model):
+    rk4 = copy.deepcopy(seed_model)
+    rk4.opt.integrator = mujoco.mjtIntegrator.mjINT_RK4
+    elliptic = copy.deepcopy(seed_model)
+    elliptic.opt.cone = mujoco.mjtCone.mjCONE_ELLIPTIC
+    for bad, why in ((rk4, "integrator"), (elliptic, "cone")):
+        with pytest.raises(NotChain, match=why) as err:
+            describe(bad)
+        assert "\n" not in str(err.value)
+    spec = mujoco.MjSpec()
+    spec.worldbody.add_body(name="lonely").add_geom(size=[0.1, 0, 0])
+    with pytest.raises(NotChain, match="free joint"):
+        describe(spec.compile())
