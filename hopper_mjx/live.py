@@ -144,10 +144,12 @@ class LiveBatch:
         self.reset()
 
     @classmethod
-    def build(cls, args, batch, sensors=None) -> LiveBatch:
-        """The checked batch (`cli.Batch`) of the command-line arguments, streams at `sensors`' rates."""
+    def build(cls, args, batch=None, sensors=None) -> LiveBatch:
+        """The batch of the command-line arguments (`batch`: already checked by `cli.check_batch`),
+        streams at `sensors`' rates."""
         from hopper_mjx import cli
 
+        batch = batch or cli.check_batch(args)
         sim, controller, params = cli.build_batch(args, batch)
         return cls(sim, controller, params, batch.gravity, seed=args.seed, sensors=sensors)
 
