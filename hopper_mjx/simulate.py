@@ -47,8 +47,9 @@ def arrays(traj, gravity, diverged) -> dict[str, np.ndarray]:
     return {k: np.asarray(v) for k, v in out.items()}
 
 
-def run(args, batch: cli.Batch) -> dict[str, np.ndarray]:
-    """Simulates the checked batch and returns the arrays saved to the .npz file."""
+def run(args, batch: cli.Batch | None = None) -> dict[str, np.ndarray]:
+    """Simulates as the arguments say (`batch`: already checked) and returns the arrays saved to the .npz file."""
+    batch = batch or cli.check_batch(args)
     _, final, traj = cli.run_batch(args, batch, sensor_config(args))
     return arrays(traj, batch.gravity, final.diverged)
 
