@@ -47,7 +47,8 @@ def add_batch_options(p: argparse.ArgumentParser, *, gravity=(9.81, 3.71, 1.62),
     p.add_argument("--duration", type=float, default=duration, help="simulated time, s")
     p.add_argument("--controller", default="hold",
                    help="none (limp), hold (keep initial joint angles), pid (the seed's joint position "
-                        "controllers, holding them), raibert (hop) or policy:PATH (a trained PPO policy)")
+                        "controllers, holding them), raibert (hop) or policy:PATH (a policy trained by "
+                        "experiments/train.py)")
     p.add_argument("--height", type=float, default=0.10,
                    help="raibert, policy: commanded apex rise of the base above its standing height, m")
     p.add_argument("--speed", type=floats("--speed"), default=[0.0, 0.0],
@@ -70,6 +71,20 @@ def check_batch(args) -> None:
         raise ValueError(f"--speed needs two values VX,VY in m/s, got {args.speed}")
     if args.chunk < 1:
         raise ValueError(f"--chunk must be >= 1, got {args.chunk}")
+    check_controller(args.controller, args.height, args.speed, getattr(args, "urdf", None))
+
+
+def check_controller(name: str, height: float, speed, urdf=None) -> None:
+    """Raises ValueError if a `policy:PATH` is no policy, or the command is outside its training
+    range. Reads the policy's JSON and MuJoCo's compiled model (for the standing height) only."""
+    if not name.startswith(POLICY_PREFIX):
+        return
+    from hopper_mjx import model
+    from hopper_mjx.envs import policy
+    from hopper_mjx.model.robot import standing_height
+
+    _, _, _, config = policy.read(name.removeprefix(POLICY_PREFIX))
+    policy.check_command(config, standing_height(model.load(urdf)), height, speed)
 
 
 def batch_gravity(args) -> np.ndarray:
@@ -85,7 +100,8 @@ def make_controller(args, sim, n: int):
         from hopper_mjx.envs import policy
 
         path = args.controller.removeprefix(POLICY_PREFIX)
-        params = policy.policy_params(sim.robot, n, height=args.height, speed=args.speed)
+        config = policy.read(path)[3]
+        params = policy.policy_params(sim.robot, n, height=args.height, speed=args.speed, config=config)
         return policy.policy_controller(sim.mj_model, path), params
     from hopper_mjx import control
 

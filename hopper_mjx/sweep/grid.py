@@ -36,6 +36,7 @@ class SweepSpec:
     chunk: int = 256  # instances per compiled call; fixed so every chunk reuses one compile
     param: str | None = None  # Raibert gain swept by `gains`
     values: tuple[float, ...] = ()
+    controller: str = "raibert"  # or policy:PATH, a policy trained by experiments/train.py
 
     def __post_init__(self):
         if self.kind not in ("gravity", "gains"):
@@ -57,6 +58,10 @@ class SweepSpec:
             raise ValueError(f"--kick must be >= 0, got {self.kick}")
         if self.chunk < 1:
             raise ValueError(f"--chunk must be >= 1, got {self.chunk}")
+        if self.controller != "raibert" and not self.controller.startswith("policy:"):
+            raise ValueError(f"--controller {self.controller!r}: a sweep runs raibert or policy:PATH")
+        if self.kind == "gains" and self.controller != "raibert":
+            raise ValueError("a gains sweep varies Raibert's gains: use --controller raibert")
         if self.kind == "gains":
             from hopper_mjx.control.raibert import GAINS
 

@@ -74,7 +74,7 @@ def versions() -> dict:
     return {p: metadata.version(p) for p in ("hopper_mjx", "jax", "jaxlib", "mujoco", "mujoco-mjx", "brax", "numpy")}
 
 
-def table_text(spec: SweepSpec, groups: list[dict]) -> str:
+def table_text(spec: SweepSpec, groups: list[dict], label: str | None = None) -> str:
     cols = [("g m/s²", "gravity", "{:.2f}"), ("", "label", "{}"), ("n", "n", "{}"), ("alive", "survival", "{:.0%}"),
             ("hops", "hops", "{:.1f}"), ("apex m", "apex_height", "{:.3f}"), ("arc m", "flight_rise", "{:.3f}"),
             ("flight s", "flight_time", "{:.3f}"), ("stance s", "stance_time", "{:.3f}"),
@@ -82,6 +82,8 @@ def table_text(spec: SweepSpec, groups: list[dict]) -> str:
             ("|v err|", "tracking_error", "{:.2f}"), ("CoT", "cost_of_transport", "{:.2f}")]
     if spec.kind == "gains":
         cols.insert(0, (spec.param, spec.param, "{:g}"))
+    if label:
+        cols.insert(0, ("controller", "controller", "{}"))
     cells = [[h for h, _, _ in cols]]
     for g in groups:
         cells.append(["-" if g.get(k) is None else f.format(g[k]) for _, k, f in cols])
@@ -90,20 +92,23 @@ def table_text(spec: SweepSpec, groups: list[dict]) -> str:
     return "\n".join([lines[0], "-" * len(lines[0])] + lines[1:])
 
 
-def plot_gravity(path: Path, spec: SweepSpec, groups: list[dict]) -> None:
+def plot_gravity(path: Path, spec: SweepSpec, groups: list[dict], series: list | None = None) -> None:
+    """Six panels against gravity; `series` [(label, groups)] draws several controllers in one figure."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    g = np.array([r["gravity"] for r in groups])
-    val = lambda k: np.array([np.nan if r.get(k) is None else r[k] for r in groups])
-    err = lambda k: np.array([np.nan if r.get(f"{k}_std") is None else r[f"{k}_std"] for r in groups])
+    series = series or [("measured", groups)]
     panels = [("apex_height", "apex rise (m)"), ("flight_time", "flight time (s)"), ("hop_period", "hop period (s)"),
               ("duty_factor", "duty factor"), ("survival", "survival"), ("cost_of_transport", "cost of transport")]
     fig, axes = plt.subplots(2, 3, figsize=(13, 7), constrained_layout=True)
     for ax, (key, label) in zip(axes.flat, panels):
-        ax.errorbar(g, val(key), yerr=None if key == "survival" else err(key), fmt="o-", capsize=3, label="measured")
+        for name, rows_ in series:
+            g = np.array([r["gravity"] for r in rows_])
+            val = np.array([np.nan if r.get(key) is None else r[key] for r in rows_])
+            err = np.array([np.nan if r.get(f"{key}_std") is None else r[f"{key}_std"] for r in rows_])
+            ax.errorbar(g, val, yerr=None if key == "survival" else err, fmt="o-", capsize=3, label=name)
         ax.set_xlabel("gravity g (m/s²)")
         ax.set_ylabel(label)
         for gp, name in PLANETS.items():
@@ -111,11 +116,18 @@ def plot_gravity(path: Path, spec: SweepSpec, groups: list[dict]) -> None:
             ax.text(gp, 1.0, name, transform=ax.get_xaxis_transform(), ha="center", va="bottom", fontsize=7)
         ax.grid(alpha=0.3)
     axes[0, 0].axhline(spec.height, color="C3", ls="--", label="commanded")
-    axes[0, 1].plot(g, val("ballistic_flight_time"), "C3x--", label="ballistic 2√(2h/g), h = each hop's measured rise")
+    if len(series) == 1:
+        g = np.array([r["gravity"] for r in groups])
+        ballistic = np.array([np.nan if r.get("ballistic_flight_time") is None else r["ballistic_flight_time"]
+                              for r in groups])
+        axes[0, 1].plot(g, ballistic, "C3x--", label="ballistic 2√(2h/g), h = each hop's measured rise")
     axes[0, 0].legend(fontsize=8)
     axes[0, 1].legend(fontsize=8)
     axes[1, 1].set_ylim(-0.05, 1.05)
-    fig.suptitle(f"Raibert hopping vs gravity: {spec.num} replicates per g, {spec.duration:g} s each")
+    who = "Raibert" if len(series) == 1 and spec.controller == "raibert" else " vs ".join(n for n, _ in series)
+    if len(series) == 1 and spec.controller != "raibert":
+        who = spec.controller
+    fig.suptitle(f"{who} hopping vs gravity: {spec.num} replicates per g, {spec.duration:g} s each")
     fig.savefig(path, dpi=90)
     plt.close(fig)
 
@@ -157,5 +169,16 @@ def write(out: Path, spec: SweepSpec, inst: Instances, table: np.ndarray, column
     else:
         plot_gains(out / "gains.png", spec, groups)
     text = table_text(spec, groups)
+    (out / "table.txt").write_text(text + "\n")
+    return text
+
+
+def write_comparison(out: Path, spec: SweepSpec, results: list[tuple[str, list[dict]]]) -> str:
+    """One table (table.txt, comparison.json) and one plot (gravity.png) of several controllers'
+    gravity sweeps: same gravities, kicks, commands and metrics."""
+    rows_ = [{"controller": name, **g} for name, groups in results for g in groups]
+    (out / "comparison.json").write_text(json.dumps({"groups": rows_, "arguments": spec.to_json()}, indent=1))
+    plot_gravity(out / "gravity.png", spec, results[0][1], series=results)
+    text = table_text(spec, rows_, label="controller")
     (out / "table.txt").write_text(text + "\n")
     return text
