@@ -231,11 +231,15 @@ def _pad(state: State, size: int) -> State:
 def _instance_rollout(engine, controller, steps, tick, periods, sensors):
     """One instance's rollout: `steps` physics steps, a record every `tick` steps."""
 
-    def physics_step(model, state, record):
+    def physics_step(model, state, record, previous):
+        """One step; `record` is a traced, batch-wide flag: the signals are measured
+        (after forward, before integrate) where it is true, else `previous` is passed on."""
         d = state.data
         ctrl, cstate = controller.act(state.cstate, signals.observe(engine, model, d), state.gravity)
         d1 = engine.forward(model, d.replace(ctrl=ctrl), state.gravity)
-        sig = signals.measure(engine, model, d1, state.gravity) if record else None
+        measure = lambda: signals.measure(engine, model, d1, state.gravity)
+        # An unbatched predicate stays a real conditional under vmap: off-tick steps skip the signals.
+        sig = jax.lax.cond(record, measure, lambda: previous)
         d1 = engine.integrate(model, d1, state.gravity)
         finite = (
             jnp.isfinite(d1.qpos).all()
@@ -250,12 +254,15 @@ def _instance_rollout(engine, controller, steps, tick, periods, sensors):
         return state._replace(data=d1, cstate=cstate, diverged=bad), sig
 
     def one_tick(carry, _):
+        # The step is traced once, in one loop, so XLA compiles the engine once (not
+        # once for the recorded step and again for the others).
         model, state = carry
-        state, sig = physics_step(model, state, record=True)
-        if tick > 1:
-            state = jax.lax.fori_loop(
-                0, tick - 1, lambda _, s: physics_step(model, s, record=False)[0], state
-            )
+
+        def body(k, state_sig):
+            return physics_step(model, state_sig[0], record=k == 0, previous=state_sig[1])
+
+        measure = lambda: signals.measure(engine, model, state.data, state.gravity)
+        state, sig = jax.lax.fori_loop(0, tick, body, (state, _zeros_like(jax.eval_shape(measure))))
         return (model, state), sig
 
     def run(model, state):
@@ -269,3 +276,7 @@ def _instance_rollout(engine, controller, steps, tick, periods, sensors):
         return state._replace(key=next_key), traj
 
     return run
+
+
+def _zeros_like(shapes):
+    return jax.tree_util.tree_map(lambda x: jnp.zeros(x.shape, x.dtype), shapes)
