@@ -42,6 +42,9 @@ def cpu_cache_dir(base: Path | str) -> Path:
 
 def configure(*, devices: int | None = None, cache_dir: Path | str | None = CACHE_DIR) -> None:
     """Call before the first JAX computation of the process."""
+    # XLA's C++ log warns "Assume version compatibility" at every persistent-cache load: noise
+    # on stderr for a user. Errors still print; TF_CPP_MIN_LOG_LEVEL=0 brings the warnings back.
+    os.environ.setdefault("TF_CPP_MIN_LOG_LEVEL", "1")
     import jax  # here, not at module level: commands check their arguments before importing JAX
 
     if "xla_force_host_platform_device_count" not in os.environ.get("XLA_FLAGS", ""):

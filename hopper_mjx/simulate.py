@@ -106,7 +106,8 @@ def main(argv=None) -> int:
             saved = run(args, batch) if stream is None else run_live(args, batch, stream)
     except ValueError as err:  # includes URDFError and a busy --foxglove port
         return cli.fail(err)
-    np.savez_compressed(args.out, **saved)
+    with open(args.out, "wb") as f:  # a file object, so numpy writes the exact name given (no ".npz" added)
+        np.savez_compressed(f, **saved)
     cli.warn_diverged(saved["diverged"])
     print(f"wrote {args.out}: {saved['qpos'].shape[0]} instances x {saved['time'].size} samples")
     return 0

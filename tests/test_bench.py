@@ -66,7 +66,8 @@ def test_table_and_plot_from_records(record, tmp_path):
     table = bench.markdown_table([record, record])
     assert table.count("\n") == 3 and f"| {record['num']} |" in table
     png = tmp_path / "scaling.png"
-    bench.plot_scaling([record, dict(record, num=8)], str(png))
+    both = [record, dict(record, num=8), dict(record, engine="mjx"), dict(record, num=8, engine="mjx")]
+    bench.plot_scaling(both, str(png))
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
@@ -75,4 +76,6 @@ def test_bad_arguments_exit_with_a_message(capsys):
     assert "--num" in capsys.readouterr().err
     assert bench.main(["--num", "4", "--steps", "20", "--engine", "warp"]) == 2
     assert "--engine: unknown engine 'warp'" in capsys.readouterr().err
+    assert bench.main(["--num", "4", "--steps", "20", "--engine", "chain,mjx"]) == 2
+    assert "--engine: several engines are compared with --scaling only" in capsys.readouterr().err
 

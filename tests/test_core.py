@@ -206,7 +206,7 @@ def test_bad_rates_are_rejected(sim, limp):
 
 
 def test_simulate_cli_writes_the_documented_arrays(tmp_path, sim, rest):
-    out = tmp_path / "run.npz"
+    out = tmp_path / "run"  # written under the exact name given, no ".npz" added
     args = ["--gravity", "1.62,3.71,9.81", "--num", "1", "--duration", "1", "--controller", "hold",
             "--rate", "100", "--engine", sim.engine.name, "--out", str(out)]
     assert simulate.main(args) == 0

@@ -1,7 +1,7 @@
 """python -m hopper_mjx.perf.bench: the batched core (engine chain or mjx) against native multithreaded MuJoCo.
 
     python -m hopper_mjx.perf.bench --num 4096 --steps 1000 --json bench.json
-    python -m hopper_mjx.perf.bench --scaling 64,256,1024,4096,16384 --steps 500 --plot scaling.png
+    python -m hopper_mjx.perf.bench --scaling 64,256,1024,4096,16384 --steps 200 --engine chain,mjx --plot scaling.png
 
 Both sides step the same compiled model, the same N instances for the same T
 steps from the same initial state, instance i under the same gravity:
@@ -283,16 +283,18 @@ def format_table(record: dict) -> str:
 # -- scaling --------------------------------------------------------------------
 
 
-def scaling(nums: list[int], steps: int, extra_args: list[str]) -> list[dict]:
-    """One fresh process per N, so that each peak RSS and compile time is that N's own."""
+def scaling(nums: list[int], engines: list[str], steps: int, extra_args: list[str]) -> list[dict]:
+    """One fresh process per N and engine, so that each peak RSS and compile time is that run's own;
+    the engines alternate at each N, so that both meet the same background load."""
     records = []
     with tempfile.TemporaryDirectory() as tmp:
         for num in nums:
-            out = Path(tmp) / f"{num}.json"
-            cmd = [sys.executable, "-m", "hopper_mjx.perf.bench", "--num", str(num), "--steps", str(steps),
-                   "--json", str(out), *extra_args]
-            subprocess.run(cmd, check=True)
-            records.append(json.loads(out.read_text()))
+            for engine in engines:
+                out = Path(tmp) / f"{num}-{engine}.json"
+                cmd = [sys.executable, "-m", "hopper_mjx.perf.bench", "--num", str(num), "--steps", str(steps),
+                       "--engine", engine, "--json", str(out), *extra_args]
+                subprocess.run(cmd, check=True)
+                records.append(json.loads(out.read_text()))
     return records
 
 
@@ -318,17 +320,20 @@ def plot_scaling(records: list[dict], path: str) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    nums = [r["num"] for r in records]
     fig, (rate, ratio) = plt.subplots(1, 2, figsize=(10, 4))
-    core = f"core ({records[0].get('engine', 'mjx')}), {records[0]['devices']} devices"
-    rate.loglog(nums, [r["mjx_steps_per_s"] for r in records], "o-", label=core)
-    rate.loglog(nums, [r["native_steps_per_s"] for r in records], "s-",
-                label=f"native mujoco.rollout, {records[0]['native_threads']} threads")
+    for k, engine in enumerate(dict.fromkeys(r.get("engine", "mjx") for r in records)):
+        runs = [r for r in records if r.get("engine", "mjx") == engine]
+        nums, color = [r["num"] for r in runs], f"C{k}"
+        rate.loglog(nums, [r["mjx_steps_per_s"] for r in runs], "o-", color=color,
+                    label=f"core ({engine}), {runs[0]['devices']} devices")
+        rate.loglog(nums, [r["native_steps_per_s"] for r in runs], "s--", color=color, alpha=0.6,
+                    label=f"native mujoco.rollout, {runs[0]['native_threads']} threads, beside {engine}")
+        ratio.semilogx(nums, [r["ratio"] for r in runs], "o-", color=color, label=engine)
     rate.set_xlabel("instances N")
     rate.set_ylabel("steps/s")
-    rate.legend()
+    rate.legend(fontsize=8)
     rate.grid(True, which="both", alpha=0.3)
-    ratio.semilogx(nums, [r["ratio"] for r in records], "o-")
+    ratio.legend()
     ratio.axhline(1.0, color="gray", linestyle="--")
     ratio.set_xlabel("instances N")
     ratio.set_ylabel("core / native")
@@ -346,7 +351,7 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--controller", default="hold",
                    help="hold (PD to the initial angles), raibert (hopping; native keeps hold) or none")
     p.add_argument("--chunk", type=int, default=256, help="instances per vmapped chunk on a device")
-    cli.add_engine_option(p)
+    cli.add_engine_option(p)  # with --scaling, a comma-separated list (e.g. chain,mjx) is run side by side
     p.add_argument("--repeat", type=int, default=2, help="timed runs per side; the best counts")
     p.add_argument("--threads", type=int, default=None, help="native threads (default: one per device)")
     p.add_argument("--timestep", type=float, default=1e-3, help="physics step, s")
@@ -362,7 +367,11 @@ def check(args) -> list[int] | None:
         if getattr(args, name) < 1:
             raise ValueError(f"--{name} must be >= 1, got {getattr(args, name)}")
     cli.check_range("--timestep", args.timestep, low=0, high=cli.MAX_TIMESTEP, open_low=True)
-    cli.check_engine(args.engine)
+    engines = args.engine.split(",")
+    if len(engines) > 1 and not args.scaling:
+        raise ValueError("--engine: several engines are compared with --scaling only")
+    for engine in engines:
+        cli.check_engine(engine)
     if args.controller not in CONTROLLERS:
         raise ValueError(f"--controller: unknown {args.controller!r}; choose from {', '.join(CONTROLLERS)}")
     if args.json:
@@ -390,9 +399,8 @@ def main(argv=None) -> int:
         runtime.configure()
         if nums:
             passed = ["--controller", args.controller, "--chunk", str(args.chunk), "--repeat", str(args.repeat),
-                      "--engine", args.engine,
                       "--timestep", str(args.timestep)] + (["--threads", str(args.threads)] if args.threads else [])
-            records = scaling(nums, args.steps, passed)
+            records = scaling(nums, args.engine.split(","), args.steps, passed)
             print(markdown_table(records))
             if args.plot:
                 plot_scaling(records, args.plot)
