@@ -128,6 +128,18 @@ def test_exported_urdf_draws_every_link_and_finds_its_meshes(tmp_path):
     assert mesh == (tmp_path / "meshes" / "base.stl").as_uri()
 
 
+def test_a_frame_prefix_renames_the_links_as_the_streams_tf_frames(tmp_path):
+    from hopper_mjx.model.display_urdf import display_urdf
+
+    path = tmp_path / "monoped_3.urdf"
+    path.write_text(display_urdf(frame_prefix="monoped_3/"))
+    prefixed, original = model.load(path), model.load()
+    assert [prefixed.body(i).name for i in range(1, prefixed.nbody)] == \
+        [f"monoped_3/{original.body(i).name}" for i in range(1, original.nbody)]
+    np.testing.assert_array_equal(prefixed.body_mass, original.body_mass)
+    np.testing.assert_array_equal(prefixed.jnt_axis, original.jnt_axis)
+
+
 def test_timestep_is_configurable():
     assert model.load(timestep=2e-3).opt.timestep == 2e-3
     for bad in (0.0, -1e-3, float("nan"), 0.5):
