@@ -6,8 +6,9 @@
             sample = run.poll()            # the latest state due now, or None
 
 A producer thread calls `Sim.rollout` for `CHUNK_TIME` of simulated time at a time (one
-compile, reused) and queues the chunks a little ahead; `LiveRun.poll` hands out each
-recorded instant when simulated time reaches `factor` x the wall time since the start.
+compile, reused), paced by the wall clock: it stays a chunk ahead of the simulated time due
+(`factor` x the wall time since the start). `LiveRun.poll` plays every recorded instant due
+since its last call, so how often it is called (the frame rate) does not change the pace.
 A rollout call costs ~20 ms of dispatch whatever its length, so the chunks are long
 (0.1 s) and the recorded streams carry the motion between them.
 
@@ -30,8 +31,8 @@ import numpy as np
 
 CHUNK_TIME = 0.1  # s of simulated time per compiled call
 SHOWN = 16  # instances a live run draws or streams at most
-AHEAD = 1  # chunks computed ahead of the one playing
-MAX_LAG = 0.25  # s: a batch slower than asked drops the backlog instead of racing to catch up
+AHEAD = 1  # chunks computed ahead of the simulated time due
+MAX_LAG = 0.25  # s of simulated time: a batch further behind the clock plays on at its own pace
 KICK_SPEED = 0.5  # m/s, sideways (+y) base velocity impulse of a kick
 SPEED_STEP = 0.1  # m/s per arrow key press
 HEIGHT_STEP = 0.02  # m per arrow key press
@@ -48,6 +49,7 @@ class Chunk:
     status: tuple[str, ...]  # per instance: "standing", "hopping", "fallen" or "diverged"
     diverged: np.ndarray  # (N,) bool
     command: dict | None  # {"speed": (vx, vy) m/s, "height": m} of every instance, or None
+    first_seq: dict  # stream -> samples of it in the earlier chunks of the run (resets included): ROS seq
 
 
 def read_command(cstate, standing_height: float) -> dict | None:
@@ -141,6 +143,7 @@ class LiveBatch:
         self.sensors = sensors or signals.SensorConfig()  # the seed's 50 Hz on every stream, as record
         self.steps = steps_for(CHUNK_TIME, sim.layout.timestep, self.sensors)
         self.epoch = 0
+        self.samples = {stream: 0 for stream in self.sensors.periods(sim.layout.timestep)}  # over the whole run
         self.reset()
 
     @classmethod
@@ -196,6 +199,9 @@ class LiveBatch:
         traj = jax.tree_util.tree_map(np.asarray, traj)._replace(
             time={k: (self.steps_done + np.arange(0, self.steps, p)) * dt for k, p in periods.items()})
         self.steps_done += self.steps
+        first_seq = dict(self.samples)
+        for stream, stamps in traj.time.items():
+            self.samples[stream] += len(stamps)
         diverged = np.asarray(self.state.diverged)
         status = self.hop_counter.update(traj.contact.flag, np.asarray(self.state.data.qpos), diverged)
         return Chunk(
@@ -206,15 +212,17 @@ class LiveBatch:
             status=status,
             diverged=diverged,
             command=self.command(),
+            first_seq=first_seq,
         )
 
 
 class Pacer:
     """Maps simulated time to wall time at `factor` x real time, and measures what is reached."""
 
-    def __init__(self, factor: float, clock: Callable[[], float] = time.monotonic):
+    def __init__(self, factor: float, clock: Callable[[], float] = time.monotonic, span: float = 2.0):
         self.clock = clock
         self.factor = factor
+        self.span = span  # s of wall time the reached factor is measured over
         self.window: list[tuple[float, float, int]] = []  # (wall, sim time, steps) of recent instants
         self.rebase(0.0)
 
@@ -223,24 +231,27 @@ class Pacer:
         self.origin = (self.clock(), sim_time)
         self.window.clear()
 
-    def wait(self, sim_time: float) -> float:
-        """Seconds until `sim_time` is due (<= 0: now). Falling behind by more than MAX_LAG
-        rebases, so that a slow batch plays at its own pace instead of skipping."""
-        wall0, sim0 = self.origin
-        lag = self.clock() - (wall0 + (sim_time - sim0) / self.factor)
-        if lag * self.factor > MAX_LAG:
-            self.origin = (self.clock(), sim_time)
-            return 0.0
-        return -lag
+    def fall_back(self, sim_time: float) -> None:
+        """The batch is behind: `sim_time` is due now, and the measurement goes on (it shows the lag)."""
+        self.origin = (self.clock(), sim_time)
 
-    def played(self, sim_time: float, steps: int, span: float = 1.0) -> None:
+    def due(self) -> float:
+        """The simulated time due now, s."""
+        wall0, sim0 = self.origin
+        return sim0 + (self.clock() - wall0) * self.factor
+
+    def wait(self, sim_time: float) -> float:
+        """Seconds of wall time until `sim_time` is due (< 0: it is late by that much)."""
+        return (sim_time - self.due()) / self.factor
+
+    def played(self, sim_time: float, steps: int) -> None:
         now = self.clock()
         self.window.append((now, sim_time, steps))
-        while self.window and now - self.window[0][0] > span:
+        while now - self.window[0][0] > self.span:
             self.window.pop(0)
 
     def reached(self) -> tuple[float, float]:
-        """(real-time factor, instance-steps per second) over the last second of play."""
+        """(real-time factor, instance-steps per second) over the last `span` of play."""
         if len(self.window) < 2:
             return math.nan, math.nan
         (w0, t0, s0), (w1, t1, s1) = self.window[0], self.window[-1]
@@ -252,18 +263,24 @@ class Pacer:
 class LiveRun:
     """Plays a LiveBatch: a producer thread computes chunks, `poll` hands out the instants due.
 
+    The producer keeps the batch up to AHEAD chunks ahead of the simulated time due by the wall
+    clock, whatever the caller does between polls; `poll` plays every instant due since the last
+    call, over as many chunks as that takes. So a caller that polls seldom (a slow renderer)
+    lowers its own frame rate, not the real-time factor; only a batch slower than asked does.
+
     `sinks` are called as sink(chunk, t_from, t_to) for every played span of simulated time
     [t_from, t_to) (e.g. the Foxglove stream publishing the messages stamped in it).
     """
 
-    def __init__(self, batch: LiveBatch, *, factor: float = 1.0, sinks=(), paused: bool = False):
+    def __init__(self, batch: LiveBatch, *, factor: float = 1.0, sinks=(), paused: bool = False,
+                 clock: Callable[[], float] = time.monotonic):
         self.batch = batch
-        self.pacer = Pacer(factor)
+        self.pacer = Pacer(factor, clock)
         self.sinks = list(sinks)
         self.paused = paused
         self.steps_pending = 0  # instants to play while paused (the step key)
         self._actions: queue.Queue = queue.Queue()
-        self._chunks: queue.Queue = queue.Queue(maxsize=AHEAD)
+        self._chunks: queue.Queue = queue.Queue()
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._produce, name="live-batch", daemon=True)
         self.error: BaseException | None = None
@@ -272,6 +289,7 @@ class LiveRun:
         self.steps_played = 0  # instance-steps since the start
         self.played_until = 0.0  # s: every instant before this simulated time has been played
         self.epoch = batch.epoch
+        self.chunk_seconds: list[float] = []  # wall time of each chunk's computation
 
     # -- lifecycle -----------------------------------------------------------------
     def __enter__(self) -> LiveRun:
@@ -283,12 +301,15 @@ class LiveRun:
 
     def close(self) -> None:
         self._stop.set()
-        while True:  # unblock a producer waiting on a full queue
-            try:
-                self._chunks.get_nowait()
-            except queue.Empty:
-                break
         self._thread.join(timeout=30)
+
+    def _ahead(self) -> bool:
+        """Whether the batch is AHEAD chunks past what is due (paused: past what is played)."""
+        if self.batch.epoch != self.epoch:  # a reset is queued or has just run: its chunks are due at once
+            return False
+        produced = self.batch.steps_done * self.batch.sim.layout.timestep
+        due = self.played_until if self.paused or self.chunk is None else self.pacer.due()
+        return produced - due > AHEAD * CHUNK_TIME
 
     def _produce(self) -> None:
         try:
@@ -298,13 +319,13 @@ class LiveRun:
                         self._actions.get_nowait()(self.batch)
                     except queue.Empty:
                         break
+                if self._ahead():
+                    self._stop.wait(0.005)
+                    continue
+                start = time.perf_counter()
                 chunk = self.batch.advance()
-                while not self._stop.is_set():
-                    try:
-                        self._chunks.put(chunk, timeout=0.05)
-                        break
-                    except queue.Full:
-                        continue
+                self.chunk_seconds.append(time.perf_counter() - start)
+                self._chunks.put(chunk)
         except BaseException as err:  # surfaced by poll() on the main thread
             self.error = err
 
@@ -341,41 +362,54 @@ class LiveRun:
 
     # -- playing ---------------------------------------------------------------------
     def _take_chunk(self) -> bool:
-        try:
-            chunk = self._chunks.get(timeout=0.01)
-        except queue.Empty:
-            return False
-        if chunk.epoch < self.epoch:  # computed before a reset
-            return self._take_chunk()
+        """Moves on to the next computed chunk of the current epoch; False if none is ready."""
+        while True:
+            try:
+                chunk = self._chunks.get_nowait()
+            except queue.Empty:
+                return False
+            if chunk.epoch >= self.epoch:  # older ones were computed before a reset
+                break
         restarted = self.chunk is None or chunk.epoch != self.chunk.epoch
         self.chunk, self._next = chunk, 0
         if restarted:
             self.pacer.rebase(float(chunk.clock[0]))
         return True
 
+    def _due_end(self, chunk: Chunk, start: int) -> int:
+        """Index past the instants of `chunk` from `start` that are due now."""
+        end = start
+        while end < len(chunk.clock) and self.pacer.wait(float(chunk.clock[end])) <= 0:
+            end += 1
+        return end
+
     def poll(self) -> tuple[Chunk, int] | None:
-        """Plays every instant now due; returns (chunk, index of the last played instant) or None."""
+        """Plays every instant now due, over as many chunks as needed; returns (chunk, index of the
+        last played instant), or None if nothing was due. A batch more than MAX_LAG behind the
+        clock plays on from where it is instead of racing to catch up."""
         if self.error is not None:
             raise RuntimeError(f"the live batch stopped: {self.error}") from self.error
         stepping = self.paused and self.steps_pending > 0
         if self.paused and not stepping:
             return None
-        done = self.chunk is None or self._next >= len(self.chunk.clock) or self.chunk.epoch < self.epoch
-        if done and not self._take_chunk():
-            return None
-        if stepping:
-            self.steps_pending -= 1
-        chunk, start = self.chunk, self._next
-        if stepping:
-            end = start + 1
-        else:
-            end = start
-            while end < len(chunk.clock) and self.pacer.wait(float(chunk.clock[end])) <= 0:
-                end += 1
+        last = None
+        while True:
+            exhausted = self.chunk is None or self._next >= len(self.chunk.clock) or self.chunk.epoch < self.epoch
+            if exhausted and not self._take_chunk():
+                if self.chunk is not None and -self.pacer.wait(self.played_until) * self.pacer.factor > MAX_LAG:
+                    self.pacer.fall_back(self.played_until)
+                return last
+            chunk, start = self.chunk, self._next
+            end = start + 1 if stepping else self._due_end(chunk, start)
             if end == start:
-                return None
-        self._play(chunk, start, end)
-        return chunk, end - 1
+                return last
+            self._play(chunk, start, end)
+            last = (chunk, end - 1)
+            if stepping:
+                self.steps_pending -= 1
+                return last
+            if end < len(chunk.clock):  # the rest of this chunk is not due yet
+                return last
 
     def _play(self, chunk: Chunk, start: int, end: int) -> None:
         dt = self.batch.sim.layout.timestep

@@ -30,17 +30,19 @@ import math
 import sys
 import threading
 import time
+from contextlib import contextmanager
 
 import mujoco
 import numpy as np
 
 from hopper_mjx import cli, runtime
-from hopper_mjx.live import HEIGHT_STEP, SHOWN, SPEED_STEP, LiveBatch, LiveRun, spread
+from hopper_mjx.live import CHUNK_TIME, HEIGHT_STEP, SHOWN, SPEED_STEP, LiveBatch, LiveRun, spread
 
 SPACING = 1.5  # m between neighbouring robots on the display grid
 LABEL_ABOVE = 0.45  # m above the base centre
 ROBOT_GROUP = 2  # geom group of the robots: MuJoCo's key 2 hides and shows them
-FRAME_TIME = 1 / 60  # s between redraws while paused or waiting
+FRAME_TIME = 1 / 60  # s: the shortest time between two frames
+RENDER_NICE = 10  # niceness added to the window's render threads: on a busy machine the simulation comes first
 KEYS_HELP = ("Space\nEnter\nBackspace\nPage Down\nInsert\nUp, Down\nRight, Left\n=, -\nF8",
              ("pause / run\nstep one instant\nreset\nselect a robot\nkick it +0.5 m/s\nspeed +-0.1 m/s\n"
               "apex rise +-0.02 m\nspeed factor x2, /2\nprint status"))
@@ -73,6 +75,7 @@ def display_model(urdf, count: int):
     m = display.compile()
     m.geom_group[m.geom_bodyid != 0] = ROBOT_GROUP
     m.site_rgba[:, 3] = 0  # the IMU and foot sites are for the simulation, not for the eye
+    m.light_castshadow[:] = 0  # shadows double the cost of a frame in software OpenGL
     free = np.flatnonzero(m.jnt_type == mujoco.mjtJoint.mjJNT_FREE)
     return m, m.jnt_qposadr[free], m.jnt_bodyid[free], (m.nbody - 1) // count
 
@@ -115,7 +118,7 @@ class Display:
         if body > 0 and copy.size:
             self.selected = int(copy[0])
 
-    def draw(self, chunk, index: int, texts: tuple[str, str]) -> None:
+    def draw(self, chunk, index: int) -> None:
         """Poses every copy at the chunk's recorded instant `index` and relabels them."""
         traj = chunk.traj
         state = max(int(np.searchsorted(traj.time["state"], chunk.clock[index], side="right")) - 1, 0)
@@ -135,7 +138,6 @@ class Display:
                                     np.ones(4, np.float32))
                 geom.label = text
                 scn.ngeom += 1
-        self.show_texts(texts)
 
     def label(self, k: int, chunk) -> str:
         i = self.shown[k]
@@ -150,16 +152,17 @@ class Display:
         ])
 
 
-def status_texts(run, n: int, shown: int) -> tuple[str, str]:
-    """The overlay's two columns: speed factor asked and reached, steps/s, time, commands."""
+def status_texts(run, n: int, shown: int, frame_rate: float) -> tuple[str, str]:
+    """The overlay's two columns: speed factor asked and reached, steps/s, frames/s, time, commands."""
     factor, steps = run.pacer.reached()
     chunk = run.chunk
     command = "none (this controller)" if chunk is None or chunk.command is None else (
         f"{chunk.command['speed'][0]:+.2f}, {chunk.command['speed'][1]:+.2f} m/s, "
         f"apex +{chunk.command['height']:.2f} m")
     reached = "paused" if run.paused else ("-" if math.isnan(factor) else f"x{factor:.2f}")
-    return ("speed factor\nreached\nsteps/s\ntime\ninstances\ncommand",
+    return ("speed factor\nreached\nsteps/s\nframes/s\ntime\ninstances\ncommand",
             f"x{run.pacer.factor:g}\n{reached}\n{'-' if math.isnan(steps) else f'{steps:,.0f}'}\n"
+            f"{'-' if math.isnan(frame_rate) else f'{frame_rate:.1f}'}\n"
             f"{run.time:.2f} s\n{n} ({shown} shown)\n{command}")
 
 
@@ -251,46 +254,118 @@ def main(argv=None) -> int:
         return cli.fail(err)
 
 
-def watch(args, batch, shown: list[int], stream) -> int:
-    """Runs the window until it is closed (or --duration is played); prints the factor reached."""
+class FrameStats:
+    """Where the main thread's wall time goes, frame by frame, and the frame rate."""
+
+    STAGES = ("poll", "draw", "sync", "renderer")  # renderer: waiting for the window to take the last frame
+
+    def __init__(self):
+        self.spent = dict.fromkeys(self.STAGES, 0.0)
+        self.frames = 0
+        self.recent: list[float] = []  # wall times of the frames of the last 2 s
+        self.first: tuple[float, float] | None = None  # (wall, simulated time) of the first frame that played
+
+    @contextmanager
+    def stage(self, name: str):
+        start = time.perf_counter()
+        try:
+            yield
+        finally:
+            self.spent[name] += time.perf_counter() - start
+
+    def frame_done(self, run) -> None:
+        now = time.perf_counter()
+        if self.first is None and run.chunk is not None:  # play starts: count from here, not from the compile
+            self.first = (now, run.played_until)
+            self.spent, self.frames = dict.fromkeys(self.STAGES, 0.0), 0
+        self.last = (now, run.played_until)
+        self.frames += 1
+        self.recent.append(now)
+        while now - self.recent[0] > 2.0:
+            self.recent.pop(0)
+
+    def rate(self) -> float:
+        """Frames per second over the last 2 s."""
+        span = self.recent[-1] - self.recent[0] if len(self.recent) > 1 else 0.0
+        return (len(self.recent) - 1) / span if span > 0 else math.nan
+
+    def summary(self, run) -> str:
+        """Two lines: the real-time factor over the run, then the frame rate and where a frame's time went."""
+        per_frame = ", ".join(f"{k} {1e3 * v / max(self.frames, 1):.1f} ms" for k, v in self.spent.items())
+        chunks = np.asarray(run.chunk_seconds[1:] or [math.nan])  # the first one includes the compile
+        (w0, t0), (w1, t1) = self.first or self.last, self.last
+        wall = max(w1 - w0, 1e-9)
+        return (f"view: played {t1 - t0:.2f} s in {w1 - w0:.2f} s: real-time factor x{(t1 - t0) / wall:.2f} "
+                f"(x{run.pacer.factor:g} asked, pauses included)\n"
+                f"view: {self.frames} frames, {self.frames / wall:.1f} frames/s; per frame: {per_frame}; "
+                f"a {CHUNK_TIME:g} s chunk took {1e3 * np.median(chunks):.0f} ms to compute "
+                f"(median of {len(run.chunk_seconds)})")
+
+
+def launch_viewer(m, key_callback):
+    """MuJoCo's passive viewer, launched from a thread niced by RENDER_NICE (Linux niceness is per
+    thread), so that its render thread and the GL driver's threads it starts inherit it."""
     import mujoco.viewer
 
+    out = {}
+
+    def launch():
+        try:
+            os.setpriority(os.PRIO_PROCESS, 0, min(os.getpriority(os.PRIO_PROCESS, 0) + RENDER_NICE, 19))
+        except (AttributeError, OSError):  # no per-thread niceness here: the frames just compete
+            pass
+        out["viewer"] = mujoco.viewer.launch_passive(m, mujoco.MjData(m), show_left_ui=False,
+                                                     show_right_ui=False, key_callback=key_callback)
+
+    launcher = threading.Thread(target=launch, name="viewer-launch")
+    launcher.start()
+    launcher.join()
+    return out["viewer"]
+
+
+def show_frame(run, display: Display, stats: FrameStats, requests: set) -> None:
+    """Plays what is due, poses and labels the robots, and hands the frame to the window."""
+    with stats.stage("poll"):
+        played = run.poll()
+    texts = status_texts(run, run.batch.n, len(display.shown), stats.rate())
+    with stats.stage("draw"):
+        if played is not None:
+            display.draw(*played)
+    if "status" in requests:
+        requests.discard("status")
+        print(status_line(run, display), flush=True)
+    with stats.stage("sync"):
+        display.viewer.sync()
+    with stats.stage("renderer"):
+        display.show_texts(texts)  # returns once the window has drawn the previous texts
+    stats.frame_done(run)
+
+
+def watch(args, batch, shown: list[int], stream) -> int:
+    """Runs the window until it is closed (or --duration is played); prints the factor reached
+    and where each frame's time went."""
     m, qpos_adr, first_body, bodies = display_model(args.urdf, len(shown))
     requests: set = set()
     run = LiveRun(batch, factor=args.speed_factor, sinks=[stream] if stream else [], paused=args.paused)
     holder = {}
-    viewer = mujoco.viewer.launch_passive(m, mujoco.MjData(m), show_left_ui=False, show_right_ui=False,
-                                          key_callback=lambda key: holder["on_key"](key) if holder else None)
+    viewer = launch_viewer(m, key_callback=lambda key: holder["on_key"](key) if holder else None)
     display = Display(viewer, m, qpos_adr, first_body, bodies, shown, batch.gravity)
     holder["on_key"] = key_handler(run, display, requests)
-    announced, reached = False, []
+    stats, announced = FrameStats(), False
     with run:
         while viewer.is_running() and (args.duration is None or run.time < args.duration - 1e-9):
-            played = run.poll()
-            texts = status_texts(run, batch.n, len(shown))
-            if played is not None:
-                display.draw(*played, texts)
-                if not announced:
-                    print(f"view: running {batch.n} instances, {len(shown)} shown", flush=True)
-                    announced = True
-                factor = run.pacer.reached()[0]
-                if not math.isnan(factor):
-                    reached.append(factor)
-            else:
-                display.show_texts(texts)
-            if "status" in requests:
-                requests.discard("status")
-                print(status_line(run, display), flush=True)
-            viewer.sync()
-            time.sleep(run.seconds_to_next() if not run.paused else FRAME_TIME)
+            start = time.perf_counter()
+            show_frame(run, display, stats, requests)
+            if run.chunk is not None and not announced:
+                print(f"view: running {batch.n} instances, {len(shown)} shown", flush=True)
+                announced = True
+            time.sleep(max(FRAME_TIME - (time.perf_counter() - start), 0.0))
     viewer.close()
     # The window's thread tears down its GL context after the close; exiting under it aborts the process.
     for thread in threading.enumerate():
         if thread.daemon and thread is not threading.current_thread():
             thread.join(timeout=10)
-    if reached:
-        print(f"view: played {run.time:.2f} s; reached real-time factor x{np.median(reached):.2f} "
-              f"(median over the run) at x{run.pacer.factor:g} asked", flush=True)
+    print(stats.summary(run), flush=True)
     return 0
 
 

@@ -3,6 +3,7 @@
 import re
 import subprocess
 import sys
+import xml.etree.ElementTree as ET
 
 import mujoco
 import numpy as np
@@ -81,6 +82,62 @@ def test_exported_mjcf_loads_in_plain_mujoco(tmp_path):
     sensors = {m.sensor(i).name for i in range(m.nsensor)}
     assert {"imu_quat", "imu_gyro", "imu_accel", "odom_pos", "odom_linvel", "odom_angvel", "foot_touch"} <= sensors
     assert m.nu == 3 and m.opt.timestep == 1e-3
+
+
+@pytest.mark.parametrize("source", [None, "tests/data/long_shin_hopper.urdf"], ids=["seed", "long-shin"])
+def test_exported_urdf_is_the_loaded_robot_with_colours(tmp_path, source):
+    """--export-urdf writes the robot the simulation loads: loaded back, every body's mass and inertia,
+    every joint's axis, range and damping and every motor's gear and range are the original's."""
+    out = tmp_path / "display.urdf"
+    urdf = [] if source is None else ["--urdf", source]
+    subprocess.run([sys.executable, "-m", "hopper_mjx.model", "--export-urdf", str(out), *urdf],
+                   capture_output=True, text=True, check=True)
+    streamed = subprocess.run([sys.executable, "-m", "hopper_mjx.model", "--export-urdf", "-", *urdf],
+                              capture_output=True, text=True, check=True).stdout
+    assert streamed == out.read_text()
+    original, exported = model.load(source), model.load(out)
+    for field in ("body_mass", "body_inertia", "body_pos", "body_quat", "jnt_axis", "jnt_range", "dof_damping",
+                  "actuator_gear", "actuator_ctrlrange", "geom_size"):
+        np.testing.assert_array_equal(getattr(exported, field), getattr(original, field), err_msg=field)
+    for kind, count in (("joint", "njnt"), ("body", "nbody")):
+        names = [[getattr(m, kind)(i).name for i in range(getattr(m, count))] for m in (original, exported)]
+        assert names[0] == names[1], kind
+    if source is not None:  # the pictures' colours are for the seed's link names
+        return
+    from hopper_mjx.model.scene import LINK_COLOURS
+
+    colours = {link.get("name"): [float(c) for c in link.find("visual/material/color").get("rgba").split()]
+               for link in ET.fromstring(streamed).findall("link")}
+    assert colours == {name: list(rgba) for name, rgba in LINK_COLOURS.items()}
+
+
+def test_exported_urdf_draws_every_link_and_finds_its_meshes(tmp_path):
+    """A link with only a collision shape is drawn by a copy of it; a relative mesh path becomes a file:// URL."""
+    from hopper_mjx.model.display_urdf import display_urdf
+
+    text = re.sub(r"<visual>\s*<geometry><sphere radius=\"0.03\"/></geometry>\s*</visual>", "", SEED_URDF)
+    text = text.replace('<geometry><box size="0.20 0.20 0.30"/></geometry>\n    </visual>',
+                        '<geometry><mesh filename="meshes/base.stl"/></geometry>\n    </visual>', 1)
+    assert text.count("<visual>") == 4 and "meshes/base.stl" in text
+    path = tmp_path / "robot.urdf"
+    path.write_text(text)
+    robot = ET.fromstring(display_urdf(path))
+    foot = robot.find("link[@name='foot']")
+    assert foot.find("visual/geometry/sphere").get("radius") == "0.03"
+    mesh = robot.find("link[@name='base']/visual/geometry/mesh").get("filename")
+    assert mesh == (tmp_path / "meshes" / "base.stl").as_uri()
+
+
+def test_a_frame_prefix_renames_the_links_as_the_streams_tf_frames(tmp_path):
+    from hopper_mjx.model.display_urdf import display_urdf
+
+    path = tmp_path / "monoped_3.urdf"
+    path.write_text(display_urdf(frame_prefix="monoped_3/"))
+    prefixed, original = model.load(path), model.load()
+    assert [prefixed.body(i).name for i in range(1, prefixed.nbody)] == \
+        [f"monoped_3/{original.body(i).name}" for i in range(1, original.nbody)]
+    np.testing.assert_array_equal(prefixed.body_mass, original.body_mass)
+    np.testing.assert_array_equal(prefixed.jnt_axis, original.jnt_axis)
 
 
 def test_timestep_is_configurable():

@@ -113,7 +113,8 @@ class FoxgloveStream:
             batch = self.batch
             rec = record.recording(batch.sim, chunk.traj, batch.gravity, batch.sensors, chunk.diverged)
             out = [(t, topic, bytes(self.store.serialize_ros1(msg, msgtype)))
-                   for topic, msgtype, t, msg in messages.messages(rec, self.instances, self.store, ros1=True)]
+                   for topic, msgtype, t, msg in messages.messages(rec, self.instances, self.store, ros1=True,
+                                                                    first_seq=chunk.first_seq)]
             out += self._tf_messages(chunk)
             out.sort(key=lambda m: m[0])
             self._messages[key] = out
@@ -129,6 +130,7 @@ class FoxgloveStream:
         data = mujoco.MjData(mj_model)
         out = []
         for k, t in enumerate(chunk.traj.time["state"]):
+            seq = chunk.first_seq["state"] + k
             transforms = []
             for i in self.instances:
                 prefix = messages.frame_prefix(None if len(self.instances) == 1 else i)
@@ -137,7 +139,7 @@ class FoxgloveStream:
                         translation=build.vector(pos), rotation=build.quaternion(quat))
                     frame = "world" if parent == "world" else prefix + parent
                     transforms.append(types["geometry_msgs/msg/TransformStamped"](
-                        header=build.header(0, t, frame), child_frame_id=prefix + child, transform=transform))
+                        header=build.header(seq, t, frame), child_frame_id=prefix + child, transform=transform))
             msg = types[TF_MSGTYPE](transforms=transforms)
             out.append((float(t), TF_TOPIC, bytes(self.store.serialize_ros1(msg, TF_MSGTYPE))))
         return out

@@ -150,9 +150,13 @@ def _covariances(sensors) -> dict:
     }
 
 
-def messages(rec, instances: list[int], store, ros1: bool) -> Iterator[tuple[str, str, float, object]]:
-    """(topic, msgtype, time s, message) of every stream of the chosen instances, then /clock."""
+def messages(rec, instances: list[int], store, ros1: bool,
+             first_seq: dict[str, int] | None = None) -> Iterator[tuple[str, str, float, object]]:
+    """(topic, msgtype, time s, message) of every stream of the chosen instances, then /clock.
+    `first_seq`: the ROS 1 header seq of each stream's first sample ("imu", "odom", "state",
+    "contact"; 0 if absent), so that a run published in pieces counts on from piece to piece."""
     b = _Builder(store, ros1)
+    seq0 = {"imu": 0, "odom": 0, "state": 0, "contact": 0, **(first_seq or {})}
     traj, cov = rec.traj, _covariances(rec.sensors)
     collision1 = f"{ROBOT}::{CONTACT_LINK}::foot_collision"
     for i in instances:
@@ -160,22 +164,22 @@ def messages(rec, instances: list[int], store, ros1: bool) -> Iterator[tuple[str
         prefix = frame_prefix(None if len(instances) == 1 else i)
         base = prefix + "base"
         for k, t in enumerate(traj.time["imu"]):
-            header = b.header(k, t, base)
+            header = b.header(seq0["imu"] + k, t, base)
             msg = b.imu(header, traj.imu.quat[i, k], traj.imu.gyro[i, k], traj.imu.accel[i, k], cov)
             yield topics["imu"], MSGTYPES["imu"], t, msg
         for k, t in enumerate(traj.time["odom"]):
             o = traj.odom
-            msg = b.odometry(b.header(k, t, "world"), base, o.pos[i, k], o.quat[i, k], o.linvel[i, k],
+            msg = b.odometry(b.header(seq0["odom"] + k, t, "world"), base, o.pos[i, k], o.quat[i, k], o.linvel[i, k],
                              o.angvel[i, k], cov)
             yield topics["odom"], MSGTYPES["odom"], t, msg
         qadr, dadr = list(rec.joint_qpos), list(rec.joint_dof)
         for k, t in enumerate(traj.time["state"]):
-            msg = b.joint_state(b.header(k, t, ""), rec.joint_names,
+            msg = b.joint_state(b.header(seq0["state"] + k, t, ""), rec.joint_names,
                                 traj.qpos[i, k, qadr], traj.qvel[i, k, dadr])
             yield topics["joint_states"], MSGTYPES["joint_states"], t, msg
         for k, t in enumerate(traj.time["contact"]):
             c = traj.contact
-            msg = b.contacts(b.header(k, t, "world"), bool(c.flag[i, k]), c.force[i, k], c.pos[i, k],
+            msg = b.contacts(b.header(seq0["contact"] + k, t, "world"), bool(c.flag[i, k]), c.force[i, k], c.pos[i, k],
                              rec.floor_normal, collision1, t)
             yield topics["contact"], MSGTYPES["contact"], t, msg
     for t in rec.clock_time:
