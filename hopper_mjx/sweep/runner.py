@@ -21,6 +21,7 @@ from tqdm import tqdm
 
 from hopper_mjx import metrics, model, signals
 from hopper_mjx.control.raibert import raibert, raibert_params
+from hopper_mjx.envs.policy import policy_controller, policy_params, read
 from hopper_mjx.sim import Sim, gravity_vectors, steps_for
 from hopper_mjx.sweep.grid import Instances, SweepSpec, expand
 
@@ -73,17 +74,25 @@ class ChunkRunner:
 
     def __init__(self, spec: SweepSpec, instances: Instances, sim: Sim):
         self.spec, self.instances, self.sim = spec, instances, sim
-        self.controller = raibert(sim.robot)
+        self.policy = spec.controller.removeprefix("policy:") if spec.controller != "raibert" else None
+        self.controller = raibert(sim.robot) if self.policy is None else policy_controller(sim.mj_model, self.policy)
         self.steps = steps_for(spec.duration, sim.layout.timestep, SENSORS)
+
+    def params(self, full: np.ndarray):
+        """Every instance's command (and swept gain): the same for Raibert and a policy."""
+        spec = self.spec
+        if self.policy is not None:
+            return policy_params(self.sim.robot, len(full), height=spec.height, speed=spec.speed,
+                                 config=read(self.policy)[3])
+        gains = {spec.param: self.instances.value[full]} if spec.kind == "gains" else {}
+        return raibert_params(len(full), height=spec.height, speed=spec.speed, **gains)
 
     def __call__(self, index: np.ndarray) -> np.ndarray:
         """Metrics (len(index), len(COLUMNS)) of the given instances."""
         n = len(index)
         full = np.concatenate([index, np.full(self.spec.chunk - n, index[0])])  # one shape, one compile
         inst = self.instances
-        gains = {self.spec.param: inst.value[full]} if self.spec.kind == "gains" else {}
-        params = raibert_params(len(full), height=self.spec.height, speed=self.spec.speed, **gains)
-        final, traj = self.sim.run(gravity_vectors(inst.gravity[full]), self.controller, params,
+        final, traj = self.sim.run(gravity_vectors(inst.gravity[full]), self.controller, self.params(full),
                                    duration=self.spec.duration, sensors=SENSORS, key=self.spec.seed,
                                    qvel=inst.qvel[full])
         result = metrics.hop_metrics(traj, inst.gravity[full], command_speed=self.spec.speed,
