@@ -21,7 +21,6 @@ from tqdm import tqdm
 
 from hopper_mjx import metrics, model, signals
 from hopper_mjx.control.raibert import raibert, raibert_params
-from hopper_mjx.envs.policy import policy_controller, policy_params, read
 from hopper_mjx.sim import Sim, gravity_vectors, steps_for
 from hopper_mjx.sweep.grid import Instances, SweepSpec, expand
 
@@ -75,13 +74,20 @@ class ChunkRunner:
     def __init__(self, spec: SweepSpec, instances: Instances, sim: Sim):
         self.spec, self.instances, self.sim = spec, instances, sim
         self.policy = spec.controller.removeprefix("policy:") if spec.controller != "raibert" else None
-        self.controller = raibert(sim.robot) if self.policy is None else policy_controller(sim.mj_model, self.policy)
+        if self.policy is None:
+            self.controller = raibert(sim.robot)
+        else:  # brax is imported only when a policy is swept
+            from hopper_mjx.envs.policy import policy_controller
+
+            self.controller = policy_controller(sim.mj_model, self.policy)
         self.steps = steps_for(spec.duration, sim.layout.timestep, SENSORS)
 
     def params(self, full: np.ndarray):
         """Every instance's command (and swept gain): the same for Raibert and a policy."""
         spec = self.spec
         if self.policy is not None:
+            from hopper_mjx.envs.policy import policy_params, read
+
             return policy_params(self.sim.robot, len(full), height=spec.height, speed=spec.speed,
                                  config=read(self.policy)[3])
         gains = {spec.param: self.instances.value[full]} if spec.kind == "gains" else {}
