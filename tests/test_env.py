@@ -352,7 +352,7 @@ def test_policy_path_errors_name_the_problem(tmp_path, mj_model, sim):
         policy.policy_params(sim.robot, 2, height=0.1, speed=(0.1,))
 
 
-def test_policy_commands_and_sizes_are_checked_before_anything_runs(trained, tmp_path, capsys):
+def test_policy_commands_and_sizes_are_checked_before_anything_runs(trained, sim, tmp_path, capsys):
     """simulate with a hop policy: a command outside its training box, or a folder whose task config
     does not match its network's input, is one line on stderr and exit 2, with nothing written."""
     import json
@@ -362,7 +362,9 @@ def test_policy_commands_and_sizes_are_checked_before_anything_runs(trained, tmp
 
     out, _ = trained
     npz = tmp_path / "x.npz"
-    cases = [(["--height", "0.5"], "--height 0.5 is outside the hop policy's trained range [0.12"),
+    rise = [apex - sim.robot.standing_height for apex in (1.0, 1.2)]  # the hop policy's apex range, m
+    cases = [(["--height", "0.5"],
+              f"--height 0.5 is outside the hop policy's trained range [{rise[0]:g}, {rise[1]:g}]"),
              (["--speed", "0.3,0"], "--speed VX 0.3 is outside the hop policy's trained range [0, 0]")]
     for args, message in cases:
         assert simulate.main(["--controller", f"policy:{out}", *args, "--out", str(npz)]) == 2

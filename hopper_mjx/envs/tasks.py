@@ -84,7 +84,7 @@ class HopVelocity(Hop):
 
     @classmethod
     def default_config(cls) -> MonopedConfig:
-        # Apex 0.93-1.03 m: a rise of 0.05-0.15 m over the 0.88 m standing height.
+        # Apex 0.93-1.03 m: a rise of 0.048-0.148 m over the 0.882 m standing height.
         return MonopedConfig(task="hop_velocity", gravity_range=GRAVITY_RANGE, apex_range=(0.93, 1.03),
                              speed_range=(-0.5, 0.5), lateral_speed_range=(-0.3, 0.3), w_speed=1.0)
 
