@@ -362,10 +362,13 @@ def test_policy_commands_and_sizes_are_checked_before_anything_runs(trained, sim
 
     out, _ = trained
     npz = tmp_path / "x.npz"
-    rise = [apex - sim.robot.standing_height for apex in (1.0, 1.2)]  # the hop policy's apex range, m
+    from hopper_mjx.envs import policy
+
+    rise = [apex - sim.robot.standing_height for apex in policy.read(out)[3].apex_range]  # m
     cases = [(["--height", "0.5"],
               f"--height 0.5 is outside the hop policy's trained range [{rise[0]:g}, {rise[1]:g}]"),
-             (["--speed", "0.3,0"], "--speed VX 0.3 is outside the hop policy's trained range [0, 0]")]
+             (["--height", "0.15", "--speed", "0.3,0"],
+              "--speed VX 0.3 is outside the hop policy's trained range [0, 0]")]
     for args, message in cases:
         assert simulate.main(["--controller", f"policy:{out}", *args, "--out", str(npz)]) == 2
         err = capsys.readouterr().err

@@ -60,7 +60,8 @@ class Hop(MonopedEnv):
 
     @classmethod
     def default_config(cls) -> MonopedConfig:
-        return MonopedConfig(task="hop", gravity_range=GRAVITY_RANGE, speed_range=(0.0, 0.0))
+        # Apex 0.95-1.2 m: rises of 0.068-0.318 m, the sweep's default 0.10 m among them.
+        return MonopedConfig(task="hop", gravity_range=GRAVITY_RANGE, apex_range=(0.95, 1.2), speed_range=(0.0, 0.0))
 
     def sample_command(self, key: jax.Array) -> jax.Array:
         """(apex height m, vx m/s, vy m/s), uniform over the configured ranges."""
