@@ -119,12 +119,15 @@ def check_controller(text: str, height: float = 0.0, speed=(0.0, 0.0), urdf=None
         return
     path = Path(text.removeprefix(POLICY_PREFIX))
     if not path.is_dir():
-        raise ValueError(f"--controller {text}: no policy folder {path}")
+        raise ValueError(f"--controller {text}: {path} is not a trained policy: no such folder")
     from hopper_mjx import model
     from hopper_mjx.envs import policy
     from hopper_mjx.model.robot import standing_height
 
-    config = policy.read(path)[3]
+    try:
+        config = policy.read(path)[3]
+    except ValueError as err:
+        raise ValueError(f"--controller: {err}") from None
     policy.check_command(config, standing_height(model.load(urdf)), height, speed)
 
 
