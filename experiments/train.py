@@ -21,7 +21,7 @@ import sys
 import time
 from pathlib import Path
 
-from hopper_mjx import runtime
+from hopper_mjx import cli, runtime
 
 HISTORY = "metrics.json"
 
@@ -30,14 +30,17 @@ ALGORITHMS = ("ppo", "sac")
 
 
 def parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = cli.parser("experiments/train.py", __doc__)
     p.add_argument("--task", default="hop", help="stand, hop or hop_velocity (hopper_mjx.envs.names())")
     p.add_argument("--algo", default="ppo", help="ppo or sac (Brax's agents)")
     p.add_argument("--out", default="runs/ppo", help="output folder (resumes if it holds checkpoints)")
     p.add_argument("--timesteps", type=int, default=8_000_000, help="total environment steps (policy steps)")
     p.add_argument("--num-envs", type=int, default=256, help="parallel environments (a multiple of the devices)")
     p.add_argument("--episode-length", type=int, default=500, help="policy steps per episode (500 = 10 s at 50 Hz)")
-    p.add_argument("--eval-every", type=int, default=400_000, help="environment steps between evaluations")
+    p.add_argument("--eval-every", type=int, default=400_000,
+                   help="environment steps between checkpoints (and Brax's evaluations)")
+    p.add_argument("--no-eval", action="store_true",
+                   help="PPO: no evaluation episodes, checkpoints only (metrics.json then holds training rates)")
     p.add_argument("--num-eval-envs", type=int, default=64)
     p.add_argument("--unroll-length", type=int, default=20)
     p.add_argument("--batch-size", type=int, default=128)
@@ -51,6 +54,8 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--gravity-range", default=None,
                    help="low,high m/s², drawn log-uniformly per episode (default: the task's, 0.5,12)")
     p.add_argument("--observe-gravity", action="store_true", help="put the gravity magnitude in the observation")
+    p.add_argument("--engine", default="auto",
+                   help="physics engine: auto (chain for the monoped), chain or mjx (default auto)")
     p.add_argument("--sac-replay", type=int, default=1_000_000, help="SAC: replay buffer size (env steps)")
     p.add_argument("--sac-min-replay", type=int, default=8192, help="SAC: env steps collected before learning")
     p.add_argument("--sac-grad-updates", type=int, default=8, help="SAC: gradient updates per env step batch")
@@ -98,6 +103,7 @@ def check(args) -> None:
         raise ValueError(f"--task {args.task!r} is unknown; choose from {', '.join(envs.names())}")
     if args.algo not in ALGORITHMS:
         raise ValueError(f"--algo {args.algo!r} is unknown; choose from {', '.join(ALGORITHMS)}")
+    cli.check_engine(args.engine)
     _layers(args.policy_layers), _layers(args.value_layers)
     if args.gravity_range is not None:
         lo, hi = _pair(args.gravity_range, "--gravity-range")
@@ -105,6 +111,8 @@ def check(args) -> None:
             raise ValueError(f"--gravity-range must be 0 < low <= high m/s², got {args.gravity_range!r}")
     if args.num_envs < 1 or args.timesteps < 1:
         raise ValueError("--num-envs and --timesteps must be >= 1")
+    if args.no_eval and args.algo != "ppo":
+        raise ValueError("--no-eval is for --algo ppo (Brax's SAC evaluates at every checkpoint)")
     resume = latest_checkpoint(Path(args.out))
     if resume:  # a folder of another task or algorithm cannot be resumed into this one
         from hopper_mjx.envs import monoped, policy
@@ -120,7 +128,7 @@ def check(args) -> None:
 def task_config(args):
     from hopper_mjx import envs
 
-    overrides = {"observe_gravity": args.observe_gravity}
+    overrides = {"observe_gravity": args.observe_gravity, "engine": args.engine}
     if args.gravity_range is not None:
         overrides["gravity_range"] = _pair(args.gravity_range, "--gravity-range")
     return envs.make(args.task, **overrides)
@@ -149,7 +157,7 @@ def _shared(args, env, factory, remaining: int, start_step: int, resume, per_tra
     )
 
 
-def _run_ppo(args, env, factory, remaining: int, start_step: int, resume, progress, save_checkpoint) -> None:
+def run_ppo(args, env, factory, remaining: int, start_step: int, resume, progress, save_checkpoint) -> None:
     """Brax PPO for the `remaining` environment steps, resuming from `resume` (path, step) if given."""
     from brax.training.agents.ppo import train as ppo
 
@@ -164,11 +172,12 @@ def _run_ppo(args, env, factory, remaining: int, start_step: int, resume, progre
         clipping_epsilon=0.2,
         max_grad_norm=1.0,
         progress_fn=progress,
+        run_evals=not args.no_eval,
         policy_params_fn=lambda step, make_policy, params: save_checkpoint(step, params),
     )
 
 
-def _run_sac(args, env, factory, remaining: int, start_step: int, resume, progress, save_checkpoint) -> None:
+def run_sac(args, env, factory, remaining: int, start_step: int, resume, progress, save_checkpoint) -> None:
     """Brax SAC for the `remaining` environment steps; Brax saves its checkpoints before each
     evaluation into a scratch folder, from where `progress` files them under the global step."""
     import tempfile
@@ -192,7 +201,7 @@ def _run_sac(args, env, factory, remaining: int, start_step: int, resume, progre
         )
 
 
-def _networks(args):
+def networks(args):
     """(network factory, Brax checkpoint module) of the algorithm."""
     if args.algo == "ppo":
         from brax.training.agents.ppo import checkpoint, networks
@@ -220,7 +229,7 @@ def train(args) -> dict:
     out.mkdir(parents=True, exist_ok=True)
     env = task_config(args)
     config = env.config
-    factory, checkpoint = _networks(args)
+    factory, checkpoint = networks(args)
     network_config = checkpoint.network_config(env.observation_size, env.action_size, True, factory)
 
     record_path = out / HISTORY
@@ -250,7 +259,7 @@ def train(args) -> dict:
             policy.write_env_config(out / "checkpoints" / f"{step:012d}", config)
 
     if remaining > 0:
-        run = _run_ppo if args.algo == "ppo" else _run_sac
+        run = run_ppo if args.algo == "ppo" else run_sac
         run(args, env, factory, remaining, start_step, resume, progress, save_checkpoint)
     final = latest_checkpoint(out)
     if final is None:
@@ -357,14 +366,9 @@ def main(argv=None) -> int:
     runtime.configure()
     try:
         check(args)
-    except ValueError as err:
-        print(f"error: {err}", file=sys.stderr)
-        return 2
-    try:
         record = train(args)
     except ValueError as err:
-        print(f"error: {err}", file=sys.stderr)
-        return 2
+        return cli.fail(err)
     print(f"wrote {args.out}/policy (step {record['final_step']:,}), {HISTORY}, reward_curve.png; "
           f"{record['wall_time'] / 60:.1f} min of training")
     if args.evaluate:

@@ -45,7 +45,7 @@ class MonopedVectorEnv(gymnasium.vector.VectorEnv):
         self.single_action_space = spaces.Box(-1.0, 1.0, (self.env.action_size,), np.float32)
         self.observation_space = batch_space(self.single_observation_space, num_envs)
         self.action_space = batch_space(self.single_action_space, num_envs)
-        reset, step = jax.vmap(self.env.reset), jax.vmap(self.env.step)
+        reset, step = jax.vmap(self.env.reset), self.env.batch_step
 
         def step_or_reset(state, action, needs_reset, keys):
             stepped, fresh = step(state, action), reset(keys)

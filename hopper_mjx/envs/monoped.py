@@ -3,9 +3,11 @@
 A task (`hopper_mjx.envs.tasks`) is a `MonopedEnv` that says what it commands
 (`sample_command`) and what it rewards (`task_terms`); everything else is here, once.
 
-- **Physics**: `hopper_mjx.model.load()` stepped by MJX (`physics_step`, the one place
-  the engine is called) at the config's `timestep` (2 ms for training; the core evaluates
-  at its own 1 ms); the policy acts every `n_frames` physics steps (default 50 Hz).
+- **Physics**: `hopper_mjx.model.load()` stepped by the config's engine
+  (`hopper_mjx.engine.make(config.engine, ...)`: "auto" is the chain engine for the monoped,
+  "mjx" MuJoCo MJX) at the config's `timestep` (2 ms for training; the core evaluates at its
+  own 1 ms); the policy acts every `n_frames` physics steps (default 50 Hz). `MonopedEnv.physics`
+  is the one place the engine steps, traced once per policy step.
 - **Actions** (3, in [-1, 1]) are joint position targets around the standing pose,
   `target = stance + action_scale * action`, clipped to the joint range and tracked by a PD
   law at the physics rate (`pd_torque`), saturated at the effort limits.
@@ -30,15 +32,14 @@ import jax.numpy as jnp
 import mujoco
 import numpy as np
 from brax.envs.base import Env, State
-from mujoco import mjx
 
-from hopper_mjx import metrics
+from hopper_mjx import engine as engines
+from hopper_mjx import metrics, signals
 from hopper_mjx import model as hopper_model
 from hopper_mjx.control.base import joint_state, pd, saturate, to_ctrl
-from hopper_mjx.engine.mjx import foot_contact, with_gravity
 from hopper_mjx.model import robot
 from hopper_mjx.model.layout import Layout
-from hopper_mjx.signals import Contact, Observation
+from hopper_mjx.signals import Observation
 
 MAX_TILT_FROM_VERTICAL = 0.8  # rad between the base's z axis and the vertical that ends an episode
 # State.info keys a task owns; the resampling auto-reset replaces exactly these (wrappers.py).
@@ -91,6 +92,8 @@ class MonopedConfig:
     timestep: float = 0.002  # s
     solver_iterations: int = 2
     ls_iterations: int = 4
+    engine: str = "auto"  # hopper_mjx.engine name: auto (chain for the monoped), chain or mjx
+
 
     def __post_init__(self):
         for name in RANGES:
@@ -105,6 +108,7 @@ class MonopedConfig:
                              f"got {self.gravity_range}")
         if not (self.policy_rate > 0 and self.timestep > 0):
             raise ValueError(f"policy_rate and timestep must be positive, got {self.policy_rate}, {self.timestep}")
+        engines.check_name(self.engine)
 
     @property
     def vy_range(self) -> tuple[float, float]:
@@ -156,11 +160,6 @@ def pd_torque(layout: Layout, cfg: MonopedConfig, target: jax.Array, obs) -> jax
     return saturate(layout, pd(jnp.asarray(cfg.kp), jnp.asarray(cfg.kd), target - q, qd))
 
 
-def observation_of(foot_geom: int, m: mjx.Model, d: mjx.Data) -> Observation:
-    """The controller's `Observation` of MJX data after a forward (the env steps MJX itself)."""
-    return Observation(time=d.time, qpos=d.qpos, qvel=d.qvel, contact=Contact(*foot_contact(foot_geom, m, d)))
-
-
 def observation_size(command_size: int, observe_gravity: bool) -> int:
     """24 robot signals + the command + 3 of the previous action (+ gravity)."""
     return 21 + command_size + 3 + int(observe_gravity)
@@ -197,25 +196,25 @@ def closeness(error: jax.Array, scale: float) -> jax.Array:
     return jnp.exp(-jnp.abs(error) / scale)
 
 
-def predicted_apex(d: mjx.Data, g: jax.Array) -> jax.Array:
+def predicted_apex(d, g: jax.Array) -> jax.Array:
     """Height the base would reach on a ballistic arc from here (its current height when falling)."""
     vz = jnp.maximum(d.qvel[2], 0.0)
     return d.qpos[2] + vz**2 / (2.0 * jnp.maximum(g, 0.1))
 
 
-def tilt_from_vertical(d: mjx.Data) -> jax.Array:
+def tilt_from_vertical(d) -> jax.Array:
     """Angle (rad) between the base's z axis and the world's vertical."""
     w, x, y, _ = d.qpos[3:7]
     cos = 1.0 - 2.0 * (x * x + y * y)  # z-component of the body z axis
     return jnp.arccos(jnp.clip(cos, -1.0, 1.0))
 
 
-def fallen(cfg: MonopedConfig, d: mjx.Data) -> jax.Array:
+def fallen(cfg: MonopedConfig, d) -> jax.Array:
     finite = jnp.isfinite(d.qpos).all() & jnp.isfinite(d.qvel).all()
     return ~finite | (tilt_from_vertical(d) > cfg.max_tilt) | (d.qpos[2] < cfg.min_base_height)
 
 
-def posture_terms(cfg: MonopedConfig, d: mjx.Data, action: jax.Array, last_action: jax.Array,
+def posture_terms(cfg: MonopedConfig, d, action: jax.Array, last_action: jax.Array,
                   effort: jax.Array, fell: jax.Array) -> dict[str, jax.Array]:
     """The terms every task pays (already weighted): upright, effort, smoothness, spin, fall."""
     return {
@@ -227,7 +226,7 @@ def posture_terms(cfg: MonopedConfig, d: mjx.Data, action: jax.Array, last_actio
     }
 
 
-def speed_term(cfg: MonopedConfig, d: mjx.Data, command_speed: jax.Array) -> jax.Array:
+def speed_term(cfg: MonopedConfig, d, command_speed: jax.Array) -> jax.Array:
     """Horizontal velocity against the commanded (vx, vy), a Gaussian kernel of width speed_scale."""
     return cfg.w_speed * jnp.exp(-jnp.sum((d.qvel[0:2] - command_speed) ** 2) / cfg.speed_scale**2)
 
@@ -249,11 +248,6 @@ def stance_qpos(mj_model: mujoco.MjModel) -> np.ndarray:
     return robot.stance_qpos(mj_model, clearance=0.0).astype(np.float32)
 
 
-def physics_step(m: mjx.Model, d: mjx.Data, gravity: jax.Array, ctrl: jax.Array) -> mjx.Data:
-    """One physics step of one instance under its own gravity: the only call into the engine."""
-    return mjx.step(with_gravity(m, gravity), d.replace(ctrl=ctrl))
-
-
 # -- the environment -------------------------------------------------------------------------
 
 
@@ -269,10 +263,10 @@ class MonopedEnv(Env):
         self.config = config
         self.layout = Layout.of(trained)
         self.n_frames = decimation(self.layout, config)
-        self.sys = mjx.put_model(trained)
-        self._stance_qpos = stance_qpos(mj_model)  # the same pose the policy controller uses
-        self.stance = self._stance_qpos[list(self.layout.joint_qpos)]
-        self.standing_height = float(self._stance_qpos[2])
+        self.engine = engines.make(config.engine, trained)
+        self.standing_qpos = stance_qpos(mj_model)  # the same pose the policy controller uses
+        self.stance = self.standing_qpos[list(self.layout.joint_qpos)]
+        self.standing_height = float(self.standing_qpos[2])
 
     @classmethod
     def default_config(cls) -> MonopedConfig:
@@ -281,7 +275,7 @@ class MonopedEnv(Env):
     def sample_command(self, key: jax.Array) -> jax.Array:
         raise NotImplementedError
 
-    def task_terms(self, d: mjx.Data, g: jax.Array, command: jax.Array) -> dict[str, jax.Array]:
+    def task_terms(self, d, g: jax.Array, command: jax.Array) -> dict[str, jax.Array]:
         raise NotImplementedError
 
     # Brax reads these.
@@ -295,7 +289,7 @@ class MonopedEnv(Env):
 
     @property
     def backend(self) -> str:
-        return "mjx"
+        return self.engine.name
 
     @property
     def dt(self) -> float:
@@ -312,35 +306,72 @@ class MonopedEnv(Env):
         gravity = gravity_vector(log_uniform(k_g, cfg.gravity_range))
         lift = jax.random.uniform(k_lift, (), minval=cfg.initial_clearance[0], maxval=cfg.initial_clearance[1])
         joints = jnp.asarray(self.stance) + cfg.initial_joint_noise * jax.random.normal(k_joint, (3,))
-        qpos = jnp.asarray(self._stance_qpos).at[2].add(lift).at[jnp.asarray(lay.joint_qpos)].set(joints)
-        data = mjx.forward(with_gravity(self.sys, gravity), mjx.make_data(self.sys).replace(qpos=qpos))
+        qpos = jnp.asarray(self.standing_qpos).at[2].add(lift).at[jnp.asarray(lay.joint_qpos)].set(joints)
+        # As the core's reset: no forward yet, so the first observation's contact is the engine's
+        # "none yet" and the physics is traced only in `physics` (the auto-reset runs this in every step).
+        data = self.engine.make_data(qpos, jnp.zeros(lay.nv, qpos.dtype))
         command = self.sample_command(k_cmd)
         last_action = jnp.zeros(3)
-        obs = observe(lay, cfg, observation_of(lay.foot_geom, self.sys, data), gravity, command, last_action)
+        obs = observe(lay, cfg, signals.observe(self.engine, self.engine.model, data), gravity, command,
+                      last_action)
         zero = jnp.zeros(())
         terms = self.reward_terms(data, -gravity[2], command, last_action, last_action, zero, zero > 0)
         info = {"command": command, "gravity": gravity, "last_action": last_action, "rng": rng}
         return State(data, obs, zero, zero, {k: zero for k in terms}, info)
 
-    def step(self, state: State, action: jax.Array) -> State:
-        cfg, lay, m = self.config, self.layout, self.sys
-        target = joint_targets(lay, cfg, jnp.asarray(self.stance), action)
+    def physics(self, model, data, gravity: jax.Array, target: jax.Array):
+        """`n_frames` physics steps of one instance under its own gravity, the PD law tracking
+        `target`: (data, mean of (torque / limit)²). The engine's step is traced once, in the loop."""
+        cfg, lay, engine = self.config, self.layout, self.engine
         limit = jnp.asarray(lay.effort_limit)
-        gravity = state.info["gravity"]
 
         def one_physics_step(carry, _):
             d, effort = carry
             torque = pd_torque(lay, cfg, target, d)
-            return (physics_step(m, d, gravity, to_ctrl(lay, torque)),
-                    effort + jnp.mean((torque / limit) ** 2)), None
+            d = engine.forward(model, d.replace(ctrl=to_ctrl(lay, torque)), gravity)
+            return (engine.integrate(model, d, gravity), effort + jnp.mean((torque / limit) ** 2)), None
 
-        (data, effort), _ = jax.lax.scan(one_physics_step, (state.pipeline_state, jnp.zeros(())), None,
-                                         self.n_frames)
+        (data, effort), _ = jax.lax.scan(one_physics_step, (data, jnp.zeros(())), None, self.n_frames)
+        return data, effort / self.n_frames
+
+    def run_time_model(self, gravity: jax.Array):
+        """The engine's model as a value known only at run time, as the core passes it (an argument
+        of the compiled function): the chain engine stores each stage's outputs behind a conditional
+        on it, which a compile-time constant would fold away (several times slower, and over twice the
+        compile). `gravity`: one instance's (3,) or a batch's (n, 3); every episode's gravity points
+        down (`gravity_range` > 0), so the selection keeps the model, but the compiler cannot know it.
+        Unbatched when `gravity` is: `batch_step` hands one model to all instances."""
+        downward = jnp.all(gravity[..., 2] < 0)
+        return jax.tree_util.tree_map(lambda x: jnp.where(downward, x, jnp.zeros_like(x)), self.engine.model)
+
+    def batch_step(self, state: State, action: jax.Array) -> State:
+        """`step` of a batch of instances (leading axis), one run-time engine model for all."""
+        model = self.run_time_model(state.info["gravity"])
+        return jax.vmap(self.step_with, in_axes=(None, 0, 0))(model, state, action)
+
+    def step(self, state: State, action: jax.Array) -> State:
+        """One policy step of one instance (vmapped, prefer `batch_step`: its model stays unbatched)."""
+        return self.step_with(self.run_time_model(state.info["gravity"]), state, action)
+
+    def step_with(self, model, state: State, action: jax.Array) -> State:
+        """`step` with the engine's model pytree given: the physics, then `after_physics`."""
+        data, effort = self.physics(model, state.pipeline_state, state.info["gravity"], self.targets(action))
+        return self.after_physics(model, state, action, data, effort)
+
+    def targets(self, action: jax.Array) -> jax.Array:
+        """The joint targets (rad) an action sets for the next policy step."""
+        return joint_targets(self.layout, self.config, jnp.asarray(self.stance), action)
+
+    def after_physics(self, model, state: State, action: jax.Array, data, effort: jax.Array) -> State:
+        """The state after `action`, given the physics' result: reward, termination, observation.
+        Every task shares `physics`; this is where they differ."""
+        cfg, lay, gravity = self.config, self.layout, state.info["gravity"]
         fell = fallen(cfg, data)
         command, last_action = state.info["command"], state.info["last_action"]
-        terms = self.reward_terms(data, -gravity[2], command, action, last_action, effort / self.n_frames, fell)
+        terms = self.reward_terms(data, -gravity[2], command, action, last_action, effort, fell)
         reward = jnp.nan_to_num(sum(terms.values()), nan=-cfg.fall_penalty)
-        obs = observe(lay, cfg, observation_of(lay.foot_geom, m, data), gravity, command, action)
+        # The contact of the last forward, as the core's controllers see it.
+        obs = observe(lay, cfg, signals.observe(self.engine, model, data), gravity, command, action)
         info = {**state.info, "last_action": action}
         return state.replace(pipeline_state=data, obs=obs, reward=reward, done=fell.astype(jnp.float32),
                              metrics={**state.metrics, **terms}, info=info)

@@ -15,9 +15,8 @@ import dataclasses
 
 import jax
 import jax.numpy as jnp
-from mujoco import mjx
 
-from hopper_mjx.envs.monoped import MonopedConfig, MonopedEnv, closeness, observation_of, predicted_apex, speed_term
+from hopper_mjx.envs.monoped import MonopedConfig, MonopedEnv, closeness, predicted_apex, speed_term
 
 # The gravity range every task draws from by default, m/s², log-uniform.
 GRAVITY_RANGE = (0.5, 12.0)
@@ -38,7 +37,7 @@ class Stand(MonopedEnv):
     def sample_command(self, key: jax.Array) -> jax.Array:
         return jnp.zeros(0)
 
-    def task_terms(self, d: mjx.Data, g: jax.Array, command: jax.Array) -> dict[str, jax.Array]:
+    def task_terms(self, d, g: jax.Array, command: jax.Array) -> dict[str, jax.Array]:
         cfg = self.config
         # The floor's vertical push on the foot against the robot's weight under this episode's g.
         support = self.foot_force_z(d) / (self.layout.total_mass * jnp.maximum(g, 0.1))
@@ -49,8 +48,9 @@ class Stand(MonopedEnv):
             "speed": speed_term(cfg, d, jnp.zeros(2)),
         }
 
-    def foot_force_z(self, d: mjx.Data) -> jax.Array:
-        return observation_of(self.layout.foot_geom, self.sys, d).contact.force[2]
+    def foot_force_z(self, d) -> jax.Array:
+        """The floor's vertical push on the foot at the engine's last forward, N."""
+        return self.engine.foot_contact(self.engine.model, d)[1][2]
 
 
 class Hop(MonopedEnv):
@@ -71,7 +71,7 @@ class Hop(MonopedEnv):
         return jnp.concatenate([draw(k_apex, cfg.apex_range), draw(k_vx, cfg.speed_range),
                                 draw(k_vy, cfg.vy_range)])
 
-    def task_terms(self, d: mjx.Data, g: jax.Array, command: jax.Array) -> dict[str, jax.Array]:
+    def task_terms(self, d, g: jax.Array, command: jax.Array) -> dict[str, jax.Array]:
         cfg = self.config
         return {
             "apex": cfg.w_apex * closeness(predicted_apex(d, g) - command[0], cfg.apex_scale),

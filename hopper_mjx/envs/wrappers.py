@@ -1,5 +1,6 @@
 """Brax's training wrappers, with an auto-reset that starts a fresh episode.
 
+`BatchWrapper` steps a batch with the engine's model as one run-time value.
 Brax's `AutoResetWrapper` returns a finished environment to the state its first
 `reset` produced, so the gravity and command drawn there would stay for the whole
 run. `ResampleAutoReset` resets a finished environment with a new key instead:
@@ -11,7 +12,7 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 from brax.envs.base import State, Wrapper
-from brax.envs.wrappers.training import EpisodeWrapper, VmapWrapper
+from brax.envs.wrappers.training import EpisodeWrapper
 
 from hopper_mjx.envs.monoped import TASK_INFO
 
@@ -19,6 +20,17 @@ from hopper_mjx.envs.monoped import TASK_INFO
 def _where_done(done: jax.Array, fresh, old):
     return jax.tree_util.tree_map(
         lambda x, y: jnp.where(done.reshape(done.shape + (1,) * (x.ndim - done.ndim)), x, y), fresh, old)
+
+
+class BatchWrapper(Wrapper):
+    """Brax's `VmapWrapper` for a `MonopedEnv`: a batch of instances, stepped by `batch_step` so that
+    the engine's model is one run-time value for the whole batch (see `MonopedEnv.run_time_model`)."""
+
+    def reset(self, rng: jax.Array) -> State:
+        return jax.vmap(self.env.reset)(rng)
+
+    def step(self, state: State, action: jax.Array) -> State:
+        return self.env.batch_step(state, action)
 
 
 class ResampleAutoReset(Wrapper):
@@ -42,4 +54,4 @@ def wrap_for_training(env, episode_length: int = 1000, action_repeat: int = 1, r
     so no `randomization_fn` is taken."""
     if randomization_fn is not None:
         raise ValueError("the monoped tasks draw gravity per episode themselves; pass no randomization_fn")
-    return ResampleAutoReset(EpisodeWrapper(VmapWrapper(env), episode_length, action_repeat))
+    return ResampleAutoReset(EpisodeWrapper(BatchWrapper(env), episode_length, action_repeat))
