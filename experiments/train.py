@@ -24,6 +24,7 @@ from pathlib import Path
 from hopper_mjx import cli, runtime
 
 HISTORY = "metrics.json"
+MIN_HOPS = 5  # hops in --eval-duration that count as hopping (the threshold of --scan-checkpoints)
 
 
 ALGORITHMS = ("ppo", "sac")
@@ -67,6 +68,12 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--eval-duration", type=float, default=10.0, help="s of simulated time")
     p.add_argument("--eval-height", type=float, default=0.2, help="commanded apex rise above standing, m")
     p.add_argument("--eval-num", type=int, default=4, help="instances per gravity (initial kicks differ)")
+    p.add_argument("--eval-speed", type=cli.floats("--eval-speed"), default=[0.0, 0.0],
+                   help="commanded VX,VY m/s of the evaluation")
+    p.add_argument("--scan-checkpoints", action="store_true",
+                   help="afterwards, evaluate the checkpoints in step order as --evaluate does (policy only) "
+                        f"and report the first at which every instance survives with >= {MIN_HOPS} hops "
+                        "(threshold.json); checkpoints whose Brax evaluation episodes ended early are skipped")
     return p
 
 
@@ -286,8 +293,9 @@ def evaluation_batch(gravities, num: int, seed: int, nv: int):
     return instances.gravity, instances.qvel
 
 
-def evaluate(policy_path, *, gravities, duration: float, height: float, num: int, seed: int = 0) -> dict:
-    """Hop metrics of the policy and of the Raibert controller, same batch, same commands.
+def evaluate(policy_path, *, gravities, duration: float, height: float, num: int, seed: int = 0,
+             speed=(0.0, 0.0), raibert_too: bool = True) -> dict:
+    """Hop metrics of the policy and (`raibert_too`) of the Raibert controller, same batch, same commands.
 
     Each controller runs `num` instances per gravity for `duration` s in the core,
     from the standing pose with small random initial base velocities (the sweep's kicks).
@@ -305,21 +313,45 @@ def evaluate(policy_path, *, gravities, duration: float, height: float, num: int
     sim = Sim(mj_model)
     g, kick = evaluation_batch(gravities, num, seed, sim.layout.nv)
     sensors = SENSORS  # the sweep's streams and kicks: the numbers compare with a sweep's
-    controllers = {
-        "policy": (policy.policy_controller(mj_model, policy_path),
-                   policy.policy_params(sim.robot, len(g), height=height, config=policy.read(policy_path)[3])),
-        "raibert": (raibert.raibert(sim.robot), raibert.raibert_params(len(g), height=height)),
-    }
+    controllers = {"policy": (policy.policy_controller(mj_model, policy_path),
+                              policy.policy_params(sim.robot, len(g), height=height, speed=speed,
+                                                   config=policy.read(policy_path)[3]))}
+    if raibert_too:
+        controllers["raibert"] = (raibert.raibert(sim.robot),
+                                  raibert.raibert_params(len(g), height=height, speed=speed))
     out = {}
     for name, (controller, params) in controllers.items():
         final, traj = sim.run(gravity_vectors(g), controller, params, duration=duration, sensors=sensors,
                               key=seed, qvel=kick)
-        m = metrics.hop_metrics(traj, g, standing_height=sim.robot.standing_height,
+        m = metrics.hop_metrics(traj, g, standing_height=sim.robot.standing_height, command_speed=speed,
                                 work=np.asarray(final.cstate.work), mass=sim.layout.total_mass)
         m["survival"] = ~(m["fell"] | np.asarray(final.diverged))
         out[name] = {f"{v:g}": {**{k: _mean(m[k][g == v]) for k in COMPARED}, "min_hops": int(m["hops"][g == v].min())}
                      for v in gravities}
     return out
+
+
+def first_hopping_checkpoint(args) -> dict | None:
+    """The first checkpoint whose policy keeps every instance at every --eval-gravity alive for
+    --eval-duration s with >= MIN_HOPS hops, with the training wall time at which it was saved; None
+    if none does. Checkpoints whose Brax evaluation episodes lasted < 95 % of --episode-length
+    already fell in training, and are not run."""
+    out = Path(args.out)
+    rows = {r["step"]: r for r in json.loads((out / HISTORY).read_text())["history"]}
+    gravities = [float(v) for v in args.eval_gravity.split(",")]
+    for path in sorted((out / "checkpoints").glob("[0-9]" * 12)):
+        row = rows.get(int(path.name), {})
+        if row.get("eval/avg_episode_length", args.episode_length) < 0.95 * args.episode_length:
+            continue
+        result = evaluate(path, gravities=gravities, duration=args.eval_duration, height=args.eval_height,
+                          num=args.eval_num, seed=args.seed, speed=args.eval_speed, raibert_too=False)["policy"]
+        passed = all(r["survival"] == 1 and r["min_hops"] >= MIN_HOPS for r in result.values())
+        print(f"step {int(path.name):>10,} ({row.get('wall_time', math.nan) / 60:.1f} min): "
+              + ", ".join(f"g {g}: {r['survival']:.0%} alive, >= {r['min_hops']} hops" for g, r in result.items()),
+              flush=True)
+        if passed:
+            return {"step": int(path.name), "wall_time": row.get("wall_time"), "evaluation": result}
+    return None
 
 
 def _mean(values) -> float | None:
@@ -379,6 +411,11 @@ def main(argv=None) -> int:
         (Path(args.out) / "evaluation.json").write_text(json.dumps(result, indent=1))
         (Path(args.out) / "evaluation.md").write_text(table + "\n")
         print(table)
+    if args.scan_checkpoints:
+        found = first_hopping_checkpoint(args)
+        (Path(args.out) / "threshold.json").write_text(json.dumps(found, indent=1))
+        print("no checkpoint meets the threshold" if found is None else
+              f"first at step {found['step']:,}, {found['wall_time'] / 60:.1f} min of training")
     return 0
 
 
