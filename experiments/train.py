@@ -1,8 +1,10 @@
-"""Brax PPO or SAC on any monoped task (`hopper_mjx.envs.names()`), gravity drawn per episode.
+"""Brax PPO or SAC on any monoped task (`hopper_mjx.envs.names()`), gravity drawn per episode, the
+physics on the chain engine (`--engine mjx` for MuJoCo MJX).
 
     nice -n 5 python experiments/train.py --task hop --algo ppo --out runs/hop-ppo --observe-gravity
     python experiments/train.py --task hop --algo ppo --out runs/hop-ppo --observe-gravity   # again: resumes
     python experiments/train.py --task hop_velocity --algo sac --out runs/hopv-sac
+    python experiments/train.py --task hop --out runs/hop-ppo --observe-gravity --scan-checkpoints --eval-num 64
     python -m hopper_mjx.simulate --controller policy:runs/hop-ppo --gravity 9.81,3.71,1.62 --duration 10
 
 Writes into --out: checkpoints/<env step>/ (every evaluation), policy/ (the final
