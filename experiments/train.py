@@ -408,7 +408,7 @@ def main(argv=None) -> int:
     if args.evaluate:
         gravities = [float(v) for v in args.eval_gravity.split(",")]
         result = evaluate(Path(args.out) / "policy", gravities=gravities, duration=args.eval_duration,
-                          height=args.eval_height, num=args.eval_num, seed=args.seed)
+                          height=args.eval_height, num=args.eval_num, seed=args.seed, speed=args.eval_speed)
         table = evaluation_table(result, args.eval_height)
         (Path(args.out) / "evaluation.json").write_text(json.dumps(result, indent=1))
         (Path(args.out) / "evaluation.md").write_text(table + "\n")
