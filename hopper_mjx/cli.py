@@ -109,13 +109,26 @@ def check_indices(name: str, indices, n: int) -> None:
         raise ValueError(f"{name} lists an instance twice: {indices}")
 
 
-def check_controller(text: str) -> None:
-    if text.startswith(POLICY_PREFIX):
-        path = Path(text.removeprefix(POLICY_PREFIX))
-        if not path.is_dir():
-            raise ValueError(f"--controller {text}: no policy folder {path}")
-    elif text not in CONTROLLERS:
-        raise ValueError(f"--controller: unknown {text!r}; choose from {', '.join(CONTROLLERS)}, policy:PATH")
+def check_controller(text: str, height: float = 0.0, speed=(0.0, 0.0), urdf=None) -> None:
+    """A known controller; a `policy:PATH` must be a trained policy whose training range holds the
+    command (`height`, `speed`). Reads the policy's JSON and MuJoCo's compiled model (for the
+    standing height) only."""
+    if not text.startswith(POLICY_PREFIX):
+        if text not in CONTROLLERS:
+            raise ValueError(f"--controller: unknown {text!r}; choose from {', '.join(CONTROLLERS)}, policy:PATH")
+        return
+    path = Path(text.removeprefix(POLICY_PREFIX))
+    if not path.is_dir():
+        raise ValueError(f"--controller {text}: {path} is not a trained policy: no such folder")
+    from hopper_mjx import model
+    from hopper_mjx.envs import policy
+    from hopper_mjx.model.robot import standing_height
+
+    try:
+        config = policy.read(path)[3]
+    except ValueError as err:
+        raise ValueError(f"--controller: {err}") from None
+    policy.check_command(config, standing_height(model.load(urdf)), height, speed)
 
 
 def check_gains(args) -> dict | None:
@@ -159,7 +172,8 @@ def add_batch_options(p: argparse.ArgumentParser, *, gravity=(9.81, 3.71, 1.62),
     p.add_argument("--duration", type=float, default=duration, help="simulated time, s")
     p.add_argument("--controller", default="hold",
                    help="none (limp), hold (keep initial joint angles), pid (the seed's joint position "
-                        "controllers, holding them), raibert (hop) or policy:PATH (a trained PPO policy)")
+                        "controllers, holding them), raibert (hop) or policy:PATH (a policy trained by "
+                        "experiments/train.py)")
     p.add_argument("--height", type=float, default=0.10,
                    help="raibert, policy: commanded apex rise of the base above its standing height, m")
     p.add_argument("--speed", type=floats("--speed"), default=[0.0, 0.0],
@@ -232,8 +246,8 @@ def check_batch(args) -> Batch:
     check_engine(args.engine)
     if args.timestep is not None:
         check_range("--timestep", args.timestep, low=0, high=MAX_TIMESTEP, open_low=True)
-    check_controller(args.controller)
     check_urdf(args.urdf)
+    check_controller(args.controller, args.height, args.speed, args.urdf)
     from_worlds = batch_from_worlds(args)
     if from_worlds is None:
         from hopper_mjx.model.world import gravity_vectors
@@ -276,7 +290,8 @@ def make_controller(args, sim, batch: Batch):
         from hopper_mjx.envs import policy
 
         path = args.controller.removeprefix(POLICY_PREFIX)
-        params = policy.policy_params(sim.robot, n, height=args.height, speed=args.speed)
+        config = policy.read(path)[3]
+        params = policy.policy_params(sim.robot, n, height=args.height, speed=args.speed, config=config)
         return policy.policy_controller(sim.mj_model, path), params
     from hopper_mjx import control
 

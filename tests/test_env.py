@@ -1,277 +1,226 @@
-"""The Brax training environment, the PPO script and the policy controller.
+"""The tasks (stand, hop, hop_velocity) and the training wrapper.
 
-Compiles once per fixture (a 4-environment batch; one tiny PPO run shared by the
-training, checkpoint and controller tests).
+The physics is what costs the compile. Every task's physics (`MonopedEnv.physics`) is the same
+XLA program (same physics config), compiled once and found in the compile cache by the others; a
+task's own part (`after_physics`) compiles apart, cheaply. One test runs the real wrapped step
+(`wrap_for_training`) and checks it against that composition.
 """
 
-import functools
-import importlib.util
-import os
-from pathlib import Path
+import dataclasses
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from brax.envs.wrappers import training
-from mujoco import mjx
 
-from hopper_mjx.envs import MonopedConfig, MonopedEnv, monoped, randomize_gravity
+from hopper_mjx import envs
+from hopper_mjx.envs import MonopedConfig, monoped, tasks
+from hopper_mjx.envs.wrappers import wrap_for_training
 
 N = 4  # environments, a multiple of the 2 host devices
+# Dropped from 0.5 m with the joints exactly at their targets: the first policy step is free fall.
+DROP = dict(observe_gravity=True, initial_clearance=(0.5, 0.5), initial_joint_noise=0.0)
 
 
-def _load_script():
-    path = Path(__file__).resolve().parents[1] / "experiments" / "train_ppo.py"
-    spec = importlib.util.spec_from_file_location("train_ppo", path)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+def test_registry_names_defaults_and_overrides(mj_model):
+    assert envs.names() == ["stand", "hop", "hop_velocity"]
+    for name in envs.names():
+        cfg = envs.default_config(name)
+        assert cfg.task == name and cfg.gravity_range == (0.5, 12.0)
+    env = envs.make("hop_velocity", mj_model, observe_gravity=True)
+    assert isinstance(env, tasks.HopVelocity) and env.config.observe_gravity
+    assert (env.observation_size, envs.make("stand", mj_model).observation_size) == (28, 24)
+    with pytest.raises(ValueError, match="unknown task 'run'"):
+        envs.make("run")
+    with pytest.raises(ValueError, match="unknown hop config field"):
+        envs.make("hop", gravity=3.0)
 
 
-train_ppo = _load_script()
+# What `MonopedEnv.physics` reads of the config: tasks that agree on these share its program.
+PHYSICS_FIELDS = ("kp", "kd", "timestep", "solver_iterations", "ls_iterations", "policy_rate", "engine")
 
 
 @pytest.fixture(scope="module")
-def env(mj_model):
-    # Dropped from 0.5 m with the joints exactly at their targets: the first policy step is free fall.
-    cfg = MonopedConfig(observe_gravity=True, initial_clearance=(0.5, 0.5), initial_joint_noise=0.0)
-    return MonopedEnv(cfg, mj_model)
+def physics(mj_model):
+    """One compiled physics (policy) step, vmapped, for every task: (env it belongs to, function)."""
+    env = envs.make("hop", mj_model, **DROP)
+    return env, jax.jit(jax.vmap(env.physics, in_axes=(None, 0, 0, 0)))
+
+
+class Stepper:
+    """A task's step as its parts, each compiled: reset, the shared physics, the task's own part."""
+
+    def __init__(self, env, physics):
+        owner, physics = physics
+        assert all(getattr(env.config, f) == getattr(owner.config, f) for f in PHYSICS_FIELDS)
+        self.env, model = env, env.engine.model
+        self.reset = jax.jit(jax.vmap(env.reset))
+        after = jax.jit(jax.vmap(env.after_physics, in_axes=(None, 0, 0, 0, 0)))
+        targets = jax.vmap(env.targets)
+        self.step = lambda s, a: after(model, s, a, *physics(model, s.pipeline_state, s.info["gravity"], targets(a)))
+
+    def __call__(self, keys, actions):
+        """(reset state, the states after each action, stacked)."""
+        first = state = self.reset(keys)
+        states = []
+        for action in actions:
+            state = self.step(state, action)
+            states.append(state)
+        return first, jax.tree_util.tree_map(lambda *x: jnp.stack(x), *states)
 
 
 @pytest.fixture(scope="module")
-def batch(env):
-    """The env as PPO sees it: gravity-randomised, vmapped, episode + auto-reset wrapped."""
-    rng = jax.random.split(jax.random.PRNGKey(3), N)
-    wrapped = training.wrap(env, episode_length=50, randomization_fn=functools.partial(randomize_gravity, rng=rng))
-    return wrapped, jax.jit(wrapped.reset), jax.jit(wrapped.step)
+def rollouts(mj_model, physics):
+    return {name: Stepper(envs.make(name, mj_model, **DROP), physics) for name in envs.names()}
 
 
-def _rollout(batch, seed, actions):
-    _, reset, step = batch
-    state = reset(jax.random.split(jax.random.PRNGKey(seed), N))
-    for a in actions:
-        state = step(state, a)
-    return state
+# The first action holds the joints at their targets (free fall), the second moves them.
+ACTIONS = jnp.stack([jnp.zeros((N, 3), jnp.float32), jnp.full((N, 3), -0.5, jnp.float32)])
 
 
-def test_reset_and_step_shapes_and_dtypes(env, batch):
-    wrapped, reset, step = batch
-    state = reset(jax.random.split(jax.random.PRNGKey(0), N))
-    assert env.observation_size == 28 and env.action_size == 3 and env.n_frames == 10
-    assert state.obs.shape == (N, env.observation_size) and state.obs.dtype == jnp.float32
-    state = step(state, jnp.zeros((N, 3)))
-    assert state.obs.shape == (N, env.observation_size) and state.obs.dtype == jnp.float32
-    assert state.reward.shape == (N,) and state.reward.dtype == jnp.float32
-    assert state.done.shape == (N,)
-    assert state.info["command"].shape == (N, 3)
-    assert np.isfinite(np.asarray(state.obs)).all()
-    # 10 physics steps of 2 ms (the training timestep) per policy step.
-    np.testing.assert_allclose(state.pipeline_state.time, 0.02, atol=1e-6)
+@pytest.mark.parametrize("name", ["stand", "hop", "hop_velocity"])
+def test_each_task_resets_and_steps_with_shapes_dtypes_and_its_own_gravity(rollouts, name):
+    run = rollouts[name]
+    env = run.env
+    first, states = run(jax.random.split(jax.random.PRNGKey(0), N), ACTIONS)
+    size = env.observation_size
+    assert first.obs.shape == (N, size) and states.obs.shape == (2, N, size)
+    assert first.obs.dtype == states.obs.dtype == states.reward.dtype == jnp.float32
+    assert states.reward.shape == states.done.shape == (2, N)
+    assert first.info["command"].shape == (N, env.command_size)
+    np.testing.assert_allclose(states.pipeline_state.time[0], 0.02, atol=1e-6)  # 10 steps of 2 ms
+    g = -np.asarray(first.info["gravity"][:, 2])
+    assert len(np.unique(g)) == N and (g >= 0.5).all() and (g <= 12.0).all()
+    np.testing.assert_allclose(np.asarray(first.obs[:, -1]) * 9.81, g, rtol=1e-5)  # observed gravity
+    # Free fall with the joints held: the base falls at each environment's own g.
+    np.testing.assert_allclose(np.asarray(states.pipeline_state.qvel[0, :, 2]), -g * 0.02, rtol=1e-3)
+    assert np.isfinite(np.asarray(states.obs)).all()
 
 
-def test_gravity_is_drawn_per_environment_within_the_range(env, batch):
-    wrapped, reset, _ = batch
-    g = -np.asarray(wrapped._sys_v.opt.gravity[:, 2])  # the DomainRandomizationVmapWrapper inside
-    assert g.shape == (N,) and len(np.unique(g)) == N
-    assert (g >= 1.0).all() and (g <= 12.0).all()
-    state = reset(jax.random.split(jax.random.PRNGKey(0), N))
-    # The observed gravity (last entry, in units of 9.81) is the environment's own.
-    np.testing.assert_allclose(np.asarray(state.obs[:, -1]) * 9.81, g, rtol=1e-5)
-
-
-def test_gravity_draws_are_log_uniform(env):
-    """As many environments per factor of g at the Moon end as at the Earth end."""
-    sys, _ = randomize_gravity(env.sys, jax.random.split(jax.random.PRNGKey(0), 4000), gravity_range=(1.0, 12.0))
-    g = -np.asarray(sys.opt.gravity[:, 2])
-    assert np.allclose(np.asarray(sys.opt.gravity[:, :2]), 0.0)
-    assert 1.0 <= g.min() and g.max() <= 12.0
-    np.testing.assert_allclose(np.median(g), np.sqrt(12.0), rtol=0.05)  # uniform would give 6.5
-    below_2, above_6 = np.mean(g < 2.0), np.mean(g > 6.0)  # each a factor of 2
-    np.testing.assert_allclose(below_2, np.log(2) / np.log(12), atol=0.03)
-    np.testing.assert_allclose(above_6, np.log(2) / np.log(12), atol=0.03)
-
-
-def test_physics_uses_each_environments_gravity(batch):
-    """In free fall with the joints held, the base falls at each environment's own g."""
-    wrapped, reset, step = batch
-    state = step(reset(jax.random.split(jax.random.PRNGKey(0), N)), jnp.zeros((N, 3)))
-    g = -np.asarray(wrapped._sys_v.opt.gravity[:, 2])
-    vz = np.asarray(state.pipeline_state.qvel[:, 2])
-    np.testing.assert_allclose(vz, -g * 0.02, rtol=1e-3)
-
-
-def test_same_seed_same_rollout_and_different_seed_differs(batch):
-    # float32 arrays (jnp.full of a Python float is weakly typed, a new signature for the jitted step)
-    actions = [jnp.full((N, 3), 0.3, jnp.float32), jnp.full((N, 3), -0.5, jnp.float32), jnp.zeros((N, 3))]
-    a, b = _rollout(batch, 7, actions), _rollout(batch, 7, actions)
+@pytest.mark.parametrize("name", ["stand", "hop", "hop_velocity"])
+def test_each_task_is_deterministic_per_seed(rollouts, name):
+    run = rollouts[name]
+    a = run(jax.random.split(jax.random.PRNGKey(7), N), ACTIONS)[1]
+    b = run(jax.random.split(jax.random.PRNGKey(7), N), ACTIONS)[1]
+    c = run(jax.random.split(jax.random.PRNGKey(8), N), ACTIONS)[1]
     np.testing.assert_array_equal(np.asarray(a.obs), np.asarray(b.obs))
     np.testing.assert_array_equal(np.asarray(a.reward), np.asarray(b.reward))
-    c = _rollout(batch, 8, actions)
     assert not np.allclose(np.asarray(a.obs), np.asarray(c.obs))
 
 
-def _state(mj_model, *, height, quat=(1.0, 0.0, 0.0, 0.0), vz=0.0):
-    qpos = monoped.stance_qpos(mj_model).copy()
+def test_gravity_draws_are_log_uniform():
+    """As many episodes per factor of g at the Moon end as at the Earth end."""
+    keys = jax.random.split(jax.random.PRNGKey(0), 4000)
+    g = np.asarray(jax.vmap(lambda k: monoped.log_uniform(k, (1.0, 12.0)))(keys))
+    assert 1.0 <= g.min() and g.max() <= 12.0
+    np.testing.assert_allclose(np.median(g), np.sqrt(12.0), rtol=0.05)  # uniform would give 6.5
+    np.testing.assert_allclose(np.mean(g < 2.0), np.log(2) / np.log(12), atol=0.03)
+    np.testing.assert_allclose(np.mean(g > 6.0), np.log(2) / np.log(12), atol=0.03)
+
+
+def test_the_training_wrapper_draws_a_fresh_episode_after_each_end(rollouts):
+    """Episodes of 2 steps: the first wrapped step is the task's step (physics, then the task's
+    part); after the auto-reset every environment has a new gravity and command, the episode
+    counter restarts, and the truncation is reported on the ending step."""
+    run = rollouts["hop_velocity"]
+    wrapped = wrap_for_training(run.env, episode_length=2)
+    step = jax.jit(wrapped.step)
+    keys = jax.random.split(jax.random.PRNGKey(1), N)
+    state = jax.jit(wrapped.reset)(keys)
+    g0, cmd0 = np.asarray(state.info["gravity"]), np.asarray(state.info["command"])
+    action = jnp.full((N, 3), 0.3, jnp.float32)
+    state = step(state, action)
+    np.testing.assert_array_equal(np.asarray(state.info["gravity"]), g0)  # mid-episode: unchanged
+    composed = run.step(run.reset(keys), action)
+    for got, want in ((state.obs, composed.obs), (state.reward, composed.reward),
+                      (state.pipeline_state.qpos, composed.pipeline_state.qpos)):
+        np.testing.assert_allclose(np.asarray(got), np.asarray(want), rtol=1e-5, atol=1e-6)
+    state = step(state, jnp.zeros((N, 3)))
+    assert (np.asarray(state.done) == 1).all() and (np.asarray(state.info["truncation"]) == 1).all()
+    assert (np.asarray(state.info["gravity"])[:, 2] != g0[:, 2]).all()
+    assert (np.asarray(state.info["command"]) != cmd0).all()
+    np.testing.assert_allclose(np.asarray(state.pipeline_state.time), 0.0)  # the fresh episode's state
+    state = step(state, jnp.zeros((N, 3)))
+    assert (np.asarray(state.info["steps"]) == 1).all() and not np.asarray(state.done).any()
+    with pytest.raises(ValueError, match="randomization_fn"):
+        wrap_for_training(run.env, randomization_fn=lambda s: s)
+
+
+def _state(env, *, height, quat=(1.0, 0.0, 0.0, 0.0), vz=0.0, vx=0.0):
+    qpos = np.array(env.standing_qpos)
     qpos[2], qpos[3:7] = height, quat
-    qvel = np.zeros(mj_model.nv, np.float32)
-    qvel[2] = vz
-    m = mjx.put_model(mj_model)
-    return mjx.make_data(m).replace(qpos=jnp.asarray(qpos), qvel=jnp.asarray(qvel))
+    qvel = np.zeros(env.layout.nv, np.float32)
+    qvel[0], qvel[2] = vx, vz
+    return env.engine.make_data(jnp.asarray(qpos), jnp.asarray(qvel))
 
 
-def test_a_fallen_state_scores_lower_than_hopping(mj_model):
-    cfg, g = MonopedConfig(), jnp.float32(9.81)
-    command = jnp.array([1.1, 0.0, 0.0])
+def _reward(env, d, command, g=9.81):
     zero = jnp.zeros(3)
+    fell = monoped.fallen(env.config, d)
+    terms = env.reward_terms(d, jnp.float32(g), jnp.asarray(command, jnp.float32), zero, zero,
+                             jnp.float32(0.0), fell)
+    return float(sum(terms.values())), bool(fell)
 
-    def reward(d):
-        fell = monoped.fallen(cfg, d)
-        terms = monoped.reward_terms(cfg, d, g, command, zero, zero, jnp.float32(0.0), fell)
-        return float(sum(terms.values())), bool(fell)
 
-    at_apex = _state(mj_model, height=1.1)  # upright, at the commanded apex, vz = 0
-    rising = _state(mj_model, height=0.95, vz=float(np.sqrt(2 * 9.81 * 0.15)))  # on its way to 1.1 m
-    standing = _state(mj_model, height=0.88)
-    half = np.sqrt(0.5)
-    on_its_side = _state(mj_model, height=0.3, quat=(half, half, 0.0, 0.0))  # rolled 90°, base near the floor
-    tilted = _state(mj_model, height=1.0, quat=(np.cos(0.5), np.sin(0.5), 0.0, 0.0))  # 1 rad roll
+HALF = np.sqrt(0.5)
 
-    r_apex, fell_apex = reward(at_apex)
-    r_rising, _ = reward(rising)
-    r_stand, _ = reward(standing)
-    r_side, fell_side = reward(on_its_side)
-    r_tilt, fell_tilt = reward(tilted)
+
+def test_hop_a_fallen_state_scores_lower_than_hopping(mj_model):
+    env = envs.make("hop", mj_model)
+    command = [1.1, 0.0, 0.0]
+    r_apex, fell_apex = _reward(env, _state(env, height=1.1), command)  # at the apex, vz = 0
+    r_rising, _ = _reward(env, _state(env, height=0.95, vz=float(np.sqrt(2 * 9.81 * 0.15))), command)
+    r_stand, _ = _reward(env, _state(env, height=0.88), command)
+    r_side, fell_side = _reward(env, _state(env, height=0.3, quat=(HALF, HALF, 0.0, 0.0)), command)
+    r_tilt, fell_tilt = _reward(env, _state(env, height=1.0, quat=(np.cos(0.5), np.sin(0.5), 0, 0)), command)
     assert not fell_apex and fell_side and fell_tilt
     np.testing.assert_allclose(r_rising, r_apex, atol=1e-3)  # the ballistic apex is what counts
-    assert r_apex > r_stand > 0 > r_tilt and r_apex > r_side + cfg.fall_penalty * 0.9
+    assert r_apex > r_stand > 0 > r_tilt and r_apex > r_side + env.config.fall_penalty * 0.9
 
 
-def test_config_rejects_bad_ranges(env):
+def test_hop_velocity_tracking_the_command_scores_above_ignoring_it(mj_model):
+    env = envs.make("hop_velocity", mj_model)
+    command = [0.98, 0.5, 0.0]  # apex 0.98 m (a 0.10 m rise), 0.5 m/s forward
+    r_track, _ = _reward(env, _state(env, height=0.98, vx=0.5), command)
+    r_in_place, _ = _reward(env, _state(env, height=0.98), command)
+    r_too_low, _ = _reward(env, _state(env, height=0.90, vx=0.5), command)
+    r_fallen, _ = _reward(env, _state(env, height=0.3, quat=(HALF, HALF, 0.0, 0.0), vx=0.5), command)
+    # The speed kernel: exp(-0.5² / 0.3²) of the 1.0 weight is lost by hopping in place.
+    np.testing.assert_allclose(r_track - r_in_place, 1.0 - np.exp(-(0.5 / 0.3) ** 2), atol=1e-4)
+    assert r_track > r_too_low > r_fallen
+
+
+def test_stand_upright_at_height_and_carrying_its_weight_scores_highest(mj_model, physics):
+    """A stand episode started on the floor, one policy step holding the stance (the physics is
+    the tasks' shared compiled one): near the standing height, the foot carrying the weight."""
+    run = Stepper(envs.make("stand", mj_model, **{**DROP, "initial_clearance": (0.0, 0.0)}), physics)
+    env = run.env
+    state = run.step(run.reset(jax.random.split(jax.random.PRNGKey(0), N)), jnp.zeros((N, 3)))
+    g = float(-state.info["gravity"][0, 2])
+    standing = jax.tree_util.tree_map(lambda x: x[0], state.pipeline_state)
+    terms = env.task_terms(standing, jnp.float32(g), jnp.zeros(0))
+    assert float(terms["height"]) > 0.9  # within 5 mm of the standing height
+    assert float(terms["support"]) > 0.0  # the foot pushes up while the base is held by nothing else
+    r_stand, fell = _reward(env, standing, [], g)
+    r_crouch, _ = _reward(env, standing.replace(qpos=standing.qpos.at[2].add(-0.15)), [], g)
+    r_side, fell_side = _reward(env, standing.replace(qpos=standing.qpos.at[2].set(0.3)
+                                                      .at[3:7].set(jnp.array([HALF, HALF, 0.0, 0.0]))), [], g)
+    assert not fell and fell_side and r_stand > r_crouch > r_side
+
+
+def test_config_rejects_bad_ranges(mj_model):
     with pytest.raises(ValueError, match="gravity_range"):
         MonopedConfig(gravity_range=(12.0, 1.0))
     with pytest.raises(ValueError, match="gravity_range"):
         MonopedConfig(gravity_range=(0.0, 1.0))  # log-uniform draws need a positive low end
     with pytest.raises(ValueError, match="policy_rate"):
-        monoped.decimation(env.layout, MonopedConfig(policy_rate=300.0))  # 1000 Hz / 300 Hz
+        envs.make("hop", mj_model, policy_rate=300.0)  # 500 Hz / 300 Hz
     with pytest.raises(ValueError, match="unknown"):
         MonopedConfig.from_dict({**MonopedConfig().to_dict(), "gravity": 3})
-    cfg = MonopedConfig(speed_range=(0.0, 0.5))
+    cfg = dataclasses.replace(envs.default_config("hop_velocity"), speed_range=(0.0, 0.5))
     assert MonopedConfig.from_dict(cfg.to_dict()) == cfg
-
-
-# -- PPO: a tiny run, its checkpoint, a resume, and the policy as a core controller -------------
-
-TINY = ["--timesteps", "80", "--num-envs", "4", "--batch-size", "4", "--num-minibatches", "2",
-        "--unroll-length", "5", "--episode-length", "20", "--eval-every", "40", "--num-eval-envs", "2",
-        "--policy-layers", "8,8", "--value-layers", "8,8"]
-
-
-@pytest.fixture(scope="module")
-def trained(tmp_path_factory):
-    base = tmp_path_factory.mktemp("ppo")
-    cwd = os.getcwd()
-    os.chdir(base)
-    try:  # a relative --out, as on the command line (orbax itself needs absolute paths)
-        record = train_ppo.train(train_ppo.parser().parse_args([*TINY, "--out", "run"]))
-    finally:
-        os.chdir(cwd)
-    return base / "run", record
-
-
-def _params_at_start(out, restore=None):
-    """What ppo.train starts from: the seeded initial params, or a restored checkpoint."""
-    from brax.training.agents.ppo import networks as ppo_networks
-    from brax.training.agents.ppo import train as ppo
-
-    factory = functools.partial(ppo_networks.make_ppo_networks, policy_hidden_layer_sizes=(8, 8),
-                                value_hidden_layer_sizes=(8, 8))
-    _, params, _ = ppo.train(environment=MonopedEnv(), num_timesteps=0, episode_length=20, num_envs=4,
-                             normalize_observations=True, network_factory=factory, seed=0,
-                             restore_checkpoint_path=restore)
-    return params
-
-
-def _leaves(tree):
-    return [np.asarray(x) for x in jax.tree_util.tree_leaves(tree)]
-
-
-def test_ppo_smoke_run_changes_the_params_and_writes_its_outputs(trained):
-    from brax.training.agents.ppo import checkpoint as ppo_checkpoint
-
-    out, record = trained
-    assert record["final_step"] >= 80
-    assert sorted(p.name for p in (out / "checkpoints").iterdir())[-1] == f"{record['final_step']:012d}"
-    assert (out / "reward_curve.png").stat().st_size > 1000
-    assert [r["step"] for r in record["history"]][0] == 0 and len(record["history"]) >= 2
-    assert all(np.isfinite(r["eval/episode_reward"]) for r in record["history"])
-    final = ppo_checkpoint.load(out / "policy")
-    start = _params_at_start(out)
-    changed = [not np.array_equal(a, b) for a, b in zip(_leaves(final[1]), _leaves(start[1]))]
-    assert any(changed), "PPO left the policy params untouched"
-
-
-def test_checkpoint_restores_identical_params(trained):
-    from brax.training.agents.ppo import checkpoint as ppo_checkpoint
-
-    out, record = trained
-    path = out / "checkpoints" / f"{record['final_step']:012d}"
-    saved = ppo_checkpoint.load(path)
-    restored = _params_at_start(out, restore=str(path))
-    for a, b in zip(_leaves(saved[:2]), _leaves(restored[:2])):
-        np.testing.assert_array_equal(a, b)
-
-
-def test_a_rerun_resumes_from_the_last_checkpoint(trained, capsys):
-    """Run again with the same total: it finds the newest checkpoint and has nothing left to train."""
-    out, record = trained
-    first = record["final_step"]
-    (out / "checkpoints" / "000000000001.orbax-checkpoint-tmp").mkdir()  # a save cut short by a kill
-    again = train_ppo.train(train_ppo.parser().parse_args([*TINY, "--out", str(out), "--timesteps", str(first)]))
-    assert f"resuming from {out / 'checkpoints' / f'{first:012d}'} (step {first:,})" in capsys.readouterr().out
-    assert again["final_step"] == first and again["history"] == record["history"]
-
-
-def test_policy_runs_as_a_core_controller(trained, mj_model, sim):
-    from hopper_mjx.envs import policy
-    from hopper_mjx.sim import gravity_vectors
-
-    out, _ = trained
-    controller = policy.policy_controller(mj_model, os.path.relpath(out))  # relative, as typed on a command line
-    params = policy.policy_params(sim.robot, 3, height=0.2, speed=(0.1, 0.0))
-    standing = monoped.stance_qpos(mj_model)[2]
-    np.testing.assert_allclose(np.asarray(params.command[0]), [standing + 0.2, 0.1, 0.0], rtol=1e-6)
-    state = sim.reset(gravity_vectors([9.81, 3.71, 1.62]), key=0, controller=controller, params=params)
-    final, traj = sim.rollout(state, controller, steps=100)
-    assert not np.asarray(final.diverged).any() and np.isfinite(np.asarray(traj.qpos)).all()
-    cs = final.cstate
-    assert (np.asarray(cs.tick) == 100).all() and (np.asarray(cs.work) > 0).all()
-    lo, hi = np.asarray(sim.layout.joint_range).T
-    assert ((np.asarray(cs.target) >= lo - 1e-6) & (np.asarray(cs.target) <= hi + 1e-6)).all()
-    # Five policy decisions in 0.1 s at 50 Hz: the last action is a real policy output in [-1, 1].
-    assert (np.abs(np.asarray(cs.last_action)) <= 1).all() and np.abs(np.asarray(cs.last_action)).sum() > 0
-
-
-def test_policy_path_errors_name_the_problem(tmp_path, mj_model, sim):
-    from hopper_mjx.envs import policy
-
-    with pytest.raises(ValueError, match="not a trained policy"):
-        policy.policy_controller(mj_model, tmp_path)
-    with pytest.raises(ValueError, match="speed"):
-        policy.policy_params(sim.robot, 2, height=0.1, speed=(0.1,))
-
-
-def test_evaluation_kicks_are_the_sweeps():
-    """The evaluation claims the sweep's kicks: replicate r gets the sweep's kick for replicate r."""
-    from hopper_mjx.sweep.grid import KICK, SweepSpec, expand
-
-    g, qvel = train_ppo.evaluation_batch([9.81, 1.62], 3, seed=4, nv=9)
-    sweep = expand(SweepSpec(kind="gravity", gravity=(9.81, 1.62), num=3, duration=10.0, height=0.1,
-                             speed=(0.0, 0.0), seed=4), 9)
-    np.testing.assert_array_equal(g, sweep.gravity)
-    np.testing.assert_array_equal(qvel, sweep.qvel)
-    np.testing.assert_array_equal(qvel[:3], qvel[3:])  # common random numbers across gravities
-    assert 0 < np.abs(qvel[:, [0, 1, 3, 4]]).max() < 6 * KICK and not qvel[:, [2, 5, 6, 7, 8]].any()
+    legacy = {k: v for k, v in MonopedConfig().to_dict().items() if k not in ("task", "lateral_speed_range")}
+    assert MonopedConfig.from_dict(legacy).task == "hop"  # policy folders from before the tasks
 
 
 def test_env_and_metrics_falls_are_different_measures(mj_model):
@@ -284,9 +233,11 @@ def test_env_and_metrics_falls_are_different_measures(mj_model):
     # ZYX Euler (yaw 0): q = q_y(pitch) * q_x(roll), [w, x, y, z]
     cr, sr, cp, sp = np.cos(roll / 2), np.sin(roll / 2), np.cos(pitch / 2), np.sin(pitch / 2)
     quat = (cp * cr, cp * sr, sp * cr, -sp * sr)
-    d = _state(mj_model, height=1.0, quat=quat)
+    d = _state(envs.make("hop", mj_model), height=1.0, quat=quat)
     np.testing.assert_allclose(metrics.roll_pitch(np.asarray(quat)), (roll, pitch), atol=1e-6)
     np.testing.assert_allclose(float(monoped.tilt_from_vertical(d)), np.arccos(np.cos(roll) * np.cos(pitch)),
                                atol=1e-5)
     assert bool(monoped.fallen(MonopedConfig(), d))
     assert max(roll, pitch) < metrics.FALL_ROLL_PITCH
+
+

@@ -112,7 +112,10 @@ def test_two_processes_give_the_rows_of_one(tiny, tmp_path):
     [(["gravity", "--values", ""], "empty"), (["gravity", "--values", "1,abc"], "comma-separated numbers"),
      (["gravity", "--values", "0,9.81"], "> 0"), (["gravity", "--values", "-3.7"], "> 0"),
      (["gains", "--param", "bogus", "--values", "1,2"], "unknown gain 'bogus'"),
-     (["gravity", "--num", "0"], "--num")],
+     (["gravity", "--num", "0"], "--num"),
+     (["gravity", "--controller", "hold"], "a sweep runs raibert or policy:PATH"),
+     (["compare", "--controllers", "raibert,raibert"], "lists one twice"),
+     (["compare", "--controllers", "raibert,policy:/nonexistent"], "is not a trained policy")],
 )
 def test_bad_input_gets_a_clear_error(args, message, capsys, tmp_path):
     try:

@@ -1,26 +1,24 @@
-"""A Brax training environment on the MJX monoped: hop to a commanded apex height and speed.
+"""The parts every monoped task shares: config, physics step, action, observation, reward kernels, termination.
 
-    env = MonopedEnv()                       # brax.envs.base.Env
-    ppo.train(environment=env, randomization_fn=randomize_gravity, ...)
+A task (`hopper_mjx.envs.tasks`) is a `MonopedEnv` that says what it commands
+(`sample_command`) and what it rewards (`task_terms`); everything else is here, once.
 
-- **Physics**: `hopper_mjx.model.load()` stepped by `mjx.step` at the config's
-  `timestep` (2 ms for training; the core evaluates at its own 1 ms); the policy acts
-  every `n_frames` physics steps (default 50 Hz).
-- **Actions** (3, in [-1, 1]) are joint position targets around the standing pose
-  (`model.robot.stance_qpos`), `target = stance + action_scale * action`, clipped to the
-  joint range and tracked by a PD law at the physics rate (`pd_torque`), saturated
-  at the effort limits like the seed's position controllers on its effort joints.
-- **Observations** (`observe`) are what a real robot reads: the IMU (orientation,
-  angular rate), odometry (base height, linear velocity), the foot contact flag and
-  force, joint positions and velocities, the command and the previous action;
+- **Physics**: `hopper_mjx.model.load()` stepped by the config's engine
+  (`hopper_mjx.engine.make(config.engine, ...)`: "auto" is the chain engine for the monoped,
+  "mjx" MuJoCo MJX) at the config's `timestep` (2 ms for training; the core evaluates at its
+  own 1 ms); the policy acts every `n_frames` physics steps (default 50 Hz). `MonopedEnv.physics`
+  is the one place the engine steps, traced once per policy step.
+- **Actions** (3, in [-1, 1]) are joint position targets around the standing pose,
+  `target = stance + action_scale * action`, clipped to the joint range and tracked by a PD
+  law at the physics rate (`pd_torque`), saturated at the effort limits.
+- **Observations** (`observe`) are what a real robot reads: the IMU, the odometry's height
+  and velocity, the foot contact, the joints, the task's command and the previous action;
   gravity only when `observe_gravity` is set.
-- **Gravity** is drawn per environment, log-uniformly over `gravity_range`, by
-  `randomize_gravity`, the Brax domain-randomisation hook that batches `opt.gravity`
-  of the MJX model.
-- **Reward and termination**: see `reward_terms` and `fallen`, documented in docs/learning.md.
+- **Gravity** is drawn per episode at `reset`, log-uniformly over `gravity_range`, and kept
+  in `State.info["gravity"]`; `wrappers.wrap_for_training` makes Brax's auto-reset draw a
+  fresh episode (gravity, command, initial state) instead of replaying the first one.
 
-State between steps lives in `State.info`: the command, the previous action and
-the joint targets. Everything is one instance; Brax's wrappers vmap it.
+Everything is one instance; Brax's wrappers vmap it.
 """
 
 from __future__ import annotations
@@ -34,34 +32,44 @@ import jax.numpy as jnp
 import mujoco
 import numpy as np
 from brax.envs.base import Env, State
-from mujoco import mjx
 
-from hopper_mjx import metrics
+from hopper_mjx import engine as engines
+from hopper_mjx import metrics, signals
 from hopper_mjx import model as hopper_model
 from hopper_mjx.control.base import joint_state, pd, saturate, to_ctrl
-from hopper_mjx.engine.mjx import foot_contact
 from hopper_mjx.model import robot
 from hopper_mjx.model.layout import Layout
-from hopper_mjx.signals import Contact, Observation
+from hopper_mjx.signals import Observation
 
 MAX_TILT_FROM_VERTICAL = 0.8  # rad between the base's z axis and the vertical that ends an episode
+# State.info keys a task owns; the resampling auto-reset replaces exactly these (wrappers.py).
+TASK_INFO = ("command", "gravity", "last_action", "rng")
+RANGES = ("gravity_range", "apex_range", "speed_range", "lateral_speed_range", "initial_clearance")
 
 
 @dataclasses.dataclass(frozen=True)
 class MonopedConfig:
-    """Everything that shapes the task; saved beside a trained policy (`to_dict`)."""
+    """Everything that shapes a task; saved beside a trained policy (`to_dict`). Each task's
+    `default_config()` sets its own defaults (hopper_mjx.envs.tasks)."""
 
+    task: str = "hop"  # a policy folder saved before tasks existed is a `hop` policy
     policy_rate: float = 50.0  # Hz; the physics runs at 1 / timestep
-    # m/s², per environment, log-uniform: as much experience per factor of g at the Moon end
+    # m/s², per episode, log-uniform: as much experience per factor of g at the Moon end
     # (slow hops, few per episode) as at the Earth end.
     gravity_range: tuple[float, float] = (1.0, 12.0)
     observe_gravity: bool = False
     apex_range: tuple[float, float] = (1.0, 1.2)  # m, commanded base height at the top of a hop
-    speed_range: tuple[float, float] = (-0.2, 0.2)  # m/s, commanded horizontal velocity, x and y
+    speed_range: tuple[float, float] = (-0.2, 0.2)  # m/s, commanded vx (and vy unless lateral_speed_range)
+    lateral_speed_range: tuple[float, float] | None = None  # m/s, commanded vy; None: as speed_range
     action_scale: tuple[float, float, float] = (0.3, 0.6, 0.8)  # rad per unit action: haa, hfe, kfe
     kp: tuple[float, float, float] = (300.0, 300.0, 300.0)  # N·m/rad
     kd: tuple[float, float, float] = (6.0, 6.0, 6.0)  # N·m·s/rad
     # Reward weights (per policy step) and kernel widths.
+    w_alive: float = 0.0  # per step upright (stand)
+    w_height: float = 0.0  # stand: exp(-|z - standing height| / height_scale)
+    height_scale: float = 0.05  # m
+    w_support: float = 0.0  # stand: exp(-|F_z / (m g) - 1| / support_scale): the foot carries the weight
+    support_scale: float = 0.25
     w_apex: float = 1.0
     apex_scale: float = 0.1  # m; exp(-|error| / scale)
     w_speed: float = 0.5
@@ -84,10 +92,15 @@ class MonopedConfig:
     timestep: float = 0.002  # s
     solver_iterations: int = 2
     ls_iterations: int = 4
+    engine: str = "auto"  # hopper_mjx.engine name: auto (chain for the monoped), chain or mjx
+
 
     def __post_init__(self):
-        for name in ("gravity_range", "apex_range", "speed_range", "initial_clearance"):
-            lo, hi = getattr(self, name)
+        for name in RANGES:
+            pair = getattr(self, name)
+            if pair is None:
+                continue
+            lo, hi = pair
             if not (math.isfinite(lo) and math.isfinite(hi) and lo <= hi):
                 raise ValueError(f"{name} must be a finite (low, high) pair with low <= high, got {(lo, hi)}")
         if not self.gravity_range[0] > 0:
@@ -95,6 +108,11 @@ class MonopedConfig:
                              f"got {self.gravity_range}")
         if not (self.policy_rate > 0 and self.timestep > 0):
             raise ValueError(f"policy_rate and timestep must be positive, got {self.policy_rate}, {self.timestep}")
+        engines.check_name(self.engine)
+
+    @property
+    def vy_range(self) -> tuple[float, float]:
+        return self.speed_range if self.lateral_speed_range is None else self.lateral_speed_range
 
     def to_dict(self) -> dict:
         return dataclasses.asdict(self)
@@ -116,6 +134,16 @@ def decimation(layout: Layout, cfg: MonopedConfig) -> int:
     return int(round(steps))
 
 
+def log_uniform(key: jax.Array, bounds: tuple[float, float]) -> jax.Array:
+    """One draw, uniform in log: every factor of the range gets the same share."""
+    lo, hi = math.log(bounds[0]), math.log(bounds[1])
+    return jnp.exp(jax.random.uniform(key, (), minval=lo, maxval=hi))
+
+
+def gravity_vector(magnitude: jax.Array) -> jax.Array:
+    return jnp.stack([jnp.zeros_like(magnitude), jnp.zeros_like(magnitude), -magnitude])
+
+
 # -- the pieces shared with the policy controller (hopper_mjx.envs.policy) ------------------
 
 
@@ -132,9 +160,9 @@ def pd_torque(layout: Layout, cfg: MonopedConfig, target: jax.Array, obs) -> jax
     return saturate(layout, pd(jnp.asarray(cfg.kp), jnp.asarray(cfg.kd), target - q, qd))
 
 
-def observation_of(foot_geom: int, m: mjx.Model, d: mjx.Data) -> Observation:
-    """The controller's `Observation` of MJX data after a forward (the env steps MJX itself)."""
-    return Observation(time=d.time, qpos=d.qpos, qvel=d.qvel, contact=Contact(*foot_contact(foot_geom, m, d)))
+def observation_size(command_size: int, observe_gravity: bool) -> int:
+    """24 robot signals + the command + 3 of the previous action (+ gravity)."""
+    return 21 + command_size + 3 + int(observe_gravity)
 
 
 def observe(layout: Layout, cfg: MonopedConfig, obs: Observation, gravity: jax.Array,
@@ -160,34 +188,36 @@ def observe(layout: Layout, cfg: MonopedConfig, obs: Observation, gravity: jax.A
     return jnp.nan_to_num(jnp.concatenate(parts), posinf=0.0, neginf=0.0)
 
 
-def predicted_apex(d: mjx.Data, g: jax.Array) -> jax.Array:
+# -- reward kernels and termination ---------------------------------------------------------
+
+
+def closeness(error: jax.Array, scale: float) -> jax.Array:
+    """1 at zero error, 1/e at `scale`: a tracking reward with a gradient everywhere."""
+    return jnp.exp(-jnp.abs(error) / scale)
+
+
+def predicted_apex(d, g: jax.Array) -> jax.Array:
     """Height the base would reach on a ballistic arc from here (its current height when falling)."""
     vz = jnp.maximum(d.qvel[2], 0.0)
     return d.qpos[2] + vz**2 / (2.0 * jnp.maximum(g, 0.1))
 
 
-def tilt_from_vertical(d: mjx.Data) -> jax.Array:
+def tilt_from_vertical(d) -> jax.Array:
     """Angle (rad) between the base's z axis and the world's vertical."""
     w, x, y, _ = d.qpos[3:7]
     cos = 1.0 - 2.0 * (x * x + y * y)  # z-component of the body z axis
     return jnp.arccos(jnp.clip(cos, -1.0, 1.0))
 
 
-def fallen(cfg: MonopedConfig, d: mjx.Data) -> jax.Array:
+def fallen(cfg: MonopedConfig, d) -> jax.Array:
     finite = jnp.isfinite(d.qpos).all() & jnp.isfinite(d.qvel).all()
     return ~finite | (tilt_from_vertical(d) > cfg.max_tilt) | (d.qpos[2] < cfg.min_base_height)
 
 
-def reward_terms(
-    cfg: MonopedConfig, d: mjx.Data, g: jax.Array, command: jax.Array,
-    action: jax.Array, last_action: jax.Array, effort: jax.Array, fell: jax.Array,
-) -> dict[str, jax.Array]:
-    """Per-step reward terms (already weighted); their sum is the reward."""
-    apex_error = jnp.abs(predicted_apex(d, g) - command[0])
-    speed_error = jnp.sum((d.qvel[0:2] - command[1:3]) ** 2)
+def posture_terms(cfg: MonopedConfig, d, action: jax.Array, last_action: jax.Array,
+                  effort: jax.Array, fell: jax.Array) -> dict[str, jax.Array]:
+    """The terms every task pays (already weighted): upright, effort, smoothness, spin, fall."""
     return {
-        "apex": cfg.w_apex * jnp.exp(-apex_error / cfg.apex_scale),
-        "speed": cfg.w_speed * jnp.exp(-speed_error / cfg.speed_scale**2),
         "upright": cfg.w_upright * jnp.exp(-((tilt_from_vertical(d) / cfg.upright_scale) ** 2)),
         "effort": -cfg.w_effort * effort,
         "action_rate": -cfg.w_action_rate * jnp.sum((action - last_action) ** 2),
@@ -196,12 +226,9 @@ def reward_terms(
     }
 
 
-def sample_command(cfg: MonopedConfig, key: jax.Array) -> jax.Array:
-    """(apex height m, vx m/s, vy m/s), uniform over the configured ranges."""
-    k_apex, k_speed = jax.random.split(key)
-    apex = jax.random.uniform(k_apex, (1,), minval=cfg.apex_range[0], maxval=cfg.apex_range[1])
-    speed = jax.random.uniform(k_speed, (2,), minval=cfg.speed_range[0], maxval=cfg.speed_range[1])
-    return jnp.concatenate([apex, speed])
+def speed_term(cfg: MonopedConfig, d, command_speed: jax.Array) -> jax.Array:
+    """Horizontal velocity against the commanded (vx, vy), a Gaussian kernel of width speed_scale."""
+    return cfg.w_speed * jnp.exp(-jnp.sum((d.qvel[0:2] - command_speed) ** 2) / cfg.speed_scale**2)
 
 
 def training_model(mj_model: mujoco.MjModel, cfg: MonopedConfig) -> mujoco.MjModel:
@@ -225,22 +252,36 @@ def stance_qpos(mj_model: mujoco.MjModel) -> np.ndarray:
 
 
 class MonopedEnv(Env):
-    """One monoped under one gravity (the model's `opt.gravity`), Brax `Env` interface."""
+    """One monoped under one gravity per episode, Brax `Env` interface. Subclasses (the tasks)
+    define `command_size`, `sample_command(key)` and `task_terms(data, g, command)`."""
 
-    def __init__(self, config: MonopedConfig = MonopedConfig(), mj_model: mujoco.MjModel | None = None):
+    command_size: int = 0
+
+    def __init__(self, config: MonopedConfig, mj_model: mujoco.MjModel | None = None):
         mj_model = mj_model if mj_model is not None else hopper_model.load()
         trained = training_model(mj_model, config)
         self.config = config
         self.layout = Layout.of(trained)
         self.n_frames = decimation(self.layout, config)
-        self.sys = mjx.put_model(trained)
-        self._stance_qpos = stance_qpos(mj_model)  # the same pose the policy controller uses
-        self.stance = self._stance_qpos[list(self.layout.joint_qpos)]
+        self.engine = engines.make(config.engine, trained)
+        self.standing_qpos = stance_qpos(mj_model)  # the same pose the policy controller uses
+        self.stance = self.standing_qpos[list(self.layout.joint_qpos)]
+        self.standing_height = float(self.standing_qpos[2])
+
+    @classmethod
+    def default_config(cls) -> MonopedConfig:
+        raise NotImplementedError
+
+    def sample_command(self, key: jax.Array) -> jax.Array:
+        raise NotImplementedError
+
+    def task_terms(self, d, g: jax.Array, command: jax.Array) -> dict[str, jax.Array]:
+        raise NotImplementedError
 
     # Brax reads these.
     @property
     def observation_size(self) -> int:
-        return 21 + 3 + 3 + int(self.config.observe_gravity)
+        return observation_size(self.command_size, self.config.observe_gravity)
 
     @property
     def action_size(self) -> int:
@@ -248,61 +289,89 @@ class MonopedEnv(Env):
 
     @property
     def backend(self) -> str:
-        return "mjx"
+        return self.engine.name
 
     @property
     def dt(self) -> float:
         return self.layout.timestep * self.n_frames
 
+    def reward_terms(self, d, g, command, action, last_action, effort, fell) -> dict[str, jax.Array]:
+        """Per-step reward terms (already weighted); their sum is the reward."""
+        return {**self.task_terms(d, g, command),
+                **posture_terms(self.config, d, action, last_action, effort, fell)}
+
     def reset(self, rng: jax.Array) -> State:
         cfg, lay = self.config, self.layout
-        k_cmd, k_lift, k_joint = jax.random.split(rng, 3)
-        qpos = jnp.asarray(self._stance_qpos)
+        rng, k_cmd, k_lift, k_joint, k_g = jax.random.split(rng, 5)
+        gravity = gravity_vector(log_uniform(k_g, cfg.gravity_range))
         lift = jax.random.uniform(k_lift, (), minval=cfg.initial_clearance[0], maxval=cfg.initial_clearance[1])
         joints = jnp.asarray(self.stance) + cfg.initial_joint_noise * jax.random.normal(k_joint, (3,))
-        qpos = qpos.at[2].add(lift).at[jnp.asarray(lay.joint_qpos)].set(joints)
-        data = mjx.forward(self.sys, mjx.make_data(self.sys).replace(qpos=qpos))
-        command = sample_command(cfg, k_cmd)
+        qpos = jnp.asarray(self.standing_qpos).at[2].add(lift).at[jnp.asarray(lay.joint_qpos)].set(joints)
+        # As the core's reset: no forward yet, so the first observation's contact is the engine's
+        # "none yet" and the physics is traced only in `physics` (the auto-reset runs this in every step).
+        data = self.engine.make_data(qpos, jnp.zeros(lay.nv, qpos.dtype))
+        command = self.sample_command(k_cmd)
         last_action = jnp.zeros(3)
-        obs = observe(lay, cfg, observation_of(lay.foot_geom, self.sys, data), self.sys.opt.gravity, command,
+        obs = observe(lay, cfg, signals.observe(self.engine, self.engine.model, data), gravity, command,
                       last_action)
         zero = jnp.zeros(())
-        metrics = {k: zero for k in reward_terms(cfg, data, zero, command, last_action, last_action, zero, zero > 0)}
-        info = {"command": command, "last_action": last_action}
-        return State(data, obs, zero, zero, metrics, info)
+        terms = self.reward_terms(data, -gravity[2], command, last_action, last_action, zero, zero > 0)
+        info = {"command": command, "gravity": gravity, "last_action": last_action, "rng": rng}
+        return State(data, obs, zero, zero, {k: zero for k in terms}, info)
 
-    def step(self, state: State, action: jax.Array) -> State:
-        cfg, lay, m = self.config, self.layout, self.sys
-        target = joint_targets(lay, cfg, jnp.asarray(self.stance), action)
+    def physics(self, model, data, gravity: jax.Array, target: jax.Array):
+        """`n_frames` physics steps of one instance under its own gravity, the PD law tracking
+        `target`: (data, mean of (torque / limit)²). The engine's step is traced once, in the loop."""
+        cfg, lay, engine = self.config, self.layout, self.engine
         limit = jnp.asarray(lay.effort_limit)
 
-        def physics_step(carry, _):
+        def one_physics_step(carry, _):
             d, effort = carry
             torque = pd_torque(lay, cfg, target, d)
-            return (mjx.step(m, d.replace(ctrl=to_ctrl(lay, torque))), effort + jnp.mean((torque / limit) ** 2)), None
+            d = engine.forward(model, d.replace(ctrl=to_ctrl(lay, torque)), gravity)
+            return (engine.integrate(model, d, gravity), effort + jnp.mean((torque / limit) ** 2)), None
 
-        (data, effort), _ = jax.lax.scan(physics_step, (state.pipeline_state, jnp.zeros(())), None, self.n_frames)
-        g = -m.opt.gravity[2]
+        (data, effort), _ = jax.lax.scan(one_physics_step, (data, jnp.zeros(())), None, self.n_frames)
+        return data, effort / self.n_frames
+
+    def run_time_model(self, gravity: jax.Array):
+        """The engine's model as a value known only at run time, as the core passes it (an argument
+        of the compiled function): the chain engine stores each stage's outputs behind a conditional
+        on it, which a compile-time constant would fold away (several times slower, and over twice the
+        compile). `gravity`: one instance's (3,) or a batch's (n, 3); every episode's gravity points
+        down (`gravity_range` > 0), so the selection keeps the model, but the compiler cannot know it.
+        Unbatched when `gravity` is: `batch_step` hands one model to all instances."""
+        downward = jnp.all(gravity[..., 2] < 0)
+        return jax.tree_util.tree_map(lambda x: jnp.where(downward, x, jnp.zeros_like(x)), self.engine.model)
+
+    def batch_step(self, state: State, action: jax.Array) -> State:
+        """`step` of a batch of instances (leading axis), one run-time engine model for all."""
+        model = self.run_time_model(state.info["gravity"])
+        return jax.vmap(self.step_with, in_axes=(None, 0, 0))(model, state, action)
+
+    def step(self, state: State, action: jax.Array) -> State:
+        """One policy step of one instance (vmapped, prefer `batch_step`: its model stays unbatched)."""
+        return self.step_with(self.run_time_model(state.info["gravity"]), state, action)
+
+    def step_with(self, model, state: State, action: jax.Array) -> State:
+        """`step` with the engine's model pytree given: the physics, then `after_physics`."""
+        data, effort = self.physics(model, state.pipeline_state, state.info["gravity"], self.targets(action))
+        return self.after_physics(model, state, action, data, effort)
+
+    def targets(self, action: jax.Array) -> jax.Array:
+        """The joint targets (rad) an action sets for the next policy step."""
+        return joint_targets(self.layout, self.config, jnp.asarray(self.stance), action)
+
+    def after_physics(self, model, state: State, action: jax.Array, data, effort: jax.Array) -> State:
+        """The state after `action`, given the physics' result: reward, termination, observation.
+        Every task shares `physics`; this is where they differ."""
+        cfg, lay, gravity = self.config, self.layout, state.info["gravity"]
         fell = fallen(cfg, data)
         command, last_action = state.info["command"], state.info["last_action"]
-        terms = reward_terms(cfg, data, g, command, action, last_action, effort / self.n_frames, fell)
+        terms = self.reward_terms(data, -gravity[2], command, action, last_action, effort, fell)
         reward = jnp.nan_to_num(sum(terms.values()), nan=-cfg.fall_penalty)
-        obs = observe(lay, cfg, observation_of(lay.foot_geom, m, data), m.opt.gravity, command, action)
+        # The contact of the last forward, as the core's controllers see it.
+        obs = observe(lay, cfg, signals.observe(self.engine, model, data), gravity, command, action)
         info = {**state.info, "last_action": action}
         return state.replace(pipeline_state=data, obs=obs, reward=reward, done=fell.astype(jnp.float32),
                              metrics={**state.metrics, **terms}, info=info)
-
-
-def randomize_gravity(sys: mjx.Model, rng: jax.Array, gravity_range=(1.0, 12.0)):
-    """Brax `randomization_fn`: one gravity magnitude per environment (rng is (N, 2)),
-    log-uniform over `gravity_range` (m/s², low > 0).
-
-    Returns the model with `opt.gravity` batched (N, 3) and the matching vmap in_axes.
-    """
-    log_lo, log_hi = math.log(gravity_range[0]), math.log(gravity_range[1])
-    magnitude = jax.vmap(lambda k: jnp.exp(jax.random.uniform(k, (), minval=log_lo, maxval=log_hi)))(rng)
-    gravity = jnp.stack([jnp.zeros_like(magnitude), jnp.zeros_like(magnitude), -magnitude], axis=1)
-    batched = sys.replace(opt=sys.opt.replace(gravity=gravity))
-    in_axes = jax.tree_util.tree_map(lambda _: None, sys)
-    in_axes = in_axes.replace(opt=in_axes.opt.replace(gravity=0))
-    return batched, in_axes

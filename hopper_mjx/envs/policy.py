@@ -1,8 +1,8 @@
-"""`policy:PATH`: a PPO policy trained on `hopper_mjx.envs.MonopedEnv`, run inside the core's rollout.
+"""`policy:PATH`: a policy trained on any task of `hopper_mjx.envs`, run inside the core's rollout.
 
-A policy directory is a Brax PPO checkpoint (orbax params + ``ppo_network_config.json``)
-with the environment's ``hopper_env.json`` beside it, as written by `save`
-(experiments/train_ppo.py saves every checkpoint and the final ``policy/`` this way).
+A policy directory is a Brax PPO or SAC checkpoint (orbax params + ``ppo_network_config.json``
+or ``sac_network_config.json``) with the task's ``hopper_env.json`` beside it
+(`write_env_config`; experiments/train.py saves every checkpoint and the final ``policy/`` this way).
 
 The controller replays the environment's control loop: every
 ``n_frames`` physics steps it builds the same observation (`envs.monoped.observe`)
@@ -23,33 +23,34 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 import mujoco
+from brax.training import checkpoint as brax_checkpoint
 from brax.training import networks as brax_networks
 from brax.training.acme import running_statistics
-from brax.training.agents.ppo import checkpoint as ppo_checkpoint
 from brax.training.agents.ppo import networks as ppo_networks
+from brax.training.agents.sac import networks as sac_networks
 
 from hopper_mjx.control.base import Controller, joint_state, to_ctrl
-from hopper_mjx.envs import monoped
+from hopper_mjx.envs import monoped, tasks
 from hopper_mjx.model.layout import Layout
 from hopper_mjx.model.robot import Robot
 from hopper_mjx.signals import Observation
 
 ENV_CONFIG = "hopper_env.json"
-NETWORK_CONFIG = "ppo_network_config.json"  # written by brax's ppo checkpoint.save
+# Brax writes one of these beside the params: which agent's networks to rebuild.
+NETWORK_CONFIGS = {"ppo": "ppo_network_config.json", "sac": "sac_network_config.json"}
 
 
 class PolicyState(NamedTuple):
-    command: jax.Array  # (3,) apex height m, vx, vy m/s
+    command: jax.Array  # the task's command: (3,) apex height m, vx, vy m/s; (0,) for stand
     target: jax.Array  # (3,) joint targets, rad
     last_action: jax.Array  # (3,)
     tick: jax.Array  # () physics steps since the start
     work: jax.Array  # J, ∫ Σ|τ·q̇| dt of the three motors (for the cost of transport)
 
 
-def save(directory, step: int, params, network_config, env_config: monoped.MonopedConfig) -> Path:
-    """Writes a Brax PPO checkpoint at directory/<step> with the env config beside it."""
-    ppo_checkpoint.save(directory, step, params, network_config)
-    path = Path(directory) / f"{step:012d}"
+def write_env_config(path, env_config: monoped.MonopedConfig) -> Path:
+    """Puts the task's config beside a Brax checkpoint at `path`: it makes the folder a policy."""
+    path = Path(path)
     (path / ENV_CONFIG).write_text(json.dumps(env_config.to_dict(), indent=1))
     return path
 
@@ -60,53 +61,96 @@ def resolve(path) -> Path:
     if (path / "policy" / ENV_CONFIG).exists():
         path = path / "policy"
     if not (path / ENV_CONFIG).exists():
-        raise ValueError(f"{path} is not a trained policy: no {ENV_CONFIG} (expected a train_ppo.py output "
-                         "folder or one of its checkpoints)")
+        raise ValueError(f"{path} is not a trained policy: no {ENV_CONFIG} (expected an experiments/train.py "
+                         "output folder or one of its checkpoints)")
     return path
 
 
-def load(path):
-    """(deterministic policy fn obs -> action, MonopedConfig) of a saved policy."""
+def algorithm_of(path: Path) -> str:
+    found = [algo for algo, name in NETWORK_CONFIGS.items() if (path / name).exists()]
+    if len(found) != 1:
+        raise ValueError(f"{path} holds no Brax PPO or SAC network config ({', '.join(NETWORK_CONFIGS.values())})")
+    return found[0]
+
+
+def read(path) -> tuple[Path, str, dict, monoped.MonopedConfig]:
+    """(checkpoint path, algorithm, network config, task config) of a saved policy, checked: the
+    network's input size must be the observation size of the task it names. Reads JSON only."""
     path = resolve(path)
     config = monoped.MonopedConfig.from_dict(json.loads((path / ENV_CONFIG).read_text()))
-    # brax 0.14.2's own load_policy cannot read back the null initialisers it saves, so the
-    # network is rebuilt here from the options train_ppo.py sets.
-    net = json.loads((path / NETWORK_CONFIG).read_text())
+    algo = algorithm_of(path)
+    net = json.loads((path / NETWORK_CONFIGS[algo]).read_text())
+    expected = monoped.observation_size(tasks.task_class(config.task).command_size, config.observe_gravity)
+    if net["observation_size"] != expected:
+        raise ValueError(f"{path}: the policy takes {net['observation_size']} observations but task "
+                         f"{config.task!r} (observe_gravity={config.observe_gravity}) gives {expected}")
+    return path, algo, net, config
+
+
+def _network(algo: str, net: dict):
+    """The Brax networks a checkpoint was trained with, rebuilt from its config (brax 0.14.2's own
+    `load_policy` cannot read back the null initialisers it saves)."""
     kwargs = net["network_factory_kwargs"]
-    network = ppo_networks.make_ppo_networks(
-        net["observation_size"],
-        net["action_size"],
-        preprocess_observations_fn=running_statistics.normalize if net["normalize_observations"] else
-        (lambda x, _: x),
-        policy_hidden_layer_sizes=tuple(kwargs["policy_hidden_layer_sizes"]),
-        value_hidden_layer_sizes=tuple(kwargs["value_hidden_layer_sizes"]),
-        activation=brax_networks.ACTIVATION[kwargs["activation"]],
-        distribution_type=kwargs["distribution_type"],
-    )
-    inference = ppo_networks.make_inference_fn(network)(ppo_checkpoint.load(path), deterministic=True)
+    normalize = running_statistics.normalize if net["normalize_observations"] else (lambda x, _: x)
+    shared = dict(preprocess_observations_fn=normalize, activation=brax_networks.ACTIVATION[kwargs["activation"]],
+                  distribution_type=kwargs["distribution_type"])
+    if algo == "ppo":
+        network = ppo_networks.make_ppo_networks(
+            net["observation_size"], net["action_size"],
+            policy_hidden_layer_sizes=tuple(kwargs["policy_hidden_layer_sizes"]),
+            value_hidden_layer_sizes=tuple(kwargs["value_hidden_layer_sizes"]), **shared)
+        return ppo_networks.make_inference_fn(network)
+    network = sac_networks.make_sac_networks(net["observation_size"], net["action_size"],
+                                             hidden_layer_sizes=tuple(kwargs["hidden_layer_sizes"]), **shared)
+    return sac_networks.make_inference_fn(network)
+
+
+def load(path):
+    """(deterministic policy fn obs -> action, MonopedConfig) of a saved PPO or SAC policy."""
+    path, algo, net, config = read(path)
+    params = brax_checkpoint.load(path)
+    inference = _network(algo, net)(params[:2], deterministic=True)
     return (lambda obs: inference(obs, jax.random.PRNGKey(0))[0]), config
-
-
-def default_command(config: monoped.MonopedConfig) -> jnp.ndarray:
-    """Mid-range apex height, standing still."""
-    return jnp.array([0.5 * sum(config.apex_range), 0.0, 0.0])
 
 
 @jax.tree_util.register_dataclass
 @dataclass(frozen=True)
 class PolicyParams:
-    """Per-instance command of a trained policy, (3,) per instance, (n, 3) batched."""
+    """Per-instance command of a trained policy, (k,) per instance, (n, k) batched: k = 3
+    (apex height of the base m above the floor, vx, vy m/s) for the hopping tasks, 0 for stand."""
 
-    command: jax.Array  # apex height of the base (m, above the floor), vx, vy (m/s)
+    command: jax.Array
 
 
-def policy_params(robot: Robot, n: int, *, height: float, speed=(0.0, 0.0)) -> PolicyParams:
+def default_command(config: monoped.MonopedConfig) -> jnp.ndarray:
+    """Mid-range apex height, standing still (nothing for stand)."""
+    if tasks.task_class(config.task).command_size == 0:
+        return jnp.zeros(0)
+    return jnp.array([0.5 * sum(config.apex_range), 0.0, 0.0])
+
+
+def check_command(config: monoped.MonopedConfig, standing_height: float, height: float, speed) -> None:
+    """Raises ValueError if (apex rise, speed) lies outside what the policy was trained on."""
+    if tasks.task_class(config.task).command_size == 0:
+        return
+    apex = standing_height + height
+    boxes = (("--height", apex, config.apex_range, standing_height),
+             ("--speed VX", speed[0], config.speed_range, 0.0), ("--speed VY", speed[1], config.vy_range, 0.0))
+    for flag, value, (lo, hi), offset in boxes:
+        if not lo - 1e-6 <= value <= hi + 1e-6:
+            raise ValueError(f"{flag} {value - offset:g} is outside the {config.task} policy's trained range "
+                             f"[{lo - offset:g}, {hi - offset:g}]")
+
+
+def policy_params(robot: Robot, n: int, *, height: float, speed=(0.0, 0.0), config=None) -> PolicyParams:
     """Commands from the Raibert controller's terms: `height` m of apex rise above the
-    standing height (`Robot.standing_height`), `speed` (vx, vy) m/s."""
+    standing height (`Robot.standing_height`), `speed` (vx, vy) m/s; none for a stand policy."""
     if len(speed) != 2:
         raise ValueError(f"speed needs two values (vx, vy) in m/s, got {speed}")
     if not (math.isfinite(height) and height >= 0):
         raise ValueError(f"height must be a finite apex rise >= 0 m, got {height}")
+    if config is not None and tasks.task_class(config.task).command_size == 0:
+        return PolicyParams(jnp.zeros((n, 0), jnp.float32))
     return PolicyParams(jnp.tile(jnp.array([robot.standing_height + height, *speed], dtype=jnp.float32), (n, 1)))
 
 

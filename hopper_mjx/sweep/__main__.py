@@ -1,6 +1,8 @@
-"""python -m hopper_mjx.sweep gravity | gains — Raibert hopping across gravity (and a gain).
+"""python -m hopper_mjx.sweep gravity | gains | compare — hopping across gravity (and a gain).
 
     python -m hopper_mjx.sweep gravity                          # the main job, ~1000 monopeds
+    python -m hopper_mjx.sweep gravity --controller policy:runs/hop-ppo     # a trained policy, same kicks
+    python -m hopper_mjx.sweep compare --controllers raibert,policy:runs/hop-ppo   # side by side
     python -m hopper_mjx.sweep gains --param speed_gain --values 0.1,0.3,0.6 --gravity 1.62,3.71,9.81
 
 Rerunning with the same --out resumes an interrupted sweep; finished chunks are not recomputed.
@@ -22,10 +24,12 @@ from hopper_mjx.sweep.grid import DEFAULT_GRAVITY, KICK
 def parser() -> argparse.ArgumentParser:
     p = cli.parser("python -m hopper_mjx.sweep", __doc__)
     sub = p.add_subparsers(dest="kind", required=True)
-    kinds = (("gravity", DEFAULT_GRAVITY, 112, 10.0), ("gains", (1.62, 3.71, 9.81), 32, 10.0))
+    kinds = (("gravity", DEFAULT_GRAVITY, 112, 10.0), ("gains", (1.62, 3.71, 9.81), 32, 10.0),
+             ("compare", DEFAULT_GRAVITY, 112, 10.0))
     for kind, gravity, num, duration in kinds:
-        s = sub.add_parser(kind, help=f"sweep {kind}")
-        flag = "--values" if kind == "gravity" else "--gravity"
+        s = sub.add_parser(kind, help=f"sweep {kind}" if kind != "compare" else "gravity sweeps of several "
+                           "controllers, one table and plot")
+        flag = "--gravity" if kind == "gains" else "--values"
         s.add_argument(flag, dest="gravity", type=cli.floats(flag), default=None,
                        help=f"gravity values in m/s² (default: {','.join(map(str, gravity))})")
         s.add_argument("--world", type=Path, nargs="+", default=None, metavar="FILE.world",
@@ -34,6 +38,11 @@ def parser() -> argparse.ArgumentParser:
         if kind == "gains":
             s.add_argument("--param", required=True, help="Raibert gain to sweep (a RaibertConfig field)")
             s.add_argument("--values", type=cli.floats("--values"), required=True, help="its values")
+        if kind == "gravity":
+            s.add_argument("--controller", default="raibert", help="raibert or policy:PATH (experiments/train.py)")
+        if kind == "compare":
+            s.add_argument("--controllers", required=True,
+                           help="comma-separated: raibert and/or policy:PATH, each swept with the same kicks")
         s.add_argument("--num", type=int, default=num, help=f"replicates per grid point (default {num})")
         s.add_argument("--duration", type=float, default=duration, help="simulated seconds per instance")
         s.add_argument("--height", type=float, default=0.10, help="commanded apex rise over standing height, m")
@@ -71,14 +80,22 @@ def gravity_from_worlds(args) -> tuple[float, ...]:
 
 
 def check(args):
-    """The SweepSpec of the arguments, and the output folder; raises ValueError before anything is built."""
+    """One SweepSpec per controller (a compare sweeps several), and the output folder; raises
+    ValueError before anything is built."""
     from hopper_mjx.sweep.grid import SweepSpec
 
     gravity = gravity_from_worlds(args) if args.world is not None else tuple(args.gravity or args.default_gravity)
-    spec = SweepSpec(kind=args.kind, gravity=gravity, num=args.num, duration=args.duration,
-                     height=args.height, speed=tuple(args.speed), seed=args.seed, kick=args.kick,
-                     chunk=args.chunk, engine=args.engine, param=getattr(args, "param", None),
-                     values=tuple(args.values) if args.kind == "gains" else ())
+    names = args.controllers.split(",") if args.kind == "compare" else [getattr(args, "controller", "raibert")]
+    if len(set(names)) != len(names):
+        raise ValueError(f"--controllers lists one twice: {args.controllers}")
+    specs = []
+    for name in names:
+        specs.append(SweepSpec(kind="gains" if args.kind == "gains" else "gravity", gravity=gravity, num=args.num,
+                               duration=args.duration, height=args.height, speed=tuple(args.speed), seed=args.seed,
+                               kick=args.kick, chunk=args.chunk, engine=args.engine,
+                               param=getattr(args, "param", None), controller=name,
+                               values=tuple(args.values) if args.kind == "gains" else ()))
+        cli.check_controller(name, args.height, args.speed)  # a policy: its folder and trained range
     out = args.out or Path("runs") / f"{args.kind}-{datetime.now(timezone.utc):%Y%m%d-%H%M%S}"
     cli.check_writable("--out", out, folder=True, make_parents=True)
     if args.num_processes < 1 or not 0 <= args.process_id < args.num_processes:
@@ -86,7 +103,7 @@ def check(args):
                          f"got {args.process_id} of {args.num_processes}")
     if args.coordinator is not None and not _host_port(args.coordinator):
         raise ValueError(f"--coordinator must be HOST:PORT, got {args.coordinator!r}")
-    return spec, out
+    return specs, out
 
 
 def _host_port(text: str) -> bool:
@@ -94,10 +111,37 @@ def _host_port(text: str) -> bool:
     return bool(host) and port.isdigit() and 0 < int(port) < 65536
 
 
+def label(controller: str) -> str:
+    return "raibert" if controller == "raibert" else "policy-" + Path(controller.removeprefix("policy:")).name
+
+
+def run_one(args, spec, folder: Path):
+    """Runs one controller's sweep into `folder` and prints its report: (label, group summary), or None
+    on a process other than 0; raises KeyboardInterrupt and runner.ManifestMismatch."""
+    from hopper_mjx.sweep import report, runner
+
+    start = time.perf_counter()
+    try:
+        instances, table, facts = runner.run(spec, folder, progress=not args.no_progress)
+    except KeyboardInterrupt:
+        print(f"\ninterrupted: finished chunks are saved in {folder}; rerun the same command to resume",
+              file=sys.stderr)
+        raise
+    facts["total_wall_s"] = time.perf_counter() - start
+    if facts["processes"] > 1 and args.process_id != 0:
+        return None
+    text = report.write(folder, spec, instances, table, runner.COLUMNS, facts)
+    print(text if args.kind != "compare" else f"{label(spec.controller)}: outputs in {folder}/")
+    rate = f", {facts['steps_per_s']:,.0f} steps/s" if facts["steps_per_s"] else " (all chunks were already done)"
+    print(f"\n{len(instances)} instances x {spec.duration:g} s in {facts['total_wall_s']:.0f} s{rate}; "
+          f"outputs in {folder}/")
+    return label(spec.controller), report.group_summary(spec, instances, table, runner.COLUMNS)
+
+
 def main(argv=None) -> int:
     args = parser().parse_args(argv)
     try:
-        spec, out = check(args)
+        specs, out = check(args)
     except ValueError as err:
         return cli.fail(err)
     runtime.configure()
@@ -106,23 +150,17 @@ def main(argv=None) -> int:
         import jax
 
         jax.distributed.initialize(args.coordinator, num_processes=args.num_processes, process_id=args.process_id)
-    start = time.perf_counter()
-    try:
-        instances, table, facts = runner.run(spec, out, progress=not args.no_progress)
-    except runner.ManifestMismatch as err:
-        return cli.fail(err)
-    except KeyboardInterrupt:
-        print(f"\ninterrupted: finished chunks are saved in {out}; rerun the same command to resume",
-              file=sys.stderr)
-        return 130
-    facts["total_wall_s"] = time.perf_counter() - start
-    if facts["processes"] > 1 and args.process_id != 0:
-        return 0
-    text = report.write(out, spec, instances, table, runner.COLUMNS, facts)
-    print(text)
-    rate = f", {facts['steps_per_s']:,.0f} steps/s" if facts["steps_per_s"] else " (all chunks were already done)"
-    print(f"\n{len(instances)} instances x {spec.duration:g} s in {facts['total_wall_s']:.0f} s{rate}; "
-          f"outputs in {out}/")
+    results = []
+    for spec in specs:
+        try:
+            result = run_one(args, spec, out / label(spec.controller) if args.kind == "compare" else out)
+        except runner.ManifestMismatch as err:
+            return cli.fail(err)
+        except KeyboardInterrupt:
+            return 130
+        results += [result] if result else []
+    if args.kind == "compare" and results:
+        print(report.write_comparison(out, specs[0], results))
     return 0
 
 

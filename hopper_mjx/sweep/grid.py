@@ -37,6 +37,7 @@ class SweepSpec:
     param: str | None = None  # Raibert gain swept by `gains`
     values: tuple[float, ...] = ()
     engine: str = "auto"  # hopper_mjx.engine name
+    controller: str = "raibert"  # or policy:PATH, a policy trained by experiments/train.py
 
     def __post_init__(self):
         if self.kind not in ("gravity", "gains"):
@@ -61,6 +62,10 @@ class SweepSpec:
         from hopper_mjx import cli
 
         cli.check_engine(self.engine)
+        if self.controller != "raibert" and not self.controller.startswith("policy:"):
+            raise ValueError(f"--controller {self.controller!r}: a sweep runs raibert or policy:PATH")
+        if self.kind == "gains" and self.controller != "raibert":
+            raise ValueError("a gains sweep varies Raibert's gains: use --controller raibert")
         if self.kind == "gains":
             from hopper_mjx.control.raibert import GAINS
 

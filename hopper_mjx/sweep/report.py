@@ -74,7 +74,7 @@ def versions() -> dict:
     return {p: metadata.version(p) for p in ("hopper_mjx", "jax", "jaxlib", "mujoco", "mujoco-mjx", "brax", "numpy")}
 
 
-def table_text(spec: SweepSpec, groups: list[dict]) -> str:
+def table_text(spec: SweepSpec, groups: list[dict], label: str | None = None) -> str:
     cols = [("g m/s²", "gravity", "{:.2f}"), ("", "label", "{}"), ("n", "n", "{}"), ("alive", "survival", "{:.0%}"),
             ("hops", "hops", "{:.1f}"), ("apex m", "apex_height", "{:.3f}"), ("arc m", "flight_rise", "{:.3f}"),
             ("flight s", "flight_time", "{:.3f}"), ("stance s", "stance_time", "{:.3f}"),
@@ -82,6 +82,8 @@ def table_text(spec: SweepSpec, groups: list[dict]) -> str:
             ("|v err|", "tracking_error", "{:.2f}"), ("CoT", "cost_of_transport", "{:.2f}")]
     if spec.kind == "gains":
         cols.insert(0, (spec.param, spec.param, "{:g}"))
+    if label:
+        cols.insert(0, ("controller", "controller", "{}"))
     cells = [[h for h, _, _ in cols]]
     for g in groups:
         cells.append(["-" if g.get(k) is None else f.format(g[k]) for _, k, f in cols])
@@ -104,13 +106,16 @@ def save(fig, path: Path) -> None:
     _pyplot().close(fig)
 
 
-def gravity_figure(spec: SweepSpec, groups: list[dict]):
-    """The gravity sweep's figure (a matplotlib Figure; `write` saves it as gravity.png)."""
+def _column(groups: list[dict], key: str) -> np.ndarray:
+    return np.array([np.nan if r.get(key) is None else r[key] for r in groups])
+
+
+def gravity_figure(spec: SweepSpec, groups: list[dict], series: list | None = None):
+    """The gravity sweep's figure (a matplotlib Figure; `write` saves it as gravity.png); `series`
+    [(label, groups)] draws several controllers in one figure."""
     plt = _pyplot()
-    groups = sorted(groups, key=lambda r: r["gravity"])  # the x axis ascends whatever order --values had
-    g = np.array([r["gravity"] for r in groups])
-    val = lambda k: np.array([np.nan if r.get(k) is None else r[k] for r in groups])
-    err = lambda k: np.array([np.nan if r.get(f"{k}_std") is None else r[f"{k}_std"] for r in groups])
+    # The x axis ascends whatever order --values had.
+    series = [(name, sorted(rows_, key=lambda r: r["gravity"])) for name, rows_ in (series or [("measured", groups)])]
     # Hopping in place travels (almost) nowhere, so work / (m·g·distance) is empty or noise there;
     # the energy of one hop is meaningful either way.
     energy = (("cost_of_transport", "cost of transport") if any(spec.speed)
@@ -119,7 +124,9 @@ def gravity_figure(spec: SweepSpec, groups: list[dict]):
               ("duty_factor", "duty factor"), ("survival", "survival"), energy]
     fig, axes = plt.subplots(2, 3, figsize=(13, 7), constrained_layout=True)
     for ax, (key, label) in zip(axes.flat, panels):
-        ax.errorbar(g, val(key), yerr=None if key == "survival" else err(key), fmt="o-", capsize=3, label="measured")
+        for name, rows_ in series:
+            ax.errorbar(_column(rows_, "gravity"), _column(rows_, key), fmt="o-", capsize=3, label=name,
+                        yerr=None if key == "survival" else _column(rows_, f"{key}_std"))
         ax.set_xlabel("gravity g (m/s²)")
         ax.set_ylabel(label)
         for gp, name in PLANETS.items():
@@ -127,11 +134,18 @@ def gravity_figure(spec: SweepSpec, groups: list[dict]):
             ax.text(gp, 1.0, name, transform=ax.get_xaxis_transform(), ha="center", va="bottom", fontsize=7)
         ax.grid(alpha=0.3)
     axes[0, 0].axhline(spec.height, color="C3", ls="--", label="commanded")
-    axes[0, 1].plot(g, val("ballistic_flight_time"), "C3x--", label="ballistic 2√(2h/g), h = each hop's measured rise")
+    if len(series) == 1:
+        rows_ = series[0][1]
+        axes[0, 1].plot(_column(rows_, "gravity"), _column(rows_, "ballistic_flight_time"), "C3x--",
+                        label="ballistic 2√(2h/g), h = each hop's measured rise")
     axes[0, 0].legend(fontsize=8)
     axes[0, 1].legend(fontsize=8)
     axes[1, 1].set_ylim(-0.05, 1.05)
-    fig.suptitle(f"Raibert hopping vs gravity: {spec.num} replicates per g, {spec.duration:g} s each")
+    if len(series) > 1:
+        who = " vs ".join(name for name, _ in series)
+    else:
+        who = "Raibert" if spec.controller == "raibert" else spec.controller
+    fig.suptitle(f"{who} hopping vs gravity: {spec.num} replicates per g, {spec.duration:g} s each")
     return fig
 
 
@@ -177,5 +191,16 @@ def write(out: Path, spec: SweepSpec, inst: Instances, table: np.ndarray, column
     figure = gravity_figure if spec.kind == "gravity" else gains_figure
     save(figure(spec, groups), out / f"{spec.kind}.png")
     text = table_text(spec, groups)
+    (out / "table.txt").write_text(text + "\n")
+    return text
+
+
+def write_comparison(out: Path, spec: SweepSpec, results: list[tuple[str, list[dict]]]) -> str:
+    """One table (table.txt, comparison.json) and one plot (gravity.png) of several controllers'
+    gravity sweeps: same gravities, kicks, commands and metrics."""
+    rows_ = [{"controller": name, **g} for name, groups in results for g in groups]
+    (out / "comparison.json").write_text(json.dumps({"groups": rows_, "arguments": spec.to_json()}, indent=1))
+    save(gravity_figure(spec, results[0][1], series=results), out / "gravity.png")
+    text = table_text(spec, rows_, label="controller")
     (out / "table.txt").write_text(text + "\n")
     return text

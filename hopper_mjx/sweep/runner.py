@@ -73,17 +73,32 @@ class ChunkRunner:
 
     def __init__(self, spec: SweepSpec, instances: Instances, sim: Sim):
         self.spec, self.instances, self.sim = spec, instances, sim
-        self.controller = raibert(sim.robot)
+        self.policy = spec.controller.removeprefix("policy:") if spec.controller != "raibert" else None
+        if self.policy is None:
+            self.controller = raibert(sim.robot)
+        else:  # brax is imported only when a policy is swept
+            from hopper_mjx.envs.policy import policy_controller
+
+            self.controller = policy_controller(sim.mj_model, self.policy)
         self.steps = steps_for(spec.duration, sim.layout.timestep, SENSORS)
+
+    def params(self, full: np.ndarray):
+        """Every instance's command (and swept gain): the same for Raibert and a policy."""
+        spec = self.spec
+        if self.policy is not None:
+            from hopper_mjx.envs.policy import policy_params, read
+
+            return policy_params(self.sim.robot, len(full), height=spec.height, speed=spec.speed,
+                                 config=read(self.policy)[3])
+        gains = {spec.param: self.instances.value[full]} if spec.kind == "gains" else {}
+        return raibert_params(len(full), height=spec.height, speed=spec.speed, **gains)
 
     def __call__(self, index: np.ndarray) -> np.ndarray:
         """Metrics (len(index), len(COLUMNS)) of the given instances."""
         n = len(index)
         full = np.concatenate([index, np.full(self.spec.chunk - n, index[0])])  # one shape, one compile
         inst = self.instances
-        gains = {self.spec.param: inst.value[full]} if self.spec.kind == "gains" else {}
-        params = raibert_params(len(full), height=self.spec.height, speed=self.spec.speed, **gains)
-        final, traj = self.sim.run(gravity_vectors(inst.gravity[full]), self.controller, params,
+        final, traj = self.sim.run(gravity_vectors(inst.gravity[full]), self.controller, self.params(full),
                                    duration=self.spec.duration, sensors=SENSORS, key=self.spec.seed,
                                    qvel=inst.qvel[full])
         result = metrics.hop_metrics(traj, inst.gravity[full], command_speed=self.spec.speed,

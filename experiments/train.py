@@ -1,0 +1,425 @@
+"""Brax PPO or SAC on any monoped task (`hopper_mjx.envs.names()`), gravity drawn per episode, the
+physics on the chain engine (`--engine mjx` for MuJoCo MJX).
+
+    nice -n 5 python experiments/train.py --task hop --algo ppo --out runs/hop-ppo --observe-gravity
+    python experiments/train.py --task hop --algo ppo --out runs/hop-ppo --observe-gravity   # again: resumes
+    python experiments/train.py --task hop_velocity --algo sac --out runs/hopv-sac
+    python experiments/train.py --task hop --out runs/hop-ppo --observe-gravity --scan-checkpoints --eval-num 64
+    python -m hopper_mjx.simulate --controller policy:runs/hop-ppo --gravity 9.81,3.71,1.62 --duration 10
+
+Writes into --out: checkpoints/<env step>/ (every evaluation), policy/ (the final
+params, loadable by `hopper_mjx.envs.policy` as `policy:PATH`), metrics.json (arguments,
+task config, one record per evaluation, wall time) and reward_curve.png.
+"""
+
+from __future__ import annotations
+
+import argparse
+import functools
+import json
+import math
+import shutil
+import sys
+import time
+from pathlib import Path
+
+from hopper_mjx import cli, runtime
+
+HISTORY = "metrics.json"
+MIN_HOPS = 5  # hops in --eval-duration that count as hopping (the threshold of --scan-checkpoints)
+
+
+ALGORITHMS = ("ppo", "sac")
+
+
+def parser() -> argparse.ArgumentParser:
+    p = cli.parser("experiments/train.py", __doc__)
+    p.add_argument("--task", default="hop", help="stand, hop or hop_velocity (hopper_mjx.envs.names())")
+    p.add_argument("--algo", default="ppo", help="ppo or sac (Brax's agents)")
+    p.add_argument("--out", default="runs/ppo", help="output folder (resumes if it holds checkpoints)")
+    p.add_argument("--timesteps", type=int, default=8_000_000, help="total environment steps (policy steps)")
+    p.add_argument("--num-envs", type=int, default=256, help="parallel environments (a multiple of the devices)")
+    p.add_argument("--episode-length", type=int, default=500, help="policy steps per episode (500 = 10 s at 50 Hz)")
+    p.add_argument("--eval-every", type=int, default=400_000,
+                   help="environment steps between checkpoints (and Brax's evaluations)")
+    p.add_argument("--no-eval", action="store_true",
+                   help="PPO: no evaluation episodes, checkpoints only (metrics.json then holds training rates)")
+    p.add_argument("--num-eval-envs", type=int, default=64)
+    p.add_argument("--unroll-length", type=int, default=20)
+    p.add_argument("--batch-size", type=int, default=128)
+    p.add_argument("--num-minibatches", type=int, default=8)
+    p.add_argument("--updates-per-batch", type=int, default=4)
+    p.add_argument("--learning-rate", type=float, default=3e-4)
+    p.add_argument("--entropy-cost", type=float, default=1e-2)
+    p.add_argument("--discounting", type=float, default=0.99)
+    p.add_argument("--policy-layers", default="64,64,64", help="hidden layer sizes of the policy MLP")
+    p.add_argument("--value-layers", default="128,128,128", help="hidden layer sizes of the value MLP")
+    p.add_argument("--gravity-range", default=None,
+                   help="low,high m/s², drawn log-uniformly per episode (default: the task's, 0.5,12)")
+    p.add_argument("--observe-gravity", action="store_true", help="put the gravity magnitude in the observation")
+    p.add_argument("--engine", default="auto",
+                   help="physics engine: auto (chain for the monoped), chain or mjx (default auto)")
+    p.add_argument("--sac-replay", type=int, default=1_000_000, help="SAC: replay buffer size (env steps)")
+    p.add_argument("--sac-min-replay", type=int, default=8192, help="SAC: env steps collected before learning")
+    p.add_argument("--sac-grad-updates", type=int, default=8, help="SAC: gradient updates per env step batch")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--evaluate", action="store_true",
+                   help="afterwards, run the policy and the Raibert controller in the core at --eval-gravity "
+                        "for --eval-duration s and compare their hop metrics (evaluation.json / .md)")
+    p.add_argument("--eval-gravity", default="9.81,3.71,1.62", help="m/s², comma-separated")
+    p.add_argument("--eval-duration", type=float, default=10.0, help="s of simulated time")
+    p.add_argument("--eval-height", type=float, default=0.2, help="commanded apex rise above standing, m")
+    p.add_argument("--eval-num", type=int, default=4, help="instances per gravity (initial kicks differ)")
+    p.add_argument("--eval-speed", type=cli.floats("--eval-speed"), default=[0.0, 0.0],
+                   help="commanded VX,VY m/s of the evaluation")
+    p.add_argument("--scan-checkpoints", action="store_true",
+                   help="afterwards, evaluate the checkpoints in step order as --evaluate does (policy only) "
+                        f"and report the first at which every instance survives with >= {MIN_HOPS} hops "
+                        "(threshold.json); checkpoints whose Brax evaluation episodes ended early are skipped")
+    return p
+
+
+def _layers(text: str) -> tuple[int, ...]:
+    sizes = tuple(int(v) for v in text.split(",") if v.strip())
+    if not sizes or min(sizes) < 1:
+        raise ValueError(f"layer sizes must be positive integers, got {text!r}")
+    return sizes
+
+
+def _pair(text: str, what: str) -> tuple[float, float]:
+    values = tuple(float(v) for v in text.split(","))
+    if len(values) != 2:
+        raise ValueError(f"{what} must be 'low,high', got {text!r}")
+    return values
+
+
+def latest_checkpoint(out: Path) -> tuple[Path, int] | None:
+    """The newest complete checkpoint under out/checkpoints, and its env step."""
+    from hopper_mjx.envs.policy import ENV_CONFIG
+
+    done = [p for p in (out / "checkpoints").glob("[0-9]" * 12) if (p / ENV_CONFIG).exists()]
+    if not done:
+        return None
+    path = max(done, key=lambda p: int(p.name))
+    return path, int(path.name)
+
+
+def check(args) -> None:
+    """Raises ValueError naming the first bad argument; JSON reads only, nothing is built."""
+    from hopper_mjx import envs
+
+    if args.task not in envs.names():
+        raise ValueError(f"--task {args.task!r} is unknown; choose from {', '.join(envs.names())}")
+    if args.algo not in ALGORITHMS:
+        raise ValueError(f"--algo {args.algo!r} is unknown; choose from {', '.join(ALGORITHMS)}")
+    cli.check_engine(args.engine)
+    _layers(args.policy_layers), _layers(args.value_layers)
+    if args.gravity_range is not None:
+        lo, hi = _pair(args.gravity_range, "--gravity-range")
+        if not 0 < lo <= hi:
+            raise ValueError(f"--gravity-range must be 0 < low <= high m/s², got {args.gravity_range!r}")
+    if args.num_envs < 1 or args.timesteps < 1:
+        raise ValueError("--num-envs and --timesteps must be >= 1")
+    if args.no_eval and args.algo != "ppo":
+        raise ValueError("--no-eval is for --algo ppo (Brax's SAC evaluates at every checkpoint)")
+    resume = latest_checkpoint(Path(args.out))
+    if resume:  # a folder of another task or algorithm cannot be resumed into this one
+        from hopper_mjx.envs import monoped, policy
+
+        _, algo, net, config = policy.read(resume[0])
+        size = monoped.observation_size(envs.tasks.task_class(args.task).command_size, args.observe_gravity)
+        if algo != args.algo or config.task != args.task or net["observation_size"] != size:
+            raise ValueError(f"--out {args.out} holds a {algo} policy of task {config.task!r} with "
+                             f"{net['observation_size']} observations; --task {args.task} --algo {args.algo} "
+                             f"needs {size}: use another --out")
+
+
+def task_config(args):
+    from hopper_mjx import envs
+
+    overrides = {"observe_gravity": args.observe_gravity, "engine": args.engine}
+    if args.gravity_range is not None:
+        overrides["gravity_range"] = _pair(args.gravity_range, "--gravity-range")
+    return envs.make(args.task, **overrides)
+
+
+def _shared(args, env, factory, remaining: int, start_step: int, resume, per_train_step: int) -> dict:
+    """The keyword arguments Brax's PPO and SAC `train` both take, from ours."""
+    from hopper_mjx.envs.wrappers import wrap_for_training
+
+    return dict(
+        environment=env,
+        num_timesteps=remaining,
+        num_evals=max(1, math.ceil(remaining / max(args.eval_every, per_train_step))) + 1,
+        episode_length=args.episode_length,
+        num_envs=args.num_envs,
+        num_eval_envs=args.num_eval_envs,
+        deterministic_eval=True,
+        wrap_env_fn=wrap_for_training,  # a fresh gravity and command every episode
+        learning_rate=args.learning_rate,
+        discounting=args.discounting,
+        batch_size=args.batch_size,
+        normalize_observations=True,
+        network_factory=factory,
+        seed=args.seed + start_step,  # a resumed run draws fresh environments
+        restore_checkpoint_path=str(resume[0]) if resume else None,
+    )
+
+
+def run_ppo(args, env, factory, remaining: int, start_step: int, resume, progress, save_checkpoint) -> None:
+    """Brax PPO for the `remaining` environment steps, resuming from `resume` (path, step) if given."""
+    from brax.training.agents.ppo import train as ppo
+
+    per_train_step = args.batch_size * args.num_minibatches * args.unroll_length
+    ppo.train(
+        **_shared(args, env, factory, remaining, start_step, resume, per_train_step),
+        unroll_length=args.unroll_length,
+        num_minibatches=args.num_minibatches,
+        num_updates_per_batch=args.updates_per_batch,
+        entropy_cost=args.entropy_cost,
+        gae_lambda=0.95,
+        clipping_epsilon=0.2,
+        max_grad_norm=1.0,
+        progress_fn=progress,
+        run_evals=not args.no_eval,
+        policy_params_fn=lambda step, make_policy, params: save_checkpoint(step, params),
+    )
+
+
+def run_sac(args, env, factory, remaining: int, start_step: int, resume, progress, save_checkpoint) -> None:
+    """Brax SAC for the `remaining` environment steps; Brax saves its checkpoints before each
+    evaluation into a scratch folder, from where `progress` files them under the global step."""
+    import tempfile
+
+    from brax.training import checkpoint as brax_checkpoint
+    from brax.training.agents.sac import train as sac
+
+    with tempfile.TemporaryDirectory(dir=Path(args.out).resolve()) as scratch:
+        def progress_and_file(step, metrics):
+            if step > 0:
+                save_checkpoint(step, brax_checkpoint.load(Path(scratch) / f"{int(step):012d}"))
+            progress(step, metrics)
+
+        sac.train(
+            **_shared(args, env, factory, remaining, start_step, resume, args.num_envs),
+            min_replay_size=min(args.sac_min_replay, remaining - 1),
+            max_replay_size=args.sac_replay,
+            grad_updates_per_step=args.sac_grad_updates,
+            checkpoint_logdir=scratch,
+            progress_fn=progress_and_file,
+        )
+
+
+def networks(args):
+    """(network factory, Brax checkpoint module) of the algorithm."""
+    if args.algo == "ppo":
+        from brax.training.agents.ppo import checkpoint, networks
+
+        return functools.partial(networks.make_ppo_networks, policy_hidden_layer_sizes=_layers(args.policy_layers),
+                                 value_hidden_layer_sizes=_layers(args.value_layers)), checkpoint
+    from brax.training.agents.sac import checkpoint, networks
+
+    return functools.partial(networks.make_sac_networks, hidden_layer_sizes=_layers(args.policy_layers)), checkpoint
+
+
+def train(args) -> dict:
+    """Trains (or resumes) as the arguments say; returns the metrics record also saved to metrics.json."""
+    import jax
+
+    from hopper_mjx.envs import policy
+
+    check(args)
+    out = Path(args.out).resolve()  # orbax writes checkpoints to absolute paths only
+    devices = jax.local_device_count()
+    if args.num_envs % devices:
+        raise ValueError(f"--num-envs={args.num_envs} must be a multiple of the {devices} local devices")
+    if args.algo == "ppo" and (args.batch_size * args.num_minibatches) % args.num_envs:
+        raise ValueError("--batch-size x --num-minibatches must be a multiple of --num-envs")
+    out.mkdir(parents=True, exist_ok=True)
+    env = task_config(args)
+    config = env.config
+    factory, checkpoint = networks(args)
+    network_config = checkpoint.network_config(env.observation_size, env.action_size, True, factory)
+
+    record_path = out / HISTORY
+    record = json.loads(record_path.read_text()) if record_path.exists() else {"history": [], "wall_time": 0.0}
+    record.update(args=vars(args), env_config=config.to_dict())
+    resume = latest_checkpoint(out)
+    start_step = resume[1] if resume else 0
+    remaining = args.timesteps - start_step
+    if resume:
+        print(f"resuming from {resume[0]} (step {start_step:,})", flush=True)
+    started, wall_before = time.perf_counter(), record["wall_time"]
+
+    def progress(step, metrics):
+        row = {"step": start_step + int(step), "wall_time": wall_before + time.perf_counter() - started,
+               **{k: float(v) for k, v in metrics.items() if k.startswith(("eval/", "training/sps"))}}
+        record["history"].append(row)
+        record["wall_time"] = row["wall_time"]
+        record_path.write_text(json.dumps(record, indent=1))
+        print(f"step {row['step']:>10,} | reward {row.get('eval/episode_reward', math.nan):8.1f} | "
+              f"episode {row.get('eval/avg_episode_length', math.nan):5.0f} steps | "
+              f"{row.get('training/sps', math.nan):6.0f} steps/s | {row['wall_time'] / 60:5.1f} min", flush=True)
+
+    def save_checkpoint(step, params):
+        if step > 0:
+            step = start_step + int(step)
+            checkpoint.save(out / "checkpoints", step, params, network_config)
+            policy.write_env_config(out / "checkpoints" / f"{step:012d}", config)
+
+    if remaining > 0:
+        run = run_ppo if args.algo == "ppo" else run_sac
+        run(args, env, factory, remaining, start_step, resume, progress, save_checkpoint)
+    final = latest_checkpoint(out)
+    if final is None:
+        raise ValueError(f"no checkpoint was written under {out / 'checkpoints'}")
+    shutil.rmtree(out / "policy", ignore_errors=True)
+    shutil.copytree(final[0], out / "policy")
+    record["final_step"] = final[1]
+    record_path.write_text(json.dumps(record, indent=1))
+    plot_rewards(record["history"], out / "reward_curve.png", f"{args.algo.upper()} on {args.task}")
+    return record
+
+
+COMPARED = ("survival", "hops", "apex_height", "hop_period", "tracking_error", "cost_of_transport")
+
+
+def evaluation_batch(gravities, num: int, seed: int, nv: int):
+    """(gravity magnitudes (n,), initial velocities (n, nv)): `num` instances per gravity, kicked
+    exactly as a gravity sweep with this seed kicks its replicates (`sweep.grid.expand`)."""
+    from hopper_mjx.sweep.grid import SweepSpec, expand
+
+    spec = SweepSpec(kind="gravity", gravity=tuple(gravities), num=num, duration=1.0, height=0.0,
+                     speed=(0.0, 0.0), seed=seed)
+    instances = expand(spec, nv)
+    return instances.gravity, instances.qvel
+
+
+def evaluate(policy_path, *, gravities, duration: float, height: float, num: int, seed: int = 0,
+             speed=(0.0, 0.0), raibert_too: bool = True) -> dict:
+    """Hop metrics of the policy and (`raibert_too`) of the Raibert controller, same batch, same commands.
+
+    Each controller runs `num` instances per gravity for `duration` s in the core,
+    from the standing pose with small random initial base velocities (the sweep's kicks).
+    Returns {controller: {gravity: {metric: mean over instances}}}.
+    """
+    import numpy as np
+
+    from hopper_mjx import metrics, model
+    from hopper_mjx.control import raibert
+    from hopper_mjx.envs import policy
+    from hopper_mjx.sim import Sim, gravity_vectors
+    from hopper_mjx.sweep.runner import SENSORS
+
+    mj_model = model.load()
+    sim = Sim(mj_model)
+    g, kick = evaluation_batch(gravities, num, seed, sim.layout.nv)
+    sensors = SENSORS  # the sweep's streams and kicks: the numbers compare with a sweep's
+    controllers = {"policy": (policy.policy_controller(mj_model, policy_path),
+                              policy.policy_params(sim.robot, len(g), height=height, speed=speed,
+                                                   config=policy.read(policy_path)[3]))}
+    if raibert_too:
+        controllers["raibert"] = (raibert.raibert(sim.robot),
+                                  raibert.raibert_params(len(g), height=height, speed=speed))
+    out = {}
+    for name, (controller, params) in controllers.items():
+        final, traj = sim.run(gravity_vectors(g), controller, params, duration=duration, sensors=sensors,
+                              key=seed, qvel=kick)
+        m = metrics.hop_metrics(traj, g, standing_height=sim.robot.standing_height, command_speed=speed,
+                                work=np.asarray(final.cstate.work), mass=sim.layout.total_mass)
+        m["survival"] = ~(m["fell"] | np.asarray(final.diverged))
+        out[name] = {f"{v:g}": {**{k: _mean(m[k][g == v]) for k in COMPARED}, "min_hops": int(m["hops"][g == v].min())}
+                     for v in gravities}
+    return out
+
+
+def first_hopping_checkpoint(args) -> dict | None:
+    """The first checkpoint whose policy keeps every instance at every --eval-gravity alive for
+    --eval-duration s with >= MIN_HOPS hops, with the training wall time at which it was saved; None
+    if none does. Checkpoints whose Brax evaluation episodes lasted < 95 % of --episode-length
+    already fell in training, and are not run."""
+    out = Path(args.out)
+    rows = {r["step"]: r for r in json.loads((out / HISTORY).read_text())["history"]}
+    gravities = [float(v) for v in args.eval_gravity.split(",")]
+    for path in sorted((out / "checkpoints").glob("[0-9]" * 12)):
+        row = rows.get(int(path.name), {})
+        if row.get("eval/avg_episode_length", args.episode_length) < 0.95 * args.episode_length:
+            continue
+        result = evaluate(path, gravities=gravities, duration=args.eval_duration, height=args.eval_height,
+                          num=args.eval_num, seed=args.seed, speed=args.eval_speed, raibert_too=False)["policy"]
+        passed = all(r["survival"] == 1 and r["min_hops"] >= MIN_HOPS for r in result.values())
+        print(f"step {int(path.name):>10,} ({row.get('wall_time', math.nan) / 60:.1f} min): "
+              + ", ".join(f"g {g}: {r['survival']:.0%} alive, >= {r['min_hops']} hops" for g, r in result.items()),
+              flush=True)
+        if passed:
+            return {"step": int(path.name), "wall_time": row.get("wall_time"), "evaluation": result}
+    return None
+
+
+def _mean(values) -> float | None:
+    """Mean over instances of the defined (finite) values; None if there are none."""
+    import numpy as np
+
+    values = np.asarray(values, dtype=float)
+    return float(values[np.isfinite(values)].mean()) if np.isfinite(values).any() else None
+
+
+def evaluation_table(result: dict, height: float) -> str:
+    """Markdown: one row per controller and gravity."""
+    lines = [f"| controller | g (m/s²) | survival | hops (min) | apex rise (m, cmd {height:g}) | hop period (s) "
+             "| speed error (m/s) | cost of transport |", "|---|---|---|---|---|---|---|---|"]
+    fmt = lambda v, f: "n/a" if v is None else format(v, f)
+    for name, by_g in result.items():
+        for g, row in by_g.items():
+            lines.append(f"| {name} | {g} | {fmt(row['survival'], '.0%')} | {fmt(row['hops'], '.1f')} "
+                         f"({row['min_hops']}) | {fmt(row['apex_height'], '.3f')} | {fmt(row['hop_period'], '.3f')} "
+                         f"| {fmt(row['tracking_error'], '.3f')} | {fmt(row['cost_of_transport'], '.2f')} |")
+    return "\n".join(lines)
+
+
+def plot_rewards(history: list[dict], path: Path, title: str) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    rows = [r for r in history if "eval/episode_reward" in r]
+    fig, ax = plt.subplots(figsize=(6, 3.5))
+    ax.plot([r["step"] for r in rows], [r["eval/episode_reward"] for r in rows], "o-")
+    ax.set_xlabel("environment steps (50 Hz policy steps)")
+    ax.set_ylabel("evaluation episode reward")
+    ax.set_title(f"{title}, the MJX monoped")
+    ax.grid(alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def main(argv=None) -> int:
+    args = parser().parse_args(argv)
+    runtime.configure()
+    try:
+        check(args)
+        record = train(args)
+    except ValueError as err:
+        return cli.fail(err)
+    print(f"wrote {args.out}/policy (step {record['final_step']:,}), {HISTORY}, reward_curve.png; "
+          f"{record['wall_time'] / 60:.1f} min of training")
+    if args.evaluate:
+        gravities = [float(v) for v in args.eval_gravity.split(",")]
+        result = evaluate(Path(args.out) / "policy", gravities=gravities, duration=args.eval_duration,
+                          height=args.eval_height, num=args.eval_num, seed=args.seed, speed=args.eval_speed)
+        table = evaluation_table(result, args.eval_height)
+        (Path(args.out) / "evaluation.json").write_text(json.dumps(result, indent=1))
+        (Path(args.out) / "evaluation.md").write_text(table + "\n")
+        print(table)
+    if args.scan_checkpoints:
+        found = first_hopping_checkpoint(args)
+        (Path(args.out) / "threshold.json").write_text(json.dumps(found, indent=1))
+        print("no checkpoint meets the threshold" if found is None else
+              f"first at step {found['step']:,}, {found['wall_time'] / 60:.1f} min of training")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

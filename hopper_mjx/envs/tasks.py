@@ -1,0 +1,122 @@
+"""The tasks: what each commands and what it rewards. Everything else is `MonopedEnv`'s.
+
+| task | command (per episode) | task reward terms |
+|---|---|---|
+| `stand` | none: hold the standing height | alive, height, support (foot carries the weight) |
+| `hop` | apex height, zero speed | apex (ballistic), speed (to zero) |
+| `hop_velocity` | apex height and (vx, vy) | apex (ballistic), speed (to the command) |
+
+Every task also pays `monoped.posture_terms` (upright, effort, smoothness, spin, fall).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import jax
+import jax.numpy as jnp
+
+from hopper_mjx.envs.monoped import MonopedConfig, MonopedEnv, closeness, predicted_apex, speed_term
+
+# The gravity range every task draws from by default, m/s², log-uniform.
+GRAVITY_RANGE = (0.5, 12.0)
+
+
+class Stand(MonopedEnv):
+    """Stay upright at the standing height with little effort: openai_ros `HopperStayUp`'s
+    counterpart (docs/learning.md says where it follows that task and where it differs)."""
+
+    command_size = 0
+
+    @classmethod
+    def default_config(cls) -> MonopedConfig:
+        return MonopedConfig(task="stand", gravity_range=GRAVITY_RANGE, apex_range=(0.0, 0.0),
+                             speed_range=(0.0, 0.0), w_alive=1.0, w_height=1.0, w_support=0.5,
+                             w_apex=0.0, w_speed=0.5, w_effort=0.2)
+
+    def sample_command(self, key: jax.Array) -> jax.Array:
+        return jnp.zeros(0)
+
+    def task_terms(self, d, g: jax.Array, command: jax.Array) -> dict[str, jax.Array]:
+        cfg = self.config
+        # The floor's vertical push on the foot against the robot's weight under this episode's g.
+        support = self.foot_force_z(d) / (self.layout.total_mass * jnp.maximum(g, 0.1))
+        return {
+            "alive": jnp.float32(cfg.w_alive),
+            "height": cfg.w_height * closeness(d.qpos[2] - self.standing_height, cfg.height_scale),
+            "support": cfg.w_support * closeness(support - 1.0, cfg.support_scale),
+            "speed": speed_term(cfg, d, jnp.zeros(2)),
+        }
+
+    def foot_force_z(self, d) -> jax.Array:
+        """The floor's vertical push on the foot at the engine's last forward, N."""
+        return self.engine.foot_contact(self.engine.model, d)[1][2]
+
+
+class Hop(MonopedEnv):
+    """Hop in place to a commanded apex height (today's environment; `speed_range` may be widened)."""
+
+    command_size = 3  # apex height m, vx, vy m/s
+
+    @classmethod
+    def default_config(cls) -> MonopedConfig:
+        # Apex 0.95-1.2 m: rises of 0.068-0.318 m, the sweep's default 0.10 m among them.
+        return MonopedConfig(task="hop", gravity_range=GRAVITY_RANGE, apex_range=(0.95, 1.2), speed_range=(0.0, 0.0))
+
+    def sample_command(self, key: jax.Array) -> jax.Array:
+        """(apex height m, vx m/s, vy m/s), uniform over the configured ranges."""
+        cfg = self.config
+        k_apex, k_vx, k_vy = jax.random.split(key, 3)
+        draw = lambda k, bounds: jax.random.uniform(k, (1,), minval=bounds[0], maxval=bounds[1])
+        return jnp.concatenate([draw(k_apex, cfg.apex_range), draw(k_vx, cfg.speed_range),
+                                draw(k_vy, cfg.vy_range)])
+
+    def task_terms(self, d, g: jax.Array, command: jax.Array) -> dict[str, jax.Array]:
+        cfg = self.config
+        return {
+            "apex": cfg.w_apex * closeness(predicted_apex(d, g) - command[0], cfg.apex_scale),
+            "speed": speed_term(cfg, d, command[1:3]),
+        }
+
+
+class HopVelocity(Hop):
+    """Hop while tracking a commanded (vx, vy) and apex height. The command box is one the
+    Raibert controller tracks at every gravity of the range (docs/learning.md)."""
+
+    @classmethod
+    def default_config(cls) -> MonopedConfig:
+        # Apex 0.93-1.03 m: a rise of 0.048-0.148 m over the 0.882 m standing height.
+        return MonopedConfig(task="hop_velocity", gravity_range=GRAVITY_RANGE, apex_range=(0.93, 1.03),
+                             speed_range=(-0.5, 0.5), lateral_speed_range=(-0.3, 0.3), w_speed=1.0)
+
+
+TASKS: dict[str, type[MonopedEnv]] = {"stand": Stand, "hop": Hop, "hop_velocity": HopVelocity}
+
+
+def names() -> list[str]:
+    return list(TASKS)
+
+
+def task_class(name: str) -> type[MonopedEnv]:
+    if name not in TASKS:
+        raise ValueError(f"unknown task {name!r}; choose from {', '.join(TASKS)}")
+    return TASKS[name]
+
+
+def default_config(name: str) -> MonopedConfig:
+    return task_class(name).default_config()
+
+
+def make(name: str, mj_model=None, **overrides) -> MonopedEnv:
+    """The task `name` with its `default_config()`, fields replaced by `overrides`."""
+    cls = task_class(name)
+    known = {f.name for f in dataclasses.fields(MonopedConfig)} - {"task"}
+    unknown = set(overrides) - known
+    if unknown:
+        raise ValueError(f"unknown {name} config field(s): {sorted(unknown)}")
+    return cls(dataclasses.replace(cls.default_config(), **overrides), mj_model)
+
+
+def from_config(config: MonopedConfig, mj_model=None) -> MonopedEnv:
+    """The env a saved config describes (a trained policy's `hopper_env.json`)."""
+    return task_class(config.task)(config, mj_model)

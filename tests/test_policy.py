@@ -1,0 +1,124 @@
+"""A policy folder as `--controller policy:PATH`: in the core, in simulate's checks and in `sweep compare`.
+
+The policy is an untrained Brax PPO network (seeded initial params) saved as experiments/train.py
+saves one: what is tested is the path from a folder to a controller, not what training reaches.
+"""
+
+import functools
+import os
+import shutil
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from hopper_mjx import envs
+from hopper_mjx.envs import monoped
+
+
+@pytest.fixture(scope="module")
+def trained(tmp_path_factory, mj_model):
+    """(folder, None): a `hop` policy folder, laid out as experiments/train.py writes one."""
+    from brax.training.acme import running_statistics, specs
+    from brax.training.agents.ppo import checkpoint
+    from brax.training.agents.ppo import networks as ppo_networks
+
+    from hopper_mjx.envs import policy
+
+    env = envs.make("hop", mj_model)
+    factory = functools.partial(ppo_networks.make_ppo_networks, policy_hidden_layer_sizes=(8, 8),
+                                value_hidden_layer_sizes=(8, 8))
+    network = factory(env.observation_size, env.action_size, preprocess_observations_fn=running_statistics.normalize)
+    k_policy, k_value = jax.random.split(jax.random.PRNGKey(0))
+    params = (running_statistics.init_state(specs.Array((env.observation_size,), jnp.dtype("float32"))),
+              network.policy_network.init(k_policy), network.value_network.init(k_value))
+    out = tmp_path_factory.mktemp("policy") / "run"
+    checkpoint.save(out / "checkpoints", 1, params,
+                    checkpoint.network_config(env.observation_size, env.action_size, True, factory))
+    shutil.copytree(policy.write_env_config(out / "checkpoints" / f"{1:012d}", env.config), out / "policy")
+    return out, None
+
+
+def test_policy_runs_as_a_core_controller(trained, mj_model, sim):
+    from hopper_mjx.envs import policy
+    from hopper_mjx.sim import gravity_vectors
+
+    out, _ = trained
+    controller = policy.policy_controller(mj_model, os.path.relpath(out))  # relative, as typed on a command line
+    params = policy.policy_params(sim.robot, 3, height=0.2, config=policy.read(out)[3])
+    standing = monoped.stance_qpos(mj_model)[2]
+    np.testing.assert_allclose(np.asarray(params.command[0]), [standing + 0.2, 0.0, 0.0], rtol=1e-6)
+    state = sim.reset(gravity_vectors([9.81, 3.71, 1.62]), key=0, controller=controller, params=params)
+    final, traj = sim.rollout(state, controller, steps=100)
+    assert not np.asarray(final.diverged).any() and np.isfinite(np.asarray(traj.qpos)).all()
+    cs = final.cstate
+    assert (np.asarray(cs.tick) == 100).all() and (np.asarray(cs.work) > 0).all()
+    lo, hi = np.asarray(sim.layout.joint_range).T
+    assert ((np.asarray(cs.target) >= lo - 1e-6) & (np.asarray(cs.target) <= hi + 1e-6)).all()
+    # Five policy decisions in 0.1 s at 50 Hz: the last action is a real policy output in [-1, 1].
+    assert (np.abs(np.asarray(cs.last_action)) <= 1).all() and np.abs(np.asarray(cs.last_action)).sum() > 0
+
+
+def test_policy_path_errors_name_the_problem(tmp_path, mj_model, sim):
+    from hopper_mjx.envs import policy
+
+    with pytest.raises(ValueError, match="not a trained policy"):
+        policy.policy_controller(mj_model, tmp_path)
+    with pytest.raises(ValueError, match="speed"):
+        policy.policy_params(sim.robot, 2, height=0.1, speed=(0.1,))
+
+
+def test_policy_commands_and_sizes_are_checked_before_anything_runs(trained, sim, tmp_path, capsys):
+    """simulate with a hop policy: a command outside its training box, or a folder whose task config
+    does not match its network's input, is one line on stderr and exit 2, with nothing written."""
+    import json
+    import shutil
+
+    from hopper_mjx import simulate
+
+    out, _ = trained
+    npz = tmp_path / "x.npz"
+    from hopper_mjx.envs import policy
+
+    rise = [apex - sim.robot.standing_height for apex in policy.read(out)[3].apex_range]  # m
+    cases = [(["--height", "0.5"],
+              f"--height 0.5 is outside the hop policy's trained range [{rise[0]:g}, {rise[1]:g}]"),
+             (["--height", "0.15", "--speed", "0.3,0"],
+              "--speed VX 0.3 is outside the hop policy's trained range [0, 0]")]
+    for args, message in cases:
+        assert simulate.main(["--controller", f"policy:{out}", *args, "--out", str(npz)]) == 2
+        err = capsys.readouterr().err
+        assert message in err and err.count("\n") == 1
+    other = tmp_path / "other"
+    shutil.copytree(out / "policy", other)
+    config = json.loads((other / "hopper_env.json").read_text())
+    (other / "hopper_env.json").write_text(json.dumps({**config, "task": "stand"}))
+    assert simulate.main(["--controller", f"policy:{other}", "--out", str(npz)]) == 2
+    assert "takes 27 observations but task 'stand' (observe_gravity=False) gives 24" in capsys.readouterr().err
+    assert not npz.exists()
+
+
+def test_sweep_compare_judges_the_policy_and_raibert_alike(trained, tmp_path, capsys):
+    """`sweep compare`: one gravity sweep per controller, same grid and kicks, one table and plot."""
+    import json
+
+    from hopper_mjx.sweep import __main__ as sweep
+
+    out, _ = trained
+    args = ["compare", "--controllers", f"raibert,policy:{out}", "--values", "9.81,1.62", "--num", "2",
+            "--duration", "0.2", "--chunk", "4", "--height", "0.15", "--no-progress", "--out", str(tmp_path)]
+    assert sweep.main(args) == 0
+    groups = json.loads((tmp_path / "comparison.json").read_text())["groups"]
+    assert [(g["controller"], g["gravity"], g["n"]) for g in groups] == [
+        ("raibert", 9.81, 2), ("raibert", 1.62, 2), ("policy-run", 9.81, 2), ("policy-run", 1.62, 2)]
+    assert (tmp_path / "gravity.png").stat().st_size > 1000
+    table = (tmp_path / "table.txt").read_text()
+    assert table.count("raibert") == 2 and table.count("policy-run") == 2
+    manifests = [json.loads((tmp_path / d / "manifest.json").read_text()) for d in ("raibert", "policy-run")]
+    assert manifests[0]["controller"] == "raibert" and manifests[1]["controller"] == f"policy:{out}"
+    assert {k: v for k, v in manifests[0].items() if k != "controller"} == \
+        {k: v for k, v in manifests[1].items() if k != "controller"}  # same grid, kicks, commands
+    capsys.readouterr()
+    assert sweep.main(["compare", "--controllers", f"raibert,policy:{tmp_path}", "--out", str(tmp_path / "x")]) == 2
+    assert "is not a trained policy" in capsys.readouterr().err and not (tmp_path / "x").exists()

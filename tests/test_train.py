@@ -1,0 +1,130 @@
+"""experiments/train.py: a tiny PPO run, its checkpoints, a restore, a resume, bad input (SAC: test_train_sac.py).
+
+Tiny networks, 4 environments, 2 updates, 20-step episodes, no Brax evaluation (checkpoints only).
+The restored params are read back by running the same tiny training again from the checkpoint with
+a capture of Brax's step-0 params, so that run's compiled program is the one already compiled.
+"""
+
+import importlib.util
+import os
+from pathlib import Path
+
+import jax
+import numpy as np
+import pytest
+
+
+def _load_script(name):
+    path = Path(__file__).resolve().parents[1] / "experiments" / f"{name}.py"
+    spec = importlib.util.spec_from_file_location(name, path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+train_script = _load_script("train")
+# 40 environment steps per PPO update (batch 4 x 2 minibatches x unroll 5): two updates, a checkpoint after each.
+TINY = ["--timesteps", "80", "--num-envs", "4", "--batch-size", "4", "--num-minibatches", "2",
+        "--unroll-length", "5", "--updates-per-batch", "1", "--episode-length", "20", "--eval-every", "40",
+        "--num-eval-envs", "2", "--policy-layers", "8,8", "--value-layers", "8,8", "--sac-min-replay", "16",
+        "--sac-grad-updates", "1"]
+PPO = ["--task", "hop", "--algo", "ppo", "--no-eval"]
+
+
+def _train(base, *args):
+    cwd = os.getcwd()
+    os.chdir(base)
+    try:  # a relative --out, as on the command line (orbax itself needs absolute paths)
+        record = train_script.train(train_script.parser().parse_args([*TINY, *args, "--out", "run"]))
+    finally:
+        os.chdir(cwd)
+    return base / "run", record
+
+
+@pytest.fixture(scope="module")
+def trained(tmp_path_factory):
+    return _train(tmp_path_factory.mktemp("ppo"), *PPO)
+
+
+def _ppo_start_params(out, resume):
+    """The params Brax's PPO starts from (its step-0 `policy_params_fn` call) when restoring the
+    checkpoint `resume`. The same tiny run as `trained`, so the same compiled program."""
+    args = train_script.parser().parse_args([*TINY, *PPO, "--out", str(out)])
+    factory, _ = train_script.networks(args)
+    seen = {}
+    train_script.run_ppo(args, train_script.task_config(args), factory, args.timesteps, 0,
+                         (resume, 0), progress=lambda *_: None,
+                         save_checkpoint=lambda step, params: seen.setdefault(int(step), params))
+    return seen[0]
+
+
+def _leaves(tree):
+    return [np.asarray(x) for x in jax.tree_util.tree_leaves(tree)]
+
+
+def _checkpoints(out):
+    return sorted((out / "checkpoints").iterdir())
+
+
+def _check_outputs(out, record):
+    assert record["final_step"] >= 80
+    steps = [p.name for p in _checkpoints(out)]
+    assert steps[-1] == f"{record['final_step']:012d}" and len(steps) == 2
+    assert (out / "reward_curve.png").stat().st_size > 1000
+    assert len(record["history"]) >= 2 and record["wall_time"] > 0
+
+
+def test_ppo_tiny_run_changes_the_params_and_restores_its_checkpoint_identically(trained):
+    from brax.training import checkpoint
+
+    out, record = trained
+    _check_outputs(out, record)
+    assert all("eval/episode_reward" not in r for r in record["history"])  # --no-eval
+    first, last = (checkpoint.load(p) for p in _checkpoints(out))
+    assert any(not np.array_equal(a, b) for a, b in zip(_leaves(first[1]), _leaves(last[1])))  # it learned
+    restored = _ppo_start_params(out, resume=_checkpoints(out)[-1])
+    for a, b in zip(_leaves(restored[:2]), _leaves(last[:2])):  # normaliser and policy, bit for bit
+        np.testing.assert_array_equal(a, b)
+    for a, b in zip(_leaves(last), _leaves(checkpoint.load(out / "policy"))):
+        np.testing.assert_array_equal(a, b)
+
+
+def test_a_rerun_resumes_from_the_last_checkpoint(trained, capsys):
+    """Run again with the same total: it finds the newest checkpoint and has nothing left to train."""
+    out, record = trained
+    first = record["final_step"]
+    (out / "checkpoints" / "000000000001.orbax-checkpoint-tmp").mkdir()  # a save cut short by a kill
+    args = [*TINY, *PPO, "--out", str(out), "--timesteps", str(first)]
+    again = train_script.train(train_script.parser().parse_args(args))
+    assert f"resuming from {out / 'checkpoints' / f'{first:012d}'} (step {first:,})" in capsys.readouterr().out
+    assert again["final_step"] == first and again["history"] == record["history"]
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--task", "run"], "--task 'run' is unknown; choose from stand, hop, hop_velocity"),
+    (["--algo", "a2c"], "--algo 'a2c' is unknown; choose from ppo, sac"),
+    (["--engine", "warp"], "--engine: unknown engine 'warp'; choose from: auto, chain, mjx"),
+    (["--algo", "sac", "--no-eval"], "--no-eval is for --algo ppo"),
+    (["--task", "hop_velocity", "--observe-gravity"], "holds a ppo policy of task 'hop' with 27 observations"),
+    (["--task", "hop", "--algo", "sac"], "holds a ppo policy of task 'hop'"),
+])
+def test_train_rejects_bad_input_in_one_line_before_anything_runs(trained, capsys, args, message):
+    out, _ = trained
+    before = [p.name for p in _checkpoints(out)]
+    assert train_script.main([*args, "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert message in err and err.count("\n") == 1 and "Traceback" not in err
+    assert [p.name for p in _checkpoints(out)] == before
+
+
+def test_evaluation_kicks_are_the_sweeps():
+    """The evaluation claims the sweep's kicks: replicate r gets the sweep's kick for replicate r."""
+    from hopper_mjx.sweep.grid import KICK, SweepSpec, expand
+
+    g, qvel = train_script.evaluation_batch([9.81, 1.62], 3, seed=4, nv=9)
+    sweep = expand(SweepSpec(kind="gravity", gravity=(9.81, 1.62), num=3, duration=10.0, height=0.1,
+                             speed=(0.0, 0.0), seed=4), 9)
+    np.testing.assert_array_equal(g, sweep.gravity)
+    np.testing.assert_array_equal(qvel, sweep.qvel)
+    np.testing.assert_array_equal(qvel[:3], qvel[3:])  # common random numbers across gravities
+    assert 0 < np.abs(qvel[:, [0, 1, 3, 4]]).max() < 6 * KICK and not qvel[:, [2, 5, 6, 7, 8]].any()
