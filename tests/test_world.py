@@ -134,5 +134,5 @@ def test_sweep_takes_downward_worlds_as_its_gravity_grid(tmp_path):
     (tmp_path / "moon.world").write_text(sdf("<gravity>0 0 -1.62</gravity>"))
     args = sweep.parser().parse_args(["gravity", "--world", str(tmp_path / "moon.world"), str(tmp_path / "mars.world"),
                                       "--out", str(tmp_path / "run")])
-    spec, out = sweep.check(args)
+    (spec,), out = sweep.check(args)  # one spec: one controller
     assert spec.gravity == (1.62, 3.71) and out == tmp_path / "run" and not out.exists()
