@@ -111,10 +111,11 @@ def _start(base: Path, k: int):
     folder = base / f"case{k}"
     folder.mkdir()
     prepare(folder)
-    out, err = open(base / f"{k}.out", "w+"), open(base / f"{k}.err", "w+")
-    proc = subprocess.Popen([sys.executable, "-m", f"hopper_mjx.{command}", *args], cwd=folder, env=ENV,
-                            stdout=out, stderr=err)
-    return proc, folder, listing(folder), out, err, time.monotonic()
+    before = listing(folder)  # before the process starts, so that nothing it writes is counted as there
+    with open(base / f"{k}.out", "w") as out, open(base / f"{k}.err", "w") as err:  # the child keeps its copies
+        proc = subprocess.Popen([sys.executable, "-m", f"hopper_mjx.{command}", *args], cwd=folder, env=ENV,
+                                stdout=out, stderr=err)
+    return proc, folder, before, time.monotonic()
 
 
 @pytest.fixture(scope="module")
@@ -127,18 +128,16 @@ def refusals(tmp_path_factory) -> dict[int, Refusal]:
             k = todo.pop(0)
             running.append((k, *_start(base, k)))
         for entry in list(running):
-            k, proc, folder, before, out, err, started = entry
+            k, proc, folder, before, started = entry
             pid, status, usage = os.wait4(proc.pid, os.WNOHANG)
             if pid == 0 and time.monotonic() - started < TIMEOUT:
                 continue
             if pid == 0:  # hung: kill it and fail the case by its return code
                 proc.kill()
                 pid, status, usage = os.wait4(proc.pid, 0)
-            proc.returncode = os.waitstatus_to_exitcode(status)
-            out.seek(0), err.seek(0)
-            done[k] = Refusal(proc.returncode, out.read(), err.read(), usage.ru_utime + usage.ru_stime,
+            done[k] = Refusal(os.waitstatus_to_exitcode(status), (base / f"{k}.out").read_text(),
+                              (base / f"{k}.err").read_text(), usage.ru_utime + usage.ru_stime,
                               listing(folder) == before)
-            out.close(), err.close()
             running.remove(entry)
         time.sleep(0.02)
     return done
