@@ -208,9 +208,11 @@ class Client:
         self.ws.close()
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture
 def streaming(batch):
-    """The batch played at 4x real time into a Foxglove stream on a free port, in a thread."""
+    """The batch played at 4x real time into a Foxglove stream on a free port, in a thread. Per test:
+    its player must have stopped before another test steps the same batch's Sim from another thread
+    (two threads compiling and dispatching on it at once aborted the process once)."""
     stream = FoxgloveStream.start(0, [0, 1, 2])
     batch.reset()
     stream.attach(batch)
