@@ -32,12 +32,19 @@ MIN_HOPS = 5  # hops in --eval-duration that count as hopping (the threshold of 
 ALGORITHMS = ("ppo", "sac")
 
 
+class OutOfTime(Exception):
+    """The --minutes budget is spent: training stops after the evaluation that found it so."""
+
+
 def parser() -> argparse.ArgumentParser:
     p = cli.parser("experiments/train.py", __doc__)
     p.add_argument("--task", default="hop", help="stand, hop or hop_velocity (hopper_mjx.envs.names())")
     p.add_argument("--algo", default="ppo", help="ppo or sac (Brax's agents)")
     p.add_argument("--out", default="runs/ppo", help="output folder (resumes if it holds checkpoints)")
     p.add_argument("--timesteps", type=int, default=8_000_000, help="total environment steps (policy steps)")
+    p.add_argument("--minutes", type=float, default=None,
+                   help="wall-time budget: stop at the first evaluation after this many minutes of training "
+                        "(summed over resumes), with its checkpoint as the policy")
     p.add_argument("--num-envs", type=int, default=256, help="parallel environments (a multiple of the devices)")
     p.add_argument("--episode-length", type=int, default=500, help="policy steps per episode (500 = 10 s at 50 Hz)")
     p.add_argument("--eval-every", type=int, default=400_000,
@@ -120,6 +127,8 @@ def check(args) -> None:
             raise ValueError(f"--gravity-range must be 0 < low <= high m/s², got {args.gravity_range!r}")
     if args.num_envs < 1 or args.timesteps < 1:
         raise ValueError("--num-envs and --timesteps must be >= 1")
+    if args.minutes is not None and not (math.isfinite(args.minutes) and args.minutes > 0):
+        raise ValueError(f"--minutes must be finite and > 0, got {args.minutes:g}")
     if args.no_eval and args.algo != "ppo":
         raise ValueError("--no-eval is for --algo ppo (Brax's SAC evaluates at every checkpoint)")
     resume = latest_checkpoint(Path(args.out))
@@ -260,6 +269,9 @@ def train(args) -> dict:
         print(f"step {row['step']:>10,} | reward {row.get('eval/episode_reward', math.nan):8.1f} | "
               f"episode {row.get('eval/avg_episode_length', math.nan):5.0f} steps | "
               f"{row.get('training/sps', math.nan):6.0f} steps/s | {row['wall_time'] / 60:5.1f} min", flush=True)
+        # Brax files an evaluation's checkpoint before reporting it, so stopping here keeps it.
+        if args.minutes is not None and step > 0 and row["wall_time"] >= 60 * args.minutes:
+            raise OutOfTime
 
     def save_checkpoint(step, params):
         if step > 0:
@@ -267,9 +279,13 @@ def train(args) -> dict:
             checkpoint.save(out / "checkpoints", step, params, network_config)
             policy.write_env_config(out / "checkpoints" / f"{step:012d}", config)
 
-    if remaining > 0:
+    out_of_time = args.minutes is not None and record["wall_time"] >= 60 * args.minutes
+    if remaining > 0 and not out_of_time:
         run = run_ppo if args.algo == "ppo" else run_sac
-        run(args, env, factory, remaining, start_step, resume, progress, save_checkpoint)
+        try:
+            run(args, env, factory, remaining, start_step, resume, progress, save_checkpoint)
+        except OutOfTime:
+            print(f"stopped: {args.minutes:g} min of training (--minutes)", flush=True)
     final = latest_checkpoint(out)
     if final is None:
         raise ValueError(f"no checkpoint was written under {out / 'checkpoints'}")

@@ -100,6 +100,15 @@ def test_a_rerun_resumes_from_the_last_checkpoint(trained, capsys):
     assert again["final_step"] == first and again["history"] == record["history"]
 
 
+def test_a_minutes_budget_stops_at_the_first_evaluation_past_it(tmp_path, capsys):
+    """A spent budget ends training after the evaluation that found it so, with that evaluation's
+    checkpoint as the policy (the same tiny program as `trained`, ten updates asked for)."""
+    out, record = _train(tmp_path, *PPO, "--timesteps", "400", "--minutes", "1e-9")
+    assert "stopped: 1e-09 min of training (--minutes)" in capsys.readouterr().out
+    assert [p.name for p in _checkpoints(out)] == ["000000000040"] and record["final_step"] == 40
+    assert max(r["step"] for r in record["history"]) == 40
+
+
 @pytest.mark.parametrize("args, message", [
     (["--task", "run"], "--task 'run' is unknown; choose from stand, hop, hop_velocity"),
     (["--algo", "a2c"], "--algo 'a2c' is unknown; choose from ppo, sac"),
@@ -107,6 +116,7 @@ def test_a_rerun_resumes_from_the_last_checkpoint(trained, capsys):
     (["--algo", "sac", "--no-eval"], "--no-eval is for --algo ppo"),
     (["--task", "hop_velocity", "--observe-gravity"], "holds a ppo policy of task 'hop' with 27 observations"),
     (["--task", "hop", "--algo", "sac"], "holds a ppo policy of task 'hop'"),
+    (["--minutes", "0"], "--minutes must be finite and > 0, got 0"),
 ])
 def test_train_rejects_bad_input_in_one_line_before_anything_runs(trained, capsys, args, message):
     out, _ = trained
