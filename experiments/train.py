@@ -27,6 +27,8 @@ from hopper_mjx import cli, runtime
 
 HISTORY = "metrics.json"
 MIN_HOPS = 5  # hops in --eval-duration that count as hopping (the threshold of --scan-checkpoints)
+APEX_TOLERANCE = 0.15  # hop_velocity's threshold: apex rise within this fraction of the command
+SPEED_TOLERANCE = 0.1  # m/s, hop_velocity's threshold: mean horizontal speed error
 
 
 ALGORITHMS = ("ppo", "sac")
@@ -81,8 +83,10 @@ def parser() -> argparse.ArgumentParser:
                    help="commanded VX,VY m/s of the evaluation")
     p.add_argument("--scan-checkpoints", action="store_true",
                    help="afterwards, evaluate the checkpoints in step order as --evaluate does (policy only) "
-                        f"and report the first at which every instance survives with >= {MIN_HOPS} hops "
-                        "(threshold.json); checkpoints whose Brax evaluation episodes ended early are skipped")
+                        "and report the first that meets the task's threshold at every --eval-gravity (stand: "
+                        f"every instance survives; hop: and >= {MIN_HOPS} hops; hop_velocity: and apex within "
+                        f"{APEX_TOLERANCE:.0%}, speed error <= {SPEED_TOLERANCE} m/s) in threshold.json; "
+                        "checkpoints whose Brax evaluation episodes ended early are skipped")
     return p
 
 
@@ -349,11 +353,34 @@ def evaluate(policy_path, *, gravities, duration: float, height: float, num: int
     return out
 
 
-def first_hopping_checkpoint(args) -> dict | None:
-    """The first checkpoint whose policy keeps every instance at every --eval-gravity alive for
-    --eval-duration s with >= MIN_HOPS hops, with the training wall time at which it was saved; None
-    if none does. Checkpoints whose Brax evaluation episodes lasted < 95 % of --episode-length
-    already fell in training, and are not run."""
+def threshold(task: str) -> str:
+    """The task's threshold in words (what --scan-checkpoints asks of every --eval-gravity)."""
+    if task == "stand":
+        return "every instance survives"
+    hopping = f"every instance survives with >= {MIN_HOPS} hops"
+    if task == "hop_velocity":
+        return f"{hopping}, apex rise within {APEX_TOLERANCE:.0%} and mean speed error <= {SPEED_TOLERANCE} m/s"
+    return hopping
+
+
+def meets_threshold(task: str, row: dict, height: float) -> bool:
+    """Does one gravity's `evaluate` row meet `threshold(task)` for a commanded rise `height`?"""
+    alive = row["survival"] == 1
+    if task == "stand" or not alive:
+        return alive
+    if row["min_hops"] < MIN_HOPS:
+        return False
+    if task == "hop_velocity":
+        return (row["apex_height"] is not None and abs(row["apex_height"] / height - 1) <= APEX_TOLERANCE
+                and row["tracking_error"] is not None and row["tracking_error"] <= SPEED_TOLERANCE)
+    return True
+
+
+def first_checkpoint_at_threshold(args) -> dict | None:
+    """The first checkpoint whose policy meets the task's `threshold` at every --eval-gravity over
+    --eval-duration s, with the training wall time at which it was saved; None if none does.
+    Checkpoints whose Brax evaluation episodes lasted < 95 % of --episode-length already fell in
+    training, and are not run."""
     out = Path(args.out)
     rows = {r["step"]: r for r in json.loads((out / HISTORY).read_text())["history"]}
     gravities = [float(v) for v in args.eval_gravity.split(",")]
@@ -363,12 +390,12 @@ def first_hopping_checkpoint(args) -> dict | None:
             continue
         result = evaluate(path, gravities=gravities, duration=args.eval_duration, height=args.eval_height,
                           num=args.eval_num, seed=args.seed, speed=args.eval_speed, raibert_too=False)["policy"]
-        passed = all(r["survival"] == 1 and r["min_hops"] >= MIN_HOPS for r in result.values())
         print(f"step {int(path.name):>10,} ({row.get('wall_time', math.nan) / 60:.1f} min): "
               + ", ".join(f"g {g}: {r['survival']:.0%} alive, >= {r['min_hops']} hops" for g, r in result.items()),
               flush=True)
-        if passed:
-            return {"step": int(path.name), "wall_time": row.get("wall_time"), "evaluation": result}
+        if all(meets_threshold(args.task, r, args.eval_height) for r in result.values()):
+            return {"step": int(path.name), "wall_time": row.get("wall_time"), "threshold": threshold(args.task),
+                    "evaluation": result}
     return None
 
 
@@ -430,9 +457,9 @@ def main(argv=None) -> int:
         (Path(args.out) / "evaluation.md").write_text(table + "\n")
         print(table)
     if args.scan_checkpoints:
-        found = first_hopping_checkpoint(args)
+        found = first_checkpoint_at_threshold(args)
         (Path(args.out) / "threshold.json").write_text(json.dumps(found, indent=1))
-        print("no checkpoint meets the threshold" if found is None else
+        print(f"no checkpoint meets the threshold ({threshold(args.task)})" if found is None else
               f"first at step {found['step']:,}, {found['wall_time'] / 60:.1f} min of training")
     return 0
 

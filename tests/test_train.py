@@ -138,3 +138,15 @@ def test_evaluation_kicks_are_the_sweeps():
     np.testing.assert_array_equal(qvel, sweep.qvel)
     np.testing.assert_array_equal(qvel[:3], qvel[3:])  # common random numbers across gravities
     assert 0 < np.abs(qvel[:, [0, 1, 3, 4]]).max() < 6 * KICK and not qvel[:, [2, 5, 6, 7, 8]].any()
+
+
+def test_each_task_has_its_threshold():
+    """--scan-checkpoints' bar: stand survives; hop also hops; hop_velocity also tracks apex and speed."""
+    row = {"survival": 1.0, "min_hops": 5, "apex_height": 0.086, "tracking_error": 0.1}
+    meets = lambda task, **change: train_script.meets_threshold(task, {**row, **change}, height=0.10)
+    assert all(meets(task) for task in ("stand", "hop", "hop_velocity"))
+    assert not any(meets(task, survival=63 / 64) for task in ("stand", "hop", "hop_velocity"))
+    assert meets("stand", min_hops=0) and not meets("hop", min_hops=4) and not meets("hop_velocity", min_hops=4)
+    assert meets("hop", apex_height=0.02) and not meets("hop_velocity", apex_height=0.084)  # -16 %
+    assert meets("hop_velocity", apex_height=0.114) and not meets("hop_velocity", apex_height=0.116)
+    assert not meets("hop_velocity", tracking_error=0.11) and not meets("hop_velocity", apex_height=None)
