@@ -133,6 +133,7 @@ def check(args) -> None:
         raise ValueError("--num-envs and --timesteps must be >= 1")
     if args.minutes is not None and not (math.isfinite(args.minutes) and args.minutes > 0):
         raise ValueError(f"--minutes must be finite and > 0, got {args.minutes:g}")
+    cli.check_writable("--out", args.out, folder=True)
     if args.no_eval and args.algo != "ppo":
         raise ValueError("--no-eval is for --algo ppo (Brax's SAC evaluates at every checkpoint)")
     resume = latest_checkpoint(Path(args.out))

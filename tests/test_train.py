@@ -150,3 +150,13 @@ def test_each_task_has_its_threshold():
     assert meets("hop", apex_height=0.02) and not meets("hop_velocity", apex_height=0.084)  # -16 %
     assert meets("hop_velocity", apex_height=0.114) and not meets("hop_velocity", apex_height=0.116)
     assert not meets("hop_velocity", tracking_error=0.11) and not meets("hop_velocity", apex_height=None)
+
+
+def test_train_rejects_an_out_it_cannot_make_in_one_line(tmp_path, capsys):
+    (tmp_path / "a_file").write_text("")
+    for out, message in ((tmp_path / "a_file" / "run", "its folder " + str(tmp_path / "a_file") + " is not a folder"),
+                         (tmp_path / "nodir" / "run", "its folder " + str(tmp_path / "nodir") + " does not exist")):
+        assert train_script.main(["--out", str(out)]) == 2
+        err = capsys.readouterr().err
+        assert message in err and err.count("\n") == 1
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a_file"]
