@@ -23,7 +23,7 @@ import sys
 import time
 from pathlib import Path
 
-from hopper_mjx import cli, runtime
+from hopper_mjx import cli, registry, runtime
 
 HISTORY = "metrics.json"
 MIN_HOPS = 5  # hops in --eval-duration that count as hopping (the threshold of --scan-checkpoints)
@@ -40,7 +40,7 @@ class OutOfTime(Exception):
 
 def parser() -> argparse.ArgumentParser:
     p = cli.parser("experiments/train.py", __doc__)
-    p.add_argument("--task", default="hop", help="stand, hop or hop_velocity (hopper_mjx.envs.names())")
+    p.add_argument("--task", default="hop", help=registry.listed(registry.TASKS))
     p.add_argument("--algo", default="ppo", help="ppo or sac (Brax's agents)")
     p.add_argument("--out", default="runs/ppo", help="output folder (resumes if it holds checkpoints)")
     p.add_argument("--timesteps", type=int, default=8_000_000, help="total environment steps (policy steps)")
@@ -66,8 +66,7 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--gravity-range", default=None,
                    help="low,high m/s², drawn log-uniformly per episode (default: the task's, 0.5,12)")
     p.add_argument("--observe-gravity", action="store_true", help="put the gravity magnitude in the observation")
-    p.add_argument("--engine", default="auto",
-                   help="physics engine: auto (chain for the monoped), chain or mjx (default auto)")
+    cli.add_engine_option(p)
     p.add_argument("--sac-replay", type=int, default=1_000_000, help="SAC: replay buffer size (env steps)")
     p.add_argument("--sac-min-replay", type=int, default=8192, help="SAC: env steps collected before learning")
     p.add_argument("--sac-grad-updates", type=int, default=8, help="SAC: gradient updates per env step batch")
@@ -119,8 +118,10 @@ def check(args) -> None:
     """Raises ValueError naming the first bad argument; JSON reads only, nothing is built."""
     from hopper_mjx import envs
 
-    if args.task not in envs.names():
-        raise ValueError(f"--task {args.task!r} is unknown; choose from {', '.join(envs.names())}")
+    try:
+        registry.check("task", registry.TASKS, args.task)
+    except ValueError as err:
+        raise ValueError(f"--task: {err}") from None
     if args.algo not in ALGORITHMS:
         raise ValueError(f"--algo {args.algo!r} is unknown; choose from {', '.join(ALGORITHMS)}")
     cli.check_engine(args.engine)

@@ -18,8 +18,8 @@ from pathlib import Path
 
 import numpy as np
 
-POLICY_PREFIX = "policy:"
-CONTROLLERS = ("none", "hold", "pid", "raibert")  # control.make's names (checked equal by a test)
+from hopper_mjx import registry
+
 MAX_TIMESTEP = 0.01  # s, as model.load accepts
 DEFAULT_TIMESTEP = 1e-3  # s, model.DEFAULT_TIMESTEP (checked equal by a test; importing model loads MuJoCo)
 
@@ -113,11 +113,13 @@ def check_controller(text: str, height: float = 0.0, speed=(0.0, 0.0), urdf=None
     """A known controller; a `policy:PATH` must be a trained policy whose training range holds the
     command (`height`, `speed`). Reads the policy's JSON and MuJoCo's compiled model (for the
     standing height) only."""
-    if not text.startswith(POLICY_PREFIX):
-        if text not in CONTROLLERS:
-            raise ValueError(f"--controller: unknown {text!r}; choose from {', '.join(CONTROLLERS)}, policy:PATH")
+    if not registry.is_policy(text):
+        try:
+            registry.check("controller", registry.CONTROLLERS, text, extra=f"{registry.POLICY_PREFIX}PATH")
+        except ValueError as err:
+            raise ValueError(f"--controller: {err}") from None
         return
-    path = Path(text.removeprefix(POLICY_PREFIX))
+    path = Path(registry.policy_path(text))
     if not path.is_dir():
         raise ValueError(f"--controller {text}: {path} is not a trained policy: no such folder")
     from hopper_mjx import model
@@ -171,9 +173,8 @@ def add_batch_options(p: argparse.ArgumentParser, *, gravity=(9.81, 3.71, 1.62),
     p.add_argument("--num", type=int, default=1, help="instances per gravity value or world")
     p.add_argument("--duration", type=float, default=duration, help="simulated time, s")
     p.add_argument("--controller", default="hold",
-                   help="none (limp), hold (keep initial joint angles), pid (the seed's joint position "
-                        "controllers, holding them), raibert (hop) or policy:PATH (a policy trained by "
-                        "experiments/train.py)")
+                   help=f"{registry.listed(registry.CONTROLLERS)} or {registry.POLICY_PREFIX}PATH (a policy trained "
+                        "by experiments/train.py)")
     p.add_argument("--height", type=float, default=0.10,
                    help="raibert, policy: commanded apex rise of the base above its standing height, m")
     p.add_argument("--speed", type=floats("--speed"), default=[0.0, 0.0],
@@ -190,9 +191,11 @@ def add_batch_options(p: argparse.ArgumentParser, *, gravity=(9.81, 3.71, 1.62),
     add_engine_option(p)
 
 
-def add_engine_option(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--engine", default="auto",
-                   help="physics engine: auto (chain when the model qualifies), chain or mjx (default auto)")
+def add_engine_option(p: argparse.ArgumentParser, *, extra_help: str = "") -> None:
+    """The one --engine option of every tool."""
+    p.add_argument("--engine", default=registry.DEFAULT_ENGINE,
+                   help=f"physics engine: {registry.listed(registry.ENGINES)}; default {registry.DEFAULT_ENGINE}"
+                        + extra_help)
 
 
 @dataclass(frozen=True)
@@ -266,10 +269,8 @@ def check_batch(args) -> Batch:
 
 
 def check_engine(name: str) -> None:
-    from hopper_mjx.engine import check_name
-
     try:
-        check_name(name)
+        registry.check("engine", registry.ENGINES, name)
     except ValueError as err:
         raise ValueError(f"--engine: {err}") from None
 
@@ -286,10 +287,10 @@ def check_rates(flags: str, sensors, batch: Batch) -> None:
 def make_controller(args, sim, batch: Batch):
     """(controller, params) for --controller: the registry `control.make`, or a trained policy."""
     n = len(batch.gravity)
-    if args.controller.startswith(POLICY_PREFIX):
+    if registry.is_policy(args.controller):
         from hopper_mjx.envs import policy
 
-        path = args.controller.removeprefix(POLICY_PREFIX)
+        path = registry.policy_path(args.controller)
         config = policy.read(path)[3]
         params = policy.policy_params(sim.robot, n, height=args.height, speed=args.speed, config=config)
         return policy.policy_controller(sim.mj_model, path), params

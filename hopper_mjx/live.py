@@ -52,33 +52,18 @@ class Chunk:
     first_seq: dict  # stream -> samples of it in the earlier chunks of the run (resets included): ROS seq
 
 
-def read_command(cstate, standing_height: float) -> dict | None:
+def read_command(controller, cstate) -> dict | None:
     """Instance 0's commanded {"speed": (vx, vy) m/s, "height": apex rise m} (all instances share
     them live), or None when the controller takes no commands (none, hold, pid)."""
-    if hasattr(cstate, "params") and hasattr(cstate.params, "speed"):  # raibert: apex rise
-        speed, height = cstate.params.speed[0], float(cstate.params.height[0])
-    elif hasattr(cstate, "command"):  # a trained policy: apex height above the floor
-        speed, height = cstate.command[0, 1:], float(cstate.command[0, 0]) - standing_height
-    else:
+    if controller.commands is None:
         return None
-    return {"speed": tuple(float(v) for v in np.asarray(speed)), "height": height}
+    speed, rise = controller.commands.read(cstate)
+    return {"speed": tuple(float(v) for v in np.asarray(speed[0])), "height": float(rise[0])}
 
 
-def set_command(cstate, speed, height: float, standing_height: float):
+def set_command(controller, cstate, speed, height: float):
     """The controller state with commanded `speed` (vx, vy) m/s and apex rise `height` m for every instance."""
-    import dataclasses
-
-    import jax.numpy as jnp
-
-    height = max(float(height), 0.0)
-    if hasattr(cstate, "command"):
-        n = cstate.command.shape[0]
-        command = jnp.tile(jnp.array([standing_height + height, *speed], jnp.float32), (n, 1))
-        return cstate._replace(command=command)
-    params = cstate.params
-    return cstate._replace(params=dataclasses.replace(
-        params, speed=jnp.broadcast_to(jnp.asarray(speed, jnp.float32), params.speed.shape),
-        height=jnp.full_like(params.height, height)))
+    return controller.commands.write(cstate, speed, max(float(height), 0.0))
 
 
 def spread(n: int, count: int) -> list[int]:
@@ -175,10 +160,10 @@ class LiveBatch:
         self.state = self.state._replace(data=self.state.data.replace(qvel=qvel))
 
     def command(self) -> dict | None:
-        return read_command(self.state.cstate, self.sim.robot.standing_height)
+        return read_command(self.controller, self.state.cstate)
 
     def _set_command(self, speed, height: float) -> None:
-        cstate = set_command(self.state.cstate, speed, height, self.sim.robot.standing_height)
+        cstate = set_command(self.controller, self.state.cstate, speed, height)
         self.state = self.state._replace(cstate=cstate)
 
     def change_command(self, *, speed_step=(0.0, 0.0), height_step: float = 0.0) -> bool:

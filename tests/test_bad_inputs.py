@@ -18,7 +18,7 @@ from typing import NamedTuple
 
 import pytest
 
-from hopper_mjx import cli, control
+from hopper_mjx import cli, control, registry
 from hopper_mjx.model import loader, world
 
 LOW_GRAVITY = str(world.LOW_GRAVITY_WORLD)
@@ -40,7 +40,8 @@ CASES = [
     ("simulate", ["--gravity", "-1"], "--gravity: gravity magnitudes point down and must be >= 0"),
     ("simulate", ["--num", "0"], "--num must be >= 1, got 0"),
     ("simulate", ["--num", "abc"], "argument --num: invalid int value: 'abc'"),
-    ("simulate", ["--controller", "jump"], "--controller: unknown 'jump'"),
+    ("simulate", ["--controller", "jump"], "--controller: unknown controller 'jump'; choose from: none, hold, pid, "
+                                             "raibert, policy:PATH"),
     ("simulate", ["--rate", "7"], "--rate: imu_rate=7.0 Hz must divide the physics rate 1000 Hz"),
     ("render", ["--video", "h.gif", "--fps", "30"], "--fps: imu_rate=30.0 Hz must divide the physics rate"),
     ("simulate", ["--timestep", "0.5"], "--timestep must be finite and > 0 and <= 0.01, got 0.5"),
@@ -76,7 +77,7 @@ CASES = [
     ("sweep", ["gravity", "--num-processes", "2", "--process-id", "2", "--out", "s"], "--process-id must be in"),
     ("perf.bench", ["--steps", "30"], "--steps must be a multiple of 20"),
     ("perf.bench", ["--plot", "p.png"], "--plot draws the --scaling records"),
-    ("perf.bench", ["--controller", "pid"], "--controller: unknown 'pid'"),
+    ("perf.bench", ["--controller", "pid"], "--controller: unknown controller 'pid'; choose from: none, hold, raibert"),
     ("perf.bench", ["--engine", "warp"], "--engine: unknown engine 'warp'"),
     ("sweep", ["gravity", "--engine", "warp", "--out", "s"], "--engine: unknown engine 'warp'"),
     ("simulate", ["--engine", "warp"], "--engine: unknown engine 'warp'"),
@@ -166,7 +167,14 @@ def test_the_seeds_gains_folder_is_taken_as_is(tmp_path):
     assert batch.gains["kfe_joint"] == {"p": 100.0, "i": 0.01, "d": 10.0, "i_clamp": 0.0}
 
 
-def test_the_checks_know_what_the_library_accepts():
-    """cli checks without importing the heavy modules; its copies of their constants must agree."""
-    assert cli.CONTROLLERS == control.NAMES
+def test_the_checks_know_what_the_library_accepts(sim):
+    """cli checks names against the registry, without importing the heavy modules: every registered
+    name must build, and nothing else; its copy of the default timestep must agree."""
+    from hopper_mjx.envs import tasks
+
+    for name in registry.CONTROLLERS:
+        assert control.make(name, sim.robot, 2)[0].name == name
+    with pytest.raises(ValueError, match="unknown controller 'bogus'; choose from: none, hold, pid, raibert"):
+        control.make("bogus", sim.robot, 2)
+    assert list(tasks.TASKS) == list(registry.TASKS)
     assert cli.DEFAULT_TIMESTEP == loader.DEFAULT_TIMESTEP

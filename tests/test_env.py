@@ -13,7 +13,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from hopper_mjx import envs
+from hopper_mjx import envs, registry
 from hopper_mjx.envs import MonopedConfig, monoped, tasks
 from hopper_mjx.envs.wrappers import wrap_for_training
 
@@ -23,7 +23,7 @@ DROP = dict(observe_gravity=True, initial_clearance=(0.5, 0.5), initial_joint_no
 
 
 def test_registry_names_defaults_and_overrides(mj_model):
-    assert envs.names() == ["stand", "hop", "hop_velocity"]
+    assert envs.names() == list(registry.TASKS) == ["stand", "hop", "hop_velocity"]
     for name in envs.names():
         cfg = envs.default_config(name)
         assert cfg.task == name and cfg.gravity_range == (0.5, 12.0)

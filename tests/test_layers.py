@@ -13,7 +13,7 @@ PACKAGE = "hopper_mjx"
 # controllers -> metrics -> the batched core -> environments -> command-line support -> live runs
 # and ROS I/O -> tools.
 LAYERS = (
-    ("startup", "runtime", "model"),  # startup: what must precede the first import of MuJoCo
+    ("startup", "runtime", "registry", "model"),  # startup: what must precede the first import of MuJoCo
     ("engine",),
     ("signals",),
     ("control",),

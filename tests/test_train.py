@@ -110,7 +110,7 @@ def test_a_minutes_budget_stops_at_the_first_evaluation_past_it(tmp_path, capsys
 
 
 @pytest.mark.parametrize("args, message", [
-    (["--task", "run"], "--task 'run' is unknown; choose from stand, hop, hop_velocity"),
+    (["--task", "run"], "--task: unknown task 'run'; choose from: stand, hop, hop_velocity"),
     (["--algo", "a2c"], "--algo 'a2c' is unknown; choose from ppo, sac"),
     (["--engine", "warp"], "--engine: unknown engine 'warp'; choose from: auto, chain, mjx"),
     (["--algo", "sac", "--no-eval"], "--no-eval is for --algo ppo"),

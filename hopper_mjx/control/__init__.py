@@ -2,11 +2,12 @@
 
 from __future__ import annotations
 
+from hopper_mjx import registry
 from hopper_mjx.control import pid, raibert
 from hopper_mjx.control.base import Controller, hold, zero_torque
 from hopper_mjx.model.robot import Robot
 
-NAMES = ("none", "hold", "pid", "raibert")
+NAMES = tuple(registry.CONTROLLERS)
 
 
 def make(name: str, robot: Robot, n: int, *, height: float = raibert.DEFAULT_HEIGHT,
@@ -18,17 +19,16 @@ def make(name: str, robot: Robot, n: int, *, height: float = raibert.DEFAULT_HEI
     monoped.yaml); raibert: hop at `height` m of apex rise over the standing height
     and `speed` (vx, vy) m/s.
     """
+    registry.check("controller", registry.CONTROLLERS, name)
     if name == "none":
         return zero_torque(robot.layout), None
     if name == "hold":
         return hold(robot.layout), None
     if name == "pid":
         return pid.pid(robot.layout, gains), None
-    if name == "raibert":
-        if len(speed) != 2:
-            raise ValueError(f"speed needs two values VX,VY in m/s, got {list(speed)}")
-        return raibert.raibert(robot), raibert.raibert_params(n, height=height, speed=speed)
-    raise ValueError(f"unknown controller {name!r}; choose from: {', '.join(NAMES)}")
+    if len(speed) != 2:  # raibert
+        raise ValueError(f"speed needs two values VX,VY in m/s, got {list(speed)}")
+    return raibert.raibert(robot), raibert.raibert_params(n, height=height, speed=speed)
 
 
 __all__ = ["NAMES", "Controller", "make"]

@@ -26,11 +26,22 @@ from hopper_mjx.signals import Observation
 CState = Any  # a pytree of arrays, one instance's worth
 
 
+@dataclass(frozen=True)
+class Commands:
+    """Where a controller's (batched) state keeps the commands a user may change while it runs:
+    `read(cstate) -> (speed (N, 2) m/s, apex rise (N,) m over the standing height)` and
+    `write(cstate, speed (2,), rise) -> cstate` with those commands for every instance."""
+
+    read: Callable[[CState], tuple[Any, Any]]
+    write: Callable[[CState, Any, float], CState]
+
+
 @dataclass(frozen=True, eq=False)
 class Controller:
     name: str
     init: Callable[[Observation, Any], CState]
     act: Callable[[CState, Observation, jax.Array], tuple[jax.Array, CState]]
+    commands: Commands | None = None  # None: the controller takes no commands (none, hold, pid)
 
 
 def pd(kp, kd, error: jax.Array, rate: jax.Array, bias: jax.Array | None = None) -> jax.Array:

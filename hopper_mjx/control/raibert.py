@@ -71,7 +71,7 @@ import numpy as np
 from brax import math as bmath
 
 from hopper_mjx.control import kinematics
-from hopper_mjx.control.base import Controller, joint_state, pd, saturate, to_ctrl
+from hopper_mjx.control.base import Commands, Controller, joint_state, pd, saturate, to_ctrl
 from hopper_mjx.model.robot import LegGeometry, Robot
 from hopper_mjx.signals import Observation
 
@@ -125,6 +125,16 @@ class RaibertParams:
     height: jax.Array  # m, commanded apex rise over the standing height
     speed: jax.Array  # (2,) m/s, commanded (vx, vy)
     gains: RaibertConfig  # every gain, one value per instance
+
+
+def _read_commands(s: "RaibertState"):
+    return s.params.speed, s.params.height
+
+
+def _write_commands(s: "RaibertState", speed, rise: float) -> "RaibertState":
+    p = s.params
+    speed = jnp.broadcast_to(jnp.asarray(speed, jnp.float32), p.speed.shape)
+    return s._replace(params=dataclasses.replace(p, speed=speed, height=jnp.full_like(p.height, rise)))
 
 
 class RaibertState(NamedTuple):
@@ -370,6 +380,9 @@ def initial_state(params: RaibertParams, obs: Observation) -> RaibertState:
     )
 
 
+COMMANDS = Commands(read=_read_commands, write=_write_commands)
+
+
 def raibert(robot: Robot, config: RaibertConfig | None = None) -> Controller:
     """`raibert`: hops at the per-instance commanded apex rise and speed.
 
@@ -407,7 +420,7 @@ def raibert(robot: Robot, config: RaibertConfig | None = None) -> Controller:
         return ctrl, state
 
     return Controller(name="raibert", init=lambda obs, params: initial_state(
-        defaults if params is None else params, obs), act=act)
+        defaults if params is None else params, obs), act=act, commands=COMMANDS)
 def _within_tilt_budget(wanted: jax.Array, now: jax.Array, drift: jax.Array, swing_tilt: jax.Array,
                         budget: jax.Array, length: jax.Array) -> jax.Array:
     """The placement `wanted` moved, if need be, so that the body lands tilted <= `budget`.

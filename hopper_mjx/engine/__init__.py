@@ -23,23 +23,34 @@ otherwise "mjx", with a one-line notice on stderr saying why.
 from __future__ import annotations
 
 import sys
+from typing import Any, Protocol, runtime_checkable
 
 import mujoco
 
+from hopper_mjx import registry
 from hopper_mjx.engine.mjx import MjxEngine
 
-NAMES = ("auto", "chain", "mjx")
 
+@runtime_checkable
+class Engine(Protocol):
+    """The contract above, checked against every engine by the tests (`isinstance(e, Engine)`)."""
 
-def names() -> tuple[str, ...]:
-    """The engine names `make` accepts."""
-    return NAMES
+    name: str
+    model: Any
+    freeze_fields: tuple[str, ...]
+
+    def make_data(self, qpos, qvel) -> Any: ...
+
+    def forward(self, model, data, gravity) -> Any: ...
+
+    def integrate(self, model, data, gravity) -> Any: ...
+
+    def foot_contact(self, model, data) -> tuple: ...
 
 
 def check_name(name: str) -> None:
     """Raises ValueError for an unknown engine name (before any model is built)."""
-    if name not in NAMES:
-        raise ValueError(f"unknown engine {name!r}; choose from: {', '.join(NAMES)}")
+    registry.check("engine", registry.ENGINES, name)
 
 
 def make(name: str, mj_model: mujoco.MjModel):
@@ -58,4 +69,4 @@ def make(name: str, mj_model: mujoco.MjModel):
     return MjxEngine(mj_model)
 
 
-__all__ = ["MjxEngine", "check_name", "make", "names"]
+__all__ = ["Engine", "MjxEngine", "check_name", "make"]

@@ -29,10 +29,11 @@ from brax.training.acme import running_statistics
 from brax.training.agents.ppo import networks as ppo_networks
 from brax.training.agents.sac import networks as sac_networks
 
-from hopper_mjx.control.base import Controller, joint_state, to_ctrl
+from hopper_mjx import registry
+from hopper_mjx.control.base import Commands, Controller, joint_state, to_ctrl
 from hopper_mjx.envs import monoped, tasks
 from hopper_mjx.model.layout import Layout
-from hopper_mjx.model.robot import Robot
+from hopper_mjx.model.robot import Robot, standing_height
 from hopper_mjx.signals import Observation
 
 ENV_CONFIG = "hopper_env.json"
@@ -175,4 +176,16 @@ def policy_controller(mj_model: mujoco.MjModel, path) -> Controller:
         work = cs.work + power * layout.timestep
         return to_ctrl(layout, torque), PolicyState(cs.command, target, action, cs.tick + 1, work)
 
-    return Controller(name=f"policy:{path}", init=init, act=act)
+    commands = None
+    if tasks.task_class(cfg.task).command_size:  # the hopping tasks: (apex height above the floor, vx, vy)
+        standing = standing_height(mj_model)
+
+        def read(cs: PolicyState):
+            return cs.command[:, 1:], cs.command[:, 0] - standing
+
+        def write(cs: PolicyState, speed, rise: float) -> PolicyState:
+            row = jnp.array([standing + rise, *speed], jnp.float32)
+            return cs._replace(command=jnp.broadcast_to(row, cs.command.shape))
+
+        commands = Commands(read=read, write=write)
+    return Controller(name=f"{registry.POLICY_PREFIX}{path}", init=init, act=act, commands=commands)

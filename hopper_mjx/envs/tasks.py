@@ -16,6 +16,7 @@ import dataclasses
 import jax
 import jax.numpy as jnp
 
+from hopper_mjx import registry
 from hopper_mjx.envs.monoped import MonopedConfig, MonopedEnv, closeness, predicted_apex, speed_term
 
 # The gravity range every task draws from by default, m/s², log-uniform.
@@ -98,12 +99,11 @@ TASKS: dict[str, type[MonopedEnv]] = {"stand": Stand, "hop": Hop, "hop_velocity"
 
 
 def names() -> list[str]:
-    return list(TASKS)
+    return list(registry.TASKS)
 
 
 def task_class(name: str) -> type[MonopedEnv]:
-    if name not in TASKS:
-        raise ValueError(f"unknown task {name!r}; choose from {', '.join(TASKS)}")
+    registry.check("task", registry.TASKS, name)
     return TASKS[name]
 
 

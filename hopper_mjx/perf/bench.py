@@ -41,7 +41,7 @@ from pathlib import Path
 
 import numpy as np
 
-from hopper_mjx import cli, runtime
+from hopper_mjx import cli, registry, runtime
 
 DISTINCT_GRAVITIES = 64  # distinct values, tiled over the batch: one native MjModel each
 GRAVITY_SPAN = (1.62, 9.81)  # m/s², Moon to Earth
@@ -53,7 +53,8 @@ COMPILE_EVENTS = (
 )
 
 
-CONTROLLERS = ("hold", "raibert", "none")
+# Controllers with a native counterpart to time against (pid's integral state has none here).
+CONTROLLERS = tuple(name for name in registry.CONTROLLERS if name != "pid")
 
 
 def bench_gravities(num: int) -> np.ndarray:
@@ -160,8 +161,7 @@ def controller_pair(name: str, sim, gravity):
     from hopper_mjx.control.base import HOLD_GAINS
 
     layout = sim.layout
-    if name not in CONTROLLERS:
-        raise ValueError(f"unknown controller {name!r}; choose from: {', '.join(CONTROLLERS)}")
+    registry.check("controller", dict.fromkeys(CONTROLLERS), name)
     controller, params = control.make(name, sim.robot, len(gravity))
     if name == "none":
         return controller, params, sim.mj_model, np.zeros(layout.nu)
@@ -349,7 +349,8 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--num", type=int, default=4096, help="instances N")
     p.add_argument("--steps", type=int, default=1000, help="physics steps T per instance (multiple of 20)")
     p.add_argument("--controller", default="hold",
-                   help="hold (PD to the initial angles), raibert (hopping; native keeps hold) or none")
+                   help=f"{registry.listed({k: registry.CONTROLLERS[k] for k in CONTROLLERS})}; native runs "
+                        "the same hold law as C servos for every one but none")
     p.add_argument("--chunk", type=int, default=256, help="instances per vmapped chunk on a device")
     cli.add_engine_option(p)  # with --scaling, a comma-separated list (e.g. chain,mjx) is run side by side
     p.add_argument("--repeat", type=int, default=2, help="timed runs per side; the best counts")
@@ -372,8 +373,10 @@ def check(args) -> list[int] | None:
         raise ValueError("--engine: several engines are compared with --scaling only")
     for engine in engines:
         cli.check_engine(engine)
-    if args.controller not in CONTROLLERS:
-        raise ValueError(f"--controller: unknown {args.controller!r}; choose from {', '.join(CONTROLLERS)}")
+    try:
+        registry.check("controller", dict.fromkeys(CONTROLLERS), args.controller)
+    except ValueError as err:
+        raise ValueError(f"--controller: {err}") from None
     if args.json:
         cli.check_writable("--json", args.json)
     if args.plot and not args.scaling:

@@ -29,7 +29,7 @@ import time
 import mujoco
 import numpy as np
 
-from hopper_mjx import cli, runtime
+from hopper_mjx import cli, registry, runtime
 
 REPEATS = 5  # timed rollouts per variant; the best counts (noise only adds time)
 VARIANTS = (
@@ -109,7 +109,7 @@ def chain_costs(engine, qpos, qvel, gravity, steps: int) -> dict:
     return dict(zip(CHAIN_STAGES, np.diff(cumulative, prepend=0.0))) | {"full step": cumulative[-1]}
 
 
-def measure(num: int, steps: int, settle: int, engine: str = "mjx") -> dict:
+def measure(num: int, steps: int, settle: int, engine: str = registry.DEFAULT_ENGINE) -> dict:
     import jax
 
     from hopper_mjx import model
@@ -165,11 +165,15 @@ def main(argv=None) -> int:
     p.add_argument("--num", type=int, default=256, help="instances in the batch (the core's chunk)")
     p.add_argument("--steps", type=int, default=200, help="steps per timed rollout")
     p.add_argument("--settle", type=int, default=300, help="physics steps holding the stance before timing")
-    p.add_argument("--engine", default="mjx", choices=("chain", "mjx"), help="engine to profile (default mjx)")
+    cli.add_engine_option(p)
     args = p.parse_args(argv)
     for name in ("num", "steps", "settle"):
         if getattr(args, name) < 1:
             return cli.fail(ValueError(f"--{name} must be >= 1, got {getattr(args, name)}"))
+    try:
+        cli.check_engine(args.engine)
+    except ValueError as err:
+        return cli.fail(err)
     runtime.configure()
     try:
         record = measure(args.num, args.steps, args.settle, args.engine)

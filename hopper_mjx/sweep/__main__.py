@@ -17,7 +17,7 @@ import time
 from datetime import datetime, timezone
 from pathlib import Path
 
-from hopper_mjx import cli, runtime
+from hopper_mjx import cli, registry, runtime
 from hopper_mjx.sweep.grid import DEFAULT_GRAVITY, KICK
 
 
@@ -112,7 +112,7 @@ def _host_port(text: str) -> bool:
 
 
 def label(controller: str) -> str:
-    return "raibert" if controller == "raibert" else "policy-" + Path(controller.removeprefix("policy:")).name
+    return "raibert" if controller == "raibert" else "policy-" + Path(registry.policy_path(controller)).name
 
 
 def run_one(args, spec, folder: Path):

@@ -14,6 +14,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from hopper_mjx import registry
+
 PLANETS = {1.62: "Moon", 3.71: "Mars", 9.81: "Earth"}
 DEFAULT_GRAVITY = (0.5, 1.0, 1.62, 2.5, 3.71, 5.0, 7.5, 9.81, 12.0)  # m/s²
 # m/s and rad/s: std of the random initial base velocity (x, y, roll and pitch rates). The default
@@ -62,7 +64,7 @@ class SweepSpec:
         from hopper_mjx import cli
 
         cli.check_engine(self.engine)
-        if self.controller != "raibert" and not self.controller.startswith("policy:"):
+        if self.controller != "raibert" and not registry.is_policy(self.controller):
             raise ValueError(f"--controller {self.controller!r}: a sweep runs raibert or policy:PATH")
         if self.kind == "gains" and self.controller != "raibert":
             raise ValueError("a gains sweep varies Raibert's gains: use --controller raibert")

@@ -19,7 +19,7 @@ import jax
 import numpy as np
 from tqdm import tqdm
 
-from hopper_mjx import metrics, model, signals
+from hopper_mjx import metrics, model, registry, signals
 from hopper_mjx.control.raibert import raibert, raibert_params
 from hopper_mjx.sim import Sim, gravity_vectors, steps_for
 from hopper_mjx.sweep.grid import Instances, SweepSpec, expand
@@ -73,7 +73,7 @@ class ChunkRunner:
 
     def __init__(self, spec: SweepSpec, instances: Instances, sim: Sim):
         self.spec, self.instances, self.sim = spec, instances, sim
-        self.policy = spec.controller.removeprefix("policy:") if spec.controller != "raibert" else None
+        self.policy = registry.policy_path(spec.controller) if registry.is_policy(spec.controller) else None
         if self.policy is None:
             self.controller = raibert(sim.robot)
         else:  # brax is imported only when a policy is swept
