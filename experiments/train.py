@@ -433,7 +433,7 @@ def plot_rewards(history: list[dict], path: Path, title: str) -> None:
     ax.plot([r["step"] for r in rows], [r["eval/episode_reward"] for r in rows], "o-")
     ax.set_xlabel("environment steps (50 Hz policy steps)")
     ax.set_ylabel("evaluation episode reward")
-    ax.set_title(f"{title}, the MJX monoped")
+    ax.set_title(f"{title}, the batched monoped")
     ax.grid(alpha=0.3)
     fig.tight_layout()
     fig.savefig(path, dpi=120)

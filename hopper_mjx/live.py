@@ -103,14 +103,10 @@ class HopCounter:
         flags = np.asarray(contact_flag, bool)
         if self.last_flag is not None:
             flags = np.concatenate([self.last_flag[:, None], flags], axis=1)
-        for k in range(1, flags.shape[1]):
-            lift, land = flags[:, k - 1] & ~flags[:, k], ~flags[:, k - 1] & flags[:, k]
-            self.hops += land & self.airborne & ~self.fallen
-            self.airborne = (self.airborne | lift) & ~land
+        landed, self.airborne = metrics.landings(flags, self.airborne)
+        self.hops += np.where(self.fallen, 0, landed)
         self.last_flag = flags[:, -1]
-        roll, pitch = metrics.roll_pitch(qpos_end[:, 3:7])
-        self.fallen |= ((qpos_end[:, 2] < metrics.FALL_HEIGHT) | (np.abs(roll) > metrics.FALL_ROLL_PITCH)
-                        | (np.abs(pitch) > metrics.FALL_ROLL_PITCH))
+        self.fallen |= metrics.fallen(qpos_end)
         return tuple("diverged" if d else "fallen" if f else "hopping" if h else "standing"
                      for d, f, h in zip(diverged, self.fallen, self.hops > 0))
 

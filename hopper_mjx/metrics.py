@@ -52,6 +52,28 @@ def roll_pitch(quat: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return roll, pitch
 
 
+def fallen(qpos: np.ndarray) -> np.ndarray:
+    """(...) bool: the base of these (..., nq) states is down (the fall test of `hop_metrics`)."""
+    roll, pitch = roll_pitch(qpos[..., 3:7])
+    return _down(qpos[..., 2], roll, pitch)
+
+
+def _down(z, roll, pitch) -> np.ndarray:
+    return (z < FALL_HEIGHT) | (np.abs(roll) > FALL_ROLL_PITCH) | (np.abs(pitch) > FALL_ROLL_PITCH)
+
+
+def landings(flag: np.ndarray, airborne: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(landings (N,), airborne (N,)) of a (N, T) contact record: touchdowns that end a flight seen
+    to start (a lift-off), for counting hops chunk by chunk. `airborne` carries a flight in progress
+    from the record before, whose last sample is `flag`'s first column."""
+    lift, land = _events(flag, rising=False), _events(flag, rising=True)
+    count = np.zeros(flag.shape[0], dtype=int)
+    for k in range(1, flag.shape[1]):
+        count += land[:, k] & airborne
+        airborne = (airborne | lift[:, k]) & ~land[:, k]
+    return count, airborne
+
+
 def _events(flag: np.ndarray, rising: bool) -> np.ndarray:
     """(N, T) bool, True at the first sample after each contact change of that kind."""
     before, after = flag[:, :-1], flag[:, 1:]
@@ -164,7 +186,7 @@ class _Falls(NamedTuple):
 def _falls(qpos: np.ndarray, t_state: np.ndarray) -> _Falls:
     z = qpos[:, :, 2]
     roll, pitch = roll_pitch(qpos[:, :, 3:7])
-    down = (z < FALL_HEIGHT) | (np.abs(roll) > FALL_ROLL_PITCH) | (np.abs(pitch) > FALL_ROLL_PITCH)
+    down = _down(z, roll, pitch)
     fell = down.any(axis=1)
     fall_index = np.where(fell, down.argmax(axis=1), len(t_state) - 1)
     t_fall = np.where(fell, t_state[fall_index], np.inf)

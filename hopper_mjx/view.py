@@ -219,8 +219,7 @@ def key_handler(run, display: Display, requests: set):
 
 
 def parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="python -m hopper_mjx.view", description=__doc__,
-                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = cli.parser("python -m hopper_mjx.view", __doc__)
     cli.add_batch_options(p)
     p.set_defaults(controller="raibert", duration=None)
     cli.add_live_options(p, foxglove_help="also stream the shown instances' ROS topics")

@@ -73,11 +73,11 @@ from brax import math as bmath
 from hopper_mjx.control import kinematics
 from hopper_mjx.control.base import Commands, Controller, joint_state, pd, saturate, to_ctrl
 from hopper_mjx.model.robot import LegGeometry, Robot
+from hopper_mjx.model.world import EARTH_GRAVITY  # where the attitude stiffness holds as given
 from hopper_mjx.signals import Observation
 
 FLIGHT, COMPRESSION, THRUST, UNLOADING = 0, 1, 2, 3
 MIN_PHASE_TIME = 0.01  # s in flight / stance before contact may end it (debounce)
-EARTH_GRAVITY = 9.81  # m/s², where the attitude stiffness holds as given
 MIN_GRAVITY = 0.1  # m/s², floor under g in the formulas (g = 0 has no hops)
 # rad (haa, hfe, kfe): the nominal stance at which the robot's inertia is taken (the
 # computed stance, `Robot.stance_joints`, has kfe -0.9502; the gains were tuned with this one).

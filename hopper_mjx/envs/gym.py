@@ -24,11 +24,7 @@ from gymnasium.vector import AutoresetMode
 from gymnasium.vector.utils import batch_space
 
 from hopper_mjx.envs import tasks
-
-
-def _select(mask: jax.Array, fresh, old):
-    return jax.tree_util.tree_map(
-        lambda x, y: jnp.where(mask.reshape(mask.shape + (1,) * (x.ndim - 1)), x, y), fresh, old)
+from hopper_mjx.envs.wrappers import where_done
 
 
 class MonopedVectorEnv(gymnasium.vector.VectorEnv):
@@ -49,7 +45,7 @@ class MonopedVectorEnv(gymnasium.vector.VectorEnv):
 
         def step_or_reset(state, action, needs_reset, keys):
             stepped, fresh = step(state, action), reset(keys)
-            state = _select(needs_reset, fresh, stepped)
+            state = where_done(needs_reset, fresh, stepped)
             reward = jnp.where(needs_reset, 0.0, stepped.reward)
             return state, reward, (stepped.done > 0) & ~needs_reset
 

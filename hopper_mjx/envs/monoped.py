@@ -39,6 +39,7 @@ from hopper_mjx import model as hopper_model
 from hopper_mjx.control.base import joint_state, pd, saturate, to_ctrl
 from hopper_mjx.model import robot
 from hopper_mjx.model.layout import Layout
+from hopper_mjx.model.world import EARTH_GRAVITY
 from hopper_mjx.signals import Observation
 
 MAX_TILT_FROM_VERTICAL = 0.8  # rad between the base's z axis and the vertical that ends an episode
@@ -160,18 +161,24 @@ def pd_torque(layout: Layout, cfg: MonopedConfig, target: jax.Array, obs) -> jax
     return saturate(layout, pd(jnp.asarray(cfg.kp), jnp.asarray(cfg.kd), target - q, qd))
 
 
+# The robot's own signals in the observation, in order, with their sizes (`observe` checks them).
+ROBOT_SIGNALS = (("orientation", 4), ("angular rate", 3), ("height", 1), ("linear velocity", 3), ("foot contact", 1),
+                 ("contact force", 3), ("joint angles", 3), ("joint rates", 3))
+MIN_GRAVITY = 0.1  # m/s², a floor under g where it divides (no task draws less than 0.5)
+
+
 def observation_size(command_size: int, observe_gravity: bool) -> int:
-    """24 robot signals + the command + 3 of the previous action (+ gravity)."""
-    return 21 + command_size + 3 + int(observe_gravity)
+    """The robot's signals + the command + 3 of the previous action (+ gravity)."""
+    return sum(size for _, size in ROBOT_SIGNALS) + command_size + 3 + int(observe_gravity)
 
 
 def observe(layout: Layout, cfg: MonopedConfig, obs: Observation, gravity: jax.Array,
             command: jax.Array, last_action: jax.Array) -> jax.Array:
     """The policy's input, from the robot's own signals, roughly unit-scaled: the IMU's
     orientation and rate, the odometry's height and velocity, the foot contact, the joints."""
-    weight = layout.total_mass * 9.81
+    weight = layout.total_mass * EARTH_GRAVITY
     q, qd = joint_state(layout, obs)
-    parts = [
+    robot = [
         obs.qpos[3:7],
         0.25 * obs.qvel[3:6],
         obs.qpos[2:3],
@@ -180,11 +187,11 @@ def observe(layout: Layout, cfg: MonopedConfig, obs: Observation, gravity: jax.A
         obs.contact.force / weight,
         q,
         0.1 * qd,
-        command,
-        last_action,
     ]
+    assert [p.shape[0] for p in robot] == [size for _, size in ROBOT_SIGNALS]  # static shapes: trace time
+    parts = [*robot, command, last_action]
     if cfg.observe_gravity:
-        parts.append(-gravity[2:3] / 9.81)
+        parts.append(-gravity[2:3] / EARTH_GRAVITY)
     return jnp.nan_to_num(jnp.concatenate(parts), posinf=0.0, neginf=0.0)
 
 
@@ -199,7 +206,7 @@ def closeness(error: jax.Array, scale: float) -> jax.Array:
 def predicted_apex(d, g: jax.Array) -> jax.Array:
     """Height the base would reach on a ballistic arc from here (its current height when falling)."""
     vz = jnp.maximum(d.qvel[2], 0.0)
-    return d.qpos[2] + vz**2 / (2.0 * jnp.maximum(g, 0.1))
+    return d.qpos[2] + vz**2 / (2.0 * jnp.maximum(g, MIN_GRAVITY))
 
 
 def tilt_from_vertical(d) -> jax.Array:

@@ -17,7 +17,7 @@ import jax
 import jax.numpy as jnp
 
 from hopper_mjx import registry
-from hopper_mjx.envs.monoped import MonopedConfig, MonopedEnv, closeness, predicted_apex, speed_term
+from hopper_mjx.envs.monoped import MIN_GRAVITY, MonopedConfig, MonopedEnv, closeness, predicted_apex, speed_term
 
 # The gravity range every task draws from by default, m/s², log-uniform.
 GRAVITY_RANGE = (0.5, 12.0)
@@ -41,7 +41,7 @@ class Stand(MonopedEnv):
     def task_terms(self, d, g: jax.Array, command: jax.Array) -> dict[str, jax.Array]:
         cfg = self.config
         # The floor's vertical push on the foot against the robot's weight under this episode's g.
-        support = self.foot_force_z(d) / (self.layout.total_mass * jnp.maximum(g, 0.1))
+        support = self.foot_force_z(d) / (self.layout.total_mass * jnp.maximum(g, MIN_GRAVITY))
         return {
             "alive": jnp.float32(cfg.w_alive),
             "height": cfg.w_height * closeness(d.qpos[2] - self.standing_height, cfg.height_scale),

@@ -17,7 +17,8 @@ from brax.envs.wrappers.training import EpisodeWrapper
 from hopper_mjx.envs.monoped import TASK_INFO
 
 
-def _where_done(done: jax.Array, fresh, old):
+def where_done(done: jax.Array, fresh, old):
+    """`fresh` where `done` (a mask over the leading axes), else `old`, leaf by leaf."""
     return jax.tree_util.tree_map(
         lambda x, y: jnp.where(done.reshape(done.shape + (1,) * (x.ndim - done.ndim)), x, y), fresh, old)
 
@@ -44,9 +45,9 @@ class ResampleAutoReset(Wrapper):
         state = self.env.step(state.replace(done=jnp.zeros_like(state.done)), action)
         fresh = self.env.reset(jax.vmap(lambda k: jax.random.split(k)[1])(state.info["rng"]))
         done = state.done > 0
-        info = {**state.info, **{k: _where_done(done, fresh.info[k], state.info[k]) for k in TASK_INFO}}
-        return state.replace(pipeline_state=_where_done(done, fresh.pipeline_state, state.pipeline_state),
-                             obs=_where_done(done, fresh.obs, state.obs), info=info)
+        info = {**state.info, **{k: where_done(done, fresh.info[k], state.info[k]) for k in TASK_INFO}}
+        return state.replace(pipeline_state=where_done(done, fresh.pipeline_state, state.pipeline_state),
+                             obs=where_done(done, fresh.obs, state.obs), info=info)
 
 
 def wrap_for_training(env, episode_length: int = 1000, action_repeat: int = 1, randomization_fn=None):

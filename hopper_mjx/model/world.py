@@ -29,6 +29,7 @@ import numpy as np
 
 from hopper_mjx.model.loader import read_text
 
+EARTH_GRAVITY = 9.81  # m/s², the standard reference g every g-scaled quantity is measured against
 LOW_GRAVITY_WORLD = Path(__file__).with_name("low_gravity.world")  # the seed's, as an example
 SDF_DEFAULT_GRAVITY = (0.0, 0.0, -9.8)  # m/s², SDF's default <gravity>
 SDF_DEFAULT_MU = 1.0  # SDF's default <surface><friction><ode><mu> (and mu2)

@@ -8,8 +8,8 @@ steps from the same initial state, instance i under the same gravity:
 
 - core: `Sim.rollout` on `--engine` (auto: chain for the monoped) with the `hold`
   controller and the default 50 Hz signals, i.e. the full core (physics,
-  controller, signals, divergence guard), sharded over every local device. The
-  JSON keeps the historical `mjx_*` key names for this side; `engine` names it.
+  controller, signals, divergence guard), sharded over every local device. Its
+  JSON keys start with `core_`; `engine` names the engine that ran.
 - native: `mujoco.rollout` with one thread per device, per-instance gravity
   given as a list of `MjModel`s. The `hold` law (PD to the initial joint angles,
   saturated at the effort limits) runs inside MuJoCo's C step as affine-bias
@@ -197,29 +197,29 @@ def run(num: int, steps: int, *, controller: str = "hold", chunk: int = 256, rep
     sim = Sim(model.load(timestep=timestep), engine=engine, chunk=chunk)
     threads = threads or len(sim.devices)
     gravity = gravity_vectors(bench_gravities(num))
-    mjx_controller, params, native_model, native_ctrl = controller_pair(controller, sim, gravity)
-    state0 = sim.reset(gravity, key=0, controller=mjx_controller, params=params)
+    core_controller, params, native_model, native_ctrl = controller_pair(controller, sim, gravity)
+    state0 = sim.reset(gravity, key=0, controller=core_controller, params=params)
     jax.block_until_ready(state0)
 
     def run_mjx():
-        final, traj = sim.rollout(state0, mjx_controller, steps=steps)
+        final, traj = sim.rollout(state0, core_controller, steps=steps)
         jax.block_until_ready((final, traj))
         return final
 
     first_s = timed(run_mjx)[0]
     compile_s = clock.seconds
     pool = NativeRollout(native_model, gravity, np.asarray(sim.robot.stance_qpos), native_ctrl, threads)
-    mjx_runs, native_runs = [], []
+    core_runs, native_runs = [], []
     for _ in range(repeat):  # interleaved, so that both sides see the same background load
         wall, cpu, final = timed(run_mjx)
-        mjx_runs.append((wall, cpu))
+        core_runs.append((wall, cpu))
         wall, cpu, native_qpos = timed(lambda: pool.run(steps))
         native_runs.append((wall, cpu))
     pool.close()
     total = num * steps
-    mjx_s, native_s = [w for w, _ in mjx_runs], [w for w, _ in native_runs]
-    mjx_rate, native_rate = total / min(mjx_s), total / min(native_s)
-    mjx_cpu = min(c for _, c in mjx_runs) / total * 1e6
+    core_s, native_s = [w for w, _ in core_runs], [w for w, _ in native_runs]
+    core_rate, native_rate = total / min(core_s), total / min(native_s)
+    core_cpu = min(c for _, c in core_runs) / total * 1e6
     native_cpu = min(c for _, c in native_runs) / total * 1e6
     qpos = np.asarray(final.data.qpos)
     record = {
@@ -229,17 +229,17 @@ def run(num: int, steps: int, *, controller: str = "hold", chunk: int = 256, rep
         "engine": sim.engine.name,
         "native_controller": "none" if controller == "none" else "hold",
         "timestep": timestep,
-        "mjx_steps_per_s": mjx_rate,
+        "core_steps_per_s": core_rate,
         "native_steps_per_s": native_rate,
-        "ratio": mjx_rate / native_rate,
+        "ratio": core_rate / native_rate,
         "compile_s": compile_s,
         "compile_cache_hits": clock.cache_hits,
         "first_call_s": first_s,
-        "mjx_runs_s": mjx_s,
+        "core_runs_s": core_s,
         "native_runs_s": native_s,
-        "mjx_cpu_us_per_step": mjx_cpu,
+        "core_cpu_us_per_step": core_cpu,
         "native_cpu_us_per_step": native_cpu,
-        "cpu_ratio": native_cpu / mjx_cpu,
+        "cpu_ratio": native_cpu / core_cpu,
         "peak_rss_mb": peak_rss_mb(),
         "devices": len(sim.devices),
         "device_kind": sim.devices[0].platform,
@@ -247,7 +247,7 @@ def run(num: int, steps: int, *, controller: str = "hold", chunk: int = 256, rep
         "chunk": min(chunk, -(-num // len(sim.devices))),
         "cpu_count": os.cpu_count(),
         "diverged": int(np.asarray(final.diverged).sum()),
-        "mjx_final_base_height_m": float(np.median(qpos[:, 2])),
+        "core_final_base_height_m": float(np.median(qpos[:, 2])),
         "jax": jax.__version__,
         "python": platform.python_version(),
     }
@@ -263,13 +263,13 @@ def run(num: int, steps: int, *, controller: str = "hold", chunk: int = 256, rep
 def format_table(record: dict) -> str:
     rows = [
         ("instances x steps", f"{record['num']} x {record['steps']}  (controller {record['controller']})"),
-        ("core steps/s", f"{record['mjx_steps_per_s']:,.0f}  engine {record['engine']}, on {record['devices']} "
+        ("core steps/s", f"{record['core_steps_per_s']:,.0f}  engine {record['engine']}, on {record['devices']} "
                          f"{record['device_kind']} device(s)"),
         ("native steps/s",
          f"{record['native_steps_per_s']:,.0f}  mujoco.rollout, {record['native_threads']} thread(s)"),
         ("ratio core / native", f"{record['ratio']:.2f}"),
-        ("CPU us per step", f"core {record['mjx_cpu_us_per_step']:.2f}, native {record['native_cpu_us_per_step']:.2f}  "
-                            f"(ratio {record['cpu_ratio']:.2f})"),
+        ("CPU us per step", f"core {record['core_cpu_us_per_step']:.2f}, "
+                            f"native {record['native_cpu_us_per_step']:.2f}  (ratio {record['cpu_ratio']:.2f})"),
         ("compile", f"{record['compile_s']:.1f} s  ({record['compile_cache_hits']} persistent-cache hit(s))"),
         ("peak RSS", f"{record['peak_rss_mb']:,.0f} MB"),
         ("diverged instances", f"{record['diverged']}"),
@@ -307,8 +307,8 @@ def markdown_table(records: list[dict]) -> str:
     for r in records:
         lines.append(
             f"| {r.get('engine', 'mjx')} | {r['num']} "
-            f"| {r['mjx_steps_per_s']:,.0f} | {r['native_steps_per_s']:,.0f} | {r['ratio']:.2f} | "
-            f"{r['mjx_cpu_us_per_step']:.1f} / {r['native_cpu_us_per_step']:.1f} | {r['cpu_ratio']:.2f} | "
+            f"| {r['core_steps_per_s']:,.0f} | {r['native_steps_per_s']:,.0f} | {r['ratio']:.2f} | "
+            f"{r['core_cpu_us_per_step']:.1f} / {r['native_cpu_us_per_step']:.1f} | {r['cpu_ratio']:.2f} | "
             f"{r['compile_s']:.1f} | {r['peak_rss_mb']:,.0f} |"
         )
     return "\n".join(lines)
@@ -324,7 +324,7 @@ def plot_scaling(records: list[dict], path: str) -> None:
     for k, engine in enumerate(dict.fromkeys(r.get("engine", "mjx") for r in records)):
         runs = [r for r in records if r.get("engine", "mjx") == engine]
         nums, color = [r["num"] for r in runs], f"C{k}"
-        rate.loglog(nums, [r["mjx_steps_per_s"] for r in runs], "o-", color=color,
+        rate.loglog(nums, [r["core_steps_per_s"] for r in runs], "o-", color=color,
                     label=f"core ({engine}), {runs[0]['devices']} devices")
         rate.loglog(nums, [r["native_steps_per_s"] for r in runs], "s--", color=color, alpha=0.6,
                     label=f"native mujoco.rollout, {runs[0]['native_threads']} threads, beside {engine}")

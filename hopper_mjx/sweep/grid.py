@@ -79,13 +79,6 @@ class SweepSpec:
     def to_json(self) -> dict:
         return dataclasses.asdict(self)
 
-    @classmethod
-    def from_json(cls, data: dict) -> "SweepSpec":
-        data = dict(data)
-        for key in ("gravity", "speed", "values"):
-            data[key] = tuple(data[key])
-        return cls(**data)
-
 
 @dataclass(frozen=True)
 class Instances:
