@@ -1,16 +1,15 @@
-"""Argument parsing and checking shared by the `python -m hopper_mjx.*` commands.
+"""The options the `python -m hopper_mjx.*` commands share, checked whole: the simulated batch
+(gravities or worlds, size, controller, model), the engine and the live options.
 
-Every command checks its arguments here before any model is built or compiled
-(and mostly before JAX or MuJoCo is even imported): a bad value is one line on
-stderr, `error: ...`, naming the argument and what is wrong, exit code 2, and
-nothing written. `ArgumentParser` gives argparse's own refusals the same form.
+The value, path and name checks themselves live below, in `hopper_mjx.checks` (re-exported here
+for the tools); a bad value is one line on stderr, `error: ...`, exit code 2, nothing written,
+before any model is built or compiled.
 """
 
 from __future__ import annotations
 
 import argparse
 import math
-import os
 import sys
 import time
 from dataclasses import dataclass
@@ -19,94 +18,22 @@ from pathlib import Path
 import numpy as np
 
 from hopper_mjx import registry
-
-MAX_TIMESTEP = 0.01  # s, as model.load accepts
-DEFAULT_TIMESTEP = 1e-3  # s, model.DEFAULT_TIMESTEP (checked equal by a test; importing model loads MuJoCo)
-
-
-class ArgumentParser(argparse.ArgumentParser):
-    """argparse, refusing in one line: `error: <what>` on stderr and exit code 2 (no usage block)."""
-
-    def error(self, message: str):
-        self.exit(2, f"error: {message} (see {self.prog} --help)\n")
-
-
-def parser(prog: str, doc: str | None) -> ArgumentParser:
-    return ArgumentParser(prog=prog, description=doc, formatter_class=argparse.RawDescriptionHelpFormatter)
-
-
-def parse_floats(text: str, what: str) -> list[float]:
-    try:
-        values = [float(v) for v in text.split(",") if v.strip()]
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{what} must be comma-separated numbers, got {text!r}") from None
-    if not values:
-        raise argparse.ArgumentTypeError(f"{what} is empty")
-    return values
-
-
-def floats(what: str):
-    """An argparse `type` for a comma-separated list of numbers."""
-    return lambda text: parse_floats(text, what)
-
-
-def parse_indices(text: str, what: str = "--instances") -> list[int]:
-    try:
-        return [int(v) for v in text.split(",") if v.strip()]
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{what} must be comma-separated integers, got {text!r}") from None
-
-
-# -- single checks, each raising ValueError with the one line to print -------------------------
-def check_range(name: str, value: float, *, low: float | None = None, high: float | None = None,
-                open_low: bool = False) -> None:
-    """`value` finite and within [low, high] (or (low, high] with `open_low`)."""
-    too_low = low is not None and (value <= low if open_low else value < low)
-    if not math.isfinite(value) or too_low or (high is not None and value > high):
-        lower = "" if low is None else f"{'>' if open_low else '>='} {low:g}"
-        upper = "" if high is None else f"<= {high:g}"
-        raise ValueError(f"{name} must be finite and {' and '.join(b for b in (lower, upper) if b)}, got {value:g}")
-
-
-def check_writable(name: str, path: str | Path, *, folder: bool = False, may_exist: bool = True,
-                   make_parents: bool = False) -> Path:
-    """An output path that can be written, checked without creating anything: its parent exists and is a
-    folder (with `make_parents`, its nearest existing ancestor); a file output is not a folder (a folder
-    output not a file); with `may_exist` False it must be new."""
-    path = Path(path)
-    parent = path.parent
-    while make_parents and not parent.exists() and parent != parent.parent:
-        parent = parent.parent
-    if not parent.is_dir():
-        why = "does not exist" if not parent.exists() else "is not a folder"
-        raise ValueError(f"{name} {path}: its folder {parent} {why}")
-    if path.exists() and not may_exist:
-        raise ValueError(f"{name} {path} exists; remove it or choose another")
-    if path.exists() and path.is_dir() != folder:
-        wanted, found = ("folder", "file") if folder else ("file", "folder")
-        raise ValueError(f"{name} {path} is a {found}; give a {wanted}")
-    if not os.access(parent, os.W_OK):
-        raise ValueError(f"{name} {path}: cannot write in {parent}")
-    return path
-
-
-def check_readable_file(name: str, path: str | Path) -> Path:
-    path = Path(path)
-    if not path.is_file():
-        raise ValueError(f"{name} {path}: {'is a folder, not a file' if path.is_dir() else 'no such file'}")
-    return path
-
-
-def check_indices(name: str, indices, n: int) -> None:
-    """Instance indices of a batch of n: within 0..n-1, none twice, at least one."""
-    indices = list(indices)
-    if not indices:
-        raise ValueError(f"{name}: no instance given")
-    bad = [i for i in indices if not 0 <= i < n]
-    if bad:
-        raise ValueError(f"{name} {bad} out of range: the batch has {n} instance(s), 0..{n - 1}")
-    if len(set(indices)) != len(indices):
-        raise ValueError(f"{name} lists an instance twice: {indices}")
+from hopper_mjx.checks import (  # noqa: F401  re-exported: the tools use them beside the options
+    DEFAULT_TIMESTEP,
+    MAX_TIMESTEP,
+    ArgumentParser,
+    check_engine,
+    check_indices,
+    check_range,
+    check_readable_file,
+    check_writable,
+    fail,
+    floats,
+    parse_floats,
+    parse_indices,
+    parser,
+    warn_diverged,
+)
 
 
 def check_controller(text: str, height: float = 0.0, speed=(0.0, 0.0), urdf=None) -> None:
@@ -145,19 +72,6 @@ def check_gains(args) -> dict | None:
         return pid.load_gains(args.gains)
     except ValueError as err:
         raise ValueError(f"--gains: {err}") from None
-
-
-def check_urdf(path: str | Path | None) -> None:
-    """--urdf exists and describes a monoped (checked as XML, before MuJoCo compiles anything)."""
-    if path is None:
-        return
-    from hopper_mjx.model import loader
-
-    path = check_readable_file("--urdf", path)
-    try:
-        loader.describe(loader.read_text(path, "URDF file", loader.URDFError), str(path))
-    except loader.URDFError as err:
-        raise ValueError(f"--urdf: {err}") from None
 
 
 # -- the simulated batch of simulate, record and render -----------------------------------------
@@ -249,6 +163,8 @@ def check_batch(args) -> Batch:
     check_engine(args.engine)
     if args.timestep is not None:
         check_range("--timestep", args.timestep, low=0, high=MAX_TIMESTEP, open_low=True)
+    from hopper_mjx.model.checks import check_urdf  # MuJoCo's import waits for the cheap checks above
+
     check_urdf(args.urdf)
     check_controller(args.controller, args.height, args.speed, args.urdf)
     from_worlds = batch_from_worlds(args)
@@ -266,13 +182,6 @@ def check_batch(args) -> Batch:
     if warning:
         print(warning, file=sys.stderr)
     return Batch(gravity=np.repeat(rows, args.num, axis=0), model_options=options, gains=gains)
-
-
-def check_engine(name: str) -> None:
-    try:
-        registry.check("engine", registry.ENGINES, name)
-    except ValueError as err:
-        raise ValueError(f"--engine: {err}") from None
 
 
 def check_rates(flags: str, sensors, batch: Batch) -> None:
@@ -351,12 +260,3 @@ def check_live(args) -> None:
         raise ValueError(f"--speed-factor must be > 0, got {args.speed_factor}")
 
 
-def fail(err: Exception | str) -> int:
-    print(f"error: {err}", file=sys.stderr)
-    return 2
-
-
-def warn_diverged(diverged) -> None:
-    bad = np.flatnonzero(diverged)
-    if bad.size:
-        print(f"warning: {bad.size} instance(s) diverged and were frozen: {bad[:20].tolist()}", file=sys.stderr)

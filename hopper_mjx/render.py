@@ -146,8 +146,10 @@ def main(argv=None) -> int:
     try:
         _check_size(**size)
         if args.still is not None:
+            from hopper_mjx.model.checks import check_urdf
+
             cli.check_writable("--still", args.still)
-            cli.check_urdf(args.urdf)
+            check_urdf(args.urdf)
         batch = check_video(args) if args.video is not None else None
         runtime.configure()
         m = scene_model(args.urdf)

@@ -13,7 +13,9 @@ PACKAGE = "hopper_mjx"
 # controllers -> metrics -> the batched core -> environments -> command-line support -> live runs
 # and ROS I/O -> tools.
 LAYERS = (
-    ("startup", "runtime", "registry", "model"),  # startup: what must precede the first import of MuJoCo
+    ("startup", "registry"),  # startup: what must precede the first import of MuJoCo; registry: the names
+    ("checks", "runtime"),  # checks: the command line's value, path and name checks
+    ("model",),
     ("engine",),
     ("signals",),
     ("control",),
@@ -77,8 +79,7 @@ def upstream_imports(graph: dict[str, list[tuple[int, str]]], files: dict[str, P
             there = part_of(target)
             if there == here:
                 continue
-            # A `__main__` module is a command: a tool, whatever part it sits in.
-            layer = TOOL_LAYER if module.endswith(".__main__") else layer_of(here)
+            layer = layer_of(here)
             if layer_of(there) >= layer:
                 problems.append(f"{files[module].relative_to(ROOT)}:{line}: {here} (layer {layer}) "
                                 f"imports {there} (layer {layer_of(there)}), which is not below it")
@@ -131,7 +132,13 @@ def test_the_check_sees_an_upstream_import_and_a_cycle():
     graph = {"hopper_mjx.control.raibert": [(1, "hopper_mjx.sim")],
              "hopper_mjx.sim": [(2, "hopper_mjx.control.raibert")]}
     assert upstream_imports(graph, files) == [
-        "hopper_mjx/control/raibert.py:1: control (layer 3) imports sim (layer 5), which is not below it"]
+        f"hopper_mjx/control/raibert.py:1: control (layer {layer_of('control')}) imports sim "
+        f"(layer {layer_of('sim')}), which is not below it"]
+    # A command's `__main__` is not exempt: the model's command importing the command line is refused.
+    main = {"hopper_mjx.model.__main__": ROOT / "hopper_mjx/model/__main__.py"}
+    assert upstream_imports({"hopper_mjx.model.__main__": [(3, "hopper_mjx.cli")]}, main) == [
+        f"hopper_mjx/model/__main__.py:3: model (layer {layer_of('model')}) imports cli (layer {layer_of('cli')}), "
+        "which is not below it"]
     assert cycles(graph) == ["hopper_mjx.control.raibert -> hopper_mjx.sim -> hopper_mjx.control.raibert"]
     assert layer_of("view") == layer_of("simulate") == layer_of("perf") == TOOL_LAYER
     assert layer_of("cli") < layer_of("ros") == layer_of("live") < TOOL_LAYER

@@ -6,7 +6,8 @@ with colours and resolvable mesh paths, for a viewer such as Foxglove's 3D panel
 
 import sys
 
-from hopper_mjx import cli
+from hopper_mjx import checks
+from hopper_mjx.model.checks import check_urdf
 
 
 def export_urdf(args) -> int:
@@ -23,30 +24,30 @@ def export_urdf(args) -> int:
 
 
 def main(argv=None) -> int:
-    parser = cli.parser("python -m hopper_mjx.model", __doc__)
+    parser = checks.parser("python -m hopper_mjx.model", __doc__)
     out = parser.add_mutually_exclusive_group(required=True)
     out.add_argument("--export", metavar="FILE.xml", help="where to write the MJCF")
     out.add_argument("--export-urdf", metavar="FILE.urdf", help="where to write the URDF for display (- for stdout)")
     parser.add_argument("--urdf", default=None, help="monoped URDF (default: the shipped seed monoped)")
     parser.add_argument("--frame-prefix", default="", metavar="PREFIX",
                         help="with --export-urdf: prefix every link name (monoped_0/: a robot of a multi-robot stream)")
-    parser.add_argument("--timestep", type=float, default=cli.DEFAULT_TIMESTEP, help="physics step, s")
+    parser.add_argument("--timestep", type=float, default=checks.DEFAULT_TIMESTEP, help="physics step, s")
     args = parser.parse_args(argv)
     try:
         if args.export_urdf is not None:
             if args.export_urdf != "-":
-                cli.check_writable("--export-urdf", args.export_urdf)
-            cli.check_urdf(args.urdf)
+                checks.check_writable("--export-urdf", args.export_urdf)
+            check_urdf(args.urdf)
             return export_urdf(args)
-        cli.check_writable("--export", args.export)
-        cli.check_range("--timestep", args.timestep, low=0, high=cli.MAX_TIMESTEP, open_low=True)
-        cli.check_urdf(args.urdf)
+        checks.check_writable("--export", args.export)
+        checks.check_range("--timestep", args.timestep, low=0, high=checks.MAX_TIMESTEP, open_low=True)
+        check_urdf(args.urdf)
         from hopper_mjx.model.loader import build_spec
 
         spec = build_spec(args.urdf, timestep=args.timestep)
         model = spec.compile()
     except ValueError as err:  # includes URDFError
-        return cli.fail(err)
+        return checks.fail(err)
     with open(args.export, "w") as f:
         f.write(spec.to_xml())
     print(f"wrote {args.export}: {model.nbody - 1} bodies, {model.njnt} joints, "
