@@ -67,6 +67,7 @@ def parser() -> argparse.ArgumentParser:
                    help="low,high m/s², drawn log-uniformly per episode (default: the task's, 0.5,12)")
     p.add_argument("--observe-gravity", action="store_true", help="put the gravity magnitude in the observation")
     cli.add_engine_option(p)
+    p.add_argument("--urdf", default=None, help="monoped URDF (default: the shipped one)")
     p.add_argument("--sac-replay", type=int, default=1_000_000, help="SAC: replay buffer size (env steps)")
     p.add_argument("--sac-min-replay", type=int, default=8192, help="SAC: env steps collected before learning")
     p.add_argument("--sac-grad-updates", type=int, default=8, help="SAC: gradient updates per env step batch")
@@ -125,6 +126,10 @@ def check(args) -> None:
     if args.algo not in ALGORITHMS:
         raise ValueError(f"--algo {args.algo!r} is unknown; choose from {', '.join(ALGORITHMS)}")
     cli.check_engine(args.engine)
+    if args.urdf is not None:
+        from hopper_mjx.model.checks import check_urdf
+
+        check_urdf(args.urdf)
     _layers(args.policy_layers), _layers(args.value_layers)
     if args.gravity_range is not None:
         lo, hi = _pair(args.gravity_range, "--gravity-range")
@@ -150,12 +155,12 @@ def check(args) -> None:
 
 
 def task_config(args):
-    from hopper_mjx import envs
+    from hopper_mjx import envs, model
 
     overrides = {"observe_gravity": args.observe_gravity, "engine": args.engine}
     if args.gravity_range is not None:
         overrides["gravity_range"] = _pair(args.gravity_range, "--gravity-range")
-    return envs.make(args.task, **overrides)
+    return envs.make(args.task, model.load(args.urdf), **overrides)
 
 
 def _shared(args, env, factory, remaining: int, start_step: int, resume, per_train_step: int) -> dict:
@@ -318,7 +323,7 @@ def evaluation_batch(gravities, num: int, seed: int, nv: int):
 
 
 def evaluate(policy_path, *, gravities, duration: float, height: float, num: int, seed: int = 0,
-             speed=(0.0, 0.0), raibert_too: bool = True) -> dict:
+             speed=(0.0, 0.0), raibert_too: bool = True, urdf: str | None = None) -> dict:
     """Hop metrics of the policy and (`raibert_too`) of the Raibert controller, same batch, same commands.
 
     Each controller runs `num` instances per gravity for `duration` s in the core,
@@ -333,7 +338,7 @@ def evaluate(policy_path, *, gravities, duration: float, height: float, num: int
     from hopper_mjx.sim import Sim, gravity_vectors
     from hopper_mjx.sweep.runner import SENSORS
 
-    mj_model = model.load()
+    mj_model = model.load(urdf)
     sim = Sim(mj_model)
     g, kick = evaluation_batch(gravities, num, seed, sim.layout.nv)
     sensors = SENSORS  # the sweep's streams and kicks: the numbers compare with a sweep's
@@ -391,7 +396,8 @@ def first_checkpoint_at_threshold(args) -> dict | None:
         if row.get("eval/avg_episode_length", args.episode_length) < 0.95 * args.episode_length:
             continue
         result = evaluate(path, gravities=gravities, duration=args.eval_duration, height=args.eval_height,
-                          num=args.eval_num, seed=args.seed, speed=args.eval_speed, raibert_too=False)["policy"]
+                          num=args.eval_num, seed=args.seed, speed=args.eval_speed, raibert_too=False,
+                          urdf=args.urdf)["policy"]
         print(f"step {int(path.name):>10,} ({row.get('wall_time', math.nan) / 60:.1f} min): "
               + ", ".join(f"g {g}: {r['survival']:.0%} alive, >= {r['min_hops']} hops" for g, r in result.items()),
               flush=True)
@@ -453,7 +459,8 @@ def main(argv=None) -> int:
     if args.evaluate:
         gravities = [float(v) for v in args.eval_gravity.split(",")]
         result = evaluate(Path(args.out) / "policy", gravities=gravities, duration=args.eval_duration,
-                          height=args.eval_height, num=args.eval_num, seed=args.seed, speed=args.eval_speed)
+                          height=args.eval_height, num=args.eval_num, seed=args.seed, speed=args.eval_speed,
+                          urdf=args.urdf)
         table = evaluation_table(result, args.eval_height)
         (Path(args.out) / "evaluation.json").write_text(json.dumps(result, indent=1))
         (Path(args.out) / "evaluation.md").write_text(table + "\n")

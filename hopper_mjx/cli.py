@@ -50,14 +50,16 @@ def check_controller(text: str, height: float = 0.0, speed=(0.0, 0.0), urdf=None
     if not path.is_dir():
         raise ValueError(f"--controller {text}: {path} is not a trained policy: no such folder")
     from hopper_mjx import model
-    from hopper_mjx.envs import policy
+    from hopper_mjx.envs import monoped, policy
     from hopper_mjx.model.robot import standing_height
 
     try:
         config = policy.read(path)[3]
+        mj_model = model.load(urdf)
+        monoped.same_robot(config.robot, mj_model, f"the policy {path}")
     except ValueError as err:
         raise ValueError(f"--controller: {err}") from None
-    policy.check_command(config, standing_height(model.load(urdf)), height, speed)
+    policy.check_command(config, standing_height(mj_model), height, speed)
 
 
 def check_gains(args) -> dict | None:

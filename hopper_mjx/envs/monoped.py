@@ -94,6 +94,7 @@ class MonopedConfig:
     solver_iterations: int = 2
     ls_iterations: int = 4
     engine: str = "auto"  # hopper_mjx.engine name: auto (chain for the monoped), chain or mjx
+    robot: str = ""  # `model.robot.fingerprint` of the robot (set by the env); "" in policies saved before it
 
 
     def __post_init__(self):
@@ -125,6 +126,15 @@ class MonopedConfig:
         if unknown:
             raise ValueError(f"unknown MonopedConfig field(s): {sorted(unknown)}")
         return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in values.items()})
+
+
+def same_robot(recorded: str, mj_model, what: str) -> str:
+    """The fingerprint of `mj_model`'s robot, refusing one other than `recorded` (when recorded)."""
+    found = robot.fingerprint(mj_model)
+    if recorded and recorded != found:
+        raise ValueError(f"{what} is for another robot (fingerprint {recorded}) than the one given ({found}): "
+                         "give the --urdf it was trained with")
+    return found
 
 
 def decimation(layout: Layout, cfg: MonopedConfig) -> int:
@@ -266,6 +276,7 @@ class MonopedEnv(Env):
 
     def __init__(self, config: MonopedConfig, mj_model: mujoco.MjModel | None = None):
         mj_model = mj_model if mj_model is not None else hopper_model.load()
+        config = dataclasses.replace(config, robot=same_robot(config.robot, mj_model, "this task's config"))
         trained = training_model(mj_model, config)
         self.config = config
         self.layout = Layout.of(trained)

@@ -158,6 +158,7 @@ def policy_params(robot: Robot, n: int, *, height: float, speed=(0.0, 0.0), conf
 def policy_controller(mj_model: mujoco.MjModel, path) -> Controller:
     """The trained policy as a core `Controller`; params: per-instance (3,) commands or None."""
     policy, cfg = load(path)
+    monoped.same_robot(cfg.robot, mj_model, f"the policy {path}")
     layout = Layout.of(mj_model)
     every = monoped.decimation(layout, cfg)  # raises if the policy rate does not divide the physics rate
     stance = jnp.asarray(monoped.stance_qpos(mj_model)[list(layout.joint_qpos)])

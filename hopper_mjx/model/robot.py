@@ -7,6 +7,7 @@ with MuJoCo C, once, and everything above takes them as arguments.
 
 from __future__ import annotations
 
+import hashlib
 from dataclasses import dataclass
 
 import mujoco
@@ -50,6 +51,24 @@ def stance_qpos(mj_model: mujoco.MjModel, clearance: float = CLEARANCE, hfe: flo
 def standing_height(mj_model: mujoco.MjModel) -> float:
     """Base height (m) of the model standing still in the default stance, foot on the floor."""
     return float(stance_qpos(mj_model, clearance=0.0)[2])
+
+
+# What makes the robot this robot: its bodies, inertias, joints, limits, motors and geoms,
+# not the world it stands in (timestep, gravity, floor, friction).
+_FINGERPRINT_FIELDS = ("body_pos", "body_quat", "body_mass", "body_inertia", "body_ipos", "body_iquat", "jnt_type",
+                       "jnt_axis", "jnt_pos", "jnt_range", "actuator_gear", "actuator_ctrlrange")
+
+
+def fingerprint(mj_model: mujoco.MjModel) -> str:
+    """A short hash of the robot a compiled model holds (a trained policy records the one it learnt on)."""
+    m = mj_model
+    h = hashlib.sha256()
+    for name in _FINGERPRINT_FIELDS:
+        h.update(np.round(np.asarray(getattr(m, name), dtype=float), 9).tobytes())
+    on_robot = m.geom_bodyid > 0  # the floor (or terrain) belongs to the world
+    for name in ("geom_type", "geom_size", "geom_pos", "geom_quat"):
+        h.update(np.round(np.asarray(getattr(m, name)[on_robot], dtype=float), 9).tobytes())
+    return h.hexdigest()[:16]
 
 
 def _link_groups(m: mujoco.MjModel, joints) -> list[list[int]]:

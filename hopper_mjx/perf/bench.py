@@ -183,7 +183,8 @@ def peak_rss_mb() -> float:
 
 
 def run(num: int, steps: int, *, controller: str = "hold", chunk: int = 256, repeat: int = 2,
-        threads: int | None = None, timestep: float = 1e-3, engine: str = "auto") -> dict:
+        threads: int | None = None, timestep: float = 1e-3, engine: str = registry.DEFAULT_ENGINE,
+        urdf: str | None = None) -> dict:
     """One side-by-side measurement; returns the JSON record."""
     import jax
 
@@ -194,7 +195,7 @@ def run(num: int, steps: int, *, controller: str = "hold", chunk: int = 256, rep
         raise ValueError(f"--steps and --repeat must be >= 1, got {steps} and {repeat}")
     cli.check_engine(engine)
     clock = CompileClock()
-    sim = Sim(model.load(timestep=timestep), engine=engine, chunk=chunk)
+    sim = Sim(model.load(urdf, timestep=timestep), engine=engine, chunk=chunk)
     threads = threads or len(sim.devices)
     gravity = gravity_vectors(bench_gravities(num))
     core_controller, params, native_model, native_ctrl = controller_pair(controller, sim, gravity)
@@ -356,6 +357,7 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--repeat", type=int, default=2, help="timed runs per side; the best counts")
     p.add_argument("--threads", type=int, default=None, help="native threads (default: one per device)")
     p.add_argument("--timestep", type=float, default=1e-3, help="physics step, s")
+    p.add_argument("--urdf", default=None, help="monoped URDF (default: the shipped one)")
     p.add_argument("--json", default=None, help="write the record (or the scaling records) here")
     p.add_argument("--scaling", default=None, help="comma-separated N values: one bench process each")
     p.add_argument("--plot", default=None, help="with --scaling: save the scaling plot (PNG) here")
@@ -379,6 +381,10 @@ def check(args) -> list[int] | None:
         raise ValueError(f"--controller: {err}") from None
     if args.json:
         cli.check_writable("--json", args.json)
+    if args.urdf is not None:
+        from hopper_mjx.model.checks import check_urdf
+
+        check_urdf(args.urdf)
     if args.plot and not args.scaling:
         raise ValueError("--plot draws the --scaling records: give --scaling N1,N2,... too")
     if args.plot:
@@ -403,6 +409,7 @@ def main(argv=None) -> int:
         if nums:
             passed = ["--controller", args.controller, "--chunk", str(args.chunk), "--repeat", str(args.repeat),
                       "--timestep", str(args.timestep)] + (["--threads", str(args.threads)] if args.threads else [])
+            passed += ["--urdf", args.urdf] if args.urdf else []
             records = scaling(nums, args.engine.split(","), args.steps, passed)
             print(markdown_table(records))
             if args.plot:
@@ -410,7 +417,8 @@ def main(argv=None) -> int:
             result = records
         else:
             result = run(args.num, args.steps, controller=args.controller, chunk=args.chunk,
-                         repeat=args.repeat, threads=args.threads, timestep=args.timestep, engine=args.engine)
+                         repeat=args.repeat, threads=args.threads, timestep=args.timestep, engine=args.engine,
+                         urdf=args.urdf)
             print(format_table(result))
     except (ValueError, argparse.ArgumentTypeError) as err:
         return cli.fail(err)

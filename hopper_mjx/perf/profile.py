@@ -109,7 +109,7 @@ def chain_costs(engine, qpos, qvel, gravity, steps: int) -> dict:
     return dict(zip(CHAIN_STAGES, np.diff(cumulative, prepend=0.0))) | {"full step": cumulative[-1]}
 
 
-def measure(num: int, steps: int, settle: int, engine: str = registry.DEFAULT_ENGINE) -> dict:
+def measure(num: int, steps: int, settle: int, engine: str = registry.DEFAULT_ENGINE, urdf: str | None = None) -> dict:
     import jax
 
     from hopper_mjx import model
@@ -120,7 +120,7 @@ def measure(num: int, steps: int, settle: int, engine: str = registry.DEFAULT_EN
 
     if num < 1 or steps < 1:
         raise ValueError(f"--num and --steps must be >= 1, got {num}, {steps}")
-    mj_model = model.load()
+    mj_model = model.load(urdf)
     sim = Sim(mj_model, engine=engine, chunk=num, devices=jax.local_devices()[:1])
     controller = hold(sim.layout)
     state = sim.reset(gravity_vectors(np.linspace(*GRAVITY_SPAN, num)), controller=controller)
@@ -166,17 +166,22 @@ def main(argv=None) -> int:
     p.add_argument("--steps", type=int, default=200, help="steps per timed rollout")
     p.add_argument("--settle", type=int, default=300, help="physics steps holding the stance before timing")
     cli.add_engine_option(p)
+    p.add_argument("--urdf", default=None, help="monoped URDF (default: the shipped one)")
     args = p.parse_args(argv)
     for name in ("num", "steps", "settle"):
         if getattr(args, name) < 1:
             return cli.fail(ValueError(f"--{name} must be >= 1, got {getattr(args, name)}"))
     try:
         cli.check_engine(args.engine)
+        if args.urdf is not None:
+            from hopper_mjx.model.checks import check_urdf
+
+            check_urdf(args.urdf)
     except ValueError as err:
         return cli.fail(err)
     runtime.configure()
     try:
-        record = measure(args.num, args.steps, args.settle, args.engine)
+        record = measure(args.num, args.steps, args.settle, args.engine, args.urdf)
     except ValueError as err:
         return cli.fail(err)
     print(table(record))

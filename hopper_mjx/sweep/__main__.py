@@ -49,6 +49,7 @@ def parser() -> argparse.ArgumentParser:
         s.add_argument("--speed", type=cli.floats("--speed"), default=[0.0, 0.0], help="VX,VY m/s")
         s.add_argument("--kick", type=float, default=KICK, help="std of the random initial velocity, m/s and rad/s")
         s.add_argument("--seed", type=int, default=0)
+        s.add_argument("--urdf", default=None, help="monoped URDF (default: the shipped one)")
         s.add_argument("--chunk", type=int, default=256, help="instances per compiled call")
         cli.add_engine_option(s)
         s.add_argument("--out", type=Path, default=None, help="output folder (default runs/<kind>-<UTC time>)")
@@ -85,6 +86,10 @@ def check(args):
     from hopper_mjx.sweep.grid import SweepSpec
 
     gravity = gravity_from_worlds(args) if args.world is not None else tuple(args.gravity or args.default_gravity)
+    if args.urdf is not None:  # MuJoCo is imported only for a URDF to check
+        from hopper_mjx.model.checks import check_urdf
+
+        check_urdf(args.urdf)
     names = args.controllers.split(",") if args.kind == "compare" else [getattr(args, "controller", "raibert")]
     if len(set(names)) != len(names):
         raise ValueError(f"--controllers lists one twice: {args.controllers}")
@@ -93,9 +98,9 @@ def check(args):
         specs.append(SweepSpec(kind="gains" if args.kind == "gains" else "gravity", gravity=gravity, num=args.num,
                                duration=args.duration, height=args.height, speed=tuple(args.speed), seed=args.seed,
                                kick=args.kick, chunk=args.chunk, engine=args.engine,
-                               param=getattr(args, "param", None), controller=name,
+                               param=getattr(args, "param", None), controller=name, urdf=args.urdf,
                                values=tuple(args.values) if args.kind == "gains" else ()))
-        cli.check_controller(name, args.height, args.speed)  # a policy: its folder and trained range
+        cli.check_controller(name, args.height, args.speed, args.urdf)  # a policy: its folder and trained range
     out = args.out or Path("runs") / f"{args.kind}-{datetime.now(timezone.utc):%Y%m%d-%H%M%S}"
     cli.check_writable("--out", out, folder=True, make_parents=True)
     if args.num_processes < 1 or not 0 <= args.process_id < args.num_processes:

@@ -77,19 +77,20 @@ class ChunkRunner:
         if self.policy is None:
             self.controller = raibert(sim.robot)
         else:  # brax is imported only when a policy is swept
-            from hopper_mjx.envs.policy import policy_controller
+            from hopper_mjx.envs.policy import policy_controller, read
 
             self.controller = policy_controller(sim.mj_model, self.policy)
+            self.policy_config = read(self.policy)[3]  # once, not per chunk
         self.steps = steps_for(spec.duration, sim.layout.timestep, SENSORS)
 
     def params(self, full: np.ndarray):
         """Every instance's command (and swept gain): the same for Raibert and a policy."""
         spec = self.spec
         if self.policy is not None:
-            from hopper_mjx.envs.policy import policy_params, read
+            from hopper_mjx.envs.policy import policy_params
 
             return policy_params(self.sim.robot, len(full), height=spec.height, speed=spec.speed,
-                                 config=read(self.policy)[3])
+                                 config=self.policy_config)
         gains = {spec.param: self.instances.value[full]} if spec.kind == "gains" else {}
         return raibert_params(len(full), height=spec.height, speed=spec.speed, **gains)
 
@@ -114,7 +115,7 @@ def run(spec: SweepSpec, out: Path, *, progress: bool = True) -> tuple[Instances
     out = Path(out)
     claim(out, spec)
     (out / "chunks").mkdir(exist_ok=True)
-    sim = Sim(model.load(), engine=spec.engine)
+    sim = Sim(model.load(spec.urdf), engine=spec.engine)
     instances = expand(spec, sim.layout.nv)
     chunks = [np.arange(i, min(i + spec.chunk, len(instances))) for i in range(0, len(instances), spec.chunk)]
     me, procs = jax.process_index(), jax.process_count()
