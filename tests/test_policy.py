@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from hopper_mjx import envs
-from hopper_mjx.envs import monoped
+from hopper_mjx.model import robot
 
 
 @pytest.fixture(scope="module")
@@ -47,7 +47,7 @@ def test_policy_runs_as_a_core_controller(trained, mj_model, sim):
     out, _ = trained
     controller = policy.policy_controller(mj_model, os.path.relpath(out))  # relative, as typed on a command line
     params = policy.policy_params(sim.robot, 3, height=0.2, config=policy.read(out)[3])
-    standing = monoped.stance_qpos(mj_model)[2]
+    standing = robot.standing_qpos(mj_model)[2]
     np.testing.assert_allclose(np.asarray(params.command[0]), [standing + 0.2, 0.0, 0.0], rtol=1e-6)
     state = sim.reset(gravity_vectors([9.81, 3.71, 1.62]), key=0, controller=controller, params=params)
     final, traj = sim.rollout(state, controller, steps=100)

@@ -259,12 +259,6 @@ def training_model(mj_model: mujoco.MjModel, cfg: MonopedConfig) -> mujoco.MjMod
     return m
 
 
-def stance_qpos(mj_model: mujoco.MjModel) -> np.ndarray:
-    """The robot's standing pose with the foot on the floor; its joint angles are the
-    centre of the action space."""
-    return robot.stance_qpos(mj_model, clearance=0.0).astype(np.float32)
-
-
 # -- the environment -------------------------------------------------------------------------
 
 
@@ -282,7 +276,7 @@ class MonopedEnv(Env):
         self.layout = Layout.of(trained)
         self.n_frames = decimation(self.layout, config)
         self.engine = engines.make(config.engine, trained)
-        self.standing_qpos = stance_qpos(mj_model)  # the same pose the policy controller uses
+        self.standing_qpos = robot.standing_qpos(mj_model).astype(np.float32)  # as the policy controller
         self.stance = self.standing_qpos[list(self.layout.joint_qpos)]
         self.standing_height = float(self.standing_qpos[2])
 

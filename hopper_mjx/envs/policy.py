@@ -33,7 +33,7 @@ from hopper_mjx import registry
 from hopper_mjx.control.base import Commands, Controller, joint_state, to_ctrl
 from hopper_mjx.envs import monoped, tasks
 from hopper_mjx.model.layout import Layout
-from hopper_mjx.model.robot import Robot, standing_height
+from hopper_mjx.model.robot import Robot, standing_height, standing_qpos
 from hopper_mjx.signals import Observation
 
 ENV_CONFIG = "hopper_env.json"
@@ -161,7 +161,7 @@ def policy_controller(mj_model: mujoco.MjModel, path) -> Controller:
     monoped.same_robot(cfg.robot, mj_model, f"the policy {path}")
     layout = Layout.of(mj_model)
     every = monoped.decimation(layout, cfg)  # raises if the policy rate does not divide the physics rate
-    stance = jnp.asarray(monoped.stance_qpos(mj_model)[list(layout.joint_qpos)])
+    stance = jnp.asarray(standing_qpos(mj_model)[list(layout.joint_qpos)], jnp.float32)
 
     def init(obs, params: PolicyParams | None):
         command = default_command(cfg) if params is None else jnp.asarray(params.command, dtype=jnp.float32)

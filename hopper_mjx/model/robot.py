@@ -14,6 +14,7 @@ import mujoco
 import numpy as np
 
 from hopper_mjx.model.layout import Layout
+from hopper_mjx.model.loader import JOINTS
 
 STANCE_HFE = 0.5  # rad: hip flexion of the default crouched stance
 CLEARANCE = 0.05  # m between the foot and the floor in the default initial state
@@ -48,9 +49,15 @@ def stance_qpos(mj_model: mujoco.MjModel, clearance: float = CLEARANCE, hfe: flo
     return d.qpos.copy()
 
 
+def standing_qpos(mj_model: mujoco.MjModel) -> np.ndarray:
+    """qpos standing still in the default stance with the foot on the floor (`stance_qpos` is the
+    same pose lifted `CLEARANCE` m, the default initial state)."""
+    return stance_qpos(mj_model, clearance=0.0)
+
+
 def standing_height(mj_model: mujoco.MjModel) -> float:
     """Base height (m) of the model standing still in the default stance, foot on the floor."""
-    return float(stance_qpos(mj_model, clearance=0.0)[2])
+    return float(standing_qpos(mj_model)[2])
 
 
 # What makes the robot this robot: its bodies, inertias, joints, limits, motors and geoms,
@@ -111,7 +118,7 @@ class LegGeometry:
         layout = Layout.of(m)
         d = mujoco.MjData(m)
         mujoco.mj_kinematics(m, d)  # reference pose: frames aligned
-        joints = [m.joint(name) for name in ("haa_joint", "hfe_joint", "kfe_joint")]
+        joints = [m.joint(name) for name in JOINTS]
         anchor = [d.xanchor[j.id].copy() for j in joints]
         groups = _link_groups(m, joints)
         mass = [float(m.body_mass[g].sum()) for g in groups]
