@@ -85,7 +85,7 @@ def parser() -> argparse.ArgumentParser:
                    help="afterwards, evaluate the checkpoints in step order as --evaluate does (policy only) "
                         "and report the first that meets the task's threshold at every --eval-gravity (stand: "
                         f"every instance survives; hop: and >= {MIN_HOPS} hops; hop_velocity: and apex within "
-                        f"{APEX_TOLERANCE:.0%}, speed error <= {SPEED_TOLERANCE} m/s) in threshold.json; "
+                        f"{APEX_TOLERANCE * 100:.0f} %%, speed error <= {SPEED_TOLERANCE} m/s) in threshold.json; "
                         "checkpoints whose Brax evaluation episodes ended early are skipped")
     return p
 
