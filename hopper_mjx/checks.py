@@ -22,11 +22,80 @@ MAX_TIMESTEP = 0.01  # s, as model.load accepts
 DEFAULT_TIMESTEP = 1e-3  # s, model.DEFAULT_TIMESTEP (checked equal by a test; importing model loads MuJoCo)
 
 
+SCENARIO_BYTES = 1 << 20  # a scenario file is a page of settings; more is not one
+
+
 class ArgumentParser(argparse.ArgumentParser):
-    """argparse, refusing in one line: `error: <what>` on stderr and exit code 2 (no usage block)."""
+    """argparse, refusing in one line: `error: <what>` on stderr and exit code 2 (no usage block).
+
+    A parser with a `--scenario FILE.yaml` option takes its options' values from that file too:
+    its keys are the options' names (`gravity`, `num`, `controller`, ...), and an option given
+    on the command line wins over the file."""
 
     def error(self, message: str):
         self.exit(2, f"error: {message} (see {self.prog} --help)\n")
+
+    def parse_known_args(self, args=None, namespace=None):
+        known, rest = super().parse_known_args(args, namespace)
+        path = getattr(known, "scenario", None)
+        if path is None or namespace is not None:
+            return known, rest
+        try:
+            self.set_defaults(**read_scenario(path, self))
+        except ValueError as err:
+            self.error(str(err))
+        return super().parse_known_args(args, namespace)
+
+
+def read_scenario(path, p: argparse.ArgumentParser) -> dict:
+    """The option values a scenario file sets, typed as the command line would type them."""
+    import yaml
+
+    path = check_readable_file("--scenario", path)
+    with open(path, "rb") as f:
+        text = f.read(SCENARIO_BYTES + 1)
+    if len(text) > SCENARIO_BYTES:
+        raise ValueError(f"--scenario {path}: over {SCENARIO_BYTES // 1024} KiB, not a scenario file")
+    try:
+        values = yaml.safe_load(text)
+    except yaml.YAMLError as err:
+        raise ValueError(f"--scenario {path}: not YAML ({str(err).splitlines()[0]})") from None
+    if not isinstance(values, dict):
+        raise ValueError(f"--scenario {path}: must be a mapping of option names to values")
+    actions = {a.dest: a for a in p._actions if a.option_strings and a.dest not in ("help", "scenario")}
+    unknown = [str(k) for k in values if str(k).replace("-", "_") not in actions]
+    if unknown:
+        raise ValueError(f"--scenario {path}: unknown option(s) {', '.join(unknown)}; "
+                         f"known: {', '.join(sorted(actions))}")
+    typed = {}
+    for key, value in values.items():
+        action = actions[str(key).replace("-", "_")]
+        typed[action.dest] = _typed(action, value, path, key)
+    return typed
+
+
+def _typed(action: argparse.Action, value, path, key):
+    """A file's value converted as argparse converts the option's text (relative paths: from the file)."""
+    convert = action.type or (lambda text: text)
+    if isinstance(action, (argparse._StoreTrueAction, argparse._StoreFalseAction)):
+        if not isinstance(value, bool):
+            raise ValueError(f"--scenario {path}: {key} must be true or false, got {value!r}")
+        return value
+    try:
+        if action.nargs in ("+", "*"):
+            items = value if isinstance(value, list) else [value]
+            return [convert(_relative(path, str(v), action)) for v in items]
+        text = ",".join(map(str, value)) if isinstance(value, list) else _relative(path, str(value), action)
+        return convert(text)
+    except (ValueError, TypeError, argparse.ArgumentTypeError) as err:
+        raise ValueError(f"--scenario {path}: {key}: {err}") from None
+
+
+def _relative(path: Path, text: str, action: argparse.Action) -> str:
+    """Paths in a scenario file are read from the file's folder (urdf, world, gains)."""
+    if action.dest in ("urdf", "world", "gains") and not Path(text).is_absolute():
+        return str(Path(path).parent / text)
+    return text
 
 
 def parser(prog: str, doc: str | None) -> ArgumentParser:

@@ -11,8 +11,6 @@ from __future__ import annotations
 import argparse
 import math
 import sys
-import time
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -34,6 +32,7 @@ from hopper_mjx.checks import (  # noqa: F401  re-exported: the tools use them b
     parser,
     warn_diverged,
 )
+from hopper_mjx.scenario import Scenario
 
 
 def check_controller(text: str, height: float = 0.0, speed=(0.0, 0.0), urdf=None) -> None:
@@ -102,6 +101,10 @@ def add_batch_options(p: argparse.ArgumentParser, *, gravity=(9.81, 3.71, 1.62),
                    help="pid: joint gains from a seed-style monoped.yaml or .yml (the file, or the seed's "
                         "package or config/ folder holding it; default: the shipped one)")
     p.add_argument("--urdf", default=None, help="monoped URDF (default: the shipped one)")
+    p.add_argument("--scenario", type=Path, default=None, metavar="FILE.yaml",
+                   help="a scenario file: these options' values by name (gravity: [9.81, 1.62], num: 8, "
+                        "controller: raibert, urdf: my.urdf, ...; paths from the file's folder); the command "
+                        "line wins over the file")
     p.add_argument("--timestep", type=float, default=None, help="physics step, s (default: the world's, or 0.001)")
     p.add_argument("--chunk", type=int, default=256, help="instances per vmapped chunk on a device")
     add_engine_option(p)
@@ -112,15 +115,6 @@ def add_engine_option(p: argparse.ArgumentParser, *, extra_help: str = "") -> No
     p.add_argument("--engine", default=registry.DEFAULT_ENGINE,
                    help=f"physics engine: {registry.listed(registry.ENGINES)}; default {registry.DEFAULT_ENGINE}"
                         + extra_help)
-
-
-@dataclass(frozen=True)
-class Batch:
-    """What the batch options resolve to, once checked."""
-
-    gravity: np.ndarray  # (N, 3) m/s², gravity-major: instance i has gravity value (or world) i // num
-    model_options: dict  # keywords of model.load: timestep, and the foot-floor friction a world sets
-    gains: dict | None = None  # --gains, as pid.load_gains read them
 
 
 def read_worlds(paths, gravity_given: str | None = None):
@@ -146,7 +140,7 @@ def batch_from_worlds(args):
     return worlds.gravity, options, worlds.warning()
 
 
-def check_batch(args) -> Batch:
+def check_batch(args) -> Scenario:
     """Checks every batch option before anything is built (and before JAX is imported); raises
     ValueError naming the first bad one. Prints the worlds' one-line warning, if any.
     The streams' rates are checked by `check_rates`, which needs the signals module.
@@ -183,56 +177,18 @@ def check_batch(args) -> Batch:
     gains = check_gains(args)
     if warning:
         print(warning, file=sys.stderr)
-    return Batch(gravity=np.repeat(rows, args.num, axis=0), model_options=options, gains=gains)
+    return Scenario(gravity=np.repeat(rows, args.num, axis=0), model_options=options, urdf=args.urdf,
+                    engine=args.engine, controller=args.controller, height=args.height, speed=tuple(args.speed),
+                    gains=gains, seed=args.seed, chunk=args.chunk)
 
 
-def check_rates(flags: str, sensors, batch: Batch) -> None:
+def check_rates(flags: str, sensors, batch: Scenario) -> None:
     """Every stream's rate divides the batch's physics rate (SensorConfig.periods says which does not);
     `flags` names the options that set the rates."""
     try:
-        sensors.periods(batch.model_options["timestep"])
+        sensors.periods(batch.timestep)
     except ValueError as err:
         raise ValueError(f"{flags}: {err}") from None
-
-
-def make_controller(args, sim, batch: Batch):
-    """(controller, params) for --controller: the registry `control.make`, or a trained policy."""
-    n = len(batch.gravity)
-    if registry.is_policy(args.controller):
-        from hopper_mjx.envs import policy
-
-        path = registry.policy_path(args.controller)
-        config = policy.read(path)[3]
-        params = policy.policy_params(sim.robot, n, height=args.height, speed=args.speed, config=config)
-        return policy.policy_controller(sim.mj_model, path), params
-    from hopper_mjx import control
-
-    return control.make(args.controller, sim.robot, n, height=args.height, speed=args.speed, gains=batch.gains)
-
-
-def build_batch(args, batch: Batch):
-    """(Sim, controller, params) of a checked batch."""
-    from hopper_mjx import model
-    from hopper_mjx.sim import Sim
-
-    sim = Sim(model.load(args.urdf, **batch.model_options), engine=args.engine, chunk=args.chunk)
-    controller, params = make_controller(args, sim, batch)
-    return sim, controller, params
-
-
-def run_batch(args, batch: Batch, sensors):
-    """(Sim, final state, trajectory) of a checked batch, on the one batch-run path."""
-    import jax
-
-    sim, controller, params = build_batch(args, batch)
-    start = time.perf_counter()
-    final, traj = sim.run(batch.gravity, controller, params, duration=args.duration, sensors=sensors, key=args.seed)
-    jax.block_until_ready(traj)
-    wall = time.perf_counter() - start
-    n, steps = len(batch.gravity), len(traj.time["state"]) * sensors.periods(sim.layout.timestep)["state"]
-    print(f"{n} instances x {steps} steps on {len(sim.devices)} device(s): {wall:.1f} s "
-          f"incl. compile, {n * steps / wall:,.0f} steps/s", file=sys.stderr)
-    return sim, final, jax.tree_util.tree_map(np.asarray, traj)
 
 
 FOXGLOVE_PORT = 8765  # Foxglove's default for a WebSocket connection

@@ -20,6 +20,7 @@ import numpy as np
 
 from hopper_mjx import cli, model, runtime
 from hopper_mjx.model import robot, scene
+from hopper_mjx.scenario import Scenario
 
 VIDEO_SUFFIXES = (".mp4", ".gif")
 TRACK_HEIGHT = 0.45  # m: the camera looks at the leg's middle, not at the base
@@ -84,16 +85,16 @@ def video_sensors(args):
     return signals.SensorConfig.uniform(args.fps)
 
 
-def simulate_qpos(args, batch: cli.Batch | None = None) -> np.ndarray:
+def simulate_qpos(args, batch: Scenario | None = None) -> np.ndarray:
     """(T, nq) poses of instance --instance, simulated on the one batch-run path, at --fps.
 
     The core runs the simulation model (`model.load`); the pictures' model adds only visuals."""
     batch = batch or check_video(args)
-    _, _, traj = cli.run_batch(args, batch, video_sensors(args))
+    _, _, traj = batch.run(args.duration, video_sensors(args))
     return traj.qpos[args.instance]
 
 
-def check_video(args) -> cli.Batch:
+def check_video(args) -> Scenario:
     """--video and the batch it shows, checked before anything is built."""
     if args.video.suffix.lower() not in VIDEO_SUFFIXES:
         raise ValueError(f"--video must end in {' or '.join(VIDEO_SUFFIXES)}, got {args.video}")

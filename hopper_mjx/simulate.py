@@ -17,6 +17,7 @@ import sys
 import numpy as np
 
 from hopper_mjx import cli, runtime
+from hopper_mjx.scenario import Scenario
 
 
 def sensor_config(args):
@@ -47,14 +48,14 @@ def arrays(traj, gravity, diverged) -> dict[str, np.ndarray]:
     return {k: np.asarray(v) for k, v in out.items()}
 
 
-def run(args, batch: cli.Batch | None = None) -> dict[str, np.ndarray]:
+def run(args, batch: Scenario | None = None) -> dict[str, np.ndarray]:
     """Simulates as the arguments say (`batch`: already checked) and returns the arrays saved to the .npz file."""
     batch = batch or cli.check_batch(args)
-    _, final, traj = cli.run_batch(args, batch, sensor_config(args))
+    _, final, traj = batch.run(args.duration, sensor_config(args))
     return arrays(traj, batch.gravity, final.diverged)
 
 
-def run_live(args, batch: cli.Batch, stream) -> dict[str, np.ndarray]:
+def run_live(args, batch: Scenario, stream) -> dict[str, np.ndarray]:
     """The same batch played live at --speed-factor x real time and streamed to Foxglove as it
     plays; returns the arrays `run` saves, joined from the played chunks."""
     import time
@@ -62,7 +63,7 @@ def run_live(args, batch: cli.Batch, stream) -> dict[str, np.ndarray]:
     from hopper_mjx import live
     from hopper_mjx.sim import steps_for
 
-    playing = live.LiveBatch.build(args, batch, sensor_config(args))
+    playing = live.LiveBatch.build(batch, sensor_config(args))
     stream.attach(playing)
     print(f"streaming instances {stream.instances} to Foxglove on ws://127.0.0.1:{stream.port}", flush=True)
     end = steps_for(args.duration, playing.sim.layout.timestep, playing.sensors) * playing.sim.layout.timestep

@@ -22,6 +22,7 @@ LAYERS = (
     ("metrics",),
     ("sim",),
     ("envs",),
+    ("scenario",),  # the typed description of a batch, built once: robot, worlds, engine, controller
     ("__init__",),  # the package's public surface
     ("cli",),
     ("live", "ros"),  # live runs of the batch, ROS messages and streams: used by several tools

@@ -30,6 +30,7 @@ import numpy as np
 from hopper_mjx import cli, runtime
 from hopper_mjx.ros import msgdefs
 from hopper_mjx.ros.messages import messages, typestore
+from hopper_mjx.scenario import Scenario
 
 if TYPE_CHECKING:
     from hopper_mjx.signals import SensorConfig
@@ -93,11 +94,11 @@ def recording(sim, traj, gravity, sensors, diverged) -> Recording:
     )
 
 
-def simulate_batch(args, batch: cli.Batch | None = None) -> Recording:
+def simulate_batch(args, batch: Scenario | None = None) -> Recording:
     """Runs the batch the arguments describe (the one batch-run path) at the bag's rates."""
     sensors = sensor_config(args)
     batch = batch or cli.check_batch(args)
-    sim, final, traj = cli.run_batch(args, batch, sensors)
+    sim, final, traj = batch.run(args.duration, sensors)
     return recording(sim, traj, batch.gravity, sensors, final.diverged)
 
 
