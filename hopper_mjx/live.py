@@ -1,6 +1,6 @@
 """The batch running live: the core advances in compiled chunks, played back against the wall clock.
 
-    batch = LiveBatch.build(args)          # Sim, controller, gravities, as simulate builds them
+    batch = LiveBatch.build(scenario)      # Sim, controller, gravities, as simulate builds them
     with LiveRun(batch, factor=1.0, sinks=[stream]) as run:
         while ...:
             sample = run.poll()            # the latest state due now, or None
@@ -128,14 +128,9 @@ class LiveBatch:
         self.reset()
 
     @classmethod
-    def build(cls, args, batch=None, sensors=None) -> LiveBatch:
-        """The batch of the command-line arguments (`batch`: already checked by `cli.check_batch`),
-        streams at `sensors`' rates."""
-        from hopper_mjx import cli
-
-        batch = batch or cli.check_batch(args)
-        sim, controller, params = cli.build_batch(args, batch)
-        return cls(sim, controller, params, batch.gravity, seed=args.seed, sensors=sensors)
+    def build(cls, scenario, sensors=None) -> LiveBatch:
+        """The batch of a `Scenario` (e.g. `cli.check_batch`'s), streams at `sensors`' rates."""
+        return cls(*scenario.build(), scenario.gravity, seed=scenario.seed, sensors=sensors)
 
     @property
     def n(self) -> int:

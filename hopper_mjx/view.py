@@ -244,7 +244,7 @@ def main(argv=None) -> int:
                 return cli.fail(f"view needs a display: {why}; for pictures and videos without one use "
                                 "python -m hopper_mjx.render")
             runtime.configure()
-            batch = LiveBatch.build(args, checked)
+            batch = LiveBatch.build(checked)
             if stream is not None:
                 stream.attach(batch)
                 print(f"streaming to Foxglove on ws://127.0.0.1:{stream.port}", flush=True)

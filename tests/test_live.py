@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from hopper_mjx import live, simulate
+from hopper_mjx import cli, live, simulate
 from hopper_mjx.ros.foxglove import FoxgloveStream
 
 GRAVITY = (9.81, 3.71, 1.62)
@@ -32,7 +32,7 @@ ROBOT_BLUE = np.array([51, 97, 166])  # model.scene.LINK_COLOURS["base"] in 8-bi
 
 @pytest.fixture(scope="module")
 def batch():
-    return live.LiveBatch.build(simulate.parser().parse_args(ARGS))
+    return live.LiveBatch.build(cli.check_batch(simulate.parser().parse_args(ARGS)))
 
 
 # -- pacing and hop counting, without physics ----------------------------------------------
@@ -87,7 +87,7 @@ def test_hops_count_completed_flights_not_the_initial_drop_and_a_fall_latches():
 def test_arrow_key_commands_reach_every_raibert_instance_and_survive_a_reset():
     args = simulate.parser().parse_args(["--gravity", "9.81,1.62", "--num", "2", "--controller", "raibert",
                                          "--height", "0.1", "--speed", "0.2,0"])
-    raibert = live.LiveBatch.build(args)
+    raibert = live.LiveBatch.build(cli.check_batch(args))
     assert raibert.command() == {"speed": pytest.approx((0.2, 0.0)), "height": pytest.approx(0.1)}
     assert raibert.change_command(speed_step=(live.SPEED_STEP, 0.0))
     assert raibert.change_command(height_step=-2 * live.HEIGHT_STEP)
@@ -313,9 +313,10 @@ def wait_for_line(proc, prefix: str, timeout: float = 240.0) -> str:
 def test_simulate_streams_live_what_it_saves(tmp_path, batch, monkeypatch):
     """`simulate --foxglove` plays the batch live: every value a client receives is in the .npz.
     Run in this process on this module's compiled batch (the same arguments build the same one)."""
-    from hopper_mjx import cli, runtime
+    from hopper_mjx import runtime
+    from hopper_mjx.scenario import Scenario
 
-    monkeypatch.setattr(cli, "build_batch", lambda args, checked: (batch.sim, batch.controller, batch.params))
+    monkeypatch.setattr(Scenario, "build", lambda self: (batch.sim, batch.controller, batch.params))
     monkeypatch.setattr(runtime, "configure", lambda: None)  # done once for the test process
     with socket.socket() as probe:
         probe.bind(("127.0.0.1", 0))

@@ -11,6 +11,7 @@ import pytest
 
 from hopper_mjx import model
 from hopper_mjx.model.layout import Layout
+from hopper_mjx.model.robot import LegGeometry
 
 SEED_URDF = model.DEFAULT_URDF.read_text()
 
@@ -23,10 +24,10 @@ def _variant(text: str, **replace) -> str:
 
 
 def test_seed_geometry_and_masses(mj_model):
-    lay = Layout.of(mj_model)
-    assert lay.hip_below_base == pytest.approx(0.15 + 0.08)
-    assert lay.thigh == pytest.approx(0.35) and lay.shank == pytest.approx(0.35)
-    assert lay.foot_radius == pytest.approx(0.03)
+    lay, leg = Layout.of(mj_model), LegGeometry.of(mj_model)
+    assert leg.haa_below_base + leg.hfe_below_haa == pytest.approx(0.15 + 0.08)
+    assert leg.thigh == pytest.approx(0.35) and leg.shank == pytest.approx(0.35)
+    assert leg.foot_radius == pytest.approx(0.03)
     assert lay.total_mass == pytest.approx(5.0 + 0.5 + 0.8 + 0.4 + 0.1)
     assert lay.joint_range == ((-1.6, 1.6), (-1.6, 1.6), (-1.6, 0.0))
     assert lay.effort_limit == (40.0, 80.0, 80.0)
@@ -60,10 +61,10 @@ def test_second_urdf_compiles_with_its_own_lengths_and_masses(tmp_path):
     )
     path = tmp_path / "long_thigh.urdf"
     path.write_text(text)
-    lay = Layout.of(model.load(path))
-    assert lay.thigh == pytest.approx(0.42)
-    assert lay.shank == pytest.approx(0.28)
-    assert lay.hip_below_base == pytest.approx(0.15 + 0.10)
+    lay, leg = Layout.of(model.load(path)), LegGeometry.of(model.load(path))
+    assert leg.thigh == pytest.approx(0.42)
+    assert leg.shank == pytest.approx(0.28)
+    assert leg.haa_below_base + leg.hfe_below_haa == pytest.approx(0.15 + 0.10)
     assert lay.total_mass == pytest.approx(8.25 + 0.5 + 0.8 + 0.65 + 0.1)
     m = model.load(path)
     assert m.body("base").mass[0] == pytest.approx(8.25)

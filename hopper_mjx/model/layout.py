@@ -28,11 +28,8 @@ class Layout:
     actuator_of_joint: tuple[int, ...]  # actuator index driving haa, hfe, kfe
     foot_geom: int
     floor_geom: int
-    foot_radius: float  # m
     total_mass: float  # kg
-    hip_below_base: float  # m, base origin -> hfe axis at zero haa (haa drop + hip offset)
-    thigh: float  # m, hfe -> kfe
-    shank: float  # m, kfe -> foot centre
+    # The leg's lengths are the leg's: `model.robot.LegGeometry`.
 
     @classmethod
     def of(cls, m: mujoco.MjModel) -> "Layout":
@@ -48,12 +45,6 @@ class Layout:
         foot = m.geom(FOOT_GEOM)
         if len({int(j.bodyid[0]) for j in joints} | {int(foot.bodyid[0])}) != 4:
             raise ValueError("haa, hfe, kfe and the foot must sit on four distinct bodies")
-        # Lengths are measured at the reference pose, between consecutive joint anchors.
-        d = mujoco.MjData(m)
-        mujoco.mj_kinematics(m, d)
-        anchor = [d.xanchor[j.id] for j in joints]
-        foot_centre = d.geom_xpos[foot.id]
-        base_pos = d.xpos[m.jnt_bodyid[0]]
         gear = m.actuator_gear[act, 0]
         torque_range = m.actuator_ctrlrange[act] * gear[:, None]  # rows in joint order
         return cls(
@@ -69,9 +60,5 @@ class Layout:
             actuator_of_joint=tuple(act),
             foot_geom=int(foot.id),
             floor_geom=int(m.geom(FLOOR_GEOM).id),
-            foot_radius=float(foot.size[0]),
             total_mass=float(m.body_mass.sum()),
-            hip_below_base=float(np.linalg.norm(anchor[1] - base_pos)),
-            thigh=float(np.linalg.norm(anchor[2] - anchor[1])),
-            shank=float(np.linalg.norm(foot_centre - anchor[2])),
         )

@@ -45,7 +45,7 @@ def stance_qpos(mj_model: mujoco.MjModel, clearance: float = CLEARANCE, hfe: flo
         else:
             lo, f_lo = mid, f_mid
     com_ahead_of_foot(0.5 * (lo + hi))
-    d.qpos[2] += clearance - (d.geom_xpos[lay.foot_geom, 2] - lay.foot_radius)
+    d.qpos[2] += clearance - (d.geom_xpos[lay.foot_geom, 2] - m.geom_size[lay.foot_geom, 0])
     return d.qpos.copy()
 
 
@@ -105,7 +105,6 @@ class LegGeometry:
     thigh: float  # hfe -> kfe
     shank: float  # kfe -> foot centre
     foot_radius: float
-    standing_height: float  # base height at rest: default stance, foot on the floor
     # Mass (kg) and centre of mass (m, in the link's frame at zero angles, from its
     # joint axis; for the base from the haa axis point) of base, hip, thigh, shank+foot.
     link_mass: tuple[float, ...]
@@ -114,8 +113,9 @@ class LegGeometry:
 
     @classmethod
     def of(cls, m: mujoco.MjModel) -> "LegGeometry":
-        """Measures a compiled monoped at its reference pose (every joint at zero)."""
-        layout = Layout.of(m)
+        """Measures a compiled monoped at its reference pose (every joint at zero), lengths between
+        consecutive joint anchors."""
+        foot = Layout.of(m).foot_geom
         d = mujoco.MjData(m)
         mujoco.mj_kinematics(m, d)  # reference pose: frames aligned
         joints = [m.joint(name) for name in JOINTS]
@@ -127,10 +127,9 @@ class LegGeometry:
         return cls(
             haa_below_base=float(np.linalg.norm(anchor[0] - d.xpos[m.jnt_bodyid[0]])),
             hfe_below_haa=float(np.linalg.norm(anchor[1] - anchor[0])),
-            thigh=layout.thigh,
-            shank=layout.shank,
-            foot_radius=layout.foot_radius,
-            standing_height=standing_height(m),
+            thigh=float(np.linalg.norm(anchor[2] - anchor[1])),
+            shank=float(np.linalg.norm(d.geom_xpos[foot] - anchor[2])),
+            foot_radius=float(m.geom_size[foot, 0]),
             link_mass=tuple(mass),
             link_com=tuple(tuple(float(v) for v in c - o) for c, o in zip(com, origin)),
             link_inertia=tuple(_group_inertia(m, d, g, c) for g, c in zip(groups, com)),
@@ -153,7 +152,7 @@ class Robot:
             layout=Layout.of(mj_model),
             leg=leg,
             stance_qpos=tuple(float(v) for v in stance_qpos(mj_model)),
-            standing_height=leg.standing_height,
+            standing_height=standing_height(mj_model),
         )
 
     @property
