@@ -186,6 +186,14 @@ def warn_diverged(diverged) -> None:
         print(f"warning: {bad.size} instance(s) diverged and were frozen: {bad[:20].tolist()}", file=sys.stderr)
 
 
+MAX_SEED = 2**32 - 1  # JAX's PRNG keys take 32-bit seeds
+
+
+def check_seed(seed: int) -> None:
+    if not 0 <= seed <= MAX_SEED:
+        raise ValueError(f"--seed must be in 0..{MAX_SEED}, got {seed}")
+
+
 def check_engine(name: str) -> None:
     try:
         registry.check("engine", registry.ENGINES, name)

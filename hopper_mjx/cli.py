@@ -24,6 +24,7 @@ from hopper_mjx.checks import (  # noqa: F401  re-exported: the tools use them b
     check_indices,
     check_range,
     check_readable_file,
+    check_seed,
     check_writable,
     fail,
     floats,
@@ -156,6 +157,7 @@ def check_batch(args) -> Scenario:
         check_range(f"--{name.replace('_', '-')}", getattr(args, name), low=0)
     if args.chunk < 1:
         raise ValueError(f"--chunk must be >= 1, got {args.chunk}")
+    check_seed(args.seed)
     check_engine(args.engine)
     if args.timestep is not None:
         check_range("--timestep", args.timestep, low=0, high=MAX_TIMESTEP, open_low=True)

@@ -93,6 +93,38 @@ def test_killed_sweep_resumes_to_identical_results(tiny, tmp_path):
     assert (out / "results.csv").read_bytes() == (tiny / "results.csv").read_bytes()
 
 
+def test_a_damaged_chunk_is_recomputed_to_identical_results(tiny, tmp_path):
+    """What a power cut leaves: an empty chunk file, and one cut short."""
+    import shutil
+
+    out = tmp_path / "damaged"
+    shutil.copytree(tiny, out)
+    (out / "chunks" / "00001.npy").write_bytes(b"")
+    cut = (out / "chunks" / "00002.npy").read_bytes()
+    (out / "chunks" / "00002.npy").write_bytes(cut[: len(cut) // 2])
+    (out / "results.csv").unlink()
+    assert main(["gravity", *TINY, "--out", str(out)]) == 0
+    assert (out / "results.csv").read_bytes() == (tiny / "results.csv").read_bytes()
+
+
+@pytest.mark.parametrize("damage", ["foreign", "truncated manifest"])
+def test_a_folder_that_is_not_this_sweeps_is_refused_and_left_as_it_was(tiny, tmp_path, capsys, damage):
+    out = tmp_path / "theirs"
+    out.mkdir()
+    if damage == "foreign":
+        (out / "results.csv").write_text("someone's data\n")
+        message = f"--out {out} exists and is not a sweep's folder (no manifest.json)"
+    else:
+        text = (tiny / "manifest.json").read_text()
+        (out / "manifest.json").write_text(text[: len(text) // 2])
+        message = f"--out {out}: its manifest.json is damaged (cut short?)"
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+    assert main(["gravity", *TINY, "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"error: {message}") and err.count("\n") == 1
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == before
+
+
 def test_two_processes_give_the_rows_of_one(tiny, tmp_path):
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
@@ -115,7 +147,9 @@ def test_two_processes_give_the_rows_of_one(tiny, tmp_path):
      (["gravity", "--num", "0"], "--num"),
      (["gravity", "--controller", "hold"], "a sweep runs raibert or policy:PATH"),
      (["compare", "--controllers", "raibert,raibert"], "lists one twice"),
-     (["compare", "--controllers", "raibert,policy:/nonexistent"], "is not a trained policy")],
+     (["compare", "--controllers", "raibert,policy:/nonexistent"], "is not a trained policy"),
+     (["gravity", "--values", "9.81,9.81"], "gravity values must differ, got [9.81, 9.81]"),
+     (["gravity", "--seed", "-1"], "--seed must be in 0..4294967295, got -1")],
 )
 def test_bad_input_gets_a_clear_error(args, message, capsys, tmp_path):
     try:

@@ -18,6 +18,7 @@ from datetime import datetime, timezone
 from pathlib import Path
 
 from hopper_mjx import cli, registry, runtime
+from hopper_mjx.sweep import folder
 from hopper_mjx.sweep.grid import DEFAULT_GRAVITY, KICK
 
 
@@ -103,12 +104,21 @@ def check(args):
         cli.check_controller(name, args.height, args.speed, args.urdf)  # a policy: its folder and trained range
     out = args.out or Path("runs") / f"{args.kind}-{datetime.now(timezone.utc):%Y%m%d-%H%M%S}"
     cli.check_writable("--out", out, folder=True, make_parents=True)
+    if args.kind == "compare" and out.is_dir() and any(out.iterdir()) and not any(out.glob(f"*/{folder.MANIFEST}")):
+        raise ValueError(f"--out {out} exists and is not a comparison's folder; a sweep writes only into a "
+                         "folder it made: use another --out")
+    for spec in specs:  # a folder of another sweep, or of no sweep, is refused before anything is built
+        folder.check(folder_of(args, out, spec), spec)
     if args.num_processes < 1 or not 0 <= args.process_id < args.num_processes:
         raise ValueError(f"--process-id must be in 0..--num-processes-1 (>= 1 process), "
                          f"got {args.process_id} of {args.num_processes}")
     if args.coordinator is not None and not _host_port(args.coordinator):
         raise ValueError(f"--coordinator must be HOST:PORT, got {args.coordinator!r}")
     return specs, out
+
+
+def folder_of(args, out: Path, spec) -> Path:
+    return out / label(spec.controller) if args.kind == "compare" else out
 
 
 def _host_port(text: str) -> bool:
@@ -122,7 +132,7 @@ def label(controller: str) -> str:
 
 def run_one(args, spec, folder: Path):
     """Runs one controller's sweep into `folder` and prints its report: (label, group summary), or None
-    on a process other than 0; raises KeyboardInterrupt and runner.ManifestMismatch."""
+    on a process other than 0; raises KeyboardInterrupt."""
     from hopper_mjx.sweep import report, runner
 
     start = time.perf_counter()
@@ -150,7 +160,7 @@ def main(argv=None) -> int:
     except ValueError as err:
         return cli.fail(err)
     runtime.configure()
-    from hopper_mjx.sweep import report, runner
+    from hopper_mjx.sweep import report
     if args.coordinator:
         import jax
 
@@ -158,9 +168,7 @@ def main(argv=None) -> int:
     results = []
     for spec in specs:
         try:
-            result = run_one(args, spec, out / label(spec.controller) if args.kind == "compare" else out)
-        except runner.ManifestMismatch as err:
-            return cli.fail(err)
+            result = run_one(args, spec, folder_of(args, out, spec))
         except KeyboardInterrupt:
             return 130
         results += [result] if result else []

@@ -10,8 +10,6 @@ needed), which writes the merged outputs.
 
 from __future__ import annotations
 
-import json
-import os
 import time
 from pathlib import Path
 
@@ -22,50 +20,15 @@ from tqdm import tqdm
 from hopper_mjx import metrics, model, registry, signals
 from hopper_mjx.control.raibert import raibert, raibert_params
 from hopper_mjx.sim import Sim, gravity_vectors, steps_for
+from hopper_mjx.sweep.folder import atomic_write, chunk_path, claim, read_chunk
 from hopper_mjx.sweep.grid import Instances, SweepSpec, expand
 
-MANIFEST = "manifest.json"
 COLUMNS = ("apex_height", "flight_rise", "flight_time", "ballistic_flight_time", "stance_time", "hop_period",
            "duty_factor", "mean_speed", "tracking_error",
            "max_roll", "max_pitch", "hops", "fell", "diverged", "cost_of_transport",
            "energy_per_hop", "mechanical_power")
 # Contact and state at the physics rate: events, lift-off heights and apexes to the step (short flights too).
 SENSORS = signals.SensorConfig(imu_rate=100, odom_rate=100, contact_rate=1000, state_rate=1000)
-
-
-class ManifestMismatch(ValueError):
-    """The output folder holds a different sweep."""
-
-
-def claim(out: Path, spec: SweepSpec) -> None:
-    """Creates OUT with the spec as its manifest, or checks that OUT holds this very sweep."""
-    path = out / MANIFEST
-    if path.exists():
-        saved = json.loads(path.read_text())
-        wanted = json.loads(json.dumps(spec.to_json()))  # tuples -> lists, as saved
-        if saved != wanted:
-            diff = {k: (saved.get(k), v) for k, v in wanted.items() if saved.get(k) != v}
-            changes = ", ".join(f"{k}: {a!r} -> {b!r}" for k, (a, b) in diff.items())
-            raise ManifestMismatch(
-                f"{out} holds a different sweep (differs in {changes}); "
-                "use another --out, or the same arguments to resume"
-            )
-        return
-    out.mkdir(parents=True, exist_ok=True)
-    _atomic_write(path, lambda f: f.write(json.dumps(spec.to_json(), indent=1).encode()))
-
-
-def _atomic_write(path: Path, write) -> None:
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    with open(tmp, "wb") as f:
-        write(f)
-        f.flush()
-        os.fsync(f.fileno())
-    os.replace(tmp, path)  # atomic: a kill leaves either no file or a whole one
-
-
-def chunk_path(out: Path, k: int) -> Path:
-    return out / "chunks" / f"{k:05d}.npy"
 
 
 class ChunkRunner:
@@ -120,15 +83,16 @@ def run(spec: SweepSpec, out: Path, *, progress: bool = True) -> tuple[Instances
     chunks = [np.arange(i, min(i + spec.chunk, len(instances))) for i in range(0, len(instances), spec.chunk)]
     me, procs = jax.process_index(), jax.process_count()
     mine = list(range(me, len(chunks), procs))
-    todo = [k for k in mine if not chunk_path(out, k).exists()]
+    saved = {k: read_chunk(out, k, len(chunks[k]), len(COLUMNS)) for k in mine}
+    todo = [k for k in mine if saved[k] is None]  # missing, or damaged by a kill mid-write: (re)computed
     runner = ChunkRunner(spec, instances, sim) if todo else None
 
     start, simulated = time.perf_counter(), 0
     bar = tqdm(total=sum(len(chunks[k]) for k in todo) * spec.duration, unit="inst·s", disable=not progress,
                desc=f"sweep {spec.kind}" + (f" [process {me}/{procs}]" if procs > 1 else ""), smoothing=0.3)
     for k in todo:
-        rows = runner(chunks[k])
-        _atomic_write(chunk_path(out, k), lambda f, rows=rows: np.save(f, rows))
+        rows = saved[k] = runner(chunks[k])
+        atomic_write(chunk_path(out, k), lambda f, rows=rows: np.save(f, rows))
         simulated += len(chunks[k]) * runner.steps
         bar.update(len(chunks[k]) * spec.duration)
         bar.set_postfix_str(f"{simulated / (time.perf_counter() - start):,.0f} steps/s")
@@ -136,13 +100,13 @@ def run(spec: SweepSpec, out: Path, *, progress: bool = True) -> tuple[Instances
     wall = time.perf_counter() - start
 
     # With one process its chunks are all the chunks; with several, gather them in chunk order.
-    rows_by_chunk = [np.load(chunk_path(out, k)) for k in mine]
+    rows_by_chunk = [saved[k] for k in mine]
     if procs > 1:
         rows_by_chunk = _gather_to_all(rows_by_chunk, chunks, procs)
         if me == 0:  # keep every chunk on the coordinator, so it can merge and resume
             for k, rows in enumerate(rows_by_chunk):
                 if not chunk_path(out, k).exists():
-                    _atomic_write(chunk_path(out, k), lambda f, rows=rows: np.save(f, rows))
+                    atomic_write(chunk_path(out, k), lambda f, rows=rows: np.save(f, rows))
     table = np.concatenate(rows_by_chunk)
     facts = {
         "wall_s": wall,
