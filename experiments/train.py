@@ -24,6 +24,7 @@ import time
 from pathlib import Path
 
 from hopper_mjx import cli, registry, runtime
+from hopper_mjx.files import atomic_write_text
 
 HISTORY = "metrics.json"
 MIN_HOPS = 5  # hops in --eval-duration that count as hopping (the threshold of --scan-checkpoints)
@@ -243,11 +244,23 @@ def networks(args):
     return functools.partial(networks.make_sac_networks, hidden_layer_sizes=_layers(args.policy_layers)), checkpoint
 
 
+def read_history(path: Path) -> dict:
+    """A run's metrics record; one cut short (a kill mid-write, before writes were atomic) is refused in one line."""
+    try:
+        record = json.loads(path.read_text())
+    except (json.JSONDecodeError, UnicodeDecodeError):
+        raise ValueError(f"--out: {path} is damaged (cut short?); move it away to train from the checkpoints "
+                         "without the old history, or use another --out") from None
+    if not isinstance(record, dict) or not isinstance(record.get("history"), list):
+        raise ValueError(f"--out: {path} is not a training record (no history list)")
+    return record
+
+
 def train(args) -> dict:
     """Trains (or resumes) as the arguments say; returns the metrics record also saved to metrics.json."""
     import jax
 
-    from hopper_mjx.envs import policy
+    from hopper_mjx.envs import policy, tfevents
 
     check(args)
     out = Path(args.out).resolve()  # orbax writes checkpoints to absolute paths only
@@ -263,7 +276,7 @@ def train(args) -> dict:
     network_config = checkpoint.network_config(env.observation_size, env.action_size, True, factory)
 
     record_path = out / HISTORY
-    record = json.loads(record_path.read_text()) if record_path.exists() else {"history": [], "wall_time": 0.0}
+    record = read_history(record_path) if record_path.exists() else {"history": [], "wall_time": 0.0}
     record.update(args=vars(args), env_config=config.to_dict())
     resume = latest_checkpoint(out)
     start_step = resume[1] if resume else 0
@@ -271,13 +284,15 @@ def train(args) -> dict:
     if resume:
         print(f"resuming from {resume[0]} (step {start_step:,})", flush=True)
     started, wall_before = time.perf_counter(), record["wall_time"]
+    board = tfevents.EventWriter(out / "tensorboard")  # the same curves for TensorBoard: tensorboard --logdir OUT
 
     def progress(step, metrics):
         row = {"step": start_step + int(step), "wall_time": wall_before + time.perf_counter() - started,
                **{k: float(v) for k, v in metrics.items() if k.startswith(("eval/", "training/sps"))}}
         record["history"].append(row)
+        board.scalars(row["step"], {k: v for k, v in row.items() if k not in ("step", "wall_time")})
         record["wall_time"] = row["wall_time"]
-        record_path.write_text(json.dumps(record, indent=1))
+        atomic_write_text(record_path, json.dumps(record, indent=1))
         print(f"step {row['step']:>10,} | reward {row.get('eval/episode_reward', math.nan):8.1f} | "
               f"episode {row.get('eval/avg_episode_length', math.nan):5.0f} steps | "
               f"{row.get('training/sps', math.nan):6.0f} steps/s | {row['wall_time'] / 60:5.1f} min", flush=True)
@@ -304,7 +319,7 @@ def train(args) -> dict:
     shutil.rmtree(out / "policy", ignore_errors=True)
     shutil.copytree(final[0], out / "policy")
     record["final_step"] = final[1]
-    record_path.write_text(json.dumps(record, indent=1))
+    atomic_write_text(record_path, json.dumps(record, indent=1))
     plot_rewards(record["history"], out / "reward_curve.png", f"{args.algo.upper()} on {args.task}")
     return record
 
@@ -388,7 +403,7 @@ def first_checkpoint_at_threshold(args) -> dict | None:
     Checkpoints whose Brax evaluation episodes lasted < 95 % of --episode-length already fell in
     training, and are not run."""
     out = Path(args.out)
-    rows = {r["step"]: r for r in json.loads((out / HISTORY).read_text())["history"]}
+    rows = {r["step"]: r for r in read_history(out / HISTORY)["history"]}
     gravities = [float(v) for v in args.eval_gravity.split(",")]
     for path in sorted((out / "checkpoints").glob("[0-9]" * 12)):
         row = rows.get(int(path.name), {})

@@ -13,7 +13,7 @@ PACKAGE = "hopper_mjx"
 # controllers -> metrics -> the batched core -> environments -> command-line support -> live runs
 # and ROS I/O -> tools.
 LAYERS = (
-    ("startup", "registry"),  # startup: what must precede the first import of MuJoCo; registry: the names
+    ("startup", "registry", "files"),  # startup: what precedes importing MuJoCo; registry: the names; files
     ("checks", "runtime"),  # checks: the command line's value, path and name checks
     ("model",),
     ("engine",),

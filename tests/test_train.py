@@ -72,6 +72,9 @@ def _check_outputs(out, record):
     assert steps[-1] == f"{record['final_step']:012d}" and len(steps) == 2
     assert (out / "reward_curve.png").stat().st_size > 1000
     assert len(record["history"]) >= 2 and record["wall_time"] > 0
+    # TensorBoard's copy of the curve: one event per history row, plus the file-version event.
+    events = [p.read_bytes() for p in (out / "tensorboard").glob("events.out.tfevents.*")]
+    assert len(events) == 1 and events[0].count(b"training/sps") == len(record["history"])
 
 
 def test_ppo_tiny_run_changes_the_params_and_restores_its_checkpoint_identically(trained):
@@ -162,3 +165,16 @@ def test_train_rejects_an_out_it_cannot_make_in_one_line(tmp_path, capsys):
         err = capsys.readouterr().err
         assert message in err and err.count("\n") == 1
     assert sorted(p.name for p in tmp_path.iterdir()) == ["a_file"]
+
+
+def test_a_damaged_history_is_refused_in_one_line(tmp_path, capsys):
+    """A metrics.json cut short (what a kill mid-write left before writes were atomic) stops the resume
+    with one line naming it, and is left as it was."""
+    out = tmp_path / "run"
+    out.mkdir()
+    (out / "metrics.json").write_text('{"history": [{"step": 4')
+    assert train_script.main([*TINY, *PPO, "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err == f"error: --out: {out.resolve() / 'metrics.json'} is damaged (cut short?); move it away to train " \
+                  "from the checkpoints without the old history, or use another --out\n"
+    assert (out / "metrics.json").read_text() == '{"history": [{"step": 4'

@@ -10,11 +10,11 @@ line checks the folder before anything is compiled.
 from __future__ import annotations
 
 import json
-import os
 from pathlib import Path
 
 import numpy as np
 
+from hopper_mjx.files import atomic_write
 from hopper_mjx.sweep.grid import SweepSpec
 
 MANIFEST = "manifest.json"
@@ -53,15 +53,6 @@ def claim(out: Path, spec: SweepSpec) -> None:
     if not (out / MANIFEST).exists():
         out.mkdir(parents=True, exist_ok=True)
         atomic_write(out / MANIFEST, lambda f: f.write(json.dumps(spec.to_json(), indent=1).encode()))
-
-
-def atomic_write(path: Path, write) -> None:
-    tmp = path.with_name(path.name + ".tmp")
-    with open(tmp, "wb") as f:
-        write(f)
-        f.flush()
-        os.fsync(f.fileno())
-    os.replace(tmp, path)  # atomic: a kill leaves either no file or a whole one
 
 
 def chunk_path(out: Path, k: int) -> Path:

@@ -19,8 +19,9 @@ from tqdm import tqdm
 
 from hopper_mjx import metrics, model, registry, signals
 from hopper_mjx.control.raibert import raibert, raibert_params
+from hopper_mjx.files import atomic_write
 from hopper_mjx.sim import Sim, gravity_vectors, steps_for
-from hopper_mjx.sweep.folder import atomic_write, chunk_path, claim, read_chunk
+from hopper_mjx.sweep.folder import chunk_path, claim, read_chunk
 from hopper_mjx.sweep.grid import Instances, SweepSpec, expand
 
 COLUMNS = ("apex_height", "flight_rise", "flight_time", "ballistic_flight_time", "stance_time", "hop_period",
