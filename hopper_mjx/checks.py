@@ -18,7 +18,7 @@ import numpy as np
 
 from hopper_mjx import registry
 
-MAX_TIMESTEP = 0.01  # s, as model.load accepts
+MAX_TIMESTEP = 0.01  # s, the longest physics step model.load and a world file may set
 DEFAULT_TIMESTEP = 1e-3  # s, model.DEFAULT_TIMESTEP (checked equal by a test; importing model loads MuJoCo)
 
 

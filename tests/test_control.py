@@ -87,6 +87,12 @@ def test_the_seeds_file_loads_as_is_under_either_spelling(tmp_path, name):
          "joint: haa_joint, pid: {p: -1}}", "pid.p must be finite and >= 0"),
         ("haa_joint_position_controller: {type: effort_controllers/JointPositionController, "
          "joint: haa_joint, pid: {p: 1}}", "no effort_controllers/JointPositionController for joint"),
+        ("7: {type: effort_controllers/JointPositionController, joint: haa_joint, pid: {p: 1}}",
+         "no effort_controllers/JointPositionController for joint"),  # an integer key: read, not a crash
+        ("a_controller: {type: effort_controllers/JointPositionController, joint: haa_joint, pid: {p: 1}}\n"
+         "b_controller: {type: effort_controllers/JointPositionController, joint: haa_joint, pid: {p: 2}}",
+         "'b_controller' drives haa_joint, which 'a_controller' drives already"),
+        ("#" * (2 << 20), "is over 1 MiB: not a PID gains file"),
     ],
 )
 def test_load_gains_rejects_bad_files(tmp_path, text, message):
@@ -95,6 +101,11 @@ def test_load_gains_rejects_bad_files(tmp_path, text, message):
     with pytest.raises(ValueError, match=message) as err:
         pid.load_gains(path)
     assert "\n" not in str(err.value)
+
+
+def test_load_gains_refuses_an_endless_file_without_reading_it_whole():
+    with pytest.raises(ValueError, match="/dev/zero is over 1 MiB: not a PID gains file"):
+        pid.load_gains("/dev/zero")
 
 
 @pytest.fixture(scope="module")

@@ -14,6 +14,7 @@ from hopper_mjx.model.layout import Layout
 from hopper_mjx.model.robot import LegGeometry
 
 SEED_URDF = model.DEFAULT_URDF.read_text()
+REDUCTION = "<mechanicalReduction>{}</mechanicalReduction>"
 
 
 def _variant(text: str, **replace) -> str:
@@ -162,15 +163,28 @@ def test_timestep_is_configurable():
          "'effort' is not a number"),
         (lambda t: t.replace('<joint name="hfe_joint" type="revolute">', '<joint name="hfe_joint" type="prismatic">'),
          "'hfe_joint' must be revolute"),
+        (lambda t: t.replace(REDUCTION.format(1), REDUCTION.format(0)),
+         r"transmission 'haa_joint_trans' <mechanicalReduction> must be a finite number > 0, got 0"),
+        (lambda t: t.replace(REDUCTION.format(1), REDUCTION.format("nan")),
+         "must be a finite number > 0, got nan"),
+        (lambda t: t.replace('effort="80" lower="-1.6" upper="1.6"', 'effort="80" lower="1.6" upper="-1.6"'),
+         "joint 'hfe_joint' <limit>: lower 1.6 must be below upper -1.6"),
+        (lambda t: t.replace('<origin xyz="0 0 -0.15" rpy="0 0 0"/>', '<origin xyz="0 nan -0.15" rpy="0 0 0"/>'),
+         r"<joint name='haa_joint'> <origin xyz> must be three finite numbers, got '0 nan -0.15'"),
+        (lambda t: t.replace('<sphere radius="0.03"/>', '<sphere radius="-0.03"/>'),
+         "the foot's radius must be > 0, got -0.03"),
     ],
     ids=["xml", "missing-joint", "no-inertia", "negative-mass", "no-foot", "no-transmission", "bad-effort",
-         "prismatic"],
+         "prismatic", "zero-reduction", "nan-reduction", "reversed-limits", "nan-origin", "negative-foot"],
 )
-def test_bad_urdf_is_rejected_with_a_clear_message(tmp_path, edit, message):
+def test_bad_urdf_is_rejected_with_a_clear_message(tmp_path, edit, message, monkeypatch):
+    monkeypatch.chdir(tmp_path)
     path = tmp_path / "bad.urdf"
     path.write_text(edit(SEED_URDF))
-    with pytest.raises(model.URDFError, match=message):
+    with pytest.raises(model.URDFError, match=message) as err:
         model.load(path)
+    assert "\n" not in str(err.value)  # one line
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["bad.urdf"]  # no MUJOCO_LOG.TXT left behind
 
 
 def test_missing_or_binary_file_is_a_urdf_error_naming_it(tmp_path):

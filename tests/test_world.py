@@ -75,6 +75,14 @@ def test_garbled_worlds_are_refused_in_one_line(text, message):
     assert "\n" not in str(err.value)
 
 
+def test_a_step_too_long_is_blamed_on_the_files_tag(tmp_path):
+    path = tmp_path / "slow.world"
+    path.write_text(sdf("<physics><max_step_size>1e6</max_step_size></physics>"))
+    with pytest.raises(world.WorldError) as err:
+        world.read(path)
+    assert str(err.value) == f"{path}: <physics><max_step_size> 1e+06 s is over the 0.01 s a step may take here"
+
+
 def test_unreadable_files_and_incompatible_batches(tmp_path):
     with pytest.raises(world.WorldError, match="cannot read world file .*missing.world"):  # model.loader.read_text
         world.read(tmp_path / "missing.world")

@@ -30,6 +30,7 @@ from hopper_mjx.model.loader import JOINTS, read_text
 DEFAULT_GAINS = Path(__file__).with_name("monoped.yaml")
 SEED_GAINS_NAMES = ("monoped.yaml", "monoped.yml")
 CONTROLLER_TYPE = "effort_controllers/JointPositionController"
+GAINS_BYTES = 1 << 20  # a gains file is a page of YAML
 GAIN_KEYS = ("p", "i", "d", "i_clamp")  # N·m/rad, N·m/(rad·s), N·m·s/rad, N·m
 
 
@@ -65,21 +66,24 @@ def load_gains(path: str | Path | None = None) -> dict[str, dict[str, float]]:
     """
     path = gains_file(path) if path is not None else DEFAULT_GAINS
     try:
-        doc = yaml.safe_load(read_text(path, "PID gains file"))
+        doc = yaml.safe_load(read_text(path, "PID gains file", max_bytes=GAINS_BYTES))
     except yaml.YAMLError as err:
         first_line = str(err).splitlines()[0] if str(err) else type(err).__name__
         raise ValueError(f"{path} is not valid YAML: {first_line}") from None
-    if isinstance(doc, dict) and len(doc) == 1 and not any(k.endswith("_controller") for k in doc):
+    if isinstance(doc, dict) and len(doc) == 1 and not any(str(k).endswith("_controller") for k in doc):
         doc = next(iter(doc.values()))  # the seed's `monoped:` namespace
     if not isinstance(doc, dict):
         raise ValueError(f"{path}: expected a mapping of <joint>_position_controller entries")
-    gains = {}
+    gains, drivers = {}, {}
     for name, entry in doc.items():
         if not (isinstance(entry, dict) and entry.get("type") == CONTROLLER_TYPE):
             continue  # e.g. the joint_state_controller
         joint = entry.get("joint")
         if joint not in JOINTS:
             raise ValueError(f"{path}: '{name}' drives unknown joint {joint!r}; expected one of {list(JOINTS)}")
+        if joint in gains:
+            raise ValueError(f"{path}: '{name}' drives {joint}, which '{drivers[joint]}' drives already")
+        drivers[joint] = name
         pid_entry = entry.get("pid")
         if not isinstance(pid_entry, dict):
             raise ValueError(f"{path}: '{name}' has no pid: {{p, i, d}} mapping")

@@ -17,6 +17,8 @@ from pathlib import Path
 
 import mujoco
 
+from hopper_mjx.checks import MAX_TIMESTEP
+
 DEFAULT_URDF = Path(__file__).with_name("monoped.urdf")
 JOINTS = ("haa_joint", "hfe_joint", "kfe_joint")
 DEFAULT_TIMESTEP = 1e-3  # s; the Gazebo original ran its physics at 1 kHz
@@ -35,12 +37,20 @@ class URDFError(ValueError):
     """The URDF cannot describe a monoped that this toolkit can simulate."""
 
 
-def read_text(path: str | os.PathLike, what: str, error: type[ValueError] = ValueError) -> str:
-    """A text file's contents; `error` with one line naming the file if it is missing, unreadable or
-    not UTF-8 text (`what`, e.g. "URDF file", says what the file should have been)."""
+MAX_TEXT_BYTES = 16 << 20  # a description file is far smaller; /dev/zero or a disk image is not one
+
+
+def read_text(path: str | os.PathLike, what: str, error: type[ValueError] = ValueError,
+              max_bytes: int = MAX_TEXT_BYTES) -> str:
+    """A text file's contents; `error` with one line naming the file if it is missing, unreadable,
+    larger than `max_bytes` or not UTF-8 text (`what`, e.g. "URDF file", says what it should have been)."""
     path = Path(path)
     try:
-        return path.read_text(encoding="utf-8")
+        with open(path, "rb") as f:
+            data = f.read(max_bytes + 1)  # bounded: a device or a huge file is refused, not read whole
+        if len(data) > max_bytes:
+            raise error(f"{path} is over {max_bytes >> 20} MiB: not a {what}")
+        return data.decode("utf-8")
     except UnicodeDecodeError:
         raise error(f"{path} is not a text (UTF-8) {what}") from None
     except OSError as err:
@@ -78,6 +88,44 @@ def _number(element: ET.Element | None, attr: str, where: str) -> float:
     return value
 
 
+def _positive(text: str | None, where: str) -> float:
+    try:
+        value = float(text)
+    except (TypeError, ValueError):
+        raise URDFError(f"{where} is not a number: {text!r}") from None
+    if not (math.isfinite(value) and value > 0):
+        raise URDFError(f"{where} must be a finite number > 0, got {text.strip()}")
+    return value
+
+
+def _check_origins(robot: ET.Element) -> None:
+    """Every <origin>'s xyz and rpy: three finite numbers (MuJoCo would log a NaN pose to a file and fail)."""
+    for parent in robot.iter():
+        for origin in parent.findall("origin"):
+            for attr in ("xyz", "rpy"):
+                text = origin.get(attr)
+                if text is None:
+                    continue
+                where = f"<{parent.tag} name={parent.get('name')!r}> <origin {attr}>" if parent.get("name") else \
+                    f"an <origin {attr}> in <{parent.tag}>"
+                try:
+                    values = [float(v) for v in text.split()]
+                except ValueError:
+                    raise URDFError(f"{where} is not three numbers: {text!r}") from None
+                if len(values) != 3 or not all(math.isfinite(v) for v in values):
+                    raise URDFError(f"{where} must be three finite numbers, got {text!r}")
+
+
+def _check_limits(joints: dict[str, ET.Element]) -> None:
+    """Each leg joint's <limit lower upper>: finite, lower below upper (MuJoCo would drop a reversed range
+    and leave the joint unlimited)."""
+    for name in JOINTS:
+        limit = joints[name].find("limit")
+        lower, upper = (_number(limit, k, f"joint '{name}' <limit>") for k in ("lower", "upper"))
+        if not lower < upper:
+            raise URDFError(f"joint '{name}' <limit>: lower {lower:g} must be below upper {upper:g}")
+
+
 def _check_inertial(link: ET.Element) -> None:
     name = link.get("name")
     inertial = link.find("inertial")
@@ -112,7 +160,9 @@ def _transmissions(robot: ET.Element, joints: dict[str, ET.Element]) -> list[Tra
                 "only torque-driven joints are supported"
             )
         actuator = trans.find("actuator")
-        reduction = actuator.findtext("mechanicalReduction") if actuator is not None else None
+        reduction = actuator.find("mechanicalReduction") if actuator is not None else None
+        if reduction is not None:  # a number > 0: the motor's torque is divided by it (0 would divide by zero)
+            reduction = _positive(reduction.text, f"transmission '{trans.get('name')}' <mechanicalReduction>")
         effort = _number(joints[jname].find("limit"), "effort", f"joint '{jname}' <limit>")
         if effort <= 0:
             raise URDFError(f"joint '{jname}' has effort limit {effort}: it must be positive")
@@ -120,7 +170,7 @@ def _transmissions(robot: ET.Element, joints: dict[str, ET.Element]) -> list[Tra
             Transmission(
                 joint=jname,
                 actuator=(actuator.get("name") if actuator is not None else None) or f"{jname}_motor",
-                reduction=float(reduction) if reduction else 1.0,
+                reduction=reduction or 1.0,
                 effort=effort,
             )
         )
@@ -146,6 +196,7 @@ def describe(urdf_text: str, source: str = "<string>") -> LegDescription:
         )
     for link in links.values():
         _check_inertial(link)
+    _check_origins(robot)
 
     def parent_child(name: str) -> tuple[str, str]:
         joint = joints[name]
@@ -164,6 +215,7 @@ def describe(urdf_text: str, source: str = "<string>") -> LegDescription:
     for name in JOINTS:
         if joints[name].get("type") != "revolute":
             raise URDFError(f"'{name}' must be revolute, not {joints[name].get('type')!r}")
+    _check_limits(joints)
 
     base_link = chain[0][0]
     children = {link: [] for link in links}
@@ -186,6 +238,8 @@ def describe(urdf_text: str, source: str = "<string>") -> LegDescription:
         raise URDFError(
             f"expected exactly one <sphere> collision (the foot) on {contact_links}, found {len(feet)}"
         )
+    if not feet[0][1] > 0:
+        raise URDFError(f"link '{feet[0][0]}' sphere: the foot's radius must be > 0, got {feet[0][1]:g}")
 
     transmissions = _transmissions(robot, joints)
     undriven = [name for name in JOINTS if name not in {t.joint for t in transmissions}]
@@ -206,8 +260,8 @@ def build_spec(urdf: str | os.PathLike | None = None, *, timestep: float = DEFAU
     """The monoped as an editable `MjSpec`, with everything the simulation adds. `friction`: the foot-floor
     contact's two sliding coefficients (Gazebo's mu, mu2), which a world file sets (`hopper_mjx.model.world`)."""
     path = Path(urdf) if urdf is not None else DEFAULT_URDF
-    if not (isinstance(timestep, (int, float)) and math.isfinite(timestep) and 0 < timestep <= 0.01):
-        raise ValueError(f"timestep must be in (0, 0.01] s, got {timestep!r}")
+    if not (isinstance(timestep, (int, float)) and math.isfinite(timestep) and 0 < timestep <= MAX_TIMESTEP):
+        raise ValueError(f"timestep must be in (0, {MAX_TIMESTEP:g}] s, got {timestep!r}")
     if len(friction) != 2 or not all(math.isfinite(mu) and mu >= 0 for mu in friction):
         raise ValueError(f"friction must be two finite coefficients >= 0, got {friction!r}")
     leg = describe(read_text(path, "URDF file", URDFError), str(path))

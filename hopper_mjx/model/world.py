@@ -27,6 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
+from hopper_mjx.checks import MAX_TIMESTEP
 from hopper_mjx.model.loader import read_text
 
 EARTH_GRAVITY = 9.81  # m/s², the standard reference g every g-scaled quantity is measured against
@@ -120,6 +121,9 @@ def _physics(physics: ET.Element, ignored: list[str]) -> tuple[float | None, tup
     for child in physics:
         if child.tag == "max_step_size":
             timestep = _positive(child, "<physics><max_step_size>")
+            if timestep > MAX_TIMESTEP:
+                raise WorldError(f"<physics><max_step_size> {timestep:g} s is over the {MAX_TIMESTEP:g} s a step "
+                                 "may take here")
         elif child.tag == "gravity":
             gravity = _vector(child.text, 3, "<physics><gravity>")
         else:
@@ -166,7 +170,11 @@ def parse(text: str, source: str = "<string>") -> World:
 
 def read(path: str | Path) -> World:
     """`parse` of a file, with a one-line error naming it when it cannot be read."""
-    return parse(read_text(path, "world file", WorldError), str(path))
+    text = read_text(path, "world file", WorldError)
+    try:
+        return parse(text, str(path))
+    except WorldError as err:  # name the file in every refusal, also those of its tags
+        raise WorldError(str(err) if str(err).startswith(str(path)) else f"{path}: {err}") from None
 
 
 def foot_friction(world_mu: tuple[float, float] | None, foot_mu: float) -> tuple[float, float] | None:
