@@ -54,7 +54,7 @@ def check_controller(text: str, height: float = 0.0, speed=(0.0, 0.0), urdf=None
     from hopper_mjx.model.robot import standing_height
 
     try:
-        config = policy.read(path)[3]
+        config = policy.load(path)[1]  # the parameters too: a damaged copy is refused before any compile
         mj_model = model.load(urdf)
         monoped.same_robot(config.robot, mj_model, f"the policy {path}")
     except ValueError as err:

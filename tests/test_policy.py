@@ -122,3 +122,56 @@ def test_sweep_compare_judges_the_policy_and_raibert_alike(trained, tmp_path, ca
     capsys.readouterr()
     assert sweep.main(["compare", "--controllers", f"raibert,policy:{tmp_path}", "--out", str(tmp_path / "x")]) == 2
     assert "is not a trained policy" in capsys.readouterr().err and not (tmp_path / "x").exists()
+
+
+def _damage_env(folder):
+    (folder / "hopper_env.json").write_text("[1, 2]")
+    return f"{folder / 'hopper_env.json'} must hold a JSON object, not a list"
+
+
+def _garble_env(folder):
+    (folder / "hopper_env.json").write_text('{"task": "hop", ')
+    return f"{folder / 'hopper_env.json'} is not valid JSON (JSONDecodeError"
+
+
+def _drop_network_key(folder):
+    import json
+
+    net = json.loads((folder / "ppo_network_config.json").read_text())
+    del net["network_factory_kwargs"]["policy_hidden_layer_sizes"]
+    (folder / "ppo_network_config.json").write_text(json.dumps(net))
+    return f"{folder / 'ppo_network_config.json'} lacks network_factory_kwargs.policy_hidden_layer_sizes"
+
+
+def _resize_layers(folder):
+    import json
+
+    net = json.loads((folder / "ppo_network_config.json").read_text())
+    net["network_factory_kwargs"]["policy_hidden_layer_sizes"] = [16, 16]
+    (folder / "ppo_network_config.json").write_text(json.dumps(net))
+    return f"{folder}: its parameters do not fit its network config"
+
+
+def _truncate_params(folder):
+    for f in folder.rglob("*"):
+        if f.is_file() and not f.name.endswith(".json"):
+            f.write_bytes(f.read_bytes()[: f.stat().st_size // 2])
+    return f"{folder}: its parameters cannot be read"
+
+
+@pytest.mark.parametrize("damage", [_damage_env, _garble_env, _drop_network_key, _resize_layers, _truncate_params],
+                         ids=["env-list", "env-garbled", "network-key", "layer-sizes", "truncated-params"])
+def test_a_damaged_policy_folder_is_one_line_naming_it(trained, tmp_path, capsys, damage):
+    """A policy is a folder a user may copy, edit or cut short: each damage is refused before anything
+    is compiled, in one line naming the file, with nothing written."""
+    from hopper_mjx import simulate
+
+    out, _ = trained
+    copy = tmp_path / "copy"
+    shutil.copytree(out / "policy", copy)
+    message = damage(copy)
+    npz = tmp_path / "x.npz"
+    assert simulate.main(["--controller", f"policy:{copy}", "--out", str(npz)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"error: --controller: {message}") and err.count("\n") == 1, err
+    assert not npz.exists()

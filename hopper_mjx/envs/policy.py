@@ -74,13 +74,40 @@ def algorithm_of(path: Path) -> str:
     return found[0]
 
 
+# What rebuilding the networks reads from Brax's network config, checked before it is used.
+NETWORK_KEYS = ("observation_size", "action_size", "normalize_observations", "network_factory_kwargs")
+FACTORY_KEYS = {"ppo": ("policy_hidden_layer_sizes", "value_hidden_layer_sizes", "activation", "distribution_type"),
+                "sac": ("hidden_layer_sizes", "activation", "distribution_type")}
+
+
+def _json_object(file: Path) -> dict:
+    """A policy folder's JSON file as a mapping; a file a user edited or a copy cut short: one line naming it."""
+    try:
+        value = json.loads(file.read_text())
+    except (json.JSONDecodeError, UnicodeDecodeError) as err:
+        raise ValueError(f"{file} is not valid JSON ({err.__class__.__name__}: {str(err).splitlines()[0]})") from None
+    if not isinstance(value, dict):
+        raise ValueError(f"{file} must hold a JSON object, not a {type(value).__name__}")
+    return value
+
+
 def read(path) -> tuple[Path, str, dict, monoped.MonopedConfig]:
     """(checkpoint path, algorithm, network config, task config) of a saved policy, checked: the
     network's input size must be the observation size of the task it names. Reads JSON only."""
     path = resolve(path)
-    config = monoped.MonopedConfig.from_dict(json.loads((path / ENV_CONFIG).read_text()))
+    try:
+        config = monoped.MonopedConfig.from_dict(_json_object(path / ENV_CONFIG))
+    except (TypeError, ValueError) as err:
+        raise ValueError(f"{path / ENV_CONFIG}: {err}" if str(path) not in str(err) else str(err)) from None
     algo = algorithm_of(path)
-    net = json.loads((path / NETWORK_CONFIGS[algo]).read_text())
+    net_file = path / NETWORK_CONFIGS[algo]
+    net = _json_object(net_file)
+    missing = [k for k in NETWORK_KEYS if k not in net]
+    kwargs = net.get("network_factory_kwargs")
+    missing += [f"network_factory_kwargs.{k}" for k in FACTORY_KEYS[algo]
+                if not isinstance(kwargs, dict) or k not in kwargs]
+    if missing:
+        raise ValueError(f"{net_file} lacks {', '.join(missing)}")
     expected = monoped.observation_size(tasks.task_class(config.task).command_size, config.observe_gravity)
     if net["observation_size"] != expected:
         raise ValueError(f"{path}: the policy takes {net['observation_size']} observations but task "
@@ -107,11 +134,22 @@ def _network(algo: str, net: dict):
 
 
 def load(path):
-    """(deterministic policy fn obs -> action, MonopedConfig) of a saved PPO or SAC policy."""
+    """(deterministic policy fn obs -> action, MonopedConfig) of a saved PPO or SAC policy, checked: the
+    saved parameters must be readable and fit the network its config describes (traced, not compiled)."""
     path, algo, net, config = read(path)
-    params = brax_checkpoint.load(path)
-    inference = _network(algo, net)(params[:2], deterministic=True)
-    return (lambda obs: inference(obs, jax.random.PRNGKey(0))[0]), config
+    try:
+        params = brax_checkpoint.load(path)
+    except Exception as err:  # orbax's many ways of failing on a damaged checkpoint
+        raise ValueError(f"{path}: its parameters cannot be read ({type(err).__name__}; a copy cut short?)") from None
+    try:
+        inference = _network(algo, net)(params[:2], deterministic=True)
+        policy = lambda obs: inference(obs, jax.random.PRNGKey(0))[0]  # noqa: E731
+        jax.eval_shape(policy, jax.ShapeDtypeStruct((net["observation_size"],), jnp.float32))
+    except Exception as err:  # flax's shape errors, a layer list that is not numbers, ...
+        first = str(err).splitlines()[0] if str(err) else ""
+        raise ValueError(f"{path}: its parameters do not fit its network config ({type(err).__name__}: "
+                         f"{first[:200]})") from None
+    return policy, config
 
 
 @jax.tree_util.register_dataclass
