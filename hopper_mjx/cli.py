@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from hopper_mjx import registry
+from hopper_mjx import budget, registry
 from hopper_mjx.checks import (  # noqa: F401  re-exported: the tools use them beside the options
     DEFAULT_TIMESTEP,
     MAX_TIMESTEP,
@@ -179,18 +179,29 @@ def check_batch(args) -> Scenario:
     gains = check_gains(args)
     if warning:
         print(warning, file=sys.stderr)
+    budget.check_memory("--num", len(rows) * args.num)  # before the rows are repeated; the recording: check_rates
     return Scenario(gravity=np.repeat(rows, args.num, axis=0), model_options=options, urdf=args.urdf,
                     engine=args.engine, controller=args.controller, height=args.height, speed=tuple(args.speed),
                     gains=gains, seed=args.seed, chunk=args.chunk)
 
 
-def check_rates(flags: str, sensors, batch: Scenario) -> None:
+# Values one sample of each stream records per instance, for the size estimate (the monoped's nq + nv for
+# the state; the IMU's quaternion, rate and force; the odometry's pose and twist; the contact's flag, force, point).
+STREAM_FLOATS = {"state": 19, "imu": 10, "odom": 13, "contact": 7}
+
+
+def check_rates(flags: str, sensors, batch: Scenario, duration: float | None = None) -> None:
     """Every stream's rate divides the batch's physics rate (SensorConfig.periods says which does not);
-    `flags` names the options that set the rates."""
+    `flags` names the options that set the rates. With a `duration`, the run must fit: its steps in one
+    compiled loop, its recording in this machine's memory (`budget`)."""
     try:
-        sensors.periods(batch.timestep)
+        periods = sensors.periods(batch.timestep)
     except ValueError as err:
         raise ValueError(f"{flags}: {err}") from None
+    if duration is not None:
+        steps = budget.check_steps("--duration", duration, batch.timestep)
+        recorded = sum(STREAM_FLOATS[s] * steps / p for s, p in periods.items())
+        budget.check_memory("--num, --duration", batch.n, recorded)
 
 
 FOXGLOVE_PORT = 8765  # Foxglove's default for a WebSocket connection

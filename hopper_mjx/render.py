@@ -102,7 +102,7 @@ def check_video(args) -> Scenario:
     cli.check_range("--fps", args.fps, low=0, open_low=True)
     batch = cli.check_batch(args)
     cli.check_indices("--instance", [args.instance], len(batch.gravity))
-    cli.check_rates("--fps", video_sensors(args), batch)
+    cli.check_rates("--fps", video_sensors(args), batch, args.duration)
     return batch
 
 

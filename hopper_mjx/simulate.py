@@ -101,7 +101,7 @@ def main(argv=None) -> int:
         cli.check_range("--rate", args.rate, low=0, open_low=True)
         cli.check_writable("--out", args.out)
         batch = cli.check_batch(args)
-        cli.check_rates("--rate", sensor_config(args), batch)
+        cli.check_rates("--rate", sensor_config(args), batch, args.duration)
         with foxglove.listening(args, live.spread(len(batch.gravity), live.SHOWN)) as stream:
             runtime.configure()
             saved = run(args, batch) if stream is None else run_live(args, batch, stream)

@@ -82,6 +82,15 @@ CASES = [
     ("sweep", ["gravity", "--engine", "warp", "--out", "s"], "--engine: unknown engine 'warp'"),
     ("simulate", ["--engine", "warp"], "--engine: unknown engine 'warp'"),
     ("perf.bench", ["--json", "nodir/b.json"], "--json nodir/b.json: its folder nodir does not exist"),
+    # Sizes that cannot run: refused up front with what the run would need and what this machine has.
+    ("simulate", ["--num", "100000000"], "--num: 300,000,000 instances would need about"),
+    ("simulate", ["--num", "20000", "--duration", "10000"], "--num, --duration: 60,000 instances would need"),
+    ("simulate", ["--duration", "1e9"], "--duration: 1e+09 s at a 0.001 s step is 1e+12 physics steps"),
+    ("simulate", ["--seed", str(2**70)], "--seed must be in 0..4294967295"),
+    ("perf.bench", ["--num", "100000000"], "--num: 100,000,000 instances would need about"),
+    ("sweep", ["gravity", "--num", "100000000", "--out", "s"], "--num: 900,000,000 instances would need about"),
+    ("sweep", ["gravity", "--duration", "1e9", "--out", "s"], "--duration: 1e+09 s at a 0.001 s step is"),
+    ("ros.record", ["--num", "100000000", "--out", "r.bag"], "would need about"),
 ]
 
 
@@ -153,6 +162,8 @@ def test_refused_in_one_line_before_anything_is_built(refusals, k):
     assert done.stdout == ""
     assert done.unchanged  # nothing written, nothing created
     assert done.cpu < MAX_CPU, f"refused after {done.cpu:.1f} s of CPU time"
+    if "would need about" in message:  # a size refusal says what this machine has
+        assert " of memory (" in lines[0] and lines[0].endswith(" available"), lines[0]
 
 
 def test_the_seeds_gains_folder_is_taken_as_is(tmp_path):

@@ -41,7 +41,7 @@ from pathlib import Path
 
 import numpy as np
 
-from hopper_mjx import cli, registry, runtime
+from hopper_mjx import budget, cli, registry, runtime
 
 DISTINCT_GRAVITIES = 64  # distinct values, tiled over the batch: one native MjModel each
 GRAVITY_SPAN = (1.62, 9.81)  # m/s², Moon to Earth
@@ -370,6 +370,9 @@ def check(args) -> list[int] | None:
         if getattr(args, name) < 1:
             raise ValueError(f"--{name} must be >= 1, got {getattr(args, name)}")
     cli.check_range("--timestep", args.timestep, low=0, high=cli.MAX_TIMESTEP, open_low=True)
+    for num in [args.num] + (cli.parse_indices(args.scaling, "--scaling") if args.scaling else []):
+        # Both sides hold the batch, and native writes its full state every step (in NATIVE_BUFFER_STEPS slices).
+        budget.check_memory("--num" if num == args.num else "--scaling", num, states=2)
     engines = args.engine.split(",")
     if len(engines) > 1 and not args.scaling:
         raise ValueError("--engine: several engines are compared with --scaling only")

@@ -177,7 +177,7 @@ def main(argv=None) -> int:
         batch = cli.check_batch(args)
         if args.instances is not None:
             cli.check_indices("--instances", args.instances, len(batch.gravity))
-        cli.check_rates("--rate, --<stream>-rate", sensor_config(args), batch)
+        cli.check_rates("--rate, --<stream>-rate", sensor_config(args), batch, args.duration)
         runtime.configure()
         rec = simulate_batch(args, batch)
         path = write(rec, out, args.format, args.instances)

@@ -17,7 +17,8 @@ import time
 from datetime import datetime, timezone
 from pathlib import Path
 
-from hopper_mjx import cli, registry, runtime
+from hopper_mjx import budget, cli, registry, runtime
+from hopper_mjx.checks import DEFAULT_TIMESTEP
 from hopper_mjx.sweep import folder
 from hopper_mjx.sweep.grid import DEFAULT_GRAVITY, KICK
 
@@ -94,11 +95,12 @@ def check(args):
     names = args.controllers.split(",") if args.kind == "compare" else [getattr(args, "controller", "raibert")]
     if len(set(names)) != len(names):
         raise ValueError(f"--controllers lists one twice: {args.controllers}")
+    chunk = check_size(args, len(gravity))
     specs = []
     for name in names:
         specs.append(SweepSpec(kind="gains" if args.kind == "gains" else "gravity", gravity=gravity, num=args.num,
                                duration=args.duration, height=args.height, speed=tuple(args.speed), seed=args.seed,
-                               kick=args.kick, chunk=args.chunk, engine=args.engine,
+                               kick=args.kick, chunk=chunk, engine=args.engine,
                                param=getattr(args, "param", None), controller=name, urdf=args.urdf,
                                values=tuple(args.values) if args.kind == "gains" else ()))
         cli.check_controller(name, args.height, args.speed, args.urdf)  # a policy: its folder and trained range
@@ -115,6 +117,25 @@ def check(args):
     if args.coordinator is not None and not _host_port(args.coordinator):
         raise ValueError(f"--coordinator must be HOST:PORT, got {args.coordinator!r}")
     return specs, out
+
+
+# Values a swept instance records per simulated second at the sweep's rates (contact and state at 1 kHz,
+# IMU and odometry at 100 Hz: runner.SENSORS), and keeps per instance (its row of metrics, its kick).
+RECORDED_PER_S = 1000 * (19 + 7) + 100 * (10 + 13)
+KEPT = 64
+
+
+def check_size(args, gravities: int) -> int:
+    """The chunk the sweep runs (no larger than the grid); refuses a grid, a chunk or a duration that
+    cannot run here, before the grid is even expanded."""
+    if args.num < 1 or args.chunk < 1:
+        return args.chunk  # SweepSpec names the bad one
+    n = gravities * args.num * (len(args.values) if args.kind == "gains" else 1)
+    budget.check_steps("--duration", args.duration, DEFAULT_TIMESTEP)
+    budget.check_memory("--num", n, KEPT)
+    chunk = min(args.chunk, n)  # a chunk is padded to its size: never beyond the grid
+    budget.check_memory("--chunk, --duration", chunk, RECORDED_PER_S * args.duration)
+    return chunk
 
 
 def folder_of(args, out: Path, spec) -> Path:
