@@ -99,10 +99,17 @@ def _layers(text: str) -> tuple[int, ...]:
     return sizes
 
 
+def _floats(text: str, what: str) -> list[float]:
+    try:
+        return cli.parse_floats(text, what)
+    except argparse.ArgumentTypeError as err:
+        raise ValueError(str(err)) from None
+
+
 def _pair(text: str, what: str) -> tuple[float, float]:
-    values = tuple(float(v) for v in text.split(","))
-    if len(values) != 2:
-        raise ValueError(f"{what} must be 'low,high', got {text!r}")
+    values = tuple(_floats(text, what))
+    if len(values) != 2 or not all(math.isfinite(v) for v in values):
+        raise ValueError(f"{what} must be two finite numbers 'low,high', got {text!r}")
     return values
 
 
@@ -137,8 +144,18 @@ def check(args) -> None:
         lo, hi = _pair(args.gravity_range, "--gravity-range")
         if not 0 < lo <= hi:
             raise ValueError(f"--gravity-range must be 0 < low <= high m/s², got {args.gravity_range!r}")
-    if args.num_envs < 1 or args.timesteps < 1:
-        raise ValueError("--num-envs and --timesteps must be >= 1")
+    for flag in ("num_envs", "timesteps", "episode_length", "eval_every", "num_eval_envs", "unroll_length",
+                 "batch_size", "num_minibatches", "eval_num"):
+        if getattr(args, flag) < 1:
+            raise ValueError(f"--{flag.replace('_', '-')} must be >= 1, got {getattr(args, flag)}")
+    cli.check_seed(args.seed)
+    # The evaluation's options too: a mistake there would otherwise surface after the whole training run.
+    for g in _floats(args.eval_gravity, "--eval-gravity"):
+        cli.check_range("--eval-gravity", g, low=0, open_low=True)
+    cli.check_range("--eval-duration", args.eval_duration, low=0, open_low=True)
+    cli.check_range("--eval-height", args.eval_height, low=0)
+    if len(args.eval_speed) != 2 or not all(math.isfinite(v) for v in args.eval_speed):
+        raise ValueError(f"--eval-speed needs two finite values VX,VY in m/s, got {args.eval_speed}")
     if args.minutes is not None and not (math.isfinite(args.minutes) and args.minutes > 0):
         raise ValueError(f"--minutes must be finite and > 0, got {args.minutes:g}")
     cli.check_writable("--out", args.out, folder=True)
@@ -404,7 +421,7 @@ def first_checkpoint_at_threshold(args) -> dict | None:
     training, and are not run."""
     out = Path(args.out)
     rows = {r["step"]: r for r in read_history(out / HISTORY)["history"]}
-    gravities = [float(v) for v in args.eval_gravity.split(",")]
+    gravities = _floats(args.eval_gravity, "--eval-gravity")
     for path in sorted((out / "checkpoints").glob("[0-9]" * 12)):
         row = rows.get(int(path.name), {})
         if row.get("eval/avg_episode_length", args.episode_length) < 0.95 * args.episode_length:
@@ -471,7 +488,7 @@ def main(argv=None) -> int:
     print(f"wrote {args.out}/policy (step {record['final_step']:,}), {HISTORY}, reward_curve.png; "
           f"{record['wall_time'] / 60:.1f} min of training")
     if args.evaluate:
-        gravities = [float(v) for v in args.eval_gravity.split(",")]
+        gravities = _floats(args.eval_gravity, "--eval-gravity")
         result = evaluate(Path(args.out) / "policy", gravities=gravities, duration=args.eval_duration,
                           height=args.eval_height, num=args.eval_num, seed=args.seed, speed=args.eval_speed,
                           urdf=args.urdf)

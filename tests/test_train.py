@@ -130,6 +130,24 @@ def test_train_rejects_bad_input_in_one_line_before_anything_runs(trained, capsy
     assert [p.name for p in _checkpoints(out)] == before
 
 
+@pytest.mark.parametrize("args, message", [
+    (["--gravity-range", "1,inf"], "--gravity-range must be two finite numbers 'low,high', got '1,inf'"),
+    (["--gravity-range", "1,x"], "--gravity-range must be comma-separated numbers, got '1,x'"),
+    (["--episode-length", "0"], "--episode-length must be >= 1, got 0"),
+    (["--eval-gravity", "9.81,abc"], "--eval-gravity must be comma-separated numbers, got '9.81,abc'"),
+    (["--eval-gravity", "9.81,-1"], "--eval-gravity must be finite and > 0, got -1"),
+    (["--seed", "-1"], "--seed must be in 0..4294967295, got -1"),
+])
+def test_a_new_run_is_refused_before_its_folder_is_made(tmp_path, capsys, args, message):
+    """Every option, the evaluation's too, is checked before the run folder exists (a mistake in
+    --eval-gravity used to surface after the whole training run)."""
+    out = tmp_path / "run"
+    assert train_script.main([*PPO, *args, "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err == f"error: {message}\n"
+    assert not out.exists()
+
+
 def test_evaluation_kicks_are_the_sweeps():
     """The evaluation claims the sweep's kicks: replicate r gets the sweep's kick for replicate r."""
     from hopper_mjx.sweep.grid import KICK, SweepSpec, expand
