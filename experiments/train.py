@@ -67,8 +67,7 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--gravity-range", default=None,
                    help="low,high m/s², drawn log-uniformly per episode (default: the task's, 0.5,12)")
     p.add_argument("--observe-gravity", action="store_true", help="put the gravity magnitude in the observation")
-    cli.add_engine_option(p)
-    p.add_argument("--urdf", default=None, help="monoped URDF (default: the shipped one)")
+    cli.add_physics_options(p)
     p.add_argument("--sac-replay", type=int, default=1_000_000, help="SAC: replay buffer size (env steps)")
     p.add_argument("--sac-min-replay", type=int, default=8192, help="SAC: env steps collected before learning")
     p.add_argument("--sac-grad-updates", type=int, default=8, help="SAC: gradient updates per env step batch")
@@ -134,11 +133,7 @@ def check(args) -> None:
         raise ValueError(f"--task: {err}") from None
     if args.algo not in ALGORITHMS:
         raise ValueError(f"--algo {args.algo!r} is unknown; choose from {', '.join(ALGORITHMS)}")
-    cli.check_engine(args.engine)
-    if args.urdf is not None:
-        from hopper_mjx.model.checks import check_urdf
-
-        check_urdf(args.urdf)
+    cli.check_physics(args)
     _layers(args.policy_layers), _layers(args.value_layers)
     if args.gravity_range is not None:
         lo, hi = _pair(args.gravity_range, "--gravity-range")

@@ -16,6 +16,7 @@ from hopper_mjx import startup
 startup.prepare()
 
 _PUBLIC = {
+    "Physics": "hopper_mjx.scenario",
     "Scenario": "hopper_mjx.scenario",
     "SensorConfig": "hopper_mjx.signals",
     "Sim": "hopper_mjx.sim",

@@ -33,13 +33,13 @@ from hopper_mjx.checks import (  # noqa: F401  re-exported: the tools use them b
     parser,
     warn_diverged,
 )
-from hopper_mjx.scenario import Scenario
+from hopper_mjx.scenario import Physics, Scenario
 
 
-def check_controller(text: str, height: float = 0.0, speed=(0.0, 0.0), urdf=None) -> None:
-    """A known controller; a `policy:PATH` must be a trained policy whose training range holds the
-    command (`height`, `speed`). Reads the policy's JSON and MuJoCo's compiled model (for the
-    standing height) only."""
+def check_controller(text: str, height: float = 0.0, speed=(0.0, 0.0), physics: Physics | None = None) -> None:
+    """A known controller; a `policy:PATH` must be a trained policy for `physics`' robot whose training
+    range holds the command (`height`, `speed`). Reads the policy and the physics' model (compiled once,
+    kept for the build) only."""
     if not registry.is_policy(text):
         try:
             registry.check("controller", registry.CONTROLLERS, text, extra=f"{registry.POLICY_PREFIX}PATH")
@@ -49,17 +49,16 @@ def check_controller(text: str, height: float = 0.0, speed=(0.0, 0.0), urdf=None
     path = Path(registry.policy_path(text))
     if not path.is_dir():
         raise ValueError(f"--controller {text}: {path} is not a trained policy: no such folder")
-    from hopper_mjx import model
     from hopper_mjx.envs import monoped, policy
     from hopper_mjx.model.robot import standing_height
 
+    physics = physics or Physics()
     try:
         config = policy.load(path)[1]  # the parameters too: a damaged copy is refused before any compile
-        mj_model = model.load(urdf)
-        monoped.same_robot(config.robot, mj_model, f"the policy {path}")
+        monoped.same_robot(config.robot, physics.mj_model, f"the policy {path}")
     except ValueError as err:
         raise ValueError(f"--controller: {err}") from None
-    policy.check_command(config, standing_height(mj_model), height, speed)
+    policy.check_command(config, standing_height(physics.mj_model), height, speed)
 
 
 def check_gains(args) -> dict | None:
@@ -101,21 +100,34 @@ def add_batch_options(p: argparse.ArgumentParser, *, gravity=(9.81, 3.71, 1.62),
     p.add_argument("--gains", type=Path, default=None, metavar="FILE_OR_FOLDER",
                    help="pid: joint gains from a seed-style monoped.yaml or .yml (the file, or the seed's "
                         "package or config/ folder holding it; default: the shipped one)")
-    p.add_argument("--urdf", default=None, help="monoped URDF (default: the shipped one)")
     p.add_argument("--scenario", type=Path, default=None, metavar="FILE.yaml",
                    help="a scenario file: these options' values by name (gravity: [9.81, 1.62], num: 8, "
                         "controller: raibert, urdf: my.urdf, ...; paths from the file's folder); the command "
                         "line wins over the file")
     p.add_argument("--timestep", type=float, default=None, help="physics step, s (default: the world's, or 0.001)")
     p.add_argument("--chunk", type=int, default=256, help="instances per vmapped chunk on a device")
-    add_engine_option(p)
+    add_physics_options(p)
 
 
-def add_engine_option(p: argparse.ArgumentParser, *, extra_help: str = "") -> None:
-    """The one --engine option of every tool."""
+# -- the physics every tool runs: the robot, the engine (and what a world sets) ------------------
+def add_physics_options(p: argparse.ArgumentParser, *, engine_help: str = "") -> None:
+    """The options of a `scenario.Physics`, one set for every tool; `check_physics` reads them."""
+    p.add_argument("--urdf", default=None, help="monoped URDF (default: the shipped one)")
     p.add_argument("--engine", default=registry.DEFAULT_ENGINE,
                    help=f"physics engine: {registry.listed(registry.ENGINES)}; default {registry.DEFAULT_ENGINE}"
-                        + extra_help)
+                        + engine_help)
+
+
+def check_physics(args, model_options: dict | None = None, *, engines: list[str] | None = None) -> Physics:
+    """The checked `Physics` of `add_physics_options`' options (with the model options a tool or its
+    world sets); `engines`: the names a tool that runs several takes from --engine (else one)."""
+    for name in engines or [args.engine]:
+        check_engine(name)
+    if args.urdf is not None:
+        from hopper_mjx.model.checks import check_urdf  # MuJoCo's import waits for the cheap checks
+
+        check_urdf(args.urdf)
+    return Physics(urdf=args.urdf, model_options=dict(model_options or {}), engine=args.engine)
 
 
 def read_worlds(paths, gravity_given: str | None = None):
@@ -161,10 +173,6 @@ def check_batch(args) -> Scenario:
     check_engine(args.engine)
     if args.timestep is not None:
         check_range("--timestep", args.timestep, low=0, high=MAX_TIMESTEP, open_low=True)
-    from hopper_mjx.model.checks import check_urdf  # MuJoCo's import waits for the cheap checks above
-
-    check_urdf(args.urdf)
-    check_controller(args.controller, args.height, args.speed, args.urdf)
     from_worlds = batch_from_worlds(args)
     if from_worlds is None:
         from hopper_mjx.model.world import gravity_vectors
@@ -176,13 +184,14 @@ def check_batch(args) -> Scenario:
     else:
         rows, options, warning = from_worlds
     options.setdefault("timestep", args.timestep or DEFAULT_TIMESTEP)
+    physics = check_physics(args, options)
+    check_controller(args.controller, args.height, args.speed, physics)
     gains = check_gains(args)
     if warning:
         print(warning, file=sys.stderr)
     budget.check_memory("--num", len(rows) * args.num)  # before the rows are repeated; the recording: check_rates
-    return Scenario(gravity=np.repeat(rows, args.num, axis=0), model_options=options, urdf=args.urdf,
-                    engine=args.engine, controller=args.controller, height=args.height, speed=tuple(args.speed),
-                    gains=gains, seed=args.seed, chunk=args.chunk)
+    return Scenario(gravity=np.repeat(rows, args.num, axis=0), physics=physics, controller=args.controller,
+                    height=args.height, speed=tuple(args.speed), gains=gains, seed=args.seed, chunk=args.chunk)
 
 
 # Values one sample of each stream records per instance, for the size estimate (the monoped's nq + nv for

@@ -18,17 +18,17 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
-from hopper_mjx import cli, model, runtime
+from hopper_mjx import cli, runtime
 from hopper_mjx.model import robot, scene
-from hopper_mjx.scenario import Scenario
+from hopper_mjx.scenario import Physics, Scenario
 
 VIDEO_SUFFIXES = (".mp4", ".gif")
 TRACK_HEIGHT = 0.45  # m: the camera looks at the leg's middle, not at the base
 
 
-def scene_model(urdf=None) -> mujoco.MjModel:
-    """The simulated monoped plus what only pictures need: a checkered floor, a sky, link colours."""
-    return scene.dress(model.build_spec(urdf)).compile()
+def scene_model(physics: Physics = Physics()) -> mujoco.MjModel:
+    """The simulated monoped of `physics` plus what only pictures need: a checkered floor, a sky, link colours."""
+    return scene.dress(physics.spec()).compile()
 
 
 def camera(base_pos, distance: float = 2.0, azimuth: float = 135.0, elevation: float = -12.0) -> mujoco.MjvCamera:
@@ -147,17 +147,15 @@ def main(argv=None) -> int:
     try:
         _check_size(**size)
         if args.still is not None:
-            from hopper_mjx.model.checks import check_urdf
-
             cli.check_writable("--still", args.still)
-            check_urdf(args.urdf)
         batch = check_video(args) if args.video is not None else None
+        physics = batch.physics if batch is not None else cli.check_physics(args)
         runtime.configure()
-        m = scene_model(args.urdf)
+        m = scene_model(physics)
         if args.still is not None:
             import imageio.v2 as imageio
 
-            imageio.imwrite(args.still, still(m, robot.stance_qpos(model.load(args.urdf)), **size))
+            imageio.imwrite(args.still, still(m, robot.stance_qpos(physics.mj_model), **size))
             print(f"wrote {args.still}")
         if args.video is not None:
             qpos = simulate_qpos(args, batch)

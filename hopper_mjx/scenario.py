@@ -3,19 +3,25 @@
     scenario = Scenario(gravity=gravity_vectors([9.81, 1.62] * 50), controller="raibert")
     sim, final, traj = scenario.run(duration=2.0)
 
-It holds what a batch is: the robot (its URDF), the world of each instance (gravity vector,
-the physics step and friction a world sets, the ground), the per-instance variation of the
-robot, the engine, and the controller with its commands. `cli.check_batch` builds one from
-the command line; Python builds one directly. `build` compiles the model once and makes the
-engine and the controller from it; `run` is the batch-run path of simulate, render and
-record, and live runs (`view`, the Foxglove stream) build theirs from the same scenario.
+It holds what a batch is: its `Physics` (the robot's URDF, the physics step and friction a
+world sets, the ground, the per-instance variation of the robot, the engine), the gravity
+vector of each instance, and the controller with its commands. `cli.check_batch` builds one
+from the command line; Python builds one directly. `build` makes the batched core and the
+controller from the model its physics compiled once; `run` is the batch-run path of
+simulate, render and record, and live runs (`view`, the Foxglove stream) build theirs from
+the same scenario.
+
+`Physics` alone is what every tool that lays out its own instances takes (the sweeps, the
+bench, the profile, training): a new dimension of the world or the robot is one field here,
+one option in `cli.add_physics_options`, and one input of the step.
 """
 
 from __future__ import annotations
 
 import sys
 import time
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
+from functools import cached_property
 from typing import Any, NamedTuple
 
 import numpy as np
@@ -34,13 +40,58 @@ class Built(NamedTuple):
 
 
 @dataclass(frozen=True)
-class Scenario:
-    gravity: np.ndarray  # (N, 3) m/s², world frame: instance i's world
-    model_options: dict = field(default_factory=dict)  # keywords of model.load a world sets: timestep, friction
+class Physics:
+    """What compiles into the batched core, whatever the instances' gravity and controller."""
+
     urdf: str | None = None  # the robot (None: the shipped seed monoped)
+    model_options: dict = field(default_factory=dict)  # keywords of model.load a world sets: timestep, friction
     ground: str = FLAT
     variation: None = None  # per-instance robot parameters: none yet, every instance is the URDF's robot
     engine: str = registry.DEFAULT_ENGINE
+
+    @property
+    def timestep(self) -> float:
+        from hopper_mjx.model.loader import DEFAULT_TIMESTEP
+
+        return self.model_options.get("timestep", DEFAULT_TIMESTEP)
+
+    @cached_property
+    def mj_model(self):
+        """The compiled MuJoCo model: compiled on first use, once (the checks and the build share it)."""
+        from hopper_mjx import model
+
+        return model.load(self.urdf, **self.model_options)
+
+    def spec(self):
+        """A fresh editable `MjSpec` of the same model, for what only pictures add to it."""
+        from hopper_mjx import model
+
+        return model.build_spec(self.urdf, **self.model_options)
+
+    def sim(self, *, chunk: int = 256, devices=None):
+        """The batched core (hopper_mjx.sim.Sim) on this physics' model and engine."""
+        from hopper_mjx.sim import Sim
+
+        return Sim(self.mj_model, engine=self.engine, chunk=chunk, devices=devices)
+
+    def to_json(self) -> dict:
+        """The fields, as a run's manifest or config records them."""
+        return asdict(self)
+
+    def flags(self) -> list[str]:
+        """The command-line options that give this physics but its engine (`cli.add_physics_options`'),
+        for a child process; of a world's model options only the timestep has a flag."""
+        extra = set(self.model_options) - {"timestep"}
+        if extra or self.ground != FLAT or self.variation is not None:
+            raise ValueError(f"this physics has no command-line form ({', '.join(sorted(extra)) or 'ground'})")
+        return ((["--urdf", str(self.urdf)] if self.urdf else [])
+                + (["--timestep", repr(self.timestep)] if "timestep" in self.model_options else []))
+
+
+@dataclass(frozen=True)
+class Scenario:
+    gravity: np.ndarray  # (N, 3) m/s², world frame: instance i's world
+    physics: Physics = field(default_factory=Physics)
     controller: str = "hold"  # a registry.CONTROLLERS name or policy:PATH
     height: float = 0.10  # m, commanded apex rise over the standing height (raibert, hopping policies)
     speed: tuple[float, float] = (0.0, 0.0)  # m/s, commanded (vx, vy)
@@ -54,16 +105,11 @@ class Scenario:
 
     @property
     def timestep(self) -> float:
-        from hopper_mjx.model.loader import DEFAULT_TIMESTEP
-
-        return self.model_options.get("timestep", DEFAULT_TIMESTEP)
+        return self.physics.timestep
 
     def build(self) -> Built:
-        """Compiles the robot once, and makes the batched core and the controller from it."""
-        from hopper_mjx import model
-        from hopper_mjx.sim import Sim
-
-        sim = Sim(model.load(self.urdf, **self.model_options), engine=self.engine, chunk=self.chunk)
+        """The batched core on the physics' model (compiled once), and the controller."""
+        sim = self.physics.sim(chunk=self.chunk)
         return Built(sim, *self._controller(sim))
 
     def _controller(self, sim):

@@ -62,15 +62,18 @@ def grid_offsets(count: int, spacing: float = SPACING) -> np.ndarray:
     return np.stack([k % cols - (cols - 1) / 2, (rows - 1) / 2 - k // cols], axis=1) * spacing
 
 
-def display_model(urdf, count: int):
+def display_model(physics, count: int):
     """(MjModel, qpos address of each copy's free joint, its first body id, bodies per copy):
-    `count` copies of the robot over the pictures' checkered floor, for display only."""
-    from hopper_mjx import model
+    `count` copies of the robot of `physics` (a `scenario.Physics`) over the pictures' checkered
+    floor, for display only."""
     from hopper_mjx.model import scene
 
-    display = scene.dress(model.build_spec(urdf))  # floor, sky, lights and robot copy 0
+    def dressed():
+        return scene.dress(physics.spec())
+
+    display = dressed()  # floor, sky, lights and robot copy 0
     for k in range(1, count):
-        source = scene.dress(model.build_spec(urdf))  # a fresh spec per copy: attaching moves the body
+        source = dressed()  # a fresh spec per copy: attaching moves the body
         display.worldbody.add_frame().attach_body(source.worldbody.first_body(), f"monoped_{k}/", "")
     m = display.compile()
     m.geom_group[m.geom_bodyid != 0] = ROBOT_GROUP
@@ -248,7 +251,7 @@ def main(argv=None) -> int:
             if stream is not None:
                 stream.attach(batch)
                 print(f"streaming to Foxglove on ws://127.0.0.1:{stream.port}", flush=True)
-            return watch(args, batch, shown, stream)
+            return watch(args, checked.physics, batch, shown, stream)
     except ValueError as err:  # includes URDFError and a busy --foxglove port
         return cli.fail(err)
 
@@ -340,10 +343,10 @@ def show_frame(run, display: Display, stats: FrameStats, requests: set) -> None:
     stats.frame_done(run)
 
 
-def watch(args, batch, shown: list[int], stream) -> int:
+def watch(args, physics, batch, shown: list[int], stream) -> int:
     """Runs the window until it is closed (or --duration is played); prints the factor reached
     and where each frame's time went."""
-    m, qpos_adr, first_body, bodies = display_model(args.urdf, len(shown))
+    m, qpos_adr, first_body, bodies = display_model(physics, len(shown))
     requests: set = set()
     run = LiveRun(batch, factor=args.speed_factor, sinks=[stream] if stream else [], paused=args.paused)
     holder = {}

@@ -17,9 +17,9 @@ def test_the_command_line_builds_the_whole_scenario():
                      "--speed", "0.3,0", "--seed", "5", "--engine", "mjx", "--timestep", "0.002"])
     assert s.n == 6 and s.gravity.shape == (6, 3)
     np.testing.assert_allclose(s.gravity[:, 2], [-9.81] * 3 + [-1.62] * 3)  # gravity-major
-    assert (s.controller, s.height, s.speed, s.seed, s.engine, s.timestep) == ("raibert", 0.12, (0.3, 0.0), 5,
-                                                                              "mjx", 0.002)
-    assert s.urdf is None and s.ground == "flat" and s.variation is None
+    assert (s.controller, s.height, s.speed, s.seed, s.physics.engine, s.timestep) == ("raibert", 0.12, (0.3, 0.0),
+                                                                                      5, "mjx", 0.002)
+    assert s.physics.urdf is None and s.physics.ground == "flat" and s.physics.variation is None
 
 
 def test_a_scenario_file_sets_options_and_the_command_line_wins(tmp_path):
@@ -31,7 +31,7 @@ def test_a_scenario_file_sets_options_and_the_command_line_wins(tmp_path):
     s = scenario_of(["--scenario", str(f), "--num", "4"])
     assert s.n == 8 and s.controller == "raibert" and s.speed == (0.2, 0.0)
     np.testing.assert_allclose(s.gravity[::4, 2], [-1.62, -3.71])
-    assert s.urdf == str(urdf)  # a path in the file is read from the file's folder
+    assert s.physics.urdf == str(urdf)  # a path in the file is read from the file's folder
 
 
 @pytest.mark.parametrize("text, message", [
@@ -49,3 +49,33 @@ def test_a_bad_scenario_file_is_one_line_naming_it(tmp_path, capsys, text, messa
     err = capsys.readouterr().err
     assert exit_.value.code == 2 and err.count("\n") == 1
     assert err.startswith(f"error: --scenario {f}: ") and message in err
+
+
+def test_the_physics_compiles_its_model_once_on_first_use(monkeypatch):
+    """The checks (a policy's robot) and the build share one compiled model: no second compile."""
+    from hopper_mjx import model
+
+    compiled = []
+    load = model.load
+    monkeypatch.setattr(model, "load", lambda *a, **k: compiled.append(a) or load(*a, **k))
+    s = scenario_of(["--gravity", "9.81", "--urdf", "tests/data/long_shin_hopper.urdf"])
+    first = s.physics.mj_model
+    assert s.physics.mj_model is first and len(compiled) == 1
+    assert first.body_mass.sum() == pytest.approx(model.load("tests/data/long_shin_hopper.urdf").body_mass.sum())
+
+
+def test_every_tool_that_lays_out_its_own_instances_takes_the_same_physics_options():
+    """The sweeps, the bench, the profile and training read --urdf and --engine through one function."""
+    import argparse
+
+    from hopper_mjx.perf import bench
+    from hopper_mjx.sweep import __main__ as sweep
+
+    argv = ["--urdf", "tests/data/long_shin_hopper.urdf", "--engine", "mjx"]
+    sweep_args = sweep.parser().parse_args(["gravity", *argv])
+    bench_args = bench.parser().parse_args(argv)
+    for args in (sweep_args, bench_args):
+        physics = cli.check_physics(args)
+        assert (physics.urdf, physics.engine) == ("tests/data/long_shin_hopper.urdf", "mjx")
+    with pytest.raises(ValueError, match="unknown engine 'warp'"):
+        cli.check_physics(argparse.Namespace(urdf=None, engine="warp"))

@@ -42,6 +42,7 @@ from pathlib import Path
 import numpy as np
 
 from hopper_mjx import budget, cli, registry, runtime
+from hopper_mjx.scenario import Physics
 
 DISTINCT_GRAVITIES = 64  # distinct values, tiled over the batch: one native MjModel each
 GRAVITY_SPAN = (1.62, 9.81)  # m/s², Moon to Earth
@@ -183,19 +184,17 @@ def peak_rss_mb() -> float:
 
 
 def run(num: int, steps: int, *, controller: str = "hold", chunk: int = 256, repeat: int = 2,
-        threads: int | None = None, timestep: float = 1e-3, engine: str = registry.DEFAULT_ENGINE,
-        urdf: str | None = None) -> dict:
-    """One side-by-side measurement; returns the JSON record."""
+        threads: int | None = None, physics: Physics = Physics()) -> dict:
+    """One side-by-side measurement of `physics` (its robot, engine and timestep); returns the JSON record."""
     import jax
 
-    from hopper_mjx import model
-    from hopper_mjx.sim import Sim, gravity_vectors
+    from hopper_mjx.sim import gravity_vectors
 
     if steps < 1 or repeat < 1:
         raise ValueError(f"--steps and --repeat must be >= 1, got {steps} and {repeat}")
-    cli.check_engine(engine)
+    cli.check_engine(physics.engine)
     clock = CompileClock()
-    sim = Sim(model.load(urdf, timestep=timestep), engine=engine, chunk=chunk)
+    sim = physics.sim(chunk=chunk)
     threads = threads or len(sim.devices)
     gravity = gravity_vectors(bench_gravities(num))
     core_controller, params, native_model, native_ctrl = controller_pair(controller, sim, gravity)
@@ -229,7 +228,7 @@ def run(num: int, steps: int, *, controller: str = "hold", chunk: int = 256, rep
         "controller": controller,
         "engine": sim.engine.name,
         "native_controller": "none" if controller == "none" else "hold",
-        "timestep": timestep,
+        "timestep": physics.timestep,
         "core_steps_per_s": core_rate,
         "native_steps_per_s": native_rate,
         "ratio": core_rate / native_rate,
@@ -353,19 +352,20 @@ def parser() -> argparse.ArgumentParser:
                    help=f"{registry.listed({k: registry.CONTROLLERS[k] for k in CONTROLLERS})}; native runs "
                         "the same hold law as C servos for every one but none")
     p.add_argument("--chunk", type=int, default=256, help="instances per vmapped chunk on a device")
-    cli.add_engine_option(p)  # with --scaling, a comma-separated list (e.g. chain,mjx) is run side by side
+    # with --scaling, --engine takes a comma-separated list (e.g. chain,mjx), run side by side
+    cli.add_physics_options(p, engine_help="; with --scaling, several (chain,mjx) side by side")
     p.add_argument("--repeat", type=int, default=2, help="timed runs per side; the best counts")
     p.add_argument("--threads", type=int, default=None, help="native threads (default: one per device)")
     p.add_argument("--timestep", type=float, default=1e-3, help="physics step, s")
-    p.add_argument("--urdf", default=None, help="monoped URDF (default: the shipped one)")
     p.add_argument("--json", default=None, help="write the record (or the scaling records) here")
     p.add_argument("--scaling", default=None, help="comma-separated N values: one bench process each")
     p.add_argument("--plot", default=None, help="with --scaling: save the scaling plot (PNG) here")
     return p
 
 
-def check(args) -> list[int] | None:
-    """Every option, before anything is built; returns the --scaling sizes (None without it)."""
+def check(args) -> tuple[list[int] | None, Physics]:
+    """Every option, before anything is built; returns the --scaling sizes (None without it) and the
+    physics (its engine the first of --engine's)."""
     for name in ("num", "steps", "repeat", "chunk") + (("threads",) if args.threads is not None else ()):
         if getattr(args, name) < 1:
             raise ValueError(f"--{name} must be >= 1, got {getattr(args, name)}")
@@ -376,18 +376,14 @@ def check(args) -> list[int] | None:
     engines = args.engine.split(",")
     if len(engines) > 1 and not args.scaling:
         raise ValueError("--engine: several engines are compared with --scaling only")
-    for engine in engines:
-        cli.check_engine(engine)
     try:
         registry.check("controller", dict.fromkeys(CONTROLLERS), args.controller)
     except ValueError as err:
         raise ValueError(f"--controller: {err}") from None
     if args.json:
         cli.check_writable("--json", args.json)
-    if args.urdf is not None:
-        from hopper_mjx.model.checks import check_urdf
-
-        check_urdf(args.urdf)
+    physics = cli.check_physics(argparse.Namespace(**vars(args) | {"engine": engines[0]}),
+                                {"timestep": args.timestep}, engines=engines)
     if args.plot and not args.scaling:
         raise ValueError("--plot draws the --scaling records: give --scaling N1,N2,... too")
     if args.plot:
@@ -401,18 +397,17 @@ def check(args) -> list[int] | None:
     if args.steps % whole:
         raise ValueError(f"--steps must be a multiple of {whole} (the streams' period at this timestep), "
                          f"got {args.steps}")
-    return nums
+    return nums, physics
 
 
 def main(argv=None) -> int:
     args = parser().parse_args(argv)
     try:
-        nums = check(args)
+        nums, physics = check(args)
         runtime.configure()
         if nums:
             passed = ["--controller", args.controller, "--chunk", str(args.chunk), "--repeat", str(args.repeat),
-                      "--timestep", str(args.timestep)] + (["--threads", str(args.threads)] if args.threads else [])
-            passed += ["--urdf", args.urdf] if args.urdf else []
+                      *physics.flags()] + (["--threads", str(args.threads)] if args.threads else [])
             records = scaling(nums, args.engine.split(","), args.steps, passed)
             print(markdown_table(records))
             if args.plot:
@@ -420,8 +415,7 @@ def main(argv=None) -> int:
             result = records
         else:
             result = run(args.num, args.steps, controller=args.controller, chunk=args.chunk,
-                         repeat=args.repeat, threads=args.threads, timestep=args.timestep, engine=args.engine,
-                         urdf=args.urdf)
+                         repeat=args.repeat, threads=args.threads, physics=physics)
             print(format_table(result))
     except (ValueError, argparse.ArgumentTypeError) as err:
         return cli.fail(err)

@@ -29,7 +29,8 @@ import time
 import mujoco
 import numpy as np
 
-from hopper_mjx import cli, registry, runtime
+from hopper_mjx import cli, runtime
+from hopper_mjx.scenario import Physics
 
 REPEATS = 5  # timed rollouts per variant; the best counts (noise only adds time)
 VARIANTS = (
@@ -109,19 +110,18 @@ def chain_costs(engine, qpos, qvel, gravity, steps: int) -> dict:
     return dict(zip(CHAIN_STAGES, np.diff(cumulative, prepend=0.0))) | {"full step": cumulative[-1]}
 
 
-def measure(num: int, steps: int, settle: int, engine: str = registry.DEFAULT_ENGINE, urdf: str | None = None) -> dict:
+def measure(num: int, steps: int, settle: int, physics: Physics = Physics()) -> dict:
     import jax
 
-    from hopper_mjx import model
     from hopper_mjx.control.base import hold
     from hopper_mjx.engine.mjx import without_sensors
     from hopper_mjx.perf.bench import GRAVITY_SPAN
-    from hopper_mjx.sim import Sim, gravity_vectors
+    from hopper_mjx.sim import gravity_vectors
 
     if num < 1 or steps < 1:
         raise ValueError(f"--num and --steps must be >= 1, got {num}, {steps}")
-    mj_model = model.load(urdf)
-    sim = Sim(mj_model, engine=engine, chunk=num, devices=jax.local_devices()[:1])
+    mj_model = physics.mj_model
+    sim = physics.sim(chunk=num, devices=jax.local_devices()[:1])
     controller = hold(sim.layout)
     state = sim.reset(gravity_vectors(np.linspace(*GRAVITY_SPAN, num)), controller=controller)
     standing, _ = sim.rollout(state, controller, steps=settle)
@@ -165,23 +165,18 @@ def main(argv=None) -> int:
     p.add_argument("--num", type=int, default=256, help="instances in the batch (the core's chunk)")
     p.add_argument("--steps", type=int, default=200, help="steps per timed rollout")
     p.add_argument("--settle", type=int, default=300, help="physics steps holding the stance before timing")
-    cli.add_engine_option(p)
-    p.add_argument("--urdf", default=None, help="monoped URDF (default: the shipped one)")
+    cli.add_physics_options(p)
     args = p.parse_args(argv)
     for name in ("num", "steps", "settle"):
         if getattr(args, name) < 1:
             return cli.fail(ValueError(f"--{name} must be >= 1, got {getattr(args, name)}"))
     try:
-        cli.check_engine(args.engine)
-        if args.urdf is not None:
-            from hopper_mjx.model.checks import check_urdf
-
-            check_urdf(args.urdf)
+        physics = cli.check_physics(args)
     except ValueError as err:
         return cli.fail(err)
     runtime.configure()
     try:
-        record = measure(args.num, args.steps, args.settle, args.engine, args.urdf)
+        record = measure(args.num, args.steps, args.settle, physics)
     except ValueError as err:
         return cli.fail(err)
     print(table(record))

@@ -51,9 +51,8 @@ def parser() -> argparse.ArgumentParser:
         s.add_argument("--speed", type=cli.floats("--speed"), default=[0.0, 0.0], help="VX,VY m/s")
         s.add_argument("--kick", type=float, default=KICK, help="std of the random initial velocity, m/s and rad/s")
         s.add_argument("--seed", type=int, default=0)
-        s.add_argument("--urdf", default=None, help="monoped URDF (default: the shipped one)")
         s.add_argument("--chunk", type=int, default=256, help="instances per compiled call")
-        cli.add_engine_option(s)
+        cli.add_physics_options(s)
         s.add_argument("--out", type=Path, default=None, help="output folder (default runs/<kind>-<UTC time>)")
         s.add_argument("--no-progress", action="store_true")
         s.add_argument("--coordinator", default=None, help="HOST:PORT of process 0, for a multi-process sweep")
@@ -88,10 +87,7 @@ def check(args):
     from hopper_mjx.sweep.grid import SweepSpec
 
     gravity = gravity_from_worlds(args) if args.world is not None else tuple(args.gravity or args.default_gravity)
-    if args.urdf is not None:  # MuJoCo is imported only for a URDF to check
-        from hopper_mjx.model.checks import check_urdf
-
-        check_urdf(args.urdf)
+    physics = cli.check_physics(args)
     names = args.controllers.split(",") if args.kind == "compare" else [getattr(args, "controller", "raibert")]
     if len(set(names)) != len(names):
         raise ValueError(f"--controllers lists one twice: {args.controllers}")
@@ -100,10 +96,10 @@ def check(args):
     for name in names:
         specs.append(SweepSpec(kind="gains" if args.kind == "gains" else "gravity", gravity=gravity, num=args.num,
                                duration=args.duration, height=args.height, speed=tuple(args.speed), seed=args.seed,
-                               kick=args.kick, chunk=chunk, engine=args.engine,
-                               param=getattr(args, "param", None), controller=name, urdf=args.urdf,
+                               kick=args.kick, chunk=chunk, physics=physics,
+                               param=getattr(args, "param", None), controller=name,
                                values=tuple(args.values) if args.kind == "gains" else ()))
-        cli.check_controller(name, args.height, args.speed, args.urdf)  # a policy: its folder and trained range
+        cli.check_controller(name, args.height, args.speed, physics)  # a policy: its folder and trained range
     out = args.out or Path("runs") / f"{args.kind}-{datetime.now(timezone.utc):%Y%m%d-%H%M%S}"
     cli.check_writable("--out", out, folder=True, make_parents=True)
     if args.kind == "compare" and out.is_dir() and any(out.iterdir()) and not any(out.glob(f"*/{folder.MANIFEST}")):

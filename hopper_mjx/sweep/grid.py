@@ -15,6 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from hopper_mjx import checks, registry
+from hopper_mjx.scenario import Physics
 
 PLANETS = {1.62: "Moon", 3.71: "Mars", 9.81: "Earth"}
 DEFAULT_GRAVITY = (0.5, 1.0, 1.62, 2.5, 3.71, 5.0, 7.5, 9.81, 12.0)  # m/s²
@@ -38,9 +39,8 @@ class SweepSpec:
     chunk: int = 256  # instances per compiled call; fixed so every chunk reuses one compile
     param: str | None = None  # Raibert gain swept by `gains`
     values: tuple[float, ...] = ()
-    engine: str = "auto"  # hopper_mjx.engine name
     controller: str = "raibert"  # or policy:PATH, a policy trained by experiments/train.py
-    urdf: str | None = None  # the monoped's URDF (None: the shipped one)
+    physics: Physics = Physics()  # the robot, its engine (and what else compiles), the same for every grid point
 
     def __post_init__(self):
         if self.kind not in ("gravity", "gains"):
@@ -65,7 +65,7 @@ class SweepSpec:
             raise ValueError(f"--kick must be >= 0, got {self.kick}")
         if self.chunk < 1:
             raise ValueError(f"--chunk must be >= 1, got {self.chunk}")
-        checks.check_engine(self.engine)
+        checks.check_engine(self.physics.engine)
         if self.controller != "raibert" and not registry.is_policy(self.controller):
             raise ValueError(f"--controller {self.controller!r}: a sweep runs raibert or policy:PATH")
         if self.kind == "gains" and self.controller != "raibert":

@@ -17,7 +17,7 @@ import jax
 import numpy as np
 from tqdm import tqdm
 
-from hopper_mjx import metrics, model, registry, signals
+from hopper_mjx import metrics, registry, signals
 from hopper_mjx.control.raibert import raibert, raibert_params
 from hopper_mjx.files import atomic_write
 from hopper_mjx.sim import Sim, gravity_vectors, steps_for
@@ -79,7 +79,7 @@ def run(spec: SweepSpec, out: Path, *, progress: bool = True) -> tuple[Instances
     out = Path(out)
     claim(out, spec)
     (out / "chunks").mkdir(exist_ok=True)
-    sim = Sim(model.load(spec.urdf), engine=spec.engine)
+    sim = spec.physics.sim()
     instances = expand(spec, sim.layout.nv)
     chunks = [np.arange(i, min(i + spec.chunk, len(instances))) for i in range(0, len(instances), spec.chunk)]
     me, procs = jax.process_index(), jax.process_count()
