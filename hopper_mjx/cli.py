@@ -116,6 +116,17 @@ def add_physics_options(p: argparse.ArgumentParser, *, engine_help: str = "") ->
     p.add_argument("--engine", default=registry.DEFAULT_ENGINE,
                    help=f"physics engine: {registry.listed(registry.ENGINES)}; default {registry.DEFAULT_ENGINE}"
                         + engine_help)
+    p.add_argument("--motor", default=registry.DEFAULT_MOTOR,
+                   help=f"the joints' motors: {registry.listed(registry.MOTORS)}; default {registry.DEFAULT_MOTOR}")
+    p.add_argument("--action-delay", type=float, default=0.0, metavar="MS",
+                   help="ms from a controller's command to the motors' torque (whole physics steps)")
+
+
+def check_delay(physics: Physics, duration: float | None) -> None:
+    """An action delay shorter than the run (else no command ever reaches the motors)."""
+    if duration is not None and physics.action_delay >= duration:
+        raise ValueError(f"--action-delay {physics.action_delay * 1e3:g} ms is not shorter than the run's "
+                         f"--duration {duration:g} s: no command would reach the motors")
 
 
 def check_physics(args, model_options: dict | None = None, *, engines: list[str] | None = None) -> Physics:
@@ -123,11 +134,25 @@ def check_physics(args, model_options: dict | None = None, *, engines: list[str]
     world sets); `engines`: the names a tool that runs several takes from --engine (else one)."""
     for name in engines or [args.engine]:
         check_engine(name)
-    if args.urdf is not None:
+    try:
+        registry.check("motor", registry.MOTORS, args.motor)
+    except ValueError as err:
+        raise ValueError(f"--motor: {err}") from None
+    check_range("--action-delay", args.action_delay, low=0)
+    physics = Physics(urdf=args.urdf, model_options=dict(model_options or {}), engine=args.engine,
+                      motor=args.motor, action_delay=args.action_delay / 1e3)
+    if abs(physics.delay_steps * physics.timestep - physics.action_delay) > 1e-9:
+        raise ValueError(f"--action-delay must be a whole number of physics steps ({physics.timestep * 1e3:g} ms), "
+                         f"got {args.action_delay:g} ms")
+    if args.urdf is not None or physics.motor != registry.DEFAULT_MOTOR:
         from hopper_mjx.model.checks import check_urdf  # MuJoCo's import waits for the cheap checks
 
-        check_urdf(args.urdf)
-    return Physics(urdf=args.urdf, model_options=dict(model_options or {}), engine=args.engine)
+        leg = check_urdf(args.urdf)
+        no_speed = [t.joint for t in leg.transmissions if not math.isfinite(t.velocity)]
+        if physics.motor == "dc" and no_speed:
+            raise ValueError(f"--motor dc: the URDF gives no <limit velocity> (the motor's no-load speed) for "
+                             f"{', '.join(no_speed)}")
+    return physics
 
 
 def read_worlds(paths, gravity_given: str | None = None):
@@ -185,6 +210,7 @@ def check_batch(args) -> Scenario:
         rows, options, warning = from_worlds
     options.setdefault("timestep", args.timestep or DEFAULT_TIMESTEP)
     physics = check_physics(args, options)
+    check_delay(physics, args.duration)
     check_controller(args.controller, args.height, args.speed, physics)
     gains = check_gains(args)
     if warning:

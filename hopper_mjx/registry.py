@@ -22,6 +22,11 @@ ENGINES = {
     "mjx": "MuJoCo MJX, the reference",
 }
 DEFAULT_ENGINE = "auto"
+MOTORS = {
+    "ideal": "a torque source up to the URDF's effort limit (the seed's EffortJointInterface)",
+    "dc": "a DC motor: its torque-speed line from the URDF's effort (stall) and velocity (no-load speed)",
+}
+DEFAULT_MOTOR = "ideal"
 TASKS = {
     "stand": "stay upright at the standing height",
     "hop": "hop in place to a commanded apex",

@@ -48,12 +48,18 @@ class Physics:
     ground: str = FLAT
     variation: None = None  # per-instance robot parameters: none yet, every instance is the URDF's robot
     engine: str = registry.DEFAULT_ENGINE
+    motor: str = registry.DEFAULT_MOTOR  # a registry.MOTORS name: what the joints' motors are (hopper_mjx.actuators)
+    action_delay: float = 0.0  # s from a controller's command to the motors' torque, whole physics steps
 
     @property
     def timestep(self) -> float:
         from hopper_mjx.model.loader import DEFAULT_TIMESTEP
 
         return self.model_options.get("timestep", DEFAULT_TIMESTEP)
+
+    @property
+    def delay_steps(self) -> int:
+        return round(self.action_delay / self.timestep)
 
     @cached_property
     def mj_model(self):
@@ -72,7 +78,8 @@ class Physics:
         """The batched core (hopper_mjx.sim.Sim) on this physics' model and engine."""
         from hopper_mjx.sim import Sim
 
-        return Sim(self.mj_model, engine=self.engine, chunk=chunk, devices=devices)
+        return Sim(self.mj_model, engine=self.engine, chunk=chunk, devices=devices, motor=self.motor,
+                   delay_steps=self.delay_steps)
 
     def to_json(self) -> dict:
         """The fields, as a run's manifest or config records them."""
@@ -85,7 +92,9 @@ class Physics:
         if extra or self.ground != FLAT or self.variation is not None:
             raise ValueError(f"this physics has no command-line form ({', '.join(sorted(extra)) or 'ground'})")
         return ((["--urdf", str(self.urdf)] if self.urdf else [])
-                + (["--timestep", repr(self.timestep)] if "timestep" in self.model_options else []))
+                + (["--timestep", repr(self.timestep)] if "timestep" in self.model_options else [])
+                + (["--motor", self.motor] if self.motor != registry.DEFAULT_MOTOR else [])
+                + (["--action-delay", repr(self.action_delay * 1e3)] if self.action_delay else []))
 
 
 @dataclass(frozen=True)

@@ -25,7 +25,8 @@ import numpy as np
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
 from hopper_mjx import engine as engines
-from hopper_mjx import signals
+from hopper_mjx import registry, signals
+from hopper_mjx.actuators import Actuation, Drive, Motor
 from hopper_mjx.control.base import Controller, CState, zero_torque
 from hopper_mjx.model import world
 from hopper_mjx.model.robot import Robot
@@ -47,6 +48,7 @@ class State(NamedTuple):
     key: jax.Array  # (N, 2) uint32, per-instance PRNG key for sensor noise
     cstate: CState  # the controller's state (with its per-instance parameters)
     diverged: jax.Array  # (N,) bool, the instance's state went non-finite
+    drive: Drive | tuple = ()  # the motors' figures and state (hopper_mjx.actuators); () for ideal motors
 
 
 class Trajectory(NamedTuple):
@@ -89,13 +91,18 @@ def _check_gravity(gravity) -> np.ndarray:
 class Sim:
     """A compiled monoped model batched over instances and local devices."""
 
-    def __init__(self, mj_model: mujoco.MjModel, *, engine: str = "auto", chunk: int = 256, devices=None):
+    def __init__(self, mj_model: mujoco.MjModel, *, engine: str = "auto", chunk: int = 256, devices=None,
+                 motor: str = registry.DEFAULT_MOTOR, delay_steps: int = 0):
+        """motor: a registry.MOTORS name; delay_steps: every instance's action delay by default, and
+        the longest one a batch may be given (`reset(motor=...)`)."""
         if chunk < 1:
             raise ValueError("chunk must be >= 1")
         self.mj_model = mj_model
         self.robot = Robot.of(mj_model)  # the robot facts, measured once and passed down
         self.layout = self.robot.layout
         self.engine = engines.make(engine, mj_model)
+        self.actuation = Actuation(self.layout, motor, delay_steps)
+        self.delay_steps = delay_steps
         self.devices = tuple(devices or jax.local_devices())
         self.mesh = Mesh(np.array(self.devices), (AXIS,))
         self.model = jax.device_put(self.engine.model, NamedSharding(self.mesh, PartitionSpec()))
@@ -113,12 +120,15 @@ class Sim:
         params: Any = None,
         qpos=None,
         qvel=None,
+        motor: Motor | None = None,
     ) -> State:
         """Initial state for N = len(gravity) instances.
 
         gravity: (N, 3) m/s²; qpos/qvel: (nq,) or (N, nq) / (nv,) or (N, nv),
         default the robot's stance (upright at rest, the foot `model.robot.CLEARANCE`
-        above the floor); params: per-instance controller parameters (leading axis N) or None.
+        above the floor); params: per-instance controller parameters (leading axis N) or None;
+        motor: per-instance motor figures (`self.actuation.motor(N, ...)`), default the URDF's
+        with the Sim's delay.
         """
         g = _check_gravity(gravity)
         n = g.shape[0]
@@ -134,12 +144,15 @@ class Sim:
         controller = controller or self.limp
         obs = jax.vmap(lambda d: signals.observe(self.engine, self.engine.model, d))(data)
         cstate = jax.vmap(controller.init, in_axes=(0, None if params is None else 0))(obs, params)
+        if motor is None and not self.actuation.passthrough:
+            motor = self.actuation.motor(n, delay_steps=self.delay_steps)
         return State(
             data=data,
             gravity=jnp.asarray(g, dtype=jnp.float32),
             key=jax.random.split(key, n),
             cstate=cstate,
             diverged=jnp.zeros(n, dtype=bool),
+            drive=() if motor is None else self.actuation.init(motor),
         )
 
     # -- rollout --------------------------------------------------------------
@@ -185,19 +198,21 @@ class Sim:
         key: int | jax.Array = 0,
         qpos=None,
         qvel=None,
+        motor: Motor | None = None,
     ) -> tuple[State, Trajectory]:
         """The batch-run path of every tool: N = len(gravity) instances from `reset` for
         `duration` s, rounded to whole periods of every stream (`steps_for`)."""
         if not (math.isfinite(duration) and duration > 0):
             raise ValueError(f"duration must be > 0 s, got {duration}")
-        state = self.reset(gravity, key=key, controller=controller, params=params, qpos=qpos, qvel=qvel)
+        state = self.reset(gravity, key=key, controller=controller, params=params, qpos=qpos, qvel=qvel,
+                           motor=motor)
         steps = steps_for(duration, self.layout.timestep, sensors)
         return self.rollout(state, controller, steps=steps, sensors=sensors)
 
     def _compiled_rollout(self, controller, steps, tick, periods, sensors, chunk):
         cache_key = (controller, steps, sensors, chunk)  # tick and periods follow from sensors
         if cache_key not in self._compiled:
-            one = _instance_rollout(self.engine, controller, steps, tick, periods, sensors)
+            one = _instance_rollout(self.engine, self.actuation, controller, steps, tick, periods, sensors)
 
             def per_device(model, state):
                 n_local = state.gravity.shape[0]
@@ -228,14 +243,18 @@ def _pad(state: State, size: int) -> State:
     )
 
 
-def _instance_rollout(engine, controller, steps, tick, periods, sensors):
+def _instance_rollout(engine, actuation: Actuation, controller, steps, tick, periods, sensors):
     """One instance's rollout: `steps` physics steps, a record every `tick` steps."""
+    dt = actuation.layout.timestep
 
     def physics_step(model, state, record, previous):
         """One step; `record` is a traced, batch-wide flag: the signals are measured
         (after forward, before integrate) where it is true, else `previous` is passed on."""
         d = state.data
         ctrl, cstate = controller.act(state.cstate, signals.observe(engine, model, d), state.gravity)
+        drive = state.drive
+        if not actuation.passthrough:  # what the motors make of the command (static: ideal adds nothing)
+            ctrl, drive = actuation.apply(drive, ctrl, d.qvel, dt)
         d1 = engine.forward(model, d.replace(ctrl=ctrl), state.gravity)
         measure = lambda: signals.measure(engine, model, d1, state.gravity)
         # An unbatched predicate stays a real conditional under vmap: off-tick steps skip the signals.
@@ -250,8 +269,8 @@ def _instance_rollout(engine, controller, steps, tick, periods, sensors):
         # A diverged instance is frozen at its last finite state; the others never see it.
         keep = lambda new, old: jnp.where(bad, old, new)
         d1 = d1.replace(**{f: keep(getattr(d1, f), getattr(d, f)) for f in engine.freeze_fields})
-        cstate = jax.tree_util.tree_map(keep, cstate, state.cstate)
-        return state._replace(data=d1, cstate=cstate, diverged=bad), sig
+        cstate, drive = jax.tree_util.tree_map(keep, (cstate, drive), (state.cstate, state.drive))
+        return state._replace(data=d1, cstate=cstate, drive=drive, diverged=bad), sig
 
     def one_tick(carry, _):
         # The step is traced once, in one loop, so XLA compiles the engine once (not

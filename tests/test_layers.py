@@ -18,7 +18,7 @@ LAYERS = (
     ("model",),
     ("engine",),
     ("signals",),
-    ("control",),
+    ("control", "actuators"),  # what the controllers command; what the motors make of it
     ("metrics",),
     ("sim",),
     ("envs",),

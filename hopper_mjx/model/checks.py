@@ -8,12 +8,13 @@ from hopper_mjx.checks import check_readable_file
 from hopper_mjx.model import loader
 
 
-def check_urdf(path: str | Path | None) -> None:
-    """--urdf exists and describes a monoped (checked as XML, before MuJoCo compiles anything)."""
-    if path is None:
-        return
-    path = check_readable_file("--urdf", path)
+def check_urdf(path: str | Path | None) -> loader.LegDescription:
+    """--urdf exists and describes a monoped (checked as XML, before MuJoCo compiles anything); its
+    description (the shipped monoped's for None)."""
+    if path is not None:
+        path = check_readable_file("--urdf", path)
+    source = path or loader.DEFAULT_URDF
     try:
-        loader.describe(loader.read_text(path, "URDF file", loader.URDFError), str(path))
+        return loader.describe(loader.read_text(source, "URDF file", loader.URDFError), str(source))
     except loader.URDFError as err:
         raise ValueError(f"--urdf: {err}") from None

@@ -6,6 +6,7 @@ static argument of compiled functions, like MJX's own NumPy model structure.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import mujoco
@@ -24,6 +25,7 @@ class Layout:
     joint_dof: tuple[int, ...]  # qvel address of haa, hfe, kfe
     joint_range: tuple[tuple[float, float], ...]  # rad
     effort_limit: tuple[float, ...]  # N·m of joint torque, haa, hfe, kfe (the URDF's <limit effort>)
+    speed_limit: tuple[float, ...]  # rad/s, haa, hfe, kfe (the URDF's <limit velocity>; inf: none given)
     gear: tuple[float, ...]  # joint torque per unit of control, haa, hfe, kfe (mechanicalReduction)
     actuator_of_joint: tuple[int, ...]  # actuator index driving haa, hfe, kfe
     foot_geom: int
@@ -56,6 +58,8 @@ class Layout:
             joint_dof=tuple(int(j.dofadr[0]) for j in joints),
             joint_range=tuple((float(j.range[0]), float(j.range[1])) for j in joints),
             effort_limit=tuple(float(v) for v in torque_range[:, 1]),
+            # The loader keeps each motor's URDF velocity limit as its user data (no MuJoCo field holds one).
+            speed_limit=tuple(float(m.actuator_user[a, 0]) if m.nuser_actuator else math.inf for a in act),
             gear=tuple(float(v) for v in gear),
             actuator_of_joint=tuple(act),
             foot_geom=int(foot.id),

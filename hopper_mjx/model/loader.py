@@ -63,6 +63,7 @@ class Transmission:
     actuator: str
     reduction: float
     effort: float  # N·m at the joint, from <limit effort>
+    velocity: float  # rad/s at the joint, from <limit velocity> (inf when the URDF gives none)
 
 
 @dataclass(frozen=True)
@@ -166,12 +167,17 @@ def _transmissions(robot: ET.Element, joints: dict[str, ET.Element]) -> list[Tra
         effort = _number(joints[jname].find("limit"), "effort", f"joint '{jname}' <limit>")
         if effort <= 0:
             raise URDFError(f"joint '{jname}' has effort limit {effort}: it must be positive")
+        limit = joints[jname].find("limit")
+        velocity = math.inf
+        if limit is not None and limit.get("velocity") is not None:
+            velocity = _positive(limit.get("velocity"), f"joint '{jname}' <limit velocity>")
         transmissions.append(
             Transmission(
                 joint=jname,
                 actuator=(actuator.get("name") if actuator is not None else None) or f"{jname}_motor",
                 reduction=reduction or 1.0,
                 effort=effort,
+                velocity=velocity,
             )
         )
     return transmissions
@@ -331,6 +337,8 @@ def build_spec(urdf: str | os.PathLike | None = None, *, timestep: float = DEFAU
             gear=[t.reduction, 0, 0, 0, 0, 0],
             ctrllimited=True,
             ctrlrange=[-t.effort / t.reduction, t.effort / t.reduction],
+            # MuJoCo has no joint speed limit; the motor models read the URDF's from here (Layout.speed_limit).
+            userdata=[t.velocity],
         )
     return spec
 

@@ -68,10 +68,16 @@ class ChunkRunner:
                                    qvel=inst.qvel[full])
         result = metrics.hop_metrics(traj, inst.gravity[full], command_speed=self.spec.speed,
                                      standing_height=self.sim.robot.standing_height,
-                                     work=np.asarray(final.cstate.work),
+                                     work=np.asarray(motor_energy(final)),
                                      mass=self.sim.layout.total_mass)
         result["diverged"] = np.asarray(final.diverged)
         return np.stack([np.asarray(result[c], dtype=np.float64) for c in COLUMNS], axis=1)[:n]
+
+
+def motor_energy(final):
+    """(N,) J the motors used: with a motor model, what the drive measured (dc: electrical energy drawn);
+    with ideal motors and no delay, the controller's ∫Σ|τ·q̇|dt of the torques it commanded (the same)."""
+    return final.drive.energy if final.drive else final.cstate.work
 
 
 def run(spec: SweepSpec, out: Path, *, progress: bool = True) -> tuple[Instances, np.ndarray, dict]:
