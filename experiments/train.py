@@ -133,7 +133,7 @@ def check(args) -> None:
         raise ValueError(f"--task: {err}") from None
     if args.algo not in ALGORITHMS:
         raise ValueError(f"--algo {args.algo!r} is unknown; choose from {', '.join(ALGORITHMS)}")
-    cli.check_physics(args)
+    cli.check_ideal_motors(cli.check_physics(args), "training (its Brax environments)")
     _layers(args.policy_layers), _layers(args.value_layers)
     if args.gravity_range is not None:
         lo, hi = _pair(args.gravity_range, "--gravity-range")

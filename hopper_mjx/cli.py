@@ -122,6 +122,13 @@ def add_physics_options(p: argparse.ArgumentParser, *, engine_help: str = "") ->
                    help="ms from a controller's command to the motors' torque (whole physics steps)")
 
 
+def check_ideal_motors(physics: Physics, tool: str) -> None:
+    """Refuses a motor model or delay in a tool that does not run them yet (rather than ignore them)."""
+    if physics.motor != registry.DEFAULT_MOTOR or physics.action_delay:
+        raise ValueError(f"--motor {physics.motor} / --action-delay: {tool} runs ideal motors without delay only, "
+                         "for now")
+
+
 def check_delay(physics: Physics, duration: float | None) -> None:
     """An action delay shorter than the run (else no command ever reaches the motors)."""
     if duration is not None and physics.action_delay >= duration:

@@ -10,6 +10,7 @@ inputs (a file, a folder, a garbled world, a binary URDF, a lone .mcap file, a b
 """
 
 import os
+import re
 import subprocess
 import sys
 import time
@@ -91,12 +92,20 @@ CASES = [
     ("sweep", ["gravity", "--num", "100000000", "--out", "s"], "--num: 900,000,000 instances would need about"),
     ("sweep", ["gravity", "--duration", "1e9", "--out", "s"], "--duration: 1e+09 s at a 0.001 s step is"),
     ("ros.record", ["--num", "100000000", "--out", "r.bag"], "would need about"),
+    # Motor models and delays.
+    ("simulate", ["--motor", "stepper"], "--motor: unknown motor 'stepper'; choose from: ideal, dc"),
+    ("simulate", ["--action-delay", "-2"], "--action-delay must be finite and >= 0, got -2"),
+    ("simulate", ["--action-delay", "0.5"], "--action-delay must be a whole number of physics steps (1 ms)"),
+    ("sweep", ["gravity", "--action-delay", "20000", "--out", "s"], "--action-delay 20000 ms is not shorter than"),
+    ("simulate", ["--motor", "dc", "--urdf", "no_speed.urdf"], "--motor dc: the URDF gives no <limit velocity>"),
+    ("perf.bench", ["--motor", "dc"], "perf.bench (native MuJoCo has no twin of the motor model) runs ideal"),
 ]
 
 
 def prepare(folder: Path) -> None:
     """The inputs the cases name (everything else they name does not exist)."""
     (folder / "a_file").write_text("a file\n")
+    (folder / "no_speed.urdf").write_text(re.sub(r' velocity="[^"]*"', "", loader.DEFAULT_URDF.read_text()))
     (folder / "a_folder").mkdir()
     (folder / "garbled.world").write_text("<sdf><world><gravity>0 0 -9.8</world></sdf>")
     (folder / "binary.urdf").write_bytes(b"\x89PNG\r\n\x1a\n\xff\xfe\x00")
