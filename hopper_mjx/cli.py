@@ -120,13 +120,27 @@ def add_physics_options(p: argparse.ArgumentParser, *, engine_help: str = "") ->
                    help=f"the joints' motors: {registry.listed(registry.MOTORS)}; default {registry.DEFAULT_MOTOR}")
     p.add_argument("--action-delay", type=float, default=0.0, metavar="MS",
                    help="ms from a controller's command to the motors' torque (whole physics steps)")
+    p.add_argument("--push", type=floats("--push"), default=None, metavar="INTERVAL,SPEED",
+                   help="random pushes during the run: every INTERVAL s each base's horizontal velocity changes "
+                        "by SPEED m/s in a direction of its own")
+
+
+def check_push(values) -> tuple[float, float] | None:
+    """--push INTERVAL,SPEED: a positive finite interval in s and a speed >= 0 in m/s."""
+    if values is None:
+        return None
+    if len(values) != 2:
+        raise ValueError(f"--push takes INTERVAL,SPEED (s, m/s), got {len(values)} value(s)")
+    check_range("--push interval", values[0], low=0, open_low=True)
+    check_range("--push speed", values[1], low=0)
+    return float(values[0]), float(values[1])
 
 
 def check_ideal_motors(physics: Physics, tool: str) -> None:
     """Refuses a motor model or delay in a tool that does not run them yet (rather than ignore them)."""
-    if physics.motor != registry.DEFAULT_MOTOR or physics.action_delay:
-        raise ValueError(f"--motor {physics.motor} / --action-delay: {tool} runs ideal motors without delay only, "
-                         "for now")
+    if physics.motor != registry.DEFAULT_MOTOR or physics.action_delay or physics.push:
+        raise ValueError(f"--motor {physics.motor} / --action-delay / --push: {tool} runs ideal motors, without "
+                         "delay or pushes, only, for now")
 
 
 def check_delay(physics: Physics, duration: float | None) -> None:
@@ -146,8 +160,16 @@ def check_physics(args, model_options: dict | None = None, *, engines: list[str]
     except ValueError as err:
         raise ValueError(f"--motor: {err}") from None
     check_range("--action-delay", args.action_delay, low=0)
+    push = check_push(args.push)
     physics = Physics(urdf=args.urdf, model_options=dict(model_options or {}), engine=args.engine,
-                      motor=args.motor, action_delay=args.action_delay / 1e3)
+                      motor=args.motor, action_delay=args.action_delay / 1e3, push=push)
+    if push is not None:
+        from hopper_mjx.pushes import Pushes
+
+        try:
+            Pushes.of(*push, physics.timestep)
+        except ValueError as err:
+            raise ValueError(f"--push: {err}") from None
     if abs(physics.delay_steps * physics.timestep - physics.action_delay) > 1e-9:
         raise ValueError(f"--action-delay must be a whole number of physics steps ({physics.timestep * 1e3:g} ms), "
                          f"got {args.action_delay:g} ms")

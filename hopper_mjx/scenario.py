@@ -50,6 +50,7 @@ class Physics:
     engine: str = registry.DEFAULT_ENGINE
     motor: str = registry.DEFAULT_MOTOR  # a registry.MOTORS name: what the joints' motors are (hopper_mjx.actuators)
     action_delay: float = 0.0  # s from a controller's command to the motors' torque, whole physics steps
+    push: tuple[float, float] | None = None  # (interval s, speed m/s) of random horizontal pushes during runs
 
     @property
     def timestep(self) -> float:
@@ -76,10 +77,12 @@ class Physics:
 
     def sim(self, *, chunk: int = 256, devices=None):
         """The batched core (hopper_mjx.sim.Sim) on this physics' model and engine."""
+        from hopper_mjx.pushes import Pushes
         from hopper_mjx.sim import Sim
 
+        pushes = None if self.push is None else Pushes.of(*self.push, self.timestep)
         return Sim(self.mj_model, engine=self.engine, chunk=chunk, devices=devices, motor=self.motor,
-                   delay_steps=self.delay_steps)
+                   delay_steps=self.delay_steps, pushes=pushes)
 
     def to_json(self) -> dict:
         """The fields, as a run's manifest or config records them."""
@@ -94,7 +97,8 @@ class Physics:
         return ((["--urdf", str(self.urdf)] if self.urdf else [])
                 + (["--timestep", repr(self.timestep)] if "timestep" in self.model_options else [])
                 + (["--motor", self.motor] if self.motor != registry.DEFAULT_MOTOR else [])
-                + (["--action-delay", repr(self.action_delay * 1e3)] if self.action_delay else []))
+                + (["--action-delay", repr(self.action_delay * 1e3)] if self.action_delay else [])
+                + (["--push", ",".join(map(repr, self.push))] if self.push else []))
 
 
 @dataclass(frozen=True)

@@ -30,6 +30,7 @@ from hopper_mjx.actuators import Actuation, Drive, Motor
 from hopper_mjx.control.base import Controller, CState, zero_torque
 from hopper_mjx.model import world
 from hopper_mjx.model.robot import Robot
+from hopper_mjx.pushes import Pushes, push
 
 gravity_vectors = world.gravity_vectors  # the gravity convention lives beside the world files
 
@@ -49,6 +50,7 @@ class State(NamedTuple):
     cstate: CState  # the controller's state (with its per-instance parameters)
     diverged: jax.Array  # (N,) bool, the instance's state went non-finite
     drive: Drive | tuple = ()  # the motors' figures and state (hopper_mjx.actuators); () for ideal motors
+    step: jax.Array | tuple = ()  # (N,) int32 physics steps taken, for the pushes' schedule; () without pushes
 
 
 class Trajectory(NamedTuple):
@@ -92,9 +94,9 @@ class Sim:
     """A compiled monoped model batched over instances and local devices."""
 
     def __init__(self, mj_model: mujoco.MjModel, *, engine: str = "auto", chunk: int = 256, devices=None,
-                 motor: str = registry.DEFAULT_MOTOR, delay_steps: int = 0):
+                 motor: str = registry.DEFAULT_MOTOR, delay_steps: int = 0, pushes: Pushes | None = None):
         """motor: a registry.MOTORS name; delay_steps: every instance's action delay by default, and
-        the longest one a batch may be given (`reset(motor=...)`)."""
+        the longest one a batch may be given (`reset(motor=...)`); pushes: random pushes during runs."""
         if chunk < 1:
             raise ValueError("chunk must be >= 1")
         self.mj_model = mj_model
@@ -103,6 +105,7 @@ class Sim:
         self.engine = engines.make(engine, mj_model)
         self.actuation = Actuation(self.layout, motor, delay_steps)
         self.delay_steps = delay_steps
+        self.pushes = pushes
         self.devices = tuple(devices or jax.local_devices())
         self.mesh = Mesh(np.array(self.devices), (AXIS,))
         self.model = jax.device_put(self.engine.model, NamedSharding(self.mesh, PartitionSpec()))
@@ -153,6 +156,7 @@ class Sim:
             cstate=cstate,
             diverged=jnp.zeros(n, dtype=bool),
             drive=() if motor is None else self.actuation.init(motor),
+            step=() if self.pushes is None else jnp.zeros(n, jnp.int32),
         )
 
     # -- rollout --------------------------------------------------------------
@@ -212,7 +216,8 @@ class Sim:
     def _compiled_rollout(self, controller, steps, tick, periods, sensors, chunk):
         cache_key = (controller, steps, sensors, chunk)  # tick and periods follow from sensors
         if cache_key not in self._compiled:
-            one = _instance_rollout(self.engine, self.actuation, controller, steps, tick, periods, sensors)
+            one = _instance_rollout(self.engine, self.actuation, self.pushes, controller, steps, tick, periods,
+                                    sensors)
 
             def per_device(model, state):
                 n_local = state.gravity.shape[0]
@@ -243,14 +248,17 @@ def _pad(state: State, size: int) -> State:
     )
 
 
-def _instance_rollout(engine, actuation: Actuation, controller, steps, tick, periods, sensors):
+def _instance_rollout(engine, actuation: Actuation, pushes: Pushes | None, controller, steps, tick, periods, sensors):
     """One instance's rollout: `steps` physics steps, a record every `tick` steps."""
     dt = actuation.layout.timestep
 
     def physics_step(model, state, record, previous):
         """One step; `record` is a traced, batch-wide flag: the signals are measured
         (after forward, before integrate) where it is true, else `previous` is passed on."""
-        d = state.data
+        d, step = state.data, state.step
+        if pushes is not None:  # static: without pushes the step is today's
+            d = d.replace(qvel=push(pushes, state.key, step, d.qvel))  # `step` steps done: the time is step·dt
+            step = step + 1
         ctrl, cstate = controller.act(state.cstate, signals.observe(engine, model, d), state.gravity)
         drive = state.drive
         if not actuation.passthrough:  # what the motors make of the command (static: ideal adds nothing)
@@ -270,7 +278,7 @@ def _instance_rollout(engine, actuation: Actuation, controller, steps, tick, per
         keep = lambda new, old: jnp.where(bad, old, new)
         d1 = d1.replace(**{f: keep(getattr(d1, f), getattr(d, f)) for f in engine.freeze_fields})
         cstate, drive = jax.tree_util.tree_map(keep, (cstate, drive), (state.cstate, state.drive))
-        return state._replace(data=d1, cstate=cstate, drive=drive, diverged=bad), sig
+        return state._replace(data=d1, cstate=cstate, drive=drive, step=step, diverged=bad), sig
 
     def one_tick(carry, _):
         # The step is traced once, in one loop, so XLA compiles the engine once (not

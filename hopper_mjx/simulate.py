@@ -26,9 +26,10 @@ def sensor_config(args):
     return signals.SensorConfig.uniform(args.rate, gyro_noise=args.gyro_noise, accel_noise=args.accel_noise)
 
 
-def arrays(traj, gravity, diverged, drive=()) -> dict[str, np.ndarray]:
+def arrays(traj, gravity, diverged, drive=(), push=None) -> dict[str, np.ndarray]:
     """The arrays saved to the .npz file, from a trajectory of the batch (and the final motors' `drive`,
-    `hopper_mjx.actuators.Drive`: each instance's motor figures and the energy drawn)."""
+    `hopper_mjx.actuators.Drive`: each instance's motor figures and the energy drawn; the pushes'
+    (interval s, speed m/s))."""
     out = {
         "time": traj.time["state"],
         "gravity": gravity,
@@ -51,6 +52,8 @@ def arrays(traj, gravity, diverged, drive=()) -> dict[str, np.ndarray]:
         out |= {"motor_stall_torque": motor.stall_torque, "motor_no_load_speed": motor.no_load_speed,
                 "motor_torque_limit": motor.torque_limit, "action_delay_steps": motor.delay,
                 "motor_energy": drive.energy}
+    if push is not None:
+        out |= {"push_interval": push[0], "push_speed": push[1]}
     return {k: np.asarray(v) for k, v in out.items()}
 
 
@@ -58,7 +61,7 @@ def run(args, batch: Scenario | None = None) -> dict[str, np.ndarray]:
     """Simulates as the arguments say (`batch`: already checked) and returns the arrays saved to the .npz file."""
     batch = batch or cli.check_batch(args)
     _, final, traj = batch.run(args.duration, sensor_config(args))
-    return arrays(traj, batch.gravity, final.diverged, final.drive)
+    return arrays(traj, batch.gravity, final.diverged, final.drive, batch.physics.push)
 
 
 def run_live(args, batch: Scenario, stream) -> dict[str, np.ndarray]:

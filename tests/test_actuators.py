@@ -162,3 +162,25 @@ def test_the_envelope_is_the_torque_speed_line(mj_model):
     np.testing.assert_allclose(low, -0.75 * tau_s, rtol=1e-6)
     low, high = (np.asarray(v) for v in envelope(motor, jnp.asarray(0.5 * w0, jnp.float32)))
     np.testing.assert_allclose(high, 0.5 * tau_s, rtol=1e-5)
+
+
+def test_pushes_change_the_base_velocity_by_their_speed_at_their_times(mj_model):
+    """Floating limp without gravity, the base's horizontal velocity is constant except at each push,
+    where it jumps by exactly the push speed, every `interval`, in directions that differ by instance;
+    the same seed gives the same pushes."""
+    from hopper_mjx.control.base import zero_torque
+    from hopper_mjx.pushes import Pushes
+
+    sim = Sim(mj_model, engine="chain", pushes=Pushes.of(0.05, 0.3, 1e-3))
+    limp = zero_torque(sim.layout)
+    runs = [jax.tree_util.tree_map(np.asarray, sim.run(np.zeros((3, 3)), limp, duration=0.2, sensors=SENSORS,
+                                                       key=5)[1]) for _ in range(2)]
+    np.testing.assert_array_equal(runs[0].qvel, runs[1].qvel)
+    v = runs[0].qvel[:, :, :2]  # (N, T, 2): the state at t = k ms, before step k + 1
+    jumps = np.linalg.norm(np.diff(v, axis=1), axis=-1)
+    for i in range(3):
+        steps = np.flatnonzero(jumps[i] > 1e-4) + 1
+        np.testing.assert_array_equal(steps, [50, 100, 150])  # each push lands at t = 0.05, 0.10, 0.15 s
+        np.testing.assert_allclose(jumps[i, steps - 1], 0.3, rtol=1e-5)
+    first = v[:, 50] - v[:, 49]
+    assert np.linalg.norm(first[0] - first[1]) > 1e-3  # instances are pushed their own ways

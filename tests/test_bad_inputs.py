@@ -98,7 +98,11 @@ CASES = [
     ("simulate", ["--action-delay", "0.5"], "--action-delay must be a whole number of physics steps (1 ms)"),
     ("sweep", ["gravity", "--action-delay", "20000", "--out", "s"], "--action-delay 20000 ms is not shorter than"),
     ("simulate", ["--motor", "dc", "--urdf", "no_speed.urdf"], "--motor dc: the URDF gives no <limit velocity>"),
-    ("perf.bench", ["--motor", "dc"], "perf.bench (native MuJoCo has no twin of the motor model) runs ideal"),
+    ("perf.bench", ["--motor", "dc"], "perf.bench (native MuJoCo has no twin of them) runs ideal motors"),
+    ("simulate", ["--push", "2"], "--push takes INTERVAL,SPEED (s, m/s), got 1 value(s)"),
+    ("simulate", ["--push", "0,0.3"], "--push interval must be finite and > 0, got 0"),
+    ("simulate", ["--push", "0.0005,0.3"], "--push: the push interval must be a whole number (>= 1) of physics"),
+    ("sweep", ["gravity", "--push", "1,-0.2", "--out", "s"], "--push speed must be finite and >= 0, got -0.2"),
 ]
 
 

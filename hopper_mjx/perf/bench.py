@@ -384,7 +384,7 @@ def check(args) -> tuple[list[int] | None, Physics]:
         cli.check_writable("--json", args.json)
     physics = cli.check_physics(argparse.Namespace(**vars(args) | {"engine": engines[0]}),
                                 {"timestep": args.timestep}, engines=engines)
-    cli.check_ideal_motors(physics, "perf.bench (native MuJoCo has no twin of the motor model)")
+    cli.check_ideal_motors(physics, "perf.bench (native MuJoCo has no twin of them)")
     if args.plot and not args.scaling:
         raise ValueError("--plot draws the --scaling records: give --scaling N1,N2,... too")
     if args.plot:
