@@ -18,7 +18,7 @@ LAYERS = (
     ("model",),
     ("engine",),
     ("signals",),
-    ("control", "actuators"),  # what the controllers command; what the motors make of it
+    ("control", "actuators", "pushes"),  # what the controllers command; what the motors make of it; shoves
     ("metrics",),
     ("sim",),
     ("envs",),
