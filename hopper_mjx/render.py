@@ -18,7 +18,7 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
-from hopper_mjx import cli, model, runtime
+from hopper_mjx import cli, command, model, runtime
 from hopper_mjx.model import robot, scene
 from hopper_mjx.scenario import Scenario
 
@@ -169,4 +169,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(command.run(main))

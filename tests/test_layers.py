@@ -13,7 +13,7 @@ PACKAGE = "hopper_mjx"
 # controllers -> metrics -> the batched core -> environments -> command-line support -> live runs
 # and ROS I/O -> tools.
 LAYERS = (
-    ("startup", "registry", "files", "budget"),  # what precedes importing MuJoCo; the names; file writes; sizes
+    ("startup", "command", "registry", "files", "budget"),  # before MuJoCo; a command's signals; names; writes; sizes
     ("checks", "runtime"),  # checks: the command line's value, path and name checks
     ("model",),
     ("engine",),

@@ -41,7 +41,7 @@ from pathlib import Path
 
 import numpy as np
 
-from hopper_mjx import budget, cli, registry, runtime
+from hopper_mjx import budget, cli, command, registry, runtime
 
 DISTINCT_GRAVITIES = 64  # distinct values, tiled over the batch: one native MjModel each
 GRAVITY_SPAN = (1.62, 9.81)  # m/s², Moon to Earth
@@ -431,4 +431,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(command.run(main))

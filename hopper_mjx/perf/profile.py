@@ -29,7 +29,7 @@ import time
 import mujoco
 import numpy as np
 
-from hopper_mjx import cli, registry, runtime
+from hopper_mjx import cli, command, registry, runtime
 
 REPEATS = 5  # timed rollouts per variant; the best counts (noise only adds time)
 VARIANTS = (
@@ -189,4 +189,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(command.run(main))
