@@ -23,7 +23,7 @@ import sys
 import time
 from pathlib import Path
 
-from hopper_mjx import cli, registry, runtime
+from hopper_mjx import cli, command, files, registry, runtime
 from hopper_mjx.files import atomic_write_text
 
 HISTORY = "metrics.json"
@@ -282,6 +282,7 @@ def train(args) -> dict:
     if args.algo == "ppo" and (args.batch_size * args.num_minibatches) % args.num_envs:
         raise ValueError("--batch-size x --num-minibatches must be a multiple of --num-envs")
     out.mkdir(parents=True, exist_ok=True)
+    command.on_stop(f"the checkpoints are saved in {out / 'checkpoints'}; rerun the same command to resume")
     env = task_config(args)
     config = env.config
     factory, checkpoint = networks(args)
@@ -315,8 +316,12 @@ def train(args) -> dict:
     def save_checkpoint(step, params):
         if step > 0:
             step = start_step + int(step)
-            checkpoint.save(out / "checkpoints", step, params, network_config)
-            policy.write_env_config(out / "checkpoints" / f"{step:012d}", config)
+            folder = out / "checkpoints" / f"{step:012d}"
+            if folder.exists() and not (folder / policy.ENV_CONFIG).exists():
+                shutil.rmtree(folder)  # an earlier run was stopped while saving it
+            with files.partial(folder):  # complete once its task config is beside it (latest_checkpoint)
+                checkpoint.save(out / "checkpoints", step, params, network_config)
+                policy.write_env_config(folder, config)
 
     out_of_time = args.minutes is not None and record["wall_time"] >= 60 * args.minutes
     if remaining > 0 and not out_of_time:
@@ -328,8 +333,9 @@ def train(args) -> dict:
     final = latest_checkpoint(out)
     if final is None:
         raise ValueError(f"no checkpoint was written under {out / 'checkpoints'}")
-    shutil.rmtree(out / "policy", ignore_errors=True)
-    shutil.copytree(final[0], out / "policy")
+    with files.partial(out / "policy"):
+        shutil.rmtree(out / "policy", ignore_errors=True)
+        shutil.copytree(final[0], out / "policy")
     record["final_step"] = final[1]
     atomic_write_text(record_path, json.dumps(record, indent=1))
     plot_rewards(record["history"], out / "reward_curve.png", f"{args.algo.upper()} on {args.task}")
@@ -500,4 +506,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(command.run(main))

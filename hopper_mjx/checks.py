@@ -57,7 +57,7 @@ def read_scenario(path, p: argparse.ArgumentParser) -> dict:
     if len(text) > SCENARIO_BYTES:
         raise ValueError(f"--scenario {path}: over {SCENARIO_BYTES // 1024} KiB, not a scenario file")
     try:
-        values = yaml.safe_load(text)
+        values = load_yaml(text)
     except yaml.YAMLError as err:
         raise ValueError(f"--scenario {path}: not YAML ({str(err).splitlines()[0]})") from None
     if not isinstance(values, dict):
@@ -72,6 +72,30 @@ def read_scenario(path, p: argparse.ArgumentParser) -> dict:
         action = actions[str(key).replace("-", "_")]
         typed[action.dest] = _typed(action, value, path, key)
     return typed
+
+
+def load_yaml(text):
+    """`yaml.safe_load`, refusing a mapping that gives a key twice (PyYAML would keep the last one silently:
+    a joint's gains given twice, an option set twice). Raises yaml.YAMLError."""
+    import yaml
+
+    class Loader(yaml.SafeLoader):
+        def construct_mapping(self, node, deep=False):
+            seen = {}
+            for key_node, _ in node.value:
+                key = self.construct_object(key_node, deep=True)
+                try:
+                    hash(key)
+                except TypeError:
+                    continue  # PyYAML refuses an unhashable key itself
+                if key in seen:
+                    raise yaml.constructor.ConstructorError(
+                        None, None, f"the key {key!r} is given twice (lines {seen[key] + 1} and "
+                        f"{key_node.start_mark.line + 1})", key_node.start_mark)
+                seen[key] = key_node.start_mark.line
+            return super().construct_mapping(node, deep=deep)
+
+    return yaml.load(text, Loader=Loader)
 
 
 def _typed(action: argparse.Action, value, path, key):

@@ -18,7 +18,7 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
-from hopper_mjx import cli, runtime
+from hopper_mjx import cli, command, files, runtime
 from hopper_mjx.model import robot, scene
 from hopper_mjx.scenario import Physics, Scenario
 
@@ -100,7 +100,14 @@ def check_video(args) -> Scenario:
         raise ValueError(f"--video must end in {' or '.join(VIDEO_SUFFIXES)}, got {args.video}")
     cli.check_writable("--video", args.video)
     cli.check_range("--fps", args.fps, low=0, open_low=True)
+    return check_batch(args)
+
+
+def check_batch(args) -> Scenario:
+    """The batch's options, checked even for a still alone (a bad --world is refused, not ignored)."""
     batch = cli.check_batch(args)
+    if args.video is None:
+        return batch
     cli.check_indices("--instance", [args.instance], len(batch.gravity))
     cli.check_rates("--fps", video_sensors(args), batch, args.duration)
     return batch
@@ -148,18 +155,20 @@ def main(argv=None) -> int:
         _check_size(**size)
         if args.still is not None:
             cli.check_writable("--still", args.still)
-        batch = check_video(args) if args.video is not None else None
-        physics = batch.physics if batch is not None else cli.check_physics(args)
+        batch = check_video(args) if args.video is not None else check_batch(args)
+        physics = batch.physics
         runtime.configure()
         m = scene_model(physics)
         if args.still is not None:
             import imageio.v2 as imageio
 
-            imageio.imwrite(args.still, still(m, robot.stance_qpos(physics.mj_model), **size))
+            with files.partial(args.still):  # a stopped run leaves no half-written image
+                imageio.imwrite(args.still, still(m, robot.stance_qpos(physics.mj_model), **size))
             print(f"wrote {args.still}")
         if args.video is not None:
             qpos = simulate_qpos(args, batch)
-            write_video(args.video, frames(m, qpos, **size), args.fps)
+            with files.partial(args.video):
+                write_video(args.video, frames(m, qpos, **size), args.fps)
             print(f"wrote {args.video}: {len(qpos)} frames at {args.fps:g} fps")
     except ValueError as err:
         return cli.fail(err)
@@ -167,4 +176,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(command.run(main))

@@ -16,7 +16,8 @@ import sys
 
 import numpy as np
 
-from hopper_mjx import cli, runtime
+from hopper_mjx import cli, command, runtime
+from hopper_mjx.files import atomic_write
 from hopper_mjx.scenario import Scenario
 
 
@@ -116,12 +117,12 @@ def main(argv=None) -> int:
             saved = run(args, batch) if stream is None else run_live(args, batch, stream)
     except ValueError as err:  # includes URDFError and a busy --foxglove port
         return cli.fail(err)
-    with open(args.out, "wb") as f:  # a file object, so numpy writes the exact name given (no ".npz" added)
-        np.savez_compressed(f, **saved)
+    # A file object, so numpy writes the exact name given (no ".npz" added); whole or not at all.
+    atomic_write(args.out, lambda f: np.savez_compressed(f, **saved))
     cli.warn_diverged(saved["diverged"])
     print(f"wrote {args.out}: {saved['qpos'].shape[0]} instances x {saved['time'].size} samples")
     return 0
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(command.run(main))

@@ -35,7 +35,7 @@ from contextlib import contextmanager
 import mujoco
 import numpy as np
 
-from hopper_mjx import cli, runtime
+from hopper_mjx import cli, command, runtime
 from hopper_mjx.live import CHUNK_TIME, HEIGHT_STEP, SHOWN, SPEED_STEP, LiveBatch, LiveRun, spread
 
 SPACING = 1.5  # m between neighbouring robots on the display grid
@@ -372,4 +372,4 @@ def watch(args, physics, batch, shown: list[int], stream) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(command.run(main))

@@ -24,7 +24,8 @@ from hopper_mjx.model import loader, world
 
 LOW_GRAVITY = str(world.LOW_GRAVITY_WORLD)
 # The commands run from another folder: this checkout's package first, whatever is installed.
-ENV = {**os.environ, "PYTHONPATH": os.pathsep.join([str(Path(__file__).resolve().parents[1]),
+ROOT = Path(__file__).resolve().parents[1]
+ENV = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT),
                                                     os.environ.get("PYTHONPATH", "")])}
 MAX_CPU = 5.0  # s of the refusing process's CPU time
 TIMEOUT = 60.0  # s of wall time before a case's process counts as hung
@@ -117,8 +118,9 @@ def prepare(folder: Path) -> None:
     (folder / "lone" / "x.mcap").write_bytes(b"\x89MCAP0\r\n")
 
 
-def listing(folder: Path) -> dict[str, int]:
-    return {str(p.relative_to(folder)): p.stat().st_size for p in sorted(folder.rglob("*"))}
+def listing(folder: Path) -> dict[str, tuple[int, int]]:
+    """Each path's size and modification time: a file rewritten, even with the same bytes, differs."""
+    return {str(p.relative_to(folder)): (p.stat().st_size, p.stat().st_mtime_ns) for p in sorted(folder.rglob("*"))}
 
 
 class Refusal(NamedTuple):
@@ -129,27 +131,31 @@ class Refusal(NamedTuple):
     unchanged: bool  # its folder holds what it held before
 
 
-def _start(base: Path, k: int):
-    command, args, _ = CASES[k]
+def _start(base: Path, k: int, case, prepare_folder):
+    command, args = case[0], case[1]
     folder = base / f"case{k}"
     folder.mkdir()
-    prepare(folder)
+    prepare_folder(folder)
     before = listing(folder)  # before the process starts, so that nothing it writes is counted as there
     with open(base / f"{k}.out", "w") as out, open(base / f"{k}.err", "w") as err:  # the child keeps its copies
-        proc = subprocess.Popen([sys.executable, "-m", f"hopper_mjx.{command}", *args], cwd=folder, env=ENV,
+        proc = subprocess.Popen([sys.executable, *command_line(command), *args], cwd=folder, env=ENV,
                                 stdout=out, stderr=err)
     return proc, folder, before, time.monotonic()
 
 
-@pytest.fixture(scope="module")
-def refusals(tmp_path_factory) -> dict[int, Refusal]:
-    """Every case's process, run a few at a time (each is one CPU-bound Python start-up); `os.wait4`
-    gives each its own CPU time."""
-    base, todo, running, done = tmp_path_factory.mktemp("refusals"), list(range(len(CASES))), [], {}
+def command_line(command: str) -> list[str]:
+    """A package command by its module's name (`sweep`), or a script's path (experiments/train.py)."""
+    return [str(ROOT / command)] if command.endswith(".py") else ["-m", f"hopper_mjx.{command}"]
+
+
+def refuse_all(base: Path, cases, prepare_folder=prepare) -> dict[int, Refusal]:
+    """Every case's process, each in its own fresh folder made by `prepare_folder`, run a few at a time
+    (each is one CPU-bound Python start-up); `os.wait4` gives each its own CPU time."""
+    todo, running, done = list(range(len(cases))), [], {}
     while todo or running:
         while todo and len(running) < WORKERS:
             k = todo.pop(0)
-            running.append((k, *_start(base, k)))
+            running.append((k, *_start(base, k, cases[k], prepare_folder)))
         for entry in list(running):
             k, proc, folder, before, started = entry
             pid, status, usage = os.wait4(proc.pid, os.WNOHANG)
@@ -166,9 +172,8 @@ def refusals(tmp_path_factory) -> dict[int, Refusal]:
     return done
 
 
-@pytest.mark.parametrize("k", range(len(CASES)), ids=[f"{c}:{' '.join(a)[:40]}" for c, a, _ in CASES])
-def test_refused_in_one_line_before_anything_is_built(refusals, k):
-    message, done = CASES[k][2], refusals[k]
+def assert_refused(done: Refusal, message: str) -> None:
+    """Exit code 2, one line `error: ...` holding `message`, nothing on stdout, nothing written, no compile."""
     lines = done.stderr.splitlines()
     assert done.returncode == 2, done.stderr[-2000:]
     assert len(lines) == 1 and lines[0].startswith("error: ") and message in lines[0], done.stderr[-2000:]
@@ -177,6 +182,16 @@ def test_refused_in_one_line_before_anything_is_built(refusals, k):
     assert done.cpu < MAX_CPU, f"refused after {done.cpu:.1f} s of CPU time"
     if "would need about" in message:  # a size refusal says what this machine has
         assert " of memory (" in lines[0] and lines[0].endswith(" available"), lines[0]
+
+
+@pytest.fixture(scope="module")
+def refusals(tmp_path_factory) -> dict[int, Refusal]:
+    return refuse_all(tmp_path_factory.mktemp("refusals"), CASES)
+
+
+@pytest.mark.parametrize("k", range(len(CASES)), ids=[f"{c}:{' '.join(a)[:40]}" for c, a, _ in CASES])
+def test_refused_in_one_line_before_anything_is_built(refusals, k):
+    assert_refused(refusals[k], CASES[k][2])
 
 
 def test_the_seeds_gains_folder_is_taken_as_is(tmp_path):

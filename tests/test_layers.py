@@ -13,7 +13,9 @@ PACKAGE = "hopper_mjx"
 # controllers -> metrics -> the batched core -> environments -> command-line support -> live runs
 # and ROS I/O -> tools.
 LAYERS = (
-    ("startup", "registry", "files", "budget"),  # what precedes importing MuJoCo; the names; file writes; sizes
+    ("registry", "files", "budget"),  # the names; file writes; sizes
+    ("command",),  # what a command's process sets up: interrupts, stderr
+    ("startup",),  # what precedes importing MuJoCo
     ("checks", "runtime"),  # checks: the command line's value, path and name checks
     ("model",),
     ("engine",),

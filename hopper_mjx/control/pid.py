@@ -23,6 +23,7 @@ import jax.numpy as jnp
 import numpy as np
 import yaml
 
+from hopper_mjx.checks import load_yaml
 from hopper_mjx.control.base import Controller, clip_to_limits, joint_state, pd
 from hopper_mjx.model.layout import Layout
 from hopper_mjx.model.loader import JOINTS, read_text
@@ -66,7 +67,7 @@ def load_gains(path: str | Path | None = None) -> dict[str, dict[str, float]]:
     """
     path = gains_file(path) if path is not None else DEFAULT_GAINS
     try:
-        doc = yaml.safe_load(read_text(path, "PID gains file", max_bytes=GAINS_BYTES))
+        doc = load_yaml(read_text(path, "PID gains file", max_bytes=GAINS_BYTES))
     except yaml.YAMLError as err:
         first_line = str(err).splitlines()[0] if str(err) else type(err).__name__
         raise ValueError(f"{path} is not valid YAML: {first_line}") from None

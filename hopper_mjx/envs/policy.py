@@ -15,6 +15,7 @@ training's 2 ms and capped solve; the policy rate stays the same.
 from __future__ import annotations
 
 import json
+import logging
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -97,7 +98,8 @@ def read(path) -> tuple[Path, str, dict, monoped.MonopedConfig]:
     path = resolve(path)
     try:
         config = monoped.MonopedConfig.from_dict(_json_object(path / ENV_CONFIG))
-    except (TypeError, ValueError) as err:
+        expected = monoped.observation_size(tasks.task_class(config.task).command_size, config.observe_gravity)
+    except (TypeError, ValueError) as err:  # an unknown task or field, a value of the wrong type
         raise ValueError(f"{path / ENV_CONFIG}: {err}" if str(path) not in str(err) else str(err)) from None
     algo = algorithm_of(path)
     net_file = path / NETWORK_CONFIGS[algo]
@@ -108,7 +110,6 @@ def read(path) -> tuple[Path, str, dict, monoped.MonopedConfig]:
                 if not isinstance(kwargs, dict) or k not in kwargs]
     if missing:
         raise ValueError(f"{net_file} lacks {', '.join(missing)}")
-    expected = monoped.observation_size(tasks.task_class(config.task).command_size, config.observe_gravity)
     if net["observation_size"] != expected:
         raise ValueError(f"{path}: the policy takes {net['observation_size']} observations but task "
                          f"{config.task!r} (observe_gravity={config.observe_gravity}) gives {expected}")
@@ -137,10 +138,15 @@ def load(path):
     """(deterministic policy fn obs -> action, MonopedConfig) of a saved PPO or SAC policy, checked: the
     saved parameters must be readable and fit the network its config describes (traced, not compiled)."""
     path, algo, net, config = read(path)
+    absl = logging.getLogger("absl")  # orbax logs its findings in a damaged folder before it fails
+    level = absl.level
+    absl.setLevel(logging.ERROR)
     try:
         params = brax_checkpoint.load(path)
     except Exception as err:  # orbax's many ways of failing on a damaged checkpoint
         raise ValueError(f"{path}: its parameters cannot be read ({type(err).__name__}; a copy cut short?)") from None
+    finally:
+        absl.setLevel(level)
     try:
         inference = _network(algo, net)(params[:2], deterministic=True)
         policy = lambda obs: inference(obs, jax.random.PRNGKey(0))[0]  # noqa: E731

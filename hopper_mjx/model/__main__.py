@@ -6,7 +6,7 @@ with colours and resolvable mesh paths, for a viewer such as Foxglove's 3D panel
 
 import sys
 
-from hopper_mjx import checks
+from hopper_mjx import checks, command
 from hopper_mjx.model.checks import check_urdf
 
 
@@ -56,4 +56,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(command.run(main))

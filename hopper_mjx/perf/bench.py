@@ -41,7 +41,7 @@ from pathlib import Path
 
 import numpy as np
 
-from hopper_mjx import budget, cli, registry, runtime
+from hopper_mjx import budget, cli, command, registry, runtime
 from hopper_mjx.scenario import Physics
 
 DISTINCT_GRAVITIES = 64  # distinct values, tiled over the batch: one native MjModel each
@@ -426,4 +426,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(command.run(main))

@@ -29,7 +29,7 @@ import time
 import mujoco
 import numpy as np
 
-from hopper_mjx import cli, runtime
+from hopper_mjx import cli, command, runtime
 from hopper_mjx.scenario import Physics
 
 REPEATS = 5  # timed rollouts per variant; the best counts (noise only adds time)
@@ -184,4 +184,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(command.run(main))

@@ -19,7 +19,7 @@ from typing import Iterator
 import numpy as np
 import yaml
 
-from hopper_mjx import cli
+from hopper_mjx import cli, command
 
 TIME_TYPES = ("builtin_interfaces/msg/Time", "builtin_interfaces/msg/Duration")
 ROS2_METADATA = "metadata.yaml"  # what makes a folder a rosbag2 bag
@@ -147,4 +147,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(command.run(main))

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from hopper_mjx import cli
+from hopper_mjx import cli, command
 from hopper_mjx.ros import echo, messages
 
 AXES = ("x", "y", "z")
@@ -133,4 +133,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(command.run(main))

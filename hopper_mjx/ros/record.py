@@ -27,7 +27,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from hopper_mjx import cli, runtime
+from hopper_mjx import cli, command, files, runtime
 from hopper_mjx.ros import msgdefs
 from hopper_mjx.ros.messages import messages, typestore
 from hopper_mjx.scenario import Scenario
@@ -142,7 +142,7 @@ def write(rec: Recording, out: str | Path, fmt: str, instances: list[int] | None
         serialize = store.serialize_cdr
     # Bags are time-ordered files; the streams are generated topic by topic, so sort first.
     msgs = sorted(messages(rec, instances, store, ros1), key=lambda m: m[2])
-    with writer:
+    with files.partial(out), writer:  # a stopped run leaves no half-written bag
         connections = {}
         for topic, msgtype, t, msg in msgs:
             if topic not in connections:
@@ -189,4 +189,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(command.run(main))

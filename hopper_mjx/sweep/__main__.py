@@ -17,7 +17,7 @@ import time
 from datetime import datetime, timezone
 from pathlib import Path
 
-from hopper_mjx import budget, cli, registry, runtime
+from hopper_mjx import budget, cli, command, registry, runtime
 from hopper_mjx.checks import DEFAULT_TIMESTEP
 from hopper_mjx.sweep import folder
 from hopper_mjx.sweep.grid import DEFAULT_GRAVITY, KICK
@@ -150,16 +150,12 @@ def label(controller: str) -> str:
 
 def run_one(args, spec, folder: Path):
     """Runs one controller's sweep into `folder` and prints its report: (label, group summary), or None
-    on a process other than 0; raises KeyboardInterrupt."""
+    on a process other than 0."""
     from hopper_mjx.sweep import report, runner
 
     start = time.perf_counter()
-    try:
-        instances, table, facts = runner.run(spec, folder, progress=not args.no_progress)
-    except KeyboardInterrupt:
-        print(f"\ninterrupted: finished chunks are saved in {folder}; rerun the same command to resume",
-              file=sys.stderr)
-        raise
+    command.on_stop(f"finished chunks are saved in {folder}; rerun the same command to resume")
+    instances, table, facts = runner.run(spec, folder, progress=not args.no_progress)
     facts["total_wall_s"] = time.perf_counter() - start
     if facts["processes"] > 1 and args.process_id != 0:
         return None
@@ -185,10 +181,7 @@ def main(argv=None) -> int:
         jax.distributed.initialize(args.coordinator, num_processes=args.num_processes, process_id=args.process_id)
     results = []
     for spec in specs:
-        try:
-            result = run_one(args, spec, folder_of(args, out, spec))
-        except KeyboardInterrupt:
-            return 130
+        result = run_one(args, spec, folder_of(args, out, spec))
         results += [result] if result else []
     if args.kind == "compare" and results:
         print(report.write_comparison(out, specs[0], results))
@@ -196,4 +189,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(command.run(main))

@@ -38,9 +38,12 @@ def check(out: Path, spec: SweepSpec) -> None:
     except (json.JSONDecodeError, UnicodeDecodeError):
         raise ManifestMismatch(f"--out {out}: its {MANIFEST} is damaged (cut short?); the chunks in it cannot "
                                "be trusted: use another --out") from None
+    if not isinstance(saved, dict):
+        raise ManifestMismatch(f"--out {out}: its {MANIFEST} is not a sweep's (a JSON {type(saved).__name__}, "
+                               "not an object): use another --out")
     wanted = json.loads(json.dumps(spec.to_json()))  # tuples -> lists, as saved
     if saved != wanted:
-        diff = {k: (saved.get(k), v) for k, v in wanted.items() if not isinstance(saved, dict) or saved.get(k) != v}
+        diff = {k: (saved.get(k), v) for k, v in wanted.items() if saved.get(k) != v}
         changes = ", ".join(f"{k}: {a!r} -> {b!r}" for k, (a, b) in diff.items())
         raise ManifestMismatch(f"{out} holds a different sweep (differs in {changes}); "
                                "use another --out, or the same arguments to resume")

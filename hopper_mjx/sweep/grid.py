@@ -77,6 +77,8 @@ class SweepSpec:
                 raise ValueError(f"unknown gain {self.param!r}; choose from {', '.join(GAINS)}")
             if not self.values or not all(math.isfinite(v) for v in self.values):
                 raise ValueError("--values must be one or more finite numbers")
+            if len(set(self.values)) != len(self.values):  # as gravity: a grid point twice is counted twice
+                raise ValueError(f"--values must differ, got {list(self.values)}")
 
     def to_json(self) -> dict:
         return dataclasses.asdict(self)

@@ -1,0 +1,158 @@
+"""What every command of the package sets up around its work: `run(main)` in each `__main__`.
+
+- **Ctrl-C and SIGTERM stop the run within a second, at any moment**, with one line on
+  stderr and exit code 130 (SIGINT) or 143 (SIGTERM). Python runs signal handlers only in
+  the main thread, between bytecodes: during an XLA compile or a compiled loop the main
+  thread is in C++ for tens of seconds, and a KeyboardInterrupt raised inside JAX's
+  garbage-collection callback is printed and dropped (the run then went on to the end).
+  So no exception is raised: the C-level handler writes the signal's number to a pipe
+  (`signal.set_wakeup_fd`), a thread waiting on that pipe wakes at once, removes the
+  outputs still being written (`files.partial`), prints the line and ends the process
+  with `os._exit`. Results are written whole or not at all (`files.atomic_write`), so
+  ending at any moment keeps the finished work: a sweep's chunks, training's checkpoints
+  and metrics. A tool says what it keeps with `on_stop`.
+  `python -m hopper_mjx.<command>` and the experiments' scripts arm this when the package
+  is first imported (`arm_if_command`, from `startup`), so an interrupt during the imports
+  is one line too; importing the package from Python changes no signal handler.
+- **No false alarms on stderr.** XLA:CPU records LLVM's tuning preferences (+prefer-no-gather,
+  +prefer-no-scatter) among the CPU features an executable was compiled for, and checks them
+  against the host's ISA features at every load from the persistent cache: the check can
+  never pass, even on the CPU that compiled it, and logs an error-level line warning of
+  "SIGILL" per feature (openxla/xla#44565). PjRt also warns at every load that it "assumes
+  version compatibility". `run` passes the process's stderr (file descriptor 2, where XLA's
+  C++ logs) through a thread that drops exactly those lines; every other line, a real
+  missing ISA feature included, goes through. TF_CPP_MIN_LOG_LEVEL=0 turns the filter off.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import signal
+import sys
+import threading
+from pathlib import Path
+
+from hopper_mjx import files
+
+STOP_CODES = {signal.SIGINT: 130, signal.SIGTERM: 143}  # 128 + the signal's number, as a shell reports it
+PACKAGE_ROOT = Path(__file__).resolve().parents[1]
+# An XLA log line that is not an alarm: a tuning preference taken for a missing CPU feature, and PjRt's note.
+FALSE_ALARMS = re.compile(r"cpu_aot_loader\.cc.*Target machine feature \+(prefer|tuning|fast|slow|false-deps)-"
+                          r"|pjrt_executable\.cc.*Assume version compatibility")
+
+_said = ["stopped before its results were written"]  # what the line says was kept
+_stopping = threading.Lock()
+_armed = threading.Event()
+_stderr: list = []  # (the real stderr's descriptor, the forwarding thread) while the filter runs
+
+
+def on_stop(kept: str) -> None:
+    """What an interrupt's line says was kept, from now on (e.g. where the finished chunks are)."""
+    _said[0] = kept
+
+
+def stop(signum: int) -> None:
+    """Ends the process for `signum`: removes partial outputs, says so in one line, exits 128 + signum."""
+    if not _stopping.acquire(blocking=False):
+        return  # a second signal while the first is handled
+    files.remove_partial()
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except (OSError, ValueError):
+            pass
+    _end_filter()
+    name = signal.Signals(signum).name
+    os.write(2, f"interrupted ({name}): {_said[0]}\n".encode())
+    os._exit(STOP_CODES.get(signum, 128 + signum))
+
+
+def _watch(fd: int) -> None:
+    while True:
+        try:
+            got = os.read(fd, 1)
+        except InterruptedError:
+            continue
+        if got and got[0] in STOP_CODES:
+            stop(got[0])
+
+
+def arm() -> None:
+    """SIGINT and SIGTERM end the process via `stop`, from any moment on; call from the main thread."""
+    if _armed.is_set():
+        return
+    read, write = os.pipe()
+    os.set_blocking(write, False)  # the C-level handler must never block
+    signal.set_wakeup_fd(write, warn_on_full_buffer=False)
+    for signum in STOP_CODES:
+        signal.signal(signum, lambda *_: None)  # the watcher acts; no KeyboardInterrupt in the main thread
+    threading.Thread(target=_watch, args=(read,), name="stop-on-signal", daemon=True).start()
+    _armed.set()
+
+
+def is_command() -> bool:
+    """This process runs one of the package's commands: `python -m hopper_mjx...` or a script of experiments/."""
+    argv = getattr(sys, "orig_argv", [])
+    if "-m" in argv[:-1]:
+        return argv[argv.index("-m") + 1].split(".")[0] == "hopper_mjx"
+    script = Path(sys.argv[0]).resolve() if sys.argv and sys.argv[0] else None
+    return script is not None and script.parent == PACKAGE_ROOT / "experiments"
+
+
+def arm_if_command() -> None:
+    if is_command() and threading.current_thread() is threading.main_thread():
+        arm()
+
+
+def _forward(read: int, real: int) -> None:
+    """Copies lines from `read` to `real`, but the false alarms."""
+    pending = b""
+    while True:
+        chunk = os.read(read, 65536)
+        if not chunk:
+            break
+        lines = (pending + chunk).split(b"\n")
+        pending = lines.pop()
+        kept = [line for line in lines if not FALSE_ALARMS.search(line.decode(errors="replace"))]
+        if kept:
+            os.write(real, b"\n".join(kept) + b"\n")
+    if pending:
+        os.write(real, pending)
+    os.close(read)
+
+
+def filter_stderr() -> None:
+    """Passes file descriptor 2 through `_forward` until `_end_filter` (both idempotent)."""
+    if _stderr or os.environ.get("TF_CPP_MIN_LOG_LEVEL") == "0":
+        return
+    sys.stderr.flush()
+    real = os.dup(2)
+    read, write = os.pipe()
+    os.dup2(write, 2)
+    os.close(write)
+    thread = threading.Thread(target=_forward, args=(read, real), name="stderr-filter", daemon=True)
+    thread.start()
+    _stderr.extend([real, thread])
+
+
+def _end_filter() -> None:
+    """Puts the real stderr back on descriptor 2 and lets the filter pass on what it holds."""
+    if not _stderr:
+        return
+    real, thread = _stderr
+    os.dup2(real, 2)  # closes the pipe's last writer: the thread reads to its end and stops
+    thread.join(timeout=0.3)
+    _stderr.clear()
+
+
+def run(main) -> int:
+    """`main()`'s exit code, with interrupts armed and stderr filtered: `sys.exit(command.run(main))`."""
+    arm()
+    filter_stderr()
+    try:
+        return main()
+    finally:
+        for stream in (sys.stdout, sys.stderr):
+            stream.flush()
+        _end_filter()

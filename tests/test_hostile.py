@@ -1,0 +1,197 @@
+"""Hostile input, one case per kind of trouble a user or a damaged disk brings: input files whose values
+are wrong, sizes that cannot run, run folders that are not what they seem, a policy folder copied, edited
+or cut short. Each is refused as test_bad_inputs holds a refusal (whose helpers run the cases): exit code
+2, one line naming the file, tag or flag at fault, no traceback, nothing written or overwritten, under 5 s
+of CPU (before anything is compiled). Interrupts are tests/test_interrupt.py's.
+"""
+
+import json
+import shutil
+from pathlib import Path
+
+import pytest
+from test_bad_inputs import assert_refused, prepare, refuse_all
+from test_policy import trained  # noqa: F401  (a fixture: an untrained policy folder, laid out as training saves one)
+
+from hopper_mjx.model import loader
+
+URDF = Path(loader.__file__).with_name("monoped.urdf").read_text()
+WORLD = Path(loader.__file__).with_name("low_gravity.world").read_text().replace("<gravity>0 0 0<",
+                                                                               "<gravity>0 0 -9.81<")
+PID = """{name}_position_controller:
+  type: effort_controllers/JointPositionController
+  joint: {name}
+  pid: {{p: 100.0, i: 0.01, d: 10.0}}
+"""
+GAINS = "".join(PID.format(name=j) for j in ("haa_joint", "hfe_joint", "kfe_joint"))
+
+
+def urdf(old: str, new: str, count: int = 1) -> str:
+    assert old in URDF
+    return URDF.replace(old, new, count)
+
+
+def world(old: str, new: str) -> str:
+    assert old in WORLD
+    return WORLD.replace(old, new)
+
+
+# Files a case's folder holds besides test_bad_inputs' (name: text).
+FILES = {
+    # URDF values
+    "reduction_neg.urdf": urdf("<mechanicalReduction>1<", "<mechanicalReduction>-2<"),
+    "reduction_inf.urdf": urdf("<mechanicalReduction>1<", "<mechanicalReduction>inf<"),
+    "reduction_text.urdf": urdf("<mechanicalReduction>1<", "<mechanicalReduction>one<"),
+    "limit_nan.urdf": urdf('lower="-1.6"', 'lower="nan"'),
+    "limit_equal.urdf": urdf('lower="-1.6" upper="1.6"', 'lower="0.5" upper="0.5"'),
+    "rpy_inf.urdf": urdf('<origin xyz="0 0 -0.15" rpy="0 0 0"/>', '<origin xyz="0 0 -0.15" rpy="0 inf 0"/>'),
+    "foot_zero.urdf": urdf('<sphere radius="0.03"/>', '<sphere radius="0"/>', 2),
+    "mass_neg.urdf": urdf('<mass value="0.1"/>', '<mass value="-0.1"/>'),
+    "effort_nan.urdf": urdf('effort="40"', 'effort="nan"'),
+    # gains YAML
+    "list.yaml": "- 1\n- 2\n",
+    "float_key.yaml": GAINS + "1.5: {type: effort_controllers/JointPositionController, joint: kfe_joint}\n",
+    "p_inf.yaml": GAINS.replace("p: 100.0", "p: .inf", 1),
+    "i_text.yaml": GAINS.replace("i: 0.01", "i: lots", 1),
+    "same_key.yaml": GAINS + PID.format(name="kfe_joint"),  # a controller's entry given twice
+    "tabs.yaml": "monoped:\n\tkfe: 1\n",
+    # world files
+    "step_zero.world": world("<max_step_size>0.001<", "<max_step_size>0<"),
+    "step_nan.world": world("<max_step_size>0.001<", "<max_step_size>nan<"),
+    "gravity_inf.world": world("<gravity>0 0 -9.81<", "<gravity>0 0 -inf<"),
+    "gravity_two.world": world("<gravity>0 0 -9.81<", "<gravity>0 -9.81<"),
+    "nested.world": "<sdf>" * 2000 + "</sdf>" * 2000,
+}
+
+
+def _env(folder: Path, text: str) -> None:
+    (folder / "hopper_env.json").write_text(text)
+
+
+def _task(folder: Path, task: str) -> None:
+    config = json.loads((folder / "hopper_env.json").read_text())
+    _env(folder, json.dumps({**config, "task": task}))
+
+
+def _observations(folder: Path, size: int) -> None:
+    net = json.loads((folder / "ppo_network_config.json").read_text())
+    (folder / "ppo_network_config.json").write_text(json.dumps({**net, "observation_size": size}))
+
+
+def _no_params(folder: Path) -> None:
+    for path in folder.iterdir():
+        if path.suffix != ".json":
+            shutil.rmtree(path) if path.is_dir() else path.unlink()
+
+
+# Policy folders a user copied and then edited or cut short: name -> damage.
+POLICIES = {
+    "pol_empty_env": lambda f: _env(f, ""),
+    "pol_binary_env": lambda f: (f / "hopper_env.json").write_bytes(b"\xff\xfe\x00{"),
+    "pol_task": lambda f: _task(f, "fly"),
+    "pol_net_list": lambda f: (f / "ppo_network_config.json").write_text("[]"),
+    "pol_obs": lambda f: _observations(f, 7),
+    "pol_no_params": _no_params,
+}
+POLICY = []  # the intact policy folder, once the fixture made it
+
+
+def prepare_hostile(folder: Path) -> None:
+    prepare(folder)
+    for name, damage in POLICIES.items():
+        shutil.copytree(POLICY[0], folder / name)
+        damage(folder / name)
+    for name, text in FILES.items():
+        (folder / name).write_text(text)
+    (folder / "unrelated").mkdir()  # a folder of the user's, holding a results.csv of theirs
+    (folder / "unrelated" / "results.csv").write_text("mine\n")
+    (folder / "notes").mkdir()
+    (folder / "notes" / "todo.txt").write_text("mine\n")
+    cut = folder / "cut_sweep"  # a sweep's folder after a power cut: its manifest cut short
+    cut.mkdir()
+    (cut / "manifest.json").write_text('{"kind": "gravity", "grav')
+    listed = folder / "list_sweep"  # a manifest that is JSON but not a sweep's
+    listed.mkdir()
+    (listed / "manifest.json").write_text("[1, 2, 3]")
+    run = folder / "run"  # a training run whose metrics.json was cut short
+    (run / "checkpoints").mkdir(parents=True)
+    (run / "metrics.json").write_text('{"history": [{"step": 1')
+
+
+SIM = ["--out", "o.npz"]
+SWEEP = ["gravity", "--out", "s"]
+TRAIN = "experiments/train.py"
+
+# (command, arguments, what the one line must say)
+CASES = [
+    # URDF values
+    ("simulate", ["--urdf", "reduction_neg.urdf", *SIM], "<mechanicalReduction> must be a finite number > 0, got -2"),
+    ("simulate", ["--urdf", "reduction_inf.urdf", *SIM], "<mechanicalReduction> must be a finite number > 0, got inf"),
+    ("sweep", [*SWEEP, "--urdf", "reduction_text.urdf"], "<mechanicalReduction>"),
+    ("simulate", ["--urdf", "limit_nan.urdf", *SIM], "joint 'haa_joint' <limit>"),
+    ("render", ["--still", "m.png", "--urdf", "limit_equal.urdf"], "joint 'haa_joint' <limit>"),
+    ("simulate", ["--urdf", "rpy_inf.urdf", *SIM], "<origin rpy> must be three finite numbers"),
+    ("ros.record", ["--urdf", "foot_zero.urdf", "--out", "r.bag"], "the foot's radius must be > 0, got 0"),
+    ("simulate", ["--urdf", "mass_neg.urdf", *SIM], "link 'foot' has mass -0.1"),
+    ("simulate", ["--urdf", "effort_nan.urdf", *SIM], "'effort' is not finite"),
+    ("model", ["--export", "m.xml", "--urdf", "reduction_neg.urdf"], "<mechanicalReduction>"),
+    # gains YAML
+    ("simulate", ["--controller", "pid", "--gains", "list.yaml", *SIM], "list.yaml: expected a mapping"),
+    ("simulate", ["--controller", "pid", "--gains", "float_key.yaml", *SIM], "float_key.yaml"),
+    ("simulate", ["--controller", "pid", "--gains", "p_inf.yaml", *SIM], "pid.p must be finite and >= 0, got inf"),
+    ("simulate", ["--controller", "pid", "--gains", "i_text.yaml", *SIM], "pid.i must be a number, got 'lots'"),
+    ("simulate", ["--controller", "pid", "--gains", "same_key.yaml", *SIM],
+     "same_key.yaml is not valid YAML: the key 'kfe_joint_position_controller' is given twice (lines 9 and 13)"),
+    ("simulate", ["--controller", "pid", "--gains", "tabs.yaml", *SIM], "tabs.yaml is not valid YAML"),
+    ("simulate", ["--controller", "pid", "--gains", "/dev/urandom", *SIM], "/dev/urandom"),
+    # world files
+    ("simulate", ["--world", "step_zero.world", *SIM], "step_zero.world: <physics><max_step_size>"),
+    ("simulate", ["--world", "step_nan.world", *SIM], "step_nan.world: <physics><max_step_size>"),
+    ("sweep", [*SWEEP, "--world", "gravity_inf.world"], "gravity_inf.world"),
+    ("render", ["--still", "m.png", "--world", "gravity_two.world"], "gravity_two.world"),
+    ("simulate", ["--world", "nested.world", *SIM], "nested.world"),
+    ("simulate", ["--world", "/dev/zero", *SIM], "/dev/zero"),
+    # sizes that cannot run: what the run would need, and what this machine has
+    ("render", ["--video", "h.gif", "--gravity", "9.81", "--num", "400000000"], "would need about"),
+    ("ros.record", ["--duration", "1e12", "--out", "r.bag"], "physics steps"),
+    ("sweep", ["gains", "--param", "speed_gain", "--values", ",".join(map(str, range(1, 2001))), "--num", "100000",
+               "--out", "s"], "would need about"),
+    ("sweep", [*SWEEP, "--num", "1", "--chunk", "100000000", "--duration", "1e6"], "would need about"),
+    ("perf.bench", ["--num", "30000000", "--engine", "mjx"], "would need about"),
+    ("simulate", ["--num", "1", "--duration", "3e6", *SIM], "physics steps"),
+    ("sweep", [*SWEEP, "--seed", str(2**32)], "--seed must be in 0..4294967295"),
+    # run folders that are not what they seem
+    ("sweep", ["gravity", "--out", "unrelated"], "--out unrelated exists and is not a sweep's folder"),
+    ("sweep", ["gravity", "--out", "notes"], "--out notes exists and is not a sweep's folder"),
+    ("sweep", ["compare", "--controllers", "raibert", "--out", "notes"], "--out notes exists and is not"),
+    ("sweep", ["gravity", "--out", "cut_sweep"], "--out cut_sweep: its manifest.json is damaged"),
+    ("sweep", ["gravity", "--out", "list_sweep"], "--out list_sweep: its manifest.json is not a sweep's"),
+    ("sweep", ["gravity", "--values", "1.62,3.71,1.62", "--out", "s"], "gravity values must differ"),
+    ("sweep", ["gains", "--param", "speed_gain", "--values", "0.1,0.1", "--out", "s"], "--values must differ"),
+    (TRAIN, ["--out", "run", "--timesteps", "1000"], "run/metrics.json is damaged"),
+    (TRAIN, ["--out", "new", "--gravity-range", "nan,9.81"], "--gravity-range"),
+    (TRAIN, ["--out", "new", "--episode-length", "-5"], "--episode-length"),
+    (TRAIN, ["--out", "new", "--num-envs", "0"], "--num-envs"),
+    (TRAIN, ["--out", "new", "--eval-gravity", "9.81,,x"], "--eval-gravity"),
+    (TRAIN, ["--out", "a_file"], "--out a_file"),
+    (TRAIN, ["--out", "new", "--seed", "-3"], "--seed must be in 0..4294967295"),
+    # policy folders copied, edited or cut short
+    ("simulate", ["--controller", "policy:pol_empty_env", *SIM], "hopper_env.json is not valid JSON"),
+    ("simulate", ["--controller", "policy:pol_binary_env", *SIM], "hopper_env.json is not valid JSON"),
+    ("sweep", ["gravity", "--controller", "policy:pol_task", "--out", "s"], "hopper_env.json: unknown task 'fly'"),
+    ("simulate", ["--controller", "policy:pol_net_list", *SIM], "ppo_network_config.json must hold a JSON object"),
+    ("ros.record", ["--controller", "policy:pol_obs", "--out", "r.bag"], "the policy takes 7 observations"),
+    ("simulate", ["--controller", "policy:pol_no_params", *SIM], "its parameters cannot be read"),
+    ("render", ["--video", "h.gif", "--controller", "policy:a_file"], "is not a trained policy"),
+]
+
+
+@pytest.fixture(scope="module")
+def refusals(tmp_path_factory, trained):  # noqa: F811
+    POLICY[:] = [trained[0] / "policy"]
+    return refuse_all(tmp_path_factory.mktemp("hostile"), CASES, prepare_hostile)
+
+
+@pytest.mark.parametrize("k", range(len(CASES)), ids=[f"{c}:{' '.join(a)[:40]}" for c, a, _ in CASES])
+def test_hostile_input_is_refused_in_one_line(refusals, k):
+    assert_refused(refusals[k], CASES[k][2])

@@ -1,0 +1,152 @@
+"""Ctrl-C (SIGINT) and SIGTERM, sent as a user's terminal sends them, to simulate, sweep, training and
+ros.record: during the imports (0.5 s), during start-up and compilation (3 s) and mid-run. Each stops
+within a second of the signal, with exactly one line on stderr and exit code 130 (143 for SIGTERM), no
+traceback and no half-written output; finished work is kept: a rerun of the sweep resumes and gives the
+same bytes as an uninterrupted sweep, and a rerun of training resumes from its last checkpoint.
+
+The cases run a few at a time, from the shared persistent compile cache, with small batches.
+"""
+
+import filecmp
+import signal
+import subprocess
+import sys
+import time
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+from typing import NamedTuple
+
+import pytest
+from test_bad_inputs import ENV, command_line, listing
+
+MAX_LATENCY = 1.0  # s from the signal to the process's exit
+TIMEOUT = 240.0  # s a case may take to reach its moment, or a run to finish
+WORKERS = 6
+MID_RUN = 20.0  # s: past start-up and compilation from a warm cache, well before the run's end
+
+SWEEP = ["sweep", "gravity", "--values", "9.81,1.62", "--num", "4", "--chunk", "2", "--duration", "2",
+         "--no-progress", "--out", "s"]
+# Training: the tiny PPO of test_train, ten updates with a checkpoint after each.
+TRAIN = ["experiments/train.py", "--task", "hop", "--algo", "ppo", "--no-eval", "--timesteps", "400",
+         "--num-envs", "4", "--batch-size", "4", "--num-minibatches", "2", "--unroll-length", "5",
+         "--updates-per-batch", "1", "--episode-length", "20", "--eval-every", "40", "--num-eval-envs", "2",
+         "--policy-layers", "8,8", "--value-layers", "8,8", "--out", "run"]
+TOOLS = {
+    "simulate": ["simulate", "--num", "2", "--duration", "20", "--out", "o.npz"],
+    "sweep": SWEEP,
+    "train": TRAIN,
+    "record": ["ros.record", "--num", "2", "--duration", "20", "--out", "r.bag"],
+}
+
+
+def first_chunk(folder: Path) -> bool:
+    return any((folder / "s" / "chunks").glob("*.npy"))
+
+
+def first_checkpoint(folder: Path) -> bool:
+    return any((folder / "run" / "checkpoints").glob("*/hopper_env.json"))
+
+
+def after(seconds: float):
+    return lambda folder, started: time.monotonic() - started >= seconds
+
+
+# (tool, signal, when: (folder, start time) -> the moment has come, what the moment is)
+CASES = [(tool, signal.SIGINT, after(0.5), "imports") for tool in TOOLS]
+CASES += [(tool, signal.SIGINT, after(3.0), "start-up") for tool in TOOLS]
+CASES += [("simulate", signal.SIGINT, after(MID_RUN), "mid-run"),
+          ("record", signal.SIGINT, after(MID_RUN), "mid-run"),
+          ("sweep", signal.SIGINT, lambda folder, _: first_chunk(folder), "mid-run"),
+          ("train", signal.SIGINT, lambda folder, _: first_checkpoint(folder), "mid-run"),
+          ("simulate", signal.SIGTERM, after(MID_RUN), "mid-run"),
+          ("sweep", signal.SIGTERM, after(3.0), "start-up")]
+
+
+class Stopped(NamedTuple):
+    returncode: int
+    stderr: str
+    latency: float  # s from the signal to the exit
+    folder: Path
+    before: dict  # the folder's listing just before the signal
+
+
+def run_to_end(argv, folder: Path) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, *command_line(argv[0]), *argv[1:]], cwd=folder, env=ENV,
+                          capture_output=True, text=True, timeout=TIMEOUT)
+
+
+def interrupt(argv, folder: Path, signum, when) -> Stopped:
+    folder.mkdir(parents=True, exist_ok=True)
+    proc = subprocess.Popen([sys.executable, *command_line(argv[0]), *argv[1:]], cwd=folder, env=ENV,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    started = time.monotonic()
+    while not when(folder, started):
+        assert proc.poll() is None, f"ended before its moment: {proc.returncode}, {proc.stderr.read()[-2000:]}"
+        assert time.monotonic() - started < TIMEOUT, "its moment never came"
+        time.sleep(0.02)
+    before = listing(folder)
+    sent = time.monotonic()
+    proc.send_signal(signum)
+    try:
+        _, err = proc.communicate(timeout=TIMEOUT)
+    finally:
+        proc.kill()
+    return Stopped(proc.returncode, err, time.monotonic() - sent, folder, before)
+
+
+@pytest.fixture(scope="module")
+def stops(tmp_path_factory):
+    """Every case's stop, and (beside them) an uninterrupted sweep: its folder."""
+    base = tmp_path_factory.mktemp("interrupts")
+    with ThreadPoolExecutor(WORKERS) as pool:
+        (base / "whole").mkdir()
+        whole = pool.submit(run_to_end, SWEEP, base / "whole")
+        futures = [pool.submit(interrupt, TOOLS[tool], base / f"case{k}", signum, when)
+                   for k, (tool, signum, when, _) in enumerate(CASES)]
+        done = [f.result() for f in futures]
+        assert whole.result().returncode == 0, whole.result().stderr[-2000:]
+    return done, base / "whole"
+
+
+@pytest.mark.parametrize("k", range(len(CASES)),
+                         ids=[f"{tool}-{signal.Signals(s).name}-{moment}" for tool, s, _, moment in CASES])
+def test_a_signal_stops_the_run_at_once_in_one_line(stops, k):
+    done = stops[0][k]
+    signum = CASES[k][1]
+    lines = done.stderr.splitlines()
+    assert done.returncode == 128 + signum, done.stderr[-2000:]
+    assert len(lines) == 1 and lines[0].startswith(f"interrupted ({signal.Signals(signum).name}): "), done.stderr
+    assert done.latency < MAX_LATENCY, f"stopped {done.latency:.2f} s after the signal"
+    left = listing(done.folder)
+    assert not [p for p in left if p.endswith(".tmp")]  # no half-written file
+    assert not {"o.npz", "r.bag"} & set(left)  # simulate's and record's outputs: whole or absent
+    finished = {p for p in done.before if p.endswith((".npy", "hopper_env.json", "metrics.json", "manifest.json"))}
+    assert set(left) >= finished  # finished work is kept: chunks, checkpoints, records
+
+
+def _case(tool: str, moment: str) -> int:
+    return next(k for k, (t, s, _, m) in enumerate(CASES) if (t, s, m) == (tool, signal.SIGINT, moment))
+
+
+def test_a_rerun_of_an_interrupted_sweep_gives_the_same_bytes(stops):
+    done, whole = stops
+    stopped = done[_case("sweep", "mid-run")]
+    assert "finished chunks are saved in s; rerun the same command to resume" in stopped.stderr
+    kept = sorted(p.name for p in (stopped.folder / "s" / "chunks").glob("*.npy"))
+    assert 1 <= len(kept) < 4  # stopped mid-run: some chunks done, not all
+    rerun = run_to_end(SWEEP, stopped.folder)
+    assert rerun.returncode == 0, rerun.stderr[-2000:]
+    compared = ["results.csv", "table.txt"] + [f"chunks/{k:05d}.npy" for k in range(4)]
+    assert all(filecmp.cmp(whole / "s" / name, stopped.folder / "s" / name, shallow=False) for name in compared)
+
+
+def test_a_rerun_of_interrupted_training_resumes(stops):
+    done, _ = stops
+    stopped = done[_case("train", "mid-run")]
+    saved = sorted(p.parent.name for p in (stopped.folder / "run" / "checkpoints").glob("*/hopper_env.json"))
+    assert saved and "rerun the same command to resume" in stopped.stderr
+    rerun = run_to_end(TRAIN, stopped.folder)
+    assert rerun.returncode == 0, rerun.stderr[-2000:]
+    last = stopped.folder / "run" / "checkpoints" / saved[-1]
+    assert f"resuming from {last.resolve()} (step {int(saved[-1]):,})" in rerun.stdout
+    assert (stopped.folder / "run" / "policy" / "hopper_env.json").exists()
