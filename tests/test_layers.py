@@ -15,6 +15,7 @@ PACKAGE = "hopper_mjx"
 LAYERS = (
     ("startup", "registry", "files", "budget"),  # what precedes importing MuJoCo; the names; file writes; sizes
     ("checks", "runtime"),  # checks: the command line's value, path and name checks
+    ("terrain",),  # height grids, their spec and their MuJoCo hfield; the height scan
     ("model",),
     ("engine",),
     ("signals",),
