@@ -34,6 +34,7 @@ from hopper_mjx.checks import (  # noqa: F401  re-exported: the tools use them b
     warn_diverged,
 )
 from hopper_mjx.scenario import Scenario
+from hopper_mjx.terrain.spec import check_terrain, terrain_help
 
 
 def check_controller(text: str, height: float = 0.0, speed=(0.0, 0.0), urdf=None) -> None:
@@ -102,6 +103,7 @@ def add_batch_options(p: argparse.ArgumentParser, *, gravity=(9.81, 3.71, 1.62),
                    help="pid: joint gains from a seed-style monoped.yaml or .yml (the file, or the seed's "
                         "package or config/ folder holding it; default: the shipped one)")
     p.add_argument("--urdf", default=None, help="monoped URDF (default: the shipped one)")
+    add_terrain_option(p)
     p.add_argument("--scenario", type=Path, default=None, metavar="FILE.yaml",
                    help="a scenario file: these options' values by name (gravity: [9.81, 1.62], num: 8, "
                         "controller: raibert, urdf: my.urdf, ...; paths from the file's folder); the command "
@@ -109,6 +111,27 @@ def add_batch_options(p: argparse.ArgumentParser, *, gravity=(9.81, 3.71, 1.62),
     p.add_argument("--timestep", type=float, default=None, help="physics step, s (default: the world's, or 0.001)")
     p.add_argument("--chunk", type=int, default=256, help="instances per vmapped chunk on a device")
     add_engine_option(p)
+
+
+def add_terrain_option(p: argparse.ArgumentParser) -> None:
+    """The one --terrain option of every tool (`hopper_mjx.terrain.spec`: its syntax and keys)."""
+    p.add_argument("--terrain", default="flat", metavar="SPEC", help=terrain_help())
+
+
+def refuse_terrain(args, tool: str) -> None:
+    """For a tool that cannot honour a terrain yet: --terrain other than flat, refused in one line."""
+    if check_terrain(args.terrain).name != "flat":
+        raise ValueError(f"--terrain: {tool} runs on the flat ground only, for now; drop --terrain {args.terrain}")
+
+
+def check_ground(text: str, engines, n: int = 1):
+    """--terrain parsed and sized for `n` instances, and the `engines` able to step it (the chain engine
+    takes the flat floor only, for now: engine.make would refuse a terrain after MuJoCo compiled it)."""
+    ground = check_terrain(text, n)
+    if not ground.is_flat and "chain" in engines:
+        raise ValueError(f"--engine chain runs on the flat floor only, for now; --terrain {text} needs --engine "
+                         "mjx (or auto)")
+    return ground
 
 
 def add_engine_option(p: argparse.ArgumentParser, *, extra_help: str = "") -> None:
@@ -159,6 +182,7 @@ def check_batch(args) -> Scenario:
         raise ValueError(f"--chunk must be >= 1, got {args.chunk}")
     check_seed(args.seed)
     check_engine(args.engine)
+    ground = check_ground(args.terrain, [args.engine])
     if args.timestep is not None:
         check_range("--timestep", args.timestep, low=0, high=MAX_TIMESTEP, open_low=True)
     from hopper_mjx.model.checks import check_urdf  # MuJoCo's import waits for the cheap checks above
@@ -180,9 +204,10 @@ def check_batch(args) -> Scenario:
     if warning:
         print(warning, file=sys.stderr)
     budget.check_memory("--num", len(rows) * args.num)  # before the rows are repeated; the recording: check_rates
+    check_terrain(args.terrain, len(rows) * args.num)  # its heights' memory, now that N is known
     return Scenario(gravity=np.repeat(rows, args.num, axis=0), model_options=options, urdf=args.urdf,
-                    engine=args.engine, controller=args.controller, height=args.height, speed=tuple(args.speed),
-                    gains=gains, seed=args.seed, chunk=args.chunk)
+                    ground=ground, engine=args.engine, controller=args.controller, height=args.height,
+                    speed=tuple(args.speed), gains=gains, seed=args.seed, chunk=args.chunk)
 
 
 # Values one sample of each stream records per instance, for the size estimate (the monoped's nq + nv for

@@ -21,8 +21,7 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from hopper_mjx import registry
-
-FLAT = "flat"  # the ground every instance stands on today; terrain fills this field in
+from hopper_mjx.terrain import FLAT, Ground
 
 
 class Built(NamedTuple):
@@ -38,7 +37,7 @@ class Scenario:
     gravity: np.ndarray  # (N, 3) m/s², world frame: instance i's world
     model_options: dict = field(default_factory=dict)  # keywords of model.load a world sets: timestep, friction
     urdf: str | None = None  # the robot (None: the shipped seed monoped)
-    ground: str = FLAT
+    ground: Ground = FLAT  # every instance on this ground (`terrain.parse` of a --terrain spec)
     variation: None = None  # per-instance robot parameters: none yet, every instance is the URDF's robot
     engine: str = registry.DEFAULT_ENGINE
     controller: str = "hold"  # a registry.CONTROLLERS name or policy:PATH
@@ -63,7 +62,8 @@ class Scenario:
         from hopper_mjx import model
         from hopper_mjx.sim import Sim
 
-        sim = Sim(model.load(self.urdf, **self.model_options), engine=self.engine, chunk=self.chunk)
+        mj_model = model.load(self.urdf, terrain=self.ground.terrain(), **self.model_options)
+        sim = Sim(mj_model, engine=self.engine, chunk=self.chunk)
         return Built(sim, *self._controller(sim))
 
     def _controller(self, sim):

@@ -19,7 +19,7 @@ def test_the_command_line_builds_the_whole_scenario():
     np.testing.assert_allclose(s.gravity[:, 2], [-9.81] * 3 + [-1.62] * 3)  # gravity-major
     assert (s.controller, s.height, s.speed, s.seed, s.engine, s.timestep) == ("raibert", 0.12, (0.3, 0.0), 5,
                                                                               "mjx", 0.002)
-    assert s.urdf is None and s.ground == "flat" and s.variation is None
+    assert s.urdf is None and s.ground.is_flat and s.variation is None
 
 
 def test_a_scenario_file_sets_options_and_the_command_line_wins(tmp_path):

@@ -23,6 +23,7 @@ SPECS = {  # one of each generator but flat and heightmap
 def ray_heights(mj_model, xy):
     """MuJoCo C's surface height at each (x, y): a ray cast straight down onto the floor."""
     d = mujoco.MjData(mj_model)
+    d.qpos[2] = 100.0  # the robot out of the rays' way
     mujoco.mj_forward(mj_model, d)
     geom = np.zeros(1, np.int32)
     out = []

@@ -184,8 +184,8 @@ def peak_rss_mb() -> float:
 
 def run(num: int, steps: int, *, controller: str = "hold", chunk: int = 256, repeat: int = 2,
         threads: int | None = None, timestep: float = 1e-3, engine: str = registry.DEFAULT_ENGINE,
-        urdf: str | None = None) -> dict:
-    """One side-by-side measurement; returns the JSON record."""
+        urdf: str | None = None, terrain: str = "flat") -> dict:
+    """One side-by-side measurement (both sides on the `terrain` spec's ground); returns the JSON record."""
     import jax
 
     from hopper_mjx import model
@@ -195,7 +195,8 @@ def run(num: int, steps: int, *, controller: str = "hold", chunk: int = 256, rep
         raise ValueError(f"--steps and --repeat must be >= 1, got {steps} and {repeat}")
     cli.check_engine(engine)
     clock = CompileClock()
-    sim = Sim(model.load(urdf, timestep=timestep), engine=engine, chunk=chunk)
+    ground = cli.check_terrain(terrain)
+    sim = Sim(model.load(urdf, timestep=timestep, terrain=ground.terrain()), engine=engine, chunk=chunk)
     threads = threads or len(sim.devices)
     gravity = gravity_vectors(bench_gravities(num))
     core_controller, params, native_model, native_ctrl = controller_pair(controller, sim, gravity)
@@ -228,6 +229,7 @@ def run(num: int, steps: int, *, controller: str = "hold", chunk: int = 256, rep
         "steps": steps,
         "controller": controller,
         "engine": sim.engine.name,
+        "terrain": str(ground),
         "native_controller": "none" if controller == "none" else "hold",
         "timestep": timestep,
         "core_steps_per_s": core_rate,
@@ -358,6 +360,7 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--threads", type=int, default=None, help="native threads (default: one per device)")
     p.add_argument("--timestep", type=float, default=1e-3, help="physics step, s")
     p.add_argument("--urdf", default=None, help="monoped URDF (default: the shipped one)")
+    cli.add_terrain_option(p)
     p.add_argument("--json", default=None, help="write the record (or the scaling records) here")
     p.add_argument("--scaling", default=None, help="comma-separated N values: one bench process each")
     p.add_argument("--plot", default=None, help="with --scaling: save the scaling plot (PNG) here")
@@ -378,6 +381,8 @@ def check(args) -> list[int] | None:
         raise ValueError("--engine: several engines are compared with --scaling only")
     for engine in engines:
         cli.check_engine(engine)
+    sizes = [args.num] + (cli.parse_indices(args.scaling, "--scaling") if args.scaling else [])
+    cli.check_ground(args.terrain, engines, 2 * max(sizes))  # both sides hold the heights
     try:
         registry.check("controller", dict.fromkeys(CONTROLLERS), args.controller)
     except ValueError as err:
@@ -412,7 +417,7 @@ def main(argv=None) -> int:
         if nums:
             passed = ["--controller", args.controller, "--chunk", str(args.chunk), "--repeat", str(args.repeat),
                       "--timestep", str(args.timestep)] + (["--threads", str(args.threads)] if args.threads else [])
-            passed += ["--urdf", args.urdf] if args.urdf else []
+            passed += (["--urdf", args.urdf] if args.urdf else []) + ["--terrain", args.terrain]
             records = scaling(nums, args.engine.split(","), args.steps, passed)
             print(markdown_table(records))
             if args.plot:
@@ -421,7 +426,7 @@ def main(argv=None) -> int:
         else:
             result = run(args.num, args.steps, controller=args.controller, chunk=args.chunk,
                          repeat=args.repeat, threads=args.threads, timestep=args.timestep, engine=args.engine,
-                         urdf=args.urdf)
+                         urdf=args.urdf, terrain=args.terrain)
             print(format_table(result))
     except (ValueError, argparse.ArgumentTypeError) as err:
         return cli.fail(err)

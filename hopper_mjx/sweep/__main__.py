@@ -54,6 +54,7 @@ def parser() -> argparse.ArgumentParser:
         s.add_argument("--urdf", default=None, help="monoped URDF (default: the shipped one)")
         s.add_argument("--chunk", type=int, default=256, help="instances per compiled call")
         cli.add_engine_option(s)
+        cli.add_terrain_option(s)
         s.add_argument("--out", type=Path, default=None, help="output folder (default runs/<kind>-<UTC time>)")
         s.add_argument("--no-progress", action="store_true")
         s.add_argument("--coordinator", default=None, help="HOST:PORT of process 0, for a multi-process sweep")
@@ -87,6 +88,7 @@ def check(args):
     ValueError before anything is built."""
     from hopper_mjx.sweep.grid import SweepSpec
 
+    cli.refuse_terrain(args, "a sweep")
     gravity = gravity_from_worlds(args) if args.world is not None else tuple(args.gravity or args.default_gravity)
     if args.urdf is not None:  # MuJoCo is imported only for a URDF to check
         from hopper_mjx.model.checks import check_urdf

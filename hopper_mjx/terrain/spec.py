@@ -33,7 +33,7 @@ PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 class Key(NamedTuple):
     name: str  # as the user types it
     default: float
-    kind: str  # "length" (> 0), "height" (>= 0), "position" (>= 0), "count" (integer >= 1), "seed"
+    kind: str  # "length" (> 0), "height" (>= 0), "position" (any, m along +x), "count" (integer >= 1), "seed"
     arg: str = ""  # the generator's keyword, when it differs from `name`
 
 
@@ -125,7 +125,7 @@ def _number(key: Key, text: str) -> float:
         raise TerrainError(f"{key.name}={text} must be finite")
     if key.kind == "length" and value <= 0:
         raise TerrainError(f"{key.name}={text} must be > 0 m")
-    if value < 0:
+    if key.kind == "height" and value < 0:
         raise TerrainError(f"{key.name}={text} must be >= 0 m")
     return value
 
