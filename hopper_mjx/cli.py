@@ -254,5 +254,7 @@ def add_live_options(p: argparse.ArgumentParser, *, foxglove_help: str) -> None:
 def check_live(args) -> None:
     if not (math.isfinite(args.speed_factor) and args.speed_factor > 0):
         raise ValueError(f"--speed-factor must be > 0, got {args.speed_factor}")
+    if args.foxglove is not None:  # its scene has no ground yet: robots would float over nothing
+        refuse_terrain(args, "the Foxglove stream")
 
 

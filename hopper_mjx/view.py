@@ -234,6 +234,7 @@ def main(argv=None) -> int:
     from hopper_mjx.ros import foxglove
 
     try:
+        cli.refuse_terrain(args, "view (it draws the instances side by side, not where they are)")
         checked = cli.check_batch(args)
         if not 1 <= args.show <= SHOWN:
             raise ValueError(f"--show must be in 1..{SHOWN}, got {args.show}")

@@ -22,6 +22,17 @@ def test_the_command_line_builds_the_whole_scenario():
     assert s.urdf is None and s.ground.is_flat and s.variation is None
 
 
+def test_the_terrain_spec_is_the_scenarios_ground(tmp_path):
+    s = scenario_of(["--terrain", "obstacle:height=0.12,x=0.8", "--engine", "mjx"])
+    assert s.ground.name == "obstacle" and dict(s.ground.values) == {"height": 0.12, "x": 0.8, "length": 0.1}
+    assert str(s.ground) == "obstacle:height=0.12,x=0.8,length=0.1,size=4x4,cell=0.04"
+    (tmp_path / "rough.yaml").write_text("terrain: rough:amp=0.02,seed=3\nengine: auto\n")
+    s = scenario_of(["--scenario", str(tmp_path / "rough.yaml")])
+    assert s.ground.name == "rough" and dict(s.ground.values)["seed"] == 3 and s.engine == "auto"
+    heights = s.ground.terrain().heights
+    assert np.abs(heights).max() == pytest.approx(0.02) and heights.shape == (101, 101)
+
+
 def test_a_scenario_file_sets_options_and_the_command_line_wins(tmp_path):
     (tmp_path / "robot").mkdir()
     urdf = (tmp_path / "robot" / "leg.urdf")

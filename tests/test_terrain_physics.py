@@ -70,8 +70,12 @@ def start_qpos(m: mujoco.MjModel, t: terrain.Terrain) -> np.ndarray:
 DROPS = {"rough": "rough:amp=0.03,wavelength=0.4,seed=1", "steps": "steps:height=0.05,x=0",
          "obstacle": "obstacle:height=0.1,x=-0.05,length=0.1"}
 DROP_SECONDS = 0.6  # the first touchdown and the fall that follows, before the limp leg folds on its own
-# Measured max |base path, mjx - C| over the 0.6 s (m), per gravity 9.81, 3.71, 1.62: see the test's print.
-MEASURED = {}
+# Measured max |base path, mjx - C| over the 0.6 s, at 9.81, 3.71, 1.62 m/s² (the test prints them):
+# rough 9.5e-4, 6.6e-6, 9.5e-7 m; steps 1.6e-3, 5.7e-4, 1.8e-4 m; obstacle 1.6e-3, 8.2e-4, 7.6e-7 m.
+# MJX collides with the hfield's prisms by its own convex routine (and Newton with 4 iterations), C by
+# its general convex collision (GJK/EPA): the paths part at the touchdown and grow apart as the limp robot topples
+# (by 1 s at 9.81: up to 0.13 m on the block). The bound is twice the worst measured.
+PATH_TOLERANCE = 3.5e-3  # m
 
 
 @pytest.mark.slow
@@ -103,4 +107,4 @@ def test_mjx_follows_mujoco_c_on_the_exported_terrain(name, tmp_path, capsys):
     with capsys.disabled():
         print(f"\n{name}: max |base path mjx - C| over {DROP_SECONDS} s at g = {GRAVITIES}: "
               + ", ".join(f"{w:.2e}" for w in worst) + " m")
-    assert max(worst) < 5e-3
+    assert max(worst) < PATH_TOLERANCE

@@ -21,7 +21,7 @@ def test_planes_are_exact_off_the_vertices():
 
 def test_the_scan_is_the_surface_mujoco_collides_with():
     """On rough ground (every cell a saddle), the scan at random points equals MuJoCo C's surface,
-    probed with rays: the same triangles, not a bilinear patch (which misses by up to ~1 mm here)."""
+    probed with rays: the same triangles, not a bilinear patch (which misses by up to 18 mm here)."""
     t = terrain.parse("rough:amp=0.05,wavelength=0.3,seed=4,size=2x2,cell=0.1").terrain()
     m = model.load(terrain=t)
     d = mujoco.MjData(m)
@@ -41,7 +41,7 @@ def test_the_scan_is_the_surface_mujoco_collides_with():
     u, v, h = u - c0, v - r0, t.heights
     bilinear = ((1 - u) * (1 - v) * h[r0, c0] + u * (1 - v) * h[r0, c0 + 1] + (1 - u) * v * h[r0 + 1, c0]
                 + u * v * h[r0 + 1, c0 + 1])
-    assert np.abs(bilinear - c).max() > 1e-4  # the triangulation matters
+    assert np.abs(bilinear - c).max() > 5e-3  # the triangulation matters
 
 
 def test_the_scan_turns_with_the_yaw_only():

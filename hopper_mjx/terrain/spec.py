@@ -245,4 +245,9 @@ def check_terrain(text: str, n: int = 1) -> Ground:
         raise ValueError(f"--terrain: {err}") from None
     nrow, ncol = ground.shape
     budget.check_memory(f"--terrain {text}" + (", --num" if n > 1 else ""), n, held_floats=nrow * ncol)
+    if ground.path:  # decoded now, once it is known to fit: a damaged image is refused before anything is built
+        try:
+            read_png(ground.path)
+        except TerrainError as err:
+            raise ValueError(f"--terrain: {err}") from None
     return ground
