@@ -155,3 +155,14 @@ def test_generators_are_pure_functions_of_the_vertices():
     x, y = terrain.vertices((1.0, 0.5), (11, 21))
     assert x.shape == (11, 21) and x[0, 0] == -1.0 and y[-1, 0] == 0.5 and x[0, -1] == 1.0
     assert not generators.flat(x, y).any()
+
+
+def test_auto_steps_a_terrain_with_mjx_and_says_why(capsys):
+    from hopper_mjx import engine
+
+    m = model.load(terrain=terrain.parse("steps").terrain())
+    assert engine.make("auto", m).name == "mjx"
+    notice = capsys.readouterr().err
+    assert notice.startswith("note: engine auto uses mjx") and "floor plane" in notice and notice.count("\n") == 1
+    with pytest.raises(ValueError, match="not a chain model"):
+        engine.make("chain", m)

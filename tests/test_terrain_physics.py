@@ -108,3 +108,29 @@ def test_mjx_follows_mujoco_c_on_the_exported_terrain(name, tmp_path, capsys):
         print(f"\n{name}: max |base path mjx - C| over {DROP_SECONDS} s at g = {GRAVITIES}: "
               + ", ".join(f"{w:.2e}" for w in worst) + " m")
     assert max(worst) < PATH_TOLERANCE
+
+
+@pytest.mark.slow
+def test_mjx_takes_the_height_field_as_a_traced_input():
+    """MJX's `hfield_data` is a jax.Array of its model: one compiled forward, vmapped over two grids, stands
+    one foot on a 5 cm platform and leaves the other in the air (what per-instance terrain will build on)."""
+    import jax
+    import jax.numpy as jnp
+
+    from hopper_mjx import engine
+
+    m = model.load(terrain=terrain.parse("steps:height=0.05,x=-0.5,depth=1").terrain())
+    eng = engine.make("mjx", m)
+    assert isinstance(eng.model.hfield_data, jax.Array)
+    platform = jnp.asarray(eng.model.hfield_data)
+    grids = jnp.stack([platform, jnp.zeros_like(platform)])  # with the platform, and level at its foot
+    q = stance_qpos(m, clearance=0.05 - 0.002)  # 2 mm into the platform's top
+
+    def foot(data_h):
+        mdl = eng.model.replace(hfield_data=data_h)
+        d = eng.forward(mdl, eng.make_data(jnp.asarray(q, jnp.float32), jnp.zeros(m.nv)), jnp.array([0, 0, -9.81]))
+        return eng.foot_contact(mdl, d)
+
+    flag, _, pos = jax.jit(jax.vmap(foot))(grids)
+    assert flag.tolist() == [True, False]
+    assert float(pos[0, 2]) == pytest.approx(0.05 - 0.001, abs=2e-4)  # midway through the overlap
