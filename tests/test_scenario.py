@@ -31,6 +31,14 @@ def test_the_terrain_spec_is_the_scenarios_ground(tmp_path):
     assert s.ground.name == "rough" and dict(s.ground.values)["seed"] == 3 and s.engine == "auto"
     heights = s.ground.terrain().heights
     assert np.abs(heights).max() == pytest.approx(0.02) and heights.shape == (101, 101)
+    import imageio.v3 as iio
+
+    (tmp_path / "maps").mkdir()
+    iio.imwrite(tmp_path / "maps" / "g.png", np.full((3, 4), 255, np.uint8))
+    (tmp_path / "hm.yaml").write_text("terrain: heightmap:maps/g.png,height=0.2\n")  # from the file's folder
+    s = scenario_of(["--scenario", str(tmp_path / "hm.yaml")])
+    assert s.ground.path == str(tmp_path / "maps" / "g.png") and s.ground.shape == (3, 4)
+    np.testing.assert_allclose(s.ground.terrain().heights, 0.2)
 
 
 def test_a_scenario_file_sets_options_and_the_command_line_wins(tmp_path):
