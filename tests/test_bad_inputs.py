@@ -108,6 +108,7 @@ CASES = [
     ("simulate", ["--terrain", "steps", "--engine", "chain"], "--engine chain runs on the flat floor only, for now"),
     ("perf.bench", ["--terrain", "steps", "--engine", "chain"], "--engine chain runs on the flat floor only"),
     ("sweep", ["gravity", "--terrain", "rough", "--out", "s"], "--terrain: a sweep runs on the flat ground only"),
+    ("perf.profile", ["--terrain", "crater:rim=-1", "--engine", "mjx"], "--terrain: rim=-1 must be >= 0 m"),
 ]
 
 

@@ -109,7 +109,8 @@ def chain_costs(engine, qpos, qvel, gravity, steps: int) -> dict:
     return dict(zip(CHAIN_STAGES, np.diff(cumulative, prepend=0.0))) | {"full step": cumulative[-1]}
 
 
-def measure(num: int, steps: int, settle: int, engine: str = registry.DEFAULT_ENGINE, urdf: str | None = None) -> dict:
+def measure(num: int, steps: int, settle: int, engine: str = registry.DEFAULT_ENGINE, urdf: str | None = None,
+            terrain: str = "flat") -> dict:
     import jax
 
     from hopper_mjx import model
@@ -120,12 +121,12 @@ def measure(num: int, steps: int, settle: int, engine: str = registry.DEFAULT_EN
 
     if num < 1 or steps < 1:
         raise ValueError(f"--num and --steps must be >= 1, got {num}, {steps}")
-    mj_model = model.load(urdf)
+    mj_model = model.load(urdf, terrain=cli.check_terrain(terrain).terrain())
     sim = Sim(mj_model, engine=engine, chunk=num, devices=jax.local_devices()[:1])
     controller = hold(sim.layout)
     state = sim.reset(gravity_vectors(np.linspace(*GRAVITY_SPAN, num)), controller=controller)
     standing, _ = sim.rollout(state, controller, steps=settle)
-    record = {"num": num, "steps": steps, "engine": sim.engine.name}
+    record = {"num": num, "steps": steps, "engine": sim.engine.name, "terrain": terrain}
     if sim.engine.name == "chain":
         return record | {"us": chain_costs(sim.engine, standing.data.qpos, standing.data.qvel, standing.gravity, steps)}
     costs = {}
@@ -149,7 +150,8 @@ def table(record: dict) -> str:
         ("smooth dynamics (kinematics .. integration)", us["no constraints"]),
     )
     head = (f"{record['num']} standing instances on one device, {record['steps']} steps, engine mjx, "
-            f"{record['constraint_rows']} constraint rows per instance")
+            f"{record['constraint_rows']} constraint rows per instance"
+            + ("" if record["terrain"] == "flat" else f", terrain {record['terrain']}"))
     return _lines(head, parts, full)
 
 
@@ -167,12 +169,14 @@ def main(argv=None) -> int:
     p.add_argument("--settle", type=int, default=300, help="physics steps holding the stance before timing")
     cli.add_engine_option(p)
     p.add_argument("--urdf", default=None, help="monoped URDF (default: the shipped one)")
+    cli.add_terrain_option(p)
     args = p.parse_args(argv)
     for name in ("num", "steps", "settle"):
         if getattr(args, name) < 1:
             return cli.fail(ValueError(f"--{name} must be >= 1, got {getattr(args, name)}"))
     try:
         cli.check_engine(args.engine)
+        cli.check_ground(args.terrain, [args.engine], args.num)
         if args.urdf is not None:
             from hopper_mjx.model.checks import check_urdf
 
@@ -181,7 +185,7 @@ def main(argv=None) -> int:
         return cli.fail(err)
     runtime.configure()
     try:
-        record = measure(args.num, args.steps, args.settle, args.engine, args.urdf)
+        record = measure(args.num, args.steps, args.settle, args.engine, args.urdf, args.terrain)
     except ValueError as err:
         return cli.fail(err)
     print(table(record))
