@@ -144,6 +144,9 @@ def test_heightmap_is_laid_out_as_mujoco_reads_a_png(tmp_path):
     ("gaps:width=0.5,spacing=0.4", "width=0.5 must be less than spacing=0.4"),
     ("flat:amp=1", "flat has no key 'amp'; it takes none"),
     ("heightmap:size=4x4", "heightmap needs a PNG file"),
+    ("steps:cell=0.04,cell=0.04", "cell is given twice"),
+    ("rough:seed=1,seed=2", "seed is given twice"),
+    ("rough:amp", "'amp' is not key=value; rough takes amp, wavelength, seed, size, cell"),
 ])
 def test_bad_specs_are_one_line(text, message):
     with pytest.raises(terrain.TerrainError, match=None) as err:

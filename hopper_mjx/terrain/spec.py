@@ -149,7 +149,7 @@ def parse(text: str) -> Ground:
     keys = {k.name: k for k in KEYS[name]}
     grid = {} if name in ("flat", "heightmap") else {k.name: k for k in GRID_KEYS}
     known = [*keys, *(k for k in grid if k not in keys)]
-    values, size, cell, path = {}, DEFAULT_SIZE, DEFAULT_CELL, None
+    values, size, cell, path, seen = {}, DEFAULT_SIZE, DEFAULT_CELL, None, set()
     for item in filter(None, (i.strip() for i in rest.split(","))):
         key, eq, value = item.partition("=")
         key = key.strip()
@@ -161,8 +161,9 @@ def parse(text: str) -> Ground:
         if key not in keys and key not in grid:
             raise TerrainError(f"{name} has no key {key!r}" + (f"; it takes {', '.join(known)}" if known
                                                                else "; it takes none"))
-        if key in values or (key == "size" and size is not DEFAULT_SIZE) or (key == "cell" and cell != DEFAULT_CELL):
+        if key in seen:
             raise TerrainError(f"{key} is given twice")
+        seen.add(key)
         if key == "size":
             size = _size(value.strip())
         elif key == "cell":
