@@ -256,6 +256,15 @@ def describe(urdf_text: str, source: str = "<string>") -> LegDescription:
     )
 
 
+def _add_floor(spec: mujoco.MjSpec, terrain: terrains.Terrain | None) -> None:
+    """The ground: MuJoCo's plane, or `terrain`'s height field in its place (the same name, so the same pairs)."""
+    floor = spec.worldbody.add_geom(
+        name=FLOOR_GEOM, type=mujoco.mjtGeom.mjGEOM_PLANE, size=[0, 0, 0.05], contype=0, conaffinity=0
+    )
+    if terrain is not None:
+        terrains.to_spec(spec, floor, terrain)
+
+
 def build_spec(urdf: str | os.PathLike | None = None, *, timestep: float = DEFAULT_TIMESTEP,
                friction: tuple[float, float] = (FOOT_FRICTION, FOOT_FRICTION),
                terrain: terrains.Terrain | None = None) -> mujoco.MjSpec:
@@ -291,11 +300,7 @@ def build_spec(urdf: str | os.PathLike | None = None, *, timestep: float = DEFAU
 
     world = spec.worldbody
     world.add_light(name="sun", pos=[0, 0, 4], dir=[0, 0, -1], type=mujoco.mjtLightType.mjLIGHT_DIRECTIONAL)
-    world.add_geom(
-        name=FLOOR_GEOM, type=mujoco.mjtGeom.mjGEOM_PLANE, size=[0, 0, 0.05], contype=0, conaffinity=0
-    )
-    if terrain is not None:
-        terrains.to_spec(spec, spec.geom(FLOOR_GEOM), terrain)
+    _add_floor(spec, terrain)
 
     # Robot geoms collide only through explicit pairs: foot-floor while hopping,
     # base-floor after a fall. The leg links never reach the floor before the base does.
