@@ -134,6 +134,17 @@ def check_ground(text: str, engines, n: int = 1):
     return ground
 
 
+def check_start(text: str, ground) -> None:
+    """Every instance starts with its foot `robot.CLEARANCE` above z = 0 at the origin: ground that rises there
+    as high would start the foot inside it."""
+    from hopper_mjx.model.robot import CLEARANCE
+
+    top = ground.start_height()
+    if top >= CLEARANCE:
+        raise ValueError(f"--terrain {text}: the ground within 0.1 m of the start rises to {top:.3f} m, and the foot "
+                         f"starts {CLEARANCE:g} m above z = 0; move the shape away from the origin or lower it")
+
+
 def add_engine_option(p: argparse.ArgumentParser, *, extra_help: str = "") -> None:
     """The one --engine option of every tool."""
     p.add_argument("--engine", default=registry.DEFAULT_ENGINE,
@@ -188,6 +199,7 @@ def check_batch(args) -> Scenario:
     from hopper_mjx.model.checks import check_urdf  # MuJoCo's import waits for the cheap checks above
 
     check_urdf(args.urdf)
+    check_start(args.terrain, ground)
     check_controller(args.controller, args.height, args.speed, args.urdf)
     from_worlds = batch_from_worlds(args)
     if from_worlds is None:

@@ -109,6 +109,8 @@ CASES = [
     ("perf.bench", ["--terrain", "steps", "--engine", "chain"], "--engine chain runs on the flat floor only"),
     ("sweep", ["gravity", "--terrain", "rough", "--out", "s"], "--terrain: a sweep runs on the flat ground only"),
     ("perf.profile", ["--terrain", "crater:rim=-1", "--engine", "mjx"], "--terrain: rim=-1 must be >= 0 m"),
+    ("simulate", ["--terrain", "obstacle:height=0.2,x=-0.05"], "--terrain obstacle:height=0.2,x=-0.05: the ground "
+                                                               "within 0.1 m of the start rises to 0.200 m"),
 ]
 
 
