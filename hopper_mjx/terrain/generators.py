@@ -20,7 +20,9 @@ def rough(x, y, *, amp, wavelength, seed):
     angle = rng.uniform(0.0, 2 * np.pi, ROUGH_WAVES)
     k = 2 * np.pi / (wavelength * rng.uniform(0.7, 1.3, ROUGH_WAVES))
     phase = rng.uniform(0.0, 2 * np.pi, ROUGH_WAVES)
-    h = np.cos(np.multiply.outer(x, k * np.cos(angle)) + np.multiply.outer(y, k * np.sin(angle)) + phase).sum(-1)
+    h = np.zeros_like(x)
+    for kx, ky, p in zip(k * np.cos(angle), k * np.sin(angle), phase):  # one wave at a time: one grid of memory
+        h += np.cos(kx * x + ky * y + p)
     h -= h.mean()
     peak = np.abs(h).max()
     return h * (amp / peak) if peak > 0 else h
