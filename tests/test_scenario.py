@@ -35,10 +35,11 @@ def test_the_terrain_spec_is_the_scenarios_ground(tmp_path):
 
     (tmp_path / "maps").mkdir()
     iio.imwrite(tmp_path / "maps" / "g.png", np.full((3, 4), 255, np.uint8))
-    (tmp_path / "hm.yaml").write_text("terrain: heightmap:maps/g.png,height=0.2\n")  # from the file's folder
+    (tmp_path / "hm.yaml").write_text("terrain: heightmap:maps/g.png,height=0.04\n")  # from the file's folder
     s = scenario_of(["--scenario", str(tmp_path / "hm.yaml")])
     assert s.ground.path == str(tmp_path / "maps" / "g.png") and s.ground.shape == (3, 4)
-    np.testing.assert_allclose(s.ground.terrain().heights, 0.2)
+    assert s.ground.start_height() == pytest.approx(0.04)  # the cell around the start, however coarse
+    np.testing.assert_allclose(s.ground.terrain().heights, 0.04)
 
 
 def test_a_scenario_file_sets_options_and_the_command_line_wins(tmp_path):

@@ -92,12 +92,14 @@ class Ground:
         return (round(self.size[1] / self.cell) + 1, round(self.size[0] / self.cell) + 1)
 
     def start_height(self, reach: float = 0.1) -> float:
-        """The highest ground within `reach` m (in x and y) of the origin, where every instance starts."""
+        """The highest vertex within `reach` m (in x and y; at least the cell around it) of the origin, where
+        every instance starts."""
         t = self.terrain()
         if t is None:
             return 0.0
         xs, ys = t.axes()
-        return float(t.heights[(np.abs(ys) <= reach)[:, None] & (np.abs(xs) <= reach)[None, :]].max())
+        near_x, near_y = np.abs(xs) <= max(reach, xs[1] - xs[0]), np.abs(ys) <= max(reach, ys[1] - ys[0])
+        return float(t.heights[near_y[:, None] & near_x[None, :]].max())
 
     def terrain(self) -> Terrain | None:
         """The height grid (None for flat: the ground stays MuJoCo's infinite plane)."""
