@@ -44,10 +44,12 @@ def check_steps(flags: str, duration: float, timestep: float) -> int:
     return int(steps)
 
 
-def check_memory(flags: str, n: int, recorded_floats: float = 0.0, *, states: int = 1) -> None:
-    """`n` instances each recording `recorded_floats` values (and held `states` times, e.g. by a
-    benchmark's two sides): refused when they would not fit in this machine's memory."""
-    run, record = n * states * INSTANCE_BYTES, n * recorded_floats * FLOAT_BYTES * COPIES
+def check_memory(flags: str, n: int, recorded_floats: float = 0.0, *, states: int = 1, held_floats: float = 0) -> None:
+    """`n` instances each recording `recorded_floats` values and holding `held_floats` more (a terrain's
+    heights), all held `states` times (e.g. by a benchmark's two sides): refused when they would not fit in
+    this machine's memory."""
+    run = n * states * (INSTANCE_BYTES + held_floats * FLOAT_BYTES)
+    record = n * recorded_floats * FLOAT_BYTES * COPIES
     have = available_bytes()
     if run + record > USABLE * have:
         raise ValueError(f"{flags}: {n:,} instances would need about {size(run + record)} of memory "

@@ -116,9 +116,14 @@ def _typed(action: argparse.Action, value, path, key):
 
 
 def _relative(path: Path, text: str, action: argparse.Action) -> str:
-    """Paths in a scenario file are read from the file's folder (urdf, world, gains)."""
+    """Paths in a scenario file are read from the file's folder (urdf, world, gains, a heightmap's PNG)."""
     if action.dest in ("urdf", "world", "gains") and not Path(text).is_absolute():
         return str(Path(path).parent / text)
+    name, _, rest = text.partition(":")
+    if action.dest == "terrain" and name.strip() == "heightmap" and rest:
+        first, *others = rest.split(",")
+        if "=" not in first and not Path(first.strip()).is_absolute():
+            return ",".join([f"{name}:{Path(path).parent / first.strip()}", *others])
     return text
 
 

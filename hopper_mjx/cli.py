@@ -34,6 +34,7 @@ from hopper_mjx.checks import (  # noqa: F401  re-exported: the tools use them b
     warn_diverged,
 )
 from hopper_mjx.scenario import Physics, Scenario
+from hopper_mjx.terrain.spec import check_terrain, terrain_help
 
 
 def check_controller(text: str, height: float = 0.0, speed=(0.0, 0.0), physics: Physics | None = None) -> None:
@@ -113,6 +114,7 @@ def add_batch_options(p: argparse.ArgumentParser, *, gravity=(9.81, 3.71, 1.62),
 def add_physics_options(p: argparse.ArgumentParser, *, engine_help: str = "") -> None:
     """The options of a `scenario.Physics`, one set for every tool; `check_physics` reads them."""
     p.add_argument("--urdf", default=None, help="monoped URDF (default: the shipped one)")
+    p.add_argument("--terrain", default="flat", metavar="SPEC", help=terrain_help())
     p.add_argument("--engine", default=registry.DEFAULT_ENGINE,
                    help=f"physics engine: {registry.listed(registry.ENGINES)}; default {registry.DEFAULT_ENGINE}"
                         + engine_help)
@@ -136,6 +138,30 @@ def check_push(values) -> tuple[float, float] | None:
     return float(values[0]), float(values[1])
 
 
+def refuse_terrain(ground, tool: str) -> None:
+    """For a tool that cannot honour a terrain yet: a ground (`terrain.Ground`) other than flat, refused in
+    one line."""
+    if not ground.is_flat:
+        raise ValueError(f"--terrain: {tool} runs on the flat ground only, for now; drop --terrain {ground}")
+
+
+def check_ground(text: str, engines, n: int = 1):
+    """--terrain parsed and sized for `n` instances, and the `engines` able to step it (the chain engine
+    takes the flat floor only, for now: engine.make would refuse a terrain after MuJoCo compiled it);
+    the foot must start above it."""
+    from hopper_mjx.model.robot import CLEARANCE
+
+    ground = check_terrain(text, n)
+    if not ground.is_flat and "chain" in engines:
+        raise ValueError(f"--engine chain runs on the flat floor only, for now; --terrain {text} needs --engine "
+                         "mjx (or auto)")
+    top = ground.start_height()  # every instance starts with its foot CLEARANCE above z = 0 at the origin
+    if top >= CLEARANCE:
+        raise ValueError(f"--terrain {text}: the ground within 0.1 m of the start rises to {top:.3f} m, and the foot "
+                         f"starts {CLEARANCE:g} m above z = 0; move the shape away from the origin or lower it")
+    return ground
+
+
 def check_ideal_motors(physics: Physics, tool: str) -> None:
     """Refuses a motor model or delay in a tool that does not run them yet (rather than ignore them)."""
     if physics.motor != registry.DEFAULT_MOTOR or physics.action_delay or physics.push:
@@ -150,18 +176,21 @@ def check_delay(physics: Physics, duration: float | None) -> None:
                          f"--duration {duration:g} s: no command would reach the motors")
 
 
-def check_physics(args, model_options: dict | None = None, *, engines: list[str] | None = None) -> Physics:
+def check_physics(args, model_options: dict | None = None, *, engines: list[str] | None = None,
+                  n: int = 1) -> Physics:
     """The checked `Physics` of `add_physics_options`' options (with the model options a tool or its
-    world sets); `engines`: the names a tool that runs several takes from --engine (else one)."""
+    world sets); `engines`: the names a tool that runs several takes from --engine (else one); `n`:
+    the instances that hold the ground's heights (its memory is checked for them)."""
     for name in engines or [args.engine]:
         check_engine(name)
+    ground = check_ground(args.terrain, engines or [args.engine], n)
     try:
         registry.check("motor", registry.MOTORS, args.motor)
     except ValueError as err:
         raise ValueError(f"--motor: {err}") from None
     check_range("--action-delay", args.action_delay, low=0)
     push = check_push(args.push)
-    physics = Physics(urdf=args.urdf, model_options=dict(model_options or {}), engine=args.engine,
+    physics = Physics(urdf=args.urdf, model_options=dict(model_options or {}), ground=ground, engine=args.engine,
                       motor=args.motor, action_delay=args.action_delay / 1e3, push=push)
     if push is not None:
         from hopper_mjx.pushes import Pushes
@@ -238,7 +267,7 @@ def check_batch(args) -> Scenario:
     else:
         rows, options, warning = from_worlds
     options.setdefault("timestep", args.timestep or DEFAULT_TIMESTEP)
-    physics = check_physics(args, options)
+    physics = check_physics(args, options, n=len(rows) * args.num)  # the ground's memory, for N instances
     check_delay(physics, args.duration)
     check_controller(args.controller, args.height, args.speed, physics)
     gains = check_gains(args)
@@ -293,5 +322,7 @@ def add_live_options(p: argparse.ArgumentParser, *, foxglove_help: str) -> None:
 def check_live(args) -> None:
     if not (math.isfinite(args.speed_factor) and args.speed_factor > 0):
         raise ValueError(f"--speed-factor must be > 0, got {args.speed_factor}")
+    if args.foxglove is not None:  # its scene has no ground yet: robots would float over nothing
+        refuse_terrain(check_terrain(args.terrain), "the Foxglove stream")
 
 

@@ -1,4 +1,4 @@
-"""The names a user types, each defined once: controllers, engines, tasks and the policy prefix.
+"""The names a user types, each defined once: controllers, engines, tasks, terrains and the policy prefix.
 
 The factories (`control.make`, `engine.make`, `envs.make`) dispatch on these names, and every
 `--controller`, `--engine` and `--task` choice, help text and error message is derived from
@@ -27,6 +27,16 @@ MOTORS = {
     "dc": "a DC motor: its torque-speed line from the URDF's effort (stall) and velocity (no-load speed)",
 }
 DEFAULT_MOTOR = "ideal"
+TERRAINS = {  # --terrain NAME:KEY=VALUE,...; the keys are in hopper_mjx/terrain/spec.py and docs/terrain.md
+    "flat": "MuJoCo's infinite plane at z = 0",
+    "rough": "smooth random ground of a peak amplitude and a wavelength",
+    "steps": "up a step onto a platform and down again",
+    "stairs": "n steps up, a landing, n steps down",
+    "gaps": "trenches across the ground at a spacing",
+    "obstacle": "a block of a height across the ground at a distance ahead",
+    "crater": "a bowl with a raised rim",
+    "heightmap": "a greyscale PNG, black low, white high",
+}
 TASKS = {
     "stand": "stay upright at the standing height",
     "hop": "hop in place to a commanded apex",

@@ -3,7 +3,8 @@
     python -m hopper_mjx.render --still docs/img/monoped.png
     python -m hopper_mjx.render --video hop.mp4 --gravity 1.62 --controller hold --duration 2
 
-The still shows the robot in its initial stance; the video (MP4 or GIF, by the
+The still shows the robot in its initial stance (on a --terrain, from further, with the ground
+ahead); the video (MP4 or GIF, by the
 file name) shows one instance simulated by the core. Headless machines render
 through EGL (software Mesa on a CPU-only box): importing `hopper_mjx` chooses it
 before MuJoCo is loaded, unless MUJOCO_GL is set (see `hopper_mjx.startup`).
@@ -27,7 +28,8 @@ TRACK_HEIGHT = 0.45  # m: the camera looks at the leg's middle, not at the base
 
 
 def scene_model(physics: Physics = Physics()) -> mujoco.MjModel:
-    """The simulated monoped of `physics` plus what only pictures need: a checkered floor, a sky, link colours."""
+    """The simulated monoped of `physics` (on its ground: the plane or a terrain's height field) plus what
+    only pictures need: a checkered floor, a sky, link colours."""
     return scene.dress(physics.spec()).compile()
 
 
@@ -40,13 +42,23 @@ def camera(base_pos, distance: float = 2.0, azimuth: float = 135.0, elevation: f
     return cam
 
 
+def ground_camera() -> mujoco.MjvCamera:
+    """A still camera for a terrain: from the side (+x to the right), above, over the ground ahead."""
+    cam = mujoco.MjvCamera()
+    cam.type = mujoco.mjtCamera.mjCAMERA_FREE
+    cam.lookat[:] = (0.8, 0.0, 0.1)
+    cam.distance, cam.azimuth, cam.elevation = 3.2, 90.0, -24.0
+    return cam
+
+
 def _check_size(width: int, height: int) -> None:
     if not (16 <= width <= 1920 and 16 <= height <= 1080):
         raise ValueError(f"image size must be within 16x16..1920x1080 pixels, got {width}x{height}")
 
 
-def frames(m: mujoco.MjModel, qpos_sequence, *, width: int = 640, height: int = 480, segmentation: bool = False):
-    """Yields one (height, width, 3) uint8 image per qpos (nq,), the camera following the base.
+def frames(m: mujoco.MjModel, qpos_sequence, *, width: int = 640, height: int = 480, segmentation: bool = False,
+           fixed: mujoco.MjvCamera | None = None):
+    """Yields one (height, width, 3) uint8 image per qpos (nq,), the camera following the base (or `fixed`).
 
     With `segmentation`, each image is instead (height, width, 2) int32 of (object id, object type)
     per pixel, as MuJoCo's segmentation rendering gives it (-1 where nothing is drawn).
@@ -60,15 +72,15 @@ def frames(m: mujoco.MjModel, qpos_sequence, *, width: int = 640, height: int = 
         for qpos in qpos_sequence:
             d.qpos[:] = qpos
             mujoco.mj_kinematics(m, d)
-            renderer.update_scene(d, camera=camera(d.qpos[:3]))
+            renderer.update_scene(d, camera=fixed or camera(d.qpos[:3]))
             yield renderer.render().copy()
     finally:
         renderer.close()  # free the GL context now, not in a destructor at interpreter exit
 
 
-def still(m: mujoco.MjModel, qpos, **size) -> np.ndarray:
-    """One picture of the robot at `qpos`."""
-    return next(frames(m, [qpos], **size))
+def still(m: mujoco.MjModel, qpos, **options) -> np.ndarray:
+    """One picture of the robot at `qpos` (`frames`' options)."""
+    return next(frames(m, [qpos], **options))
 
 
 def robot_pixels(m: mujoco.MjModel, qpos, **size) -> np.ndarray:
@@ -162,8 +174,9 @@ def main(argv=None) -> int:
         if args.still is not None:
             import imageio.v2 as imageio
 
+            view = None if physics.ground.is_flat else ground_camera()  # on a terrain, the still shows the ground
             with files.partial(args.still):  # a stopped run leaves no half-written image
-                imageio.imwrite(args.still, still(m, robot.stance_qpos(physics.mj_model), **size))
+                imageio.imwrite(args.still, still(m, robot.stance_qpos(physics.mj_model), fixed=view, **size))
             print(f"wrote {args.still}")
         if args.video is not None:
             qpos = simulate_qpos(args, batch)

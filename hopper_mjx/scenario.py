@@ -27,8 +27,7 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from hopper_mjx import registry
-
-FLAT = "flat"  # the ground every instance stands on today; terrain fills this field in
+from hopper_mjx.terrain import FLAT, Ground
 
 
 class Built(NamedTuple):
@@ -45,7 +44,7 @@ class Physics:
 
     urdf: str | None = None  # the robot (None: the shipped seed monoped)
     model_options: dict = field(default_factory=dict)  # keywords of model.load a world sets: timestep, friction
-    ground: str = FLAT
+    ground: Ground = FLAT  # every instance on this ground (`terrain.parse` of a --terrain spec)
     variation: None = None  # per-instance robot parameters: none yet, every instance is the URDF's robot
     engine: str = registry.DEFAULT_ENGINE
     motor: str = registry.DEFAULT_MOTOR  # a registry.MOTORS name: what the joints' motors are (hopper_mjx.actuators)
@@ -67,13 +66,13 @@ class Physics:
         """The compiled MuJoCo model: compiled on first use, once (the checks and the build share it)."""
         from hopper_mjx import model
 
-        return model.load(self.urdf, **self.model_options)
+        return model.load(self.urdf, terrain=self.ground.terrain(), **self.model_options)
 
     def spec(self):
         """A fresh editable `MjSpec` of the same model, for what only pictures add to it."""
         from hopper_mjx import model
 
-        return model.build_spec(self.urdf, **self.model_options)
+        return model.build_spec(self.urdf, terrain=self.ground.terrain(), **self.model_options)
 
     def sim(self, *, chunk: int = 256, devices=None):
         """The batched core (hopper_mjx.sim.Sim) on this physics' model and engine."""
@@ -92,9 +91,10 @@ class Physics:
         """The command-line options that give this physics but its engine (`cli.add_physics_options`'),
         for a child process; of a world's model options only the timestep has a flag."""
         extra = set(self.model_options) - {"timestep"}
-        if extra or self.ground != FLAT or self.variation is not None:
-            raise ValueError(f"this physics has no command-line form ({', '.join(sorted(extra)) or 'ground'})")
+        if extra or self.variation is not None:
+            raise ValueError(f"this physics has no command-line form ({', '.join(sorted(extra)) or 'variation'})")
         return ((["--urdf", str(self.urdf)] if self.urdf else [])
+                + (["--terrain", str(self.ground)] if not self.ground.is_flat else [])
                 + (["--timestep", repr(self.timestep)] if "timestep" in self.model_options else [])
                 + (["--motor", self.motor] if self.motor != registry.DEFAULT_MOTOR else [])
                 + (["--action-delay", repr(self.action_delay * 1e3)] if self.action_delay else [])

@@ -238,6 +238,7 @@ def main(argv=None) -> int:
 
     try:
         checked = cli.check_batch(args)
+        cli.refuse_terrain(checked.physics.ground, "view (it draws the instances side by side, not where they are)")
         if not 1 <= args.show <= SHOWN:
             raise ValueError(f"--show must be in 1..{SHOWN}, got {args.show}")
         shown = spread(len(checked.gravity), args.show)

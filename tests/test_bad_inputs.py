@@ -104,6 +104,26 @@ CASES = [
     ("simulate", ["--push", "0,0.3"], "--push interval must be finite and > 0, got 0"),
     ("simulate", ["--push", "0.0005,0.3"], "--push: the push interval must be a whole number (>= 1) of physics"),
     ("sweep", ["gravity", "--push", "1,-0.2", "--out", "s"], "--push speed must be finite and >= 0, got -0.2"),
+    # Terrain specs: a name, its keys and their values, the heightmap's file, the grid's memory at N.
+    ("simulate", ["--terrain", "hills"], "--terrain: unknown terrain 'hills'; choose from: flat, rough, steps,"),
+    ("simulate", ["--terrain", "rough:amp=0.03,bumps=2"], "--terrain: rough has no key 'bumps'; it takes amp,"),
+    ("simulate", ["--terrain", "rough:amp=nan"], "--terrain: amp=nan must be finite"),
+    ("render", ["--still", "s.png", "--terrain", "obstacle:height=-0.1"], "--terrain: height=-0.1 must be >= 0 m"),
+    ("view", ["--terrain", "crater:radius=0"], "--terrain: radius=0 must be > 0 m"),
+    ("ros.record", ["--terrain", "steps:size=4xq", "--out", "r.bag"], "--terrain: size=q is not a number"),
+    ("model", ["--export", "m.xml", "--terrain", "heightmap:a_file,size=4x4"], "--terrain: a_file is not a PNG image"),
+    ("model", ["--export", "m.xml", "--terrain", "heightmap:corrupt.png"], "corrupt.png is not a readable PNG image"),
+    ("model", ["--export", "m.xml", "--terrain", "heightmap:nothere.png"], "heightmap nothere.png: no such file"),
+    ("model", ["--export-urdf", "-", "--terrain", "rough"], "--terrain goes with --export"),
+    ("simulate", ["--terrain", "rough:cell=0.002", "--num", "30000"], "--terrain rough:cell=0.002, --num: 90,000 "
+                                                                       "instances would need about"),
+    ("simulate", ["--terrain", "rough:cell=0.0001"], "--terrain: a 40001 x 40001 grid has 1,600,080,001 vertices"),
+    ("simulate", ["--terrain", "steps", "--engine", "chain"], "--engine chain runs on the flat floor only, for now"),
+    ("perf.bench", ["--terrain", "steps", "--engine", "chain"], "--engine chain runs on the flat floor only"),
+    ("sweep", ["gravity", "--terrain", "rough", "--out", "s"], "--terrain: a sweep runs on the flat ground only"),
+    ("perf.profile", ["--terrain", "crater:rim=-1", "--engine", "mjx"], "--terrain: rim=-1 must be >= 0 m"),
+    ("simulate", ["--terrain", "obstacle:height=0.2,x=-0.05"], "--terrain obstacle:height=0.2,x=-0.05: the ground "
+                                                               "within 0.1 m of the start rises to 0.200 m"),
 ]
 
 
@@ -116,6 +136,9 @@ def prepare(folder: Path) -> None:
     (folder / "binary.urdf").write_bytes(b"\x89PNG\r\n\x1a\n\xff\xfe\x00")
     (folder / "lone").mkdir()
     (folder / "lone" / "x.mcap").write_bytes(b"\x89MCAP0\r\n")
+    # a PNG whose header says 64 x 64 grey, cut off before its pixels
+    (folder / "corrupt.png").write_bytes(b"\x89PNG\r\n\x1a\n\x00\x00\x00\rIHDR\x00\x00\x00@\x00\x00\x00@\x08\x00"
+                                         b"\x00\x00\x00\xe5\xb7\xcc\x1b\x00\x00\x00\x05IDATxx")
 
 
 def listing(folder: Path) -> dict[str, tuple[int, int]]:

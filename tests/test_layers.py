@@ -17,6 +17,7 @@ LAYERS = (
     ("command",),  # what a command's process sets up: interrupts, stderr
     ("startup",),  # what precedes importing MuJoCo
     ("checks", "runtime"),  # checks: the command line's value, path and name checks
+    ("terrain",),  # height grids, their spec and their MuJoCo hfield; the height scan
     ("model",),
     ("engine",),
     ("signals",),

@@ -67,6 +67,23 @@ def test_still_png_cli_is_not_blank(tmp_path):
     assert done.stdout == f"wrote {path}\n"  # nothing else on stdout (no library import notices)
 
 
+def test_a_still_on_a_terrain_draws_the_ground(tmp_path):
+    """The same view of a 0.3 m block and of the level grid it stands on: the block shows (the pictures'
+    model is the simulated one, height field included), and where it stands, ahead of the robot."""
+    images = []
+    for height in (0.3, 0.0):
+        path = tmp_path / f"block{height}.png"
+        done = run_cli("--still", str(path), "--size", f"{WIDTH}x{HEIGHT}", "--terrain", f"obstacle:height={height}")
+        assert done.returncode == 0, done.stderr[-3000:]
+        images.append(iio.imread(path)[..., :3].astype(int))
+    changed = np.abs(images[0] - images[1]).max(axis=-1) > 30
+    assert changed.mean() > 0.01
+    cols = np.nonzero(changed)[1]
+    # +x is to the right: the robot (x = 0) stands at about a quarter of the width, the camera looks at
+    # x = 0.8, and the block (x = 0.6..0.7) is drawn just left of the middle.
+    assert 0.35 * WIDTH < np.median(cols) < 0.5 * WIDTH
+
+
 def test_video_cli_without_display_or_gl_variable(tmp_path):
     """The whole `--video` path (simulate, then render) on a headless machine; a Moon drop
     under `none` keeps the compiled rollout small. The falling robot moves down the frame."""

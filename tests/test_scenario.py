@@ -19,7 +19,29 @@ def test_the_command_line_builds_the_whole_scenario():
     np.testing.assert_allclose(s.gravity[:, 2], [-9.81] * 3 + [-1.62] * 3)  # gravity-major
     assert (s.controller, s.height, s.speed, s.seed, s.physics.engine, s.timestep) == ("raibert", 0.12, (0.3, 0.0),
                                                                                       5, "mjx", 0.002)
-    assert s.physics.urdf is None and s.physics.ground == "flat" and s.physics.variation is None
+    assert s.physics.urdf is None and s.physics.ground.is_flat and s.physics.variation is None
+
+
+def test_the_terrain_spec_is_the_scenarios_ground(tmp_path):
+    s = scenario_of(["--terrain", "obstacle:height=0.12,x=0.8", "--engine", "mjx"])
+    ground = s.physics.ground
+    assert ground.name == "obstacle" and dict(ground.values) == {"height": 0.12, "x": 0.8, "length": 0.1}
+    assert str(s.physics.ground) == "obstacle:height=0.12,x=0.8,length=0.1,size=4x4,cell=0.04"
+    (tmp_path / "rough.yaml").write_text("terrain: rough:amp=0.02,seed=3\nengine: auto\n")
+    s = scenario_of(["--scenario", str(tmp_path / "rough.yaml")])
+    ground = s.physics.ground
+    assert ground.name == "rough" and dict(ground.values)["seed"] == 3 and s.physics.engine == "auto"
+    heights = s.physics.ground.terrain().heights
+    assert np.abs(heights).max() == pytest.approx(0.02) and heights.shape == (101, 101)
+    import imageio.v3 as iio
+
+    (tmp_path / "maps").mkdir()
+    iio.imwrite(tmp_path / "maps" / "g.png", np.full((3, 4), 255, np.uint8))
+    (tmp_path / "hm.yaml").write_text("terrain: heightmap:maps/g.png,height=0.04\n")  # from the file's folder
+    s = scenario_of(["--scenario", str(tmp_path / "hm.yaml")])
+    assert s.physics.ground.path == str(tmp_path / "maps" / "g.png") and s.physics.ground.shape == (3, 4)
+    assert s.physics.ground.start_height() == pytest.approx(0.04)  # the cell around the start, however coarse
+    np.testing.assert_allclose(s.physics.ground.terrain().heights, 0.04)
 
 
 def test_a_scenario_file_sets_options_and_the_command_line_wins(tmp_path):

@@ -1,13 +1,15 @@
-"""python -m hopper_mjx.model --export monoped.xml [--urdf PATH] [--timestep S]
+"""python -m hopper_mjx.model --export monoped.xml [--urdf PATH] [--timestep S] [--terrain SPEC]
 python -m hopper_mjx.model --export-urdf monoped_display.urdf [--urdf PATH] [--frame-prefix monoped_0/]   (- for stdout)
 
---export writes the simulated model as MJCF; --export-urdf writes the URDF the simulation loads,
-with colours and resolvable mesh paths, for a viewer such as Foxglove's 3D panel."""
+--export writes the simulated model as MJCF (on a terrain, its height field's data beside it in
+FILE_terrain.bin, MuJoCo's binary hfield format, which MuJoCo reads back exactly); --export-urdf writes
+the URDF the simulation loads, with colours and resolvable mesh paths, for a viewer such as Foxglove's 3D panel."""
 
 import sys
 
 from hopper_mjx import checks, command
 from hopper_mjx.model.checks import check_urdf
+from hopper_mjx.terrain.spec import check_terrain, terrain_help
 
 
 def export_urdf(args) -> int:
@@ -32,26 +34,30 @@ def main(argv=None) -> int:
     parser.add_argument("--frame-prefix", default="", metavar="PREFIX",
                         help="with --export-urdf: prefix every link name (monoped_0/: a robot of a multi-robot stream)")
     parser.add_argument("--timestep", type=float, default=checks.DEFAULT_TIMESTEP, help="physics step, s")
+    parser.add_argument("--terrain", default="flat", metavar="SPEC", help=terrain_help())
     args = parser.parse_args(argv)
     try:
         if args.export_urdf is not None:
+            if args.terrain != "flat":
+                raise ValueError("--terrain goes with --export; a URDF holds the robot, not the ground")
             if args.export_urdf != "-":
                 checks.check_writable("--export-urdf", args.export_urdf)
             check_urdf(args.urdf)
             return export_urdf(args)
         checks.check_writable("--export", args.export)
         checks.check_range("--timestep", args.timestep, low=0, high=checks.MAX_TIMESTEP, open_low=True)
+        ground = check_terrain(args.terrain)
         check_urdf(args.urdf)
         from hopper_mjx.model.loader import build_spec
+        from hopper_mjx.terrain import write_mjcf
 
-        spec = build_spec(args.urdf, timestep=args.timestep)
+        spec = build_spec(args.urdf, timestep=args.timestep, terrain=ground.terrain())
         model = spec.compile()
-    except ValueError as err:  # includes URDFError
+    except ValueError as err:  # includes URDFError and TerrainError
         return checks.fail(err)
-    with open(args.export, "w") as f:
-        f.write(spec.to_xml())
-    print(f"wrote {args.export}: {model.nbody - 1} bodies, {model.njnt} joints, "
-          f"{model.nu} motors, {model.nsensor} sensors, mass {model.body_mass.sum():.3f} kg")
+    written = write_mjcf(spec, args.export)
+    print(f"wrote {', '.join(written)}: {model.nbody - 1} bodies, {model.njnt} joints, "
+          f"{model.nu} motors, {model.nsensor} sensors, mass {model.body_mass.sum():.3f} kg, ground {ground}")
     return 0
 
 

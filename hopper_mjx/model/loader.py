@@ -2,9 +2,9 @@
 
 The URDF is first checked here, so that a bad file fails with a message that
 names the problem; MuJoCo's own URDF parser then builds an `MjSpec`, to which
-the simulation-only parts are added: a free-floating base, a ground plane,
-explicit foot/base-ground contact pairs, an IMU site, native MuJoCo sensors
-(for users of the exported MJCF) and one torque motor per transmission.
+the simulation-only parts are added: a free-floating base, the ground (a plane, or a
+terrain's height field), explicit foot/base-ground contact pairs, an IMU site, native
+MuJoCo sensors (for users of the exported MJCF) and one torque motor per transmission.
 """
 
 from __future__ import annotations
@@ -17,6 +17,7 @@ from pathlib import Path
 
 import mujoco
 
+from hopper_mjx import terrain as terrains
 from hopper_mjx.checks import MAX_TIMESTEP
 
 DEFAULT_URDF = Path(__file__).with_name("monoped.urdf")
@@ -261,10 +262,22 @@ def describe(urdf_text: str, source: str = "<string>") -> LegDescription:
     )
 
 
+def _add_floor(spec: mujoco.MjSpec, terrain: terrains.Terrain | None) -> None:
+    """The ground: MuJoCo's plane, or `terrain`'s height field in its place (the same name, so the same pairs)."""
+    floor = spec.worldbody.add_geom(
+        name=FLOOR_GEOM, type=mujoco.mjtGeom.mjGEOM_PLANE, size=[0, 0, 0.05], contype=0, conaffinity=0
+    )
+    if terrain is not None:
+        terrains.to_spec(spec, floor, terrain)
+
+
 def build_spec(urdf: str | os.PathLike | None = None, *, timestep: float = DEFAULT_TIMESTEP,
-               friction: tuple[float, float] = (FOOT_FRICTION, FOOT_FRICTION)) -> mujoco.MjSpec:
+               friction: tuple[float, float] = (FOOT_FRICTION, FOOT_FRICTION),
+               terrain: terrains.Terrain | None = None) -> mujoco.MjSpec:
     """The monoped as an editable `MjSpec`, with everything the simulation adds. `friction`: the foot-floor
-    contact's two sliding coefficients (Gazebo's mu, mu2), which a world file sets (`hopper_mjx.model.world`)."""
+    contact's two sliding coefficients (Gazebo's mu, mu2), which a world file sets (`hopper_mjx.model.world`).
+    `terrain`: a height grid the floor becomes (`terrain.to_spec`), keeping its name and contact pairs;
+    None keeps the plane."""
     path = Path(urdf) if urdf is not None else DEFAULT_URDF
     if not (isinstance(timestep, (int, float)) and math.isfinite(timestep) and 0 < timestep <= MAX_TIMESTEP):
         raise ValueError(f"timestep must be in (0, {MAX_TIMESTEP:g}] s, got {timestep!r}")
@@ -293,9 +306,7 @@ def build_spec(urdf: str | os.PathLike | None = None, *, timestep: float = DEFAU
 
     world = spec.worldbody
     world.add_light(name="sun", pos=[0, 0, 4], dir=[0, 0, -1], type=mujoco.mjtLightType.mjLIGHT_DIRECTIONAL)
-    world.add_geom(
-        name=FLOOR_GEOM, type=mujoco.mjtGeom.mjGEOM_PLANE, size=[0, 0, 0.05], contype=0, conaffinity=0
-    )
+    _add_floor(spec, terrain)
 
     # Robot geoms collide only through explicit pairs: foot-floor while hopping,
     # base-floor after a fall. The leg links never reach the floor before the base does.
@@ -344,9 +355,11 @@ def build_spec(urdf: str | os.PathLike | None = None, *, timestep: float = DEFAU
 
 
 def load(urdf: str | os.PathLike | None = None, *, timestep: float = DEFAULT_TIMESTEP,
-         friction: tuple[float, float] = (FOOT_FRICTION, FOOT_FRICTION)) -> mujoco.MjModel:
-    """Compiles a monoped URDF (default: the shipped seed monoped) to an `MjModel`."""
-    spec = build_spec(urdf, timestep=timestep, friction=friction)
+         friction: tuple[float, float] = (FOOT_FRICTION, FOOT_FRICTION),
+         terrain: terrains.Terrain | None = None) -> mujoco.MjModel:
+    """Compiles a monoped URDF (default: the shipped seed monoped) to an `MjModel`, on `terrain` (a
+    `hopper_mjx.terrain.Terrain`; None: the flat plane)."""
+    spec = build_spec(urdf, timestep=timestep, friction=friction, terrain=terrain)
     try:
         return spec.compile()
     except ValueError as err:

@@ -227,6 +227,7 @@ def run(num: int, steps: int, *, controller: str = "hold", chunk: int = 256, rep
         "steps": steps,
         "controller": controller,
         "engine": sim.engine.name,
+        "terrain": str(physics.ground),
         "native_controller": "none" if controller == "none" else "hold",
         "timestep": physics.timestep,
         "core_steps_per_s": core_rate,
@@ -382,8 +383,9 @@ def check(args) -> tuple[list[int] | None, Physics]:
         raise ValueError(f"--controller: {err}") from None
     if args.json:
         cli.check_writable("--json", args.json)
+    sizes = [args.num] + (cli.parse_indices(args.scaling, "--scaling") if args.scaling else [])
     physics = cli.check_physics(argparse.Namespace(**vars(args) | {"engine": engines[0]}),
-                                {"timestep": args.timestep}, engines=engines)
+                                {"timestep": args.timestep}, engines=engines, n=2 * max(sizes))  # both sides' heights
     cli.check_ideal_motors(physics, "perf.bench (native MuJoCo has no twin of them)")
     if args.plot and not args.scaling:
         raise ValueError("--plot draws the --scaling records: give --scaling N1,N2,... too")

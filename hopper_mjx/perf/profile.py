@@ -125,7 +125,7 @@ def measure(num: int, steps: int, settle: int, physics: Physics = Physics()) -> 
     controller = hold(sim.layout)
     state = sim.reset(gravity_vectors(np.linspace(*GRAVITY_SPAN, num)), controller=controller)
     standing, _ = sim.rollout(state, controller, steps=settle)
-    record = {"num": num, "steps": steps, "engine": sim.engine.name}
+    record = {"num": num, "steps": steps, "engine": sim.engine.name, "terrain": str(physics.ground)}
     if sim.engine.name == "chain":
         return record | {"us": chain_costs(sim.engine, standing.data.qpos, standing.data.qvel, standing.gravity, steps)}
     costs = {}
@@ -149,7 +149,8 @@ def table(record: dict) -> str:
         ("smooth dynamics (kinematics .. integration)", us["no constraints"]),
     )
     head = (f"{record['num']} standing instances on one device, {record['steps']} steps, engine mjx, "
-            f"{record['constraint_rows']} constraint rows per instance")
+            f"{record['constraint_rows']} constraint rows per instance"
+            + ("" if record["terrain"] == "flat" else f", terrain {record['terrain']}"))
     return _lines(head, parts, full)
 
 
@@ -171,7 +172,7 @@ def main(argv=None) -> int:
         if getattr(args, name) < 1:
             return cli.fail(ValueError(f"--{name} must be >= 1, got {getattr(args, name)}"))
     try:
-        physics = cli.check_physics(args)
+        physics = cli.check_physics(args, n=args.num)
     except ValueError as err:
         return cli.fail(err)
     runtime.configure()

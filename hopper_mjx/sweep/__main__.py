@@ -88,6 +88,7 @@ def check(args):
 
     gravity = gravity_from_worlds(args) if args.world is not None else tuple(args.gravity or args.default_gravity)
     physics = cli.check_physics(args)
+    cli.refuse_terrain(physics.ground, "a sweep")
     cli.check_delay(physics, args.duration)
     names = args.controllers.split(",") if args.kind == "compare" else [getattr(args, "controller", "raibert")]
     if len(set(names)) != len(names):

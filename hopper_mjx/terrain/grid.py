@@ -1,0 +1,126 @@
+"""A terrain as a height grid, and the one mapping of that grid onto MuJoCo's height field.
+
+The convention, shared by the generators, the loader, the engines and the height scan:
+a `Terrain` is `heights` (nrow, ncol) in metres and half-extents `size` (hx, hy), centred
+on the world origin, laid out as MuJoCo lays out an hfield: vertex (r, c) sits at
+x = -hx + 2 hx c / (ncol - 1), y = -hy + 2 hy r / (nrow - 1) (rows along +y, columns along +x).
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+HFIELD = "terrain"  # the hfield asset's name in the compiled model
+BASE_DEPTH = 0.1  # m of solid below the lowest vertex (MuJoCo's size[3]); contacts below it are missed
+FLAT_SPAN = 1e-6  # m: MuJoCo refuses an hfield whose elevation range size[2] is 0; a level grid gets this
+
+
+class Terrain(NamedTuple):
+    heights: np.ndarray  # (nrow, ncol) float64, m
+    size: tuple[float, float]  # (hx, hy) half-extents, m
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return self.heights.shape
+
+    def axes(self) -> tuple[np.ndarray, np.ndarray]:
+        """(x of each column (ncol,), y of each row (nrow,)), m."""
+        nrow, ncol = self.heights.shape
+        return (np.linspace(-self.size[0], self.size[0], ncol), np.linspace(-self.size[1], self.size[1], nrow))
+
+
+def vertices(size: tuple[float, float], shape: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
+    """(x, y) of every vertex of a (nrow, ncol) grid of half-extents `size`, each (nrow, ncol)."""
+    nrow, ncol = shape
+    return np.meshgrid(np.linspace(-size[0], size[0], ncol), np.linspace(-size[1], size[1], nrow))
+
+
+class HField(NamedTuple):
+    """A terrain as MuJoCo's hfield takes it: the asset's fields and the geom's height."""
+
+    nrow: int
+    ncol: int
+    size: tuple[float, float, float, float]  # (hx, hy, elevation range, base depth)
+    data: np.ndarray  # (nrow * ncol,) row-major, normalised to [0, 1]
+    z: float  # m: the geom's height, the grid's lowest vertex
+
+
+def hfield(terrain: Terrain) -> HField:
+    """MuJoCo's height of vertex (r, c) is z + data[r * ncol + c] * size[2]; this puts it at heights[r, c]."""
+    h = np.asarray(terrain.heights, dtype=np.float64)
+    low, span = float(h.min()), float(h.max() - h.min())
+    data = (h - low) / span if span > 0 else np.zeros_like(h)
+    nrow, ncol = h.shape
+    return HField(nrow, ncol, (float(terrain.size[0]), float(terrain.size[1]), span if span > 0 else FLAT_SPAN,
+                               BASE_DEPTH), data.ravel(), low)
+
+
+def to_spec(spec, geom, terrain: Terrain) -> None:
+    """Turns `geom` of the MjSpec `spec` into the terrain: an hfield geom over the asset `HFIELD`.
+    Its contact pairs and name are kept."""
+    import mujoco
+
+    f = hfield(terrain)
+    spec.add_hfield(name=HFIELD, nrow=f.nrow, ncol=f.ncol, size=list(f.size), userdata=f.data.tolist())
+    geom.type = mujoco.mjtGeom.mjGEOM_HFIELD
+    geom.hfieldname = HFIELD
+    geom.pos = [0.0, 0.0, f.z]
+
+
+def from_model(mj_model) -> Terrain | None:
+    """The terrain of a compiled model's hfield `HFIELD` (None without one), heights as MuJoCo holds them."""
+    import mujoco
+
+    k = mujoco.mj_name2id(mj_model, mujoco.mjtObj.mjOBJ_HFIELD, HFIELD)
+    if k < 0:
+        return None
+    nrow, ncol = int(mj_model.hfield_nrow[k]), int(mj_model.hfield_ncol[k])
+    adr, size = int(mj_model.hfield_adr[k]), mj_model.hfield_size[k]
+    geom = int(np.flatnonzero((mj_model.geom_type == mujoco.mjtGeom.mjGEOM_HFIELD) & (mj_model.geom_dataid == k))[0])
+    data = np.asarray(mj_model.hfield_data[adr:adr + nrow * ncol], dtype=np.float64).reshape(nrow, ncol)
+    return Terrain(mj_model.geom_pos[geom, 2] + data * size[2], (float(size[0]), float(size[1])))
+
+
+def _exact(values) -> str:
+    return " ".join(repr(float(v)) for v in values)
+
+
+def write_mjcf(spec, path) -> list[str]:
+    """Writes `spec` as MJCF to `path`; an hfield's elevation goes beside it as MuJoCo's binary hfield file
+    (int32 nrow, ncol, then float32 data), because the MJCF's decimal text would round it. Returns the
+    paths written. `from_xml_path` of the file then holds exactly the compiled model's hfield_data."""
+    import xml.etree.ElementTree as ET
+    from pathlib import Path
+
+    import mujoco
+
+    path = Path(path)
+    model = spec.compile()
+    text = spec.to_xml()
+    if model.nhfield == 0:  # nothing to move out: MuJoCo's own text as it is
+        path.write_text(text)
+        return [str(path)]
+    root = ET.fromstring(text)
+    written = []
+    for element in root.iterfind("asset/hfield"):
+        k = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_HFIELD, element.get("name"))
+        nrow, ncol, adr = int(model.hfield_nrow[k]), int(model.hfield_ncol[k]), int(model.hfield_adr[k])
+        data = path.with_name(f"{path.stem}_{element.get('name')}.bin")
+        with open(data, "wb") as f:
+            f.write(np.array([nrow, ncol], dtype="<i4").tobytes())
+            f.write(np.asarray(model.hfield_data[adr:adr + nrow * ncol], dtype="<f4").tobytes())
+        element.attrib.pop("elevation", None)
+        element.attrib.pop("nrow", None)  # the file gives them
+        element.attrib.pop("ncol", None)
+        element.set("file", data.name)
+        element.set("size", _exact(model.hfield_size[k]))  # MuJoCo's text keeps 6 digits
+        for geom in root.iter("geom"):
+            if geom.get("hfield") == element.get("name"):
+                geom.set("pos", _exact(model.geom_pos[mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM,
+                                                                         geom.get("name"))]))
+        written.append(str(data))
+    ET.indent(root)
+    path.write_text(ET.tostring(root, encoding="unicode") + "\n")
+    return [str(path), *written]

@@ -1,0 +1,53 @@
+"""Terrain height where the robot is, in JAX: the surface MuJoCo collides with, and the height scan.
+
+MuJoCo splits each hfield cell into two triangles along the diagonal from vertex (r, c) to
+(r + 1, c + 1) (engine_collision_convex.c, and MJX's `_hfield_collision`); `height_at` interpolates
+on the same triangles, so that a scanned height is the height the foot lands on (bilinear
+interpolation would disagree inside every cell that is not planar). The heights are a run-time
+input (a traced array, one grid per instance if vmapped); the half-extents are static.
+Off the grid, where MuJoCo has no ground, the grid's edge height is returned.
+"""
+
+from __future__ import annotations
+
+import jax.numpy as jnp
+import numpy as np
+
+
+def height_at(heights: jnp.ndarray, size: tuple[float, float], x, y):
+    """Ground height (m) at world (x, y) (any matching shapes) on the grid `heights` (nrow, ncol) of
+    half-extents `size`, on MuJoCo's triangles."""
+    nrow, ncol = heights.shape
+    fc = jnp.clip((x + size[0]) / (2 * size[0]) * (ncol - 1), 0.0, ncol - 1.0)
+    fr = jnp.clip((y + size[1]) / (2 * size[1]) * (nrow - 1), 0.0, nrow - 1.0)
+    c = jnp.clip(jnp.floor(fc), 0, ncol - 2).astype(jnp.int32)
+    r = jnp.clip(jnp.floor(fr), 0, nrow - 2).astype(jnp.int32)
+    u, v = fc - c, fr - r  # within the cell, along +x and +y
+    h00, h10 = heights[r, c], heights[r, c + 1]  # h<dc><dr>
+    h01, h11 = heights[r + 1, c], heights[r + 1, c + 1]
+    upper = h00 + v * (h01 - h00) + u * (h11 - h01)  # triangle (0,0) (1,1) (0,1): v >= u
+    lower = h00 + u * (h10 - h00) + v * (h11 - h10)  # triangle (0,0) (1,0) (1,1): u > v
+    return jnp.where(v >= u, upper, lower)
+
+
+def scan_points(counts: tuple[int, int] = (5, 5), spacing: tuple[float, float] = (0.1, 0.1)) -> np.ndarray:
+    """(K, 2) points of a scan in the base's yaw frame: a grid of counts (along x ahead, along y left)
+    at `spacing` m, centred under the base (legged_gym's measured_heights pattern)."""
+    xs = (np.arange(counts[0]) - (counts[0] - 1) / 2) * spacing[0]
+    ys = (np.arange(counts[1]) - (counts[1] - 1) / 2) * spacing[1]
+    return np.stack(np.meshgrid(xs, ys, indexing="ij"), -1).reshape(-1, 2)
+
+
+def yaw(quat) -> jnp.ndarray:
+    """Heading (rad) of a [w, x, y, z] orientation: the rotation about world z of its x axis."""
+    w, x, y, z = quat[..., 0], quat[..., 1], quat[..., 2], quat[..., 3]
+    return jnp.arctan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
+
+
+def measured_heights(heights: jnp.ndarray, size: tuple[float, float], base_pos, base_quat, points) -> jnp.ndarray:
+    """Ground heights (K,) (m, world z) under the scan `points` (K, 2) placed around the base at
+    `base_pos` (3,) and turned with its yaw only (a tilted base scans the same ground)."""
+    psi = yaw(base_quat)
+    cos, sin = jnp.cos(psi), jnp.sin(psi)
+    px, py = points[:, 0], points[:, 1]
+    return height_at(heights, size, base_pos[0] + cos * px - sin * py, base_pos[1] + sin * px + cos * py)

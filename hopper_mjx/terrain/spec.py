@@ -1,0 +1,264 @@
+"""`--terrain SPEC`: a generator's name and its keys, `name:key=value,...`, parsed and checked whole
+before anything is built (NumPy only: no JAX, no MuJoCo).
+
+    rough:amp=0.03,wavelength=0.4,seed=1
+    obstacle:height=0.15,x=0.6
+    heightmap:ground.png,size=4x4,height=0.3
+
+Every generator but `flat` and `heightmap` also takes `size=LxW` (full extents of the grid, m; one
+number for a square) and `cell` (the grid's spacing, m). A `heightmap` takes its grid from the image.
+"""
+
+from __future__ import annotations
+
+import math
+import struct
+from dataclasses import dataclass
+from pathlib import Path
+from typing import NamedTuple
+
+import numpy as np
+
+from hopper_mjx import registry
+from hopper_mjx.terrain import generators
+from hopper_mjx.terrain.grid import Terrain, vertices
+
+DEFAULT_SIZE = (4.0, 4.0)  # m, full extents: a hopping robot stays on it for seconds (no contact off the grid)
+DEFAULT_CELL = 0.04  # m: a fifth of the foot's approach in a hop, and ~100 x 100 vertices on 4 m
+MAX_VERTICES = 4096 * 4096  # per grid: 128 MiB of float64 heights; a larger grid is not a terrain for a monoped
+MAX_SEED = 2**32 - 1
+PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+
+
+class Key(NamedTuple):
+    name: str  # as the user types it
+    default: float
+    kind: str  # "length" (> 0), "height" (>= 0), "position" (any, m along +x), "count" (integer >= 1), "seed"
+    arg: str = ""  # the generator's keyword, when it differs from `name`
+
+
+GRID_KEYS = (Key("size", DEFAULT_SIZE[0], "length"), Key("cell", DEFAULT_CELL, "length"))
+KEYS = {
+    "flat": (),
+    "rough": (Key("amp", 0.03, "height"), Key("wavelength", 0.4, "length"), Key("seed", 0, "seed")),
+    "steps": (Key("height", 0.05, "height"), Key("depth", 0.5, "length"), Key("x", 0.5, "position", "x0")),
+    "stairs": (Key("height", 0.05, "height"), Key("depth", 0.3, "length"), Key("n", 4, "count"),
+               Key("x", 0.5, "position", "x0")),
+    "gaps": (Key("width", 0.1, "length"), Key("spacing", 0.5, "length"), Key("depth", 0.2, "length"),
+             Key("x", 0.5, "position", "x0")),
+    "obstacle": (Key("height", 0.15, "height"), Key("x", 0.6, "position", "x0"), Key("length", 0.1, "length")),
+    "crater": (Key("radius", 0.5, "length"), Key("depth", 0.1, "height"), Key("rim", 0.03, "height"),
+               Key("x", 0.0, "position", "x0")),
+    "heightmap": (Key("size", DEFAULT_SIZE[0], "length"), Key("height", 0.3, "height")),
+}
+assert list(KEYS) == list(registry.TERRAINS)  # one list of names
+
+
+class TerrainError(ValueError):
+    """A --terrain spec that cannot describe a terrain; the message is one line."""
+
+
+@dataclass(frozen=True)
+class Ground:
+    """A parsed terrain spec: the generator, every key's value (defaults filled in), the heightmap's PNG."""
+
+    name: str = "flat"
+    values: tuple[tuple[str, float], ...] = ()
+    size: tuple[float, float] = DEFAULT_SIZE  # full extents, m
+    cell: float = DEFAULT_CELL
+    path: str | None = None
+
+    def __str__(self) -> str:
+        items = [self.path] if self.path else []
+        items += [f"{k}={v:g}" for k, v in self.values]
+        if self.name != "flat":
+            items.append(f"size={self.size[0]:g}x{self.size[1]:g}")
+        if self.name not in ("flat", "heightmap"):
+            items.append(f"cell={self.cell:g}")
+        return self.name + (":" + ",".join(items) if items else "")
+
+    @property
+    def is_flat(self) -> bool:
+        return self.name == "flat"
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        """(nrow, ncol) of the grid; (0, 0) for the flat plane."""
+        if self.is_flat:
+            return (0, 0)
+        if self.path:
+            width, height = png_header(self.path)[:2]
+            return (height, width)
+        return (round(self.size[1] / self.cell) + 1, round(self.size[0] / self.cell) + 1)
+
+    def start_height(self, reach: float = 0.1) -> float:
+        """The highest vertex within `reach` m (in x and y; at least the cell around it) of the origin, where
+        every instance starts."""
+        t = self.terrain()
+        if t is None:
+            return 0.0
+        xs, ys = t.axes()
+        near_x, near_y = np.abs(xs) <= max(reach, xs[1] - xs[0]), np.abs(ys) <= max(reach, ys[1] - ys[0])
+        return float(t.heights[near_y[:, None] & near_x[None, :]].max())
+
+    def terrain(self) -> Terrain | None:
+        """The height grid (None for flat: the ground stays MuJoCo's infinite plane)."""
+        if self.is_flat:
+            return None
+        half = (self.size[0] / 2, self.size[1] / 2)
+        values = dict(self.values)
+        if self.path:
+            return Terrain(generators.heightmap(read_png(self.path), height=values["height"]), half)
+        x, y = vertices(half, self.shape)
+        args = {k.arg or k.name: (int(values[k.name]) if k.kind in ("count", "seed") else values[k.name])
+                for k in KEYS[self.name]}
+        return Terrain(getattr(generators, self.name)(x, y, **args), half)
+
+
+FLAT = Ground()
+
+
+def _number(key: Key, text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise TerrainError(f"{key.name}={text} is not a number") from None
+    if key.kind in ("count", "seed"):
+        if not (math.isfinite(value) and value == int(value)):
+            raise TerrainError(f"{key.name}={text} must be a whole number")
+        top = MAX_SEED if key.kind == "seed" else 10_000
+        low = 0 if key.kind == "seed" else 1
+        if not low <= value <= top:
+            raise TerrainError(f"{key.name}={text} must be in {low}..{top}")
+        return int(value)
+    if not math.isfinite(value):
+        raise TerrainError(f"{key.name}={text} must be finite")
+    if key.kind == "length" and value <= 0:
+        raise TerrainError(f"{key.name}={text} must be > 0 m")
+    if key.kind == "height" and value < 0:
+        raise TerrainError(f"{key.name}={text} must be >= 0 m")
+    return value
+
+
+def _size(text: str) -> tuple[float, float]:
+    parts = text.lower().split("x")
+    if len(parts) not in (1, 2):
+        raise TerrainError(f"size={text} must be LxW or one length, in m")
+    lengths = tuple(_number(GRID_KEYS[0], p) for p in parts)
+    return lengths * 2 if len(lengths) == 1 else lengths
+
+
+def parse(text: str) -> Ground:
+    """The Ground a spec describes; TerrainError (one line) for a mistake. A heightmap's PNG is opened
+    and its header read (not its pixels)."""
+    name, _, rest = text.strip().partition(":")
+    try:
+        registry.check("terrain", registry.TERRAINS, name)
+    except ValueError as err:
+        raise TerrainError(str(err)) from None
+    keys = {k.name: k for k in KEYS[name]}
+    grid = {} if name in ("flat", "heightmap") else {k.name: k for k in GRID_KEYS}
+    known = [*keys, *(k for k in grid if k not in keys)]
+    values, size, cell, path, seen = {}, DEFAULT_SIZE, DEFAULT_CELL, None, set()
+    for item in filter(None, (i.strip() for i in rest.split(","))):
+        key, eq, value = item.partition("=")
+        key = key.strip()
+        if not eq and name == "heightmap" and path is None:
+            path = check_png(item)
+            continue
+        if not eq:
+            raise TerrainError(f"{item!r} is not key=value" + (f"; {name} takes {', '.join(known)}" if known else ""))
+        if key not in keys and key not in grid:
+            raise TerrainError(f"{name} has no key {key!r}" + (f"; it takes {', '.join(known)}" if known
+                                                               else "; it takes none"))
+        if key in seen:
+            raise TerrainError(f"{key} is given twice")
+        seen.add(key)
+        if key == "size":
+            size = _size(value.strip())
+        elif key == "cell":
+            cell = _number(grid["cell"], value.strip())
+        else:
+            values[key] = _number(keys[key], value.strip())
+    if name == "heightmap" and path is None:
+        raise TerrainError("heightmap needs a PNG file: heightmap:FILE.png,size=4x4,height=0.3")
+    filled = tuple((k.name, values.get(k.name, k.default)) for k in KEYS[name] if k.name != "size")
+    ground = Ground(name, filled, size, cell, path)
+    if name not in ("flat", "heightmap"):
+        for extent in size:
+            if cell > extent:
+                raise TerrainError(f"cell={cell:g} m is larger than the grid's extent {extent:g} m")
+    if name == "gaps" and dict(filled)["width"] >= dict(filled)["spacing"]:
+        raise TerrainError(f"gaps: width={dict(filled)['width']:g} must be less than spacing="
+                           f"{dict(filled)['spacing']:g}")
+    nrow, ncol = ground.shape
+    if nrow * ncol > MAX_VERTICES:
+        raise TerrainError(f"a {nrow} x {ncol} grid has {nrow * ncol:,} vertices; at most {MAX_VERTICES:,} "
+                           "(a larger cell or a smaller image)")
+    if path and (nrow < 2 or ncol < 2):
+        raise TerrainError(f"{path} is {ncol} x {nrow} pixels; a height field needs at least 2 x 2")
+    return ground
+
+
+def png_header(path: str) -> tuple[int, int, int, int]:
+    """(width, height, bit depth, colour type) from a PNG's IHDR; TerrainError if it is not a PNG."""
+    try:
+        with open(path, "rb") as f:
+            head = f.read(33)
+    except OSError as err:
+        raise TerrainError(f"cannot read the heightmap {path}: {err.strerror}") from None
+    if head[:8] != PNG_SIGNATURE or head[12:16] != b"IHDR" or len(head) < 33:
+        raise TerrainError(f"{path} is not a PNG image")
+    return struct.unpack(">IIBB", head[16:26])
+
+
+def check_png(text: str) -> str:
+    path = Path(text)
+    if not path.is_file():
+        raise TerrainError(f"heightmap {text}: {'is a folder, not a file' if path.is_dir() else 'no such file'}")
+    width, height, depth, colour = png_header(text)
+    if depth not in (8, 16) or colour not in (0, 2, 4, 6):  # grey, RGB, grey + alpha, RGBA; no palettes
+        raise TerrainError(f"{text}: a heightmap must be an 8- or 16-bit greyscale (or RGB) PNG")
+    return text
+
+
+def read_png(path: str) -> np.ndarray:
+    """A PNG's pixels as grey values in [0, 1] (rows top to bottom); colour is averaged. TerrainError if
+    the file is damaged."""
+    import imageio.v3 as iio
+
+    try:
+        image = np.asarray(iio.imread(path, extension=".png"))
+    except Exception as err:  # imageio and Pillow raise many kinds for a damaged file
+        raise TerrainError(f"{path} is not a readable PNG image: {str(err).splitlines()[0] if str(err) else err}")\
+            from None
+    top = 65535.0 if image.dtype == np.uint16 else 255.0
+    if image.ndim == 3:
+        image = image[..., : 3 if image.shape[-1] >= 3 else 1].mean(-1)
+    return image.astype(np.float64) / top
+
+
+def terrain_help() -> str:
+    """The --terrain option's help text, from the registry."""
+    return (f"the ground: NAME[:KEY=VALUE,...], NAME one of {registry.listed(registry.TERRAINS)}; e.g. "
+            "rough:amp=0.03,wavelength=0.4,seed=1, obstacle:height=0.15,x=0.6, heightmap:ground.png,size=4x4,"
+            "height=0.3 (keys: docs/terrain.md; default flat)")
+
+
+def check_terrain(text: str, n: int = 1) -> Ground:
+    """--terrain parsed, and its grid checked to fit in memory for `n` instances (each may hold its own copy
+    of the heights once terrain varies per instance); ValueError '--terrain: ...' in one line."""
+    from hopper_mjx import budget
+
+    try:
+        ground = parse(text)
+    except TerrainError as err:
+        raise ValueError(f"--terrain: {err}") from None
+    nrow, ncol = ground.shape
+    budget.check_memory(f"--terrain {text}" + (", --num" if n > 1 else ""), n, held_floats=nrow * ncol)
+    if ground.path:  # decoded now, once it is known to fit: a damaged image is refused before anything is built
+        try:
+            read_png(ground.path)
+        except TerrainError as err:
+            raise ValueError(f"--terrain: {err}") from None
+    return ground

@@ -1,0 +1,171 @@
+"""Terrain: the generators' shapes, the spec, the grid -> MuJoCo hfield mapping (checked with MuJoCo C's own
+rays and PNG reader), and the exported MJCF reloading the same heights."""
+
+import mujoco
+import numpy as np
+import pytest
+
+from hopper_mjx import model, registry, terrain
+from hopper_mjx.model import __main__ as model_main
+from hopper_mjx.terrain import generators
+from hopper_mjx.terrain.spec import KEYS
+
+SPECS = {  # one of each generator but flat and heightmap
+    "rough": "rough:amp=0.03,wavelength=0.4,seed=1",
+    "steps": "steps:height=0.05,depth=0.5,x=0.5",
+    "stairs": "stairs:height=0.04,depth=0.25,n=3,x=0.3",
+    "gaps": "gaps:width=0.12,spacing=0.5,depth=0.2,x=0.5",
+    "obstacle": "obstacle:height=0.15,x=0.6",
+    "crater": "crater:radius=0.5,depth=0.1,rim=0.03,x=1",
+}
+
+
+def ray_heights(mj_model, xy):
+    """MuJoCo C's surface height at each (x, y): a ray cast straight down onto the floor."""
+    d = mujoco.MjData(mj_model)
+    d.qpos[2] = 100.0  # the robot out of the rays' way
+    mujoco.mj_forward(mj_model, d)
+    geom = np.zeros(1, np.int32)
+    out = []
+    for x, y in xy:
+        dist = mujoco.mj_ray(mj_model, d, np.array([x, y, 5.0]), np.array([0.0, 0.0, -1.0]), None, 1, -1, geom)
+        assert dist >= 0 and mj_model.geom(int(geom[0])).name == model.FLOOR_GEOM
+        out.append(5.0 - dist)
+    return np.array(out)
+
+
+def test_every_registered_generator_has_its_keys():
+    assert list(KEYS) == list(registry.TERRAINS) and set(SPECS) | {"flat", "heightmap"} == set(KEYS)
+
+
+def test_rough_is_zero_mean_peaks_at_amp_and_follows_its_seed():
+    t = terrain.parse(SPECS["rough"]).terrain()
+    assert abs(t.heights.mean()) < 1e-12 and np.abs(t.heights).max() == pytest.approx(0.03, rel=1e-12)
+    again = terrain.parse(SPECS["rough"]).terrain()
+    other = terrain.parse("rough:amp=0.03,wavelength=0.4,seed=2").terrain()
+    assert np.array_equal(t.heights, again.heights) and np.abs(t.heights - other.heights).max() > 0.01
+    # The wavelength sets the slope: peak |dh/dx| ~ 2 pi amp / wavelength, within the waves' spread.
+    x, _ = t.axes()
+    slope = np.abs(np.diff(t.heights, axis=1)).max() / (x[1] - x[0])
+    assert 0.3 * 2 * np.pi * 0.03 / 0.4 < slope < 3 * 2 * np.pi * 0.03 / 0.4
+
+
+def test_shapes_sit_where_their_keys_put_them():
+    def height_at(spec, x, y=0.0):
+        t = terrain.parse(spec).terrain()
+        xs, ys = t.axes()
+        return t.heights[np.argmin(abs(ys - y)), np.argmin(abs(xs - x))]
+
+    for x, h in ((0.0, 0), (0.48, 0), (0.52, 0.05), (0.96, 0.05), (1.04, 0)):
+        assert height_at(SPECS["steps"], x) == pytest.approx(h)
+    # stairs: 3 risers of 0.04 m up every 0.25 m from 0.3, the top tread and a landing as long, 3 down.
+    for x, h in ((0.2, 0), (0.4, 0.04), (0.6, 0.08), (1.0, 0.12), (1.2, 0.12), (1.4, 0.08), (1.6, 0.04), (1.88, 0)):
+        assert height_at(SPECS["stairs"], x) == pytest.approx(h, abs=1e-12), x
+    for x, h in ((0.52, -0.2), (0.6, -0.2), (0.68, 0.0), (1.04, -0.2), (0.4, 0.0)):
+        assert height_at(SPECS["gaps"], x) == pytest.approx(h), x
+    for x, h in ((0.56, 0), (0.64, 0.15), (0.68, 0.15), (0.72, 0)):
+        assert height_at(SPECS["obstacle"], x, y=1.7) == pytest.approx(h), x
+    assert height_at(SPECS["crater"], 1.0) == pytest.approx(-0.1 + 0.03 * np.exp(-16))
+    assert height_at(SPECS["crater"], 1.0, 0.52) == pytest.approx(0.03 * np.exp(-0.16**2))  # the rim, r = 1.04 R
+    assert height_at(SPECS["crater"], -1.0) == pytest.approx(0.0, abs=1e-12)
+
+
+@pytest.mark.parametrize("name", list(SPECS))
+def test_mujoco_places_every_vertex_at_its_height(name):
+    """The hfield mapping: MuJoCo C's surface, probed by rays at vertices, is the grid's heights
+    (to the float32 of MuJoCo's hfield_data: 2^-24 of the height range)."""
+    t = terrain.parse(SPECS[name]).terrain()
+    m = model.load(terrain=t)
+    assert m.geom(model.FLOOR_GEOM).type[0] == mujoco.mjtGeom.mjGEOM_HFIELD
+    assert m.pair_geom1.tolist().count(m.geom(model.FLOOR_GEOM).id) == m.npair  # every pair kept
+    span = np.ptp(t.heights)
+    np.testing.assert_allclose(terrain.from_model(m).heights, t.heights, rtol=0, atol=span * 2**-23)
+    xs, ys = t.axes()
+    rng = np.random.default_rng(0)
+    r, c = rng.integers(1, t.shape[0] - 1, 40), rng.integers(1, t.shape[1] - 1, 40)
+    np.testing.assert_allclose(ray_heights(m, np.stack([xs[c], ys[r]], 1)), t.heights[r, c], rtol=0,
+                               atol=span * 2**-22 + 1e-12)
+
+
+def test_a_level_grid_is_an_hfield_mujoco_accepts():
+    t = terrain.Terrain(np.full((5, 6), 0.07), (1.0, 1.0))
+    f = terrain.hfield(t)
+    assert f.size[2] == terrain.FLAT_SPAN and f.z == 0.07 and not f.data.any()
+    m = model.load(terrain=t)
+    np.testing.assert_allclose(ray_heights(m, [(0.3, -0.2), (-0.9, 0.9)]), 0.07, atol=1e-12)
+
+
+def test_export_reloads_the_same_model_in_mujoco(tmp_path, capsys):
+    ground = terrain.parse(SPECS["rough"])
+    path = tmp_path / "m.xml"
+    assert model_main.main(["--export", str(path), "--terrain", SPECS["rough"]]) == 0
+    assert "m_terrain.bin" in capsys.readouterr().out and (tmp_path / "m_terrain.bin").is_file()
+    compiled, reloaded = model.load(terrain=ground.terrain()), mujoco.MjModel.from_xml_path(str(path))
+    for field in ("hfield_data", "hfield_size", "geom_pos", "geom_type", "pair_geom1", "pair_geom2", "pair_dim"):
+        assert np.array_equal(getattr(compiled, field), getattr(reloaded, field)), field
+    d = mujoco.MjData(reloaded)
+    from hopper_mjx.model.robot import stance_qpos
+
+    d.qpos[:] = stance_qpos(reloaded)
+    mujoco.mj_step(reloaded, d, 300)  # it steps: the foot lands on the hfield and holds
+    assert d.ncon > 0 and np.isfinite(d.qpos).all() and 0.4 < d.qpos[2] < 0.9
+
+
+def test_flat_keeps_the_plane_and_its_export():
+    assert terrain.parse("flat").terrain() is None and str(terrain.parse("flat")) == "flat"
+    assert model.load(terrain=None).geom(model.FLOOR_GEOM).type[0] == mujoco.mjtGeom.mjGEOM_PLANE
+
+
+def test_heightmap_is_laid_out_as_mujoco_reads_a_png(tmp_path):
+    import imageio.v3 as iio
+
+    image = np.random.default_rng(3).integers(0, 256, (7, 9)).astype(np.uint8)
+    image[0, 0], image[-1, -1] = 0, 255
+    iio.imwrite(tmp_path / "g.png", image)
+    t = terrain.parse(f"heightmap:{tmp_path / 'g.png'},size=4x3,height=0.3").terrain()
+    assert t.size == (2.0, 1.5) and t.shape == (7, 9)
+    np.testing.assert_allclose(t.heights, 0.3 * image[::-1] / 255.0)  # black 0, white 0.3 m, top row at +y
+    spec = mujoco.MjSpec()
+    spec.add_hfield(name="png", file=str(tmp_path / "g.png"), size=[2, 1.5, 0.3, 0.1])
+    spec.worldbody.add_geom(type=mujoco.mjtGeom.mjGEOM_HFIELD, hfieldname="png")
+    ours = terrain.hfield(t).data
+    np.testing.assert_allclose(ours, spec.compile().hfield_data, atol=1e-6)  # MuJoCo's own PNG reading
+
+
+@pytest.mark.parametrize("text, message", [
+    ("hills", "unknown terrain 'hills'; choose from: flat, rough,"),
+    ("rough:amp=0.03,bumpiness=2", "rough has no key 'bumpiness'; it takes amp, wavelength, seed, size, cell"),
+    ("rough:amp=nan", "amp=nan must be finite"),
+    ("rough:wavelength=0", "wavelength=0 must be > 0 m"),
+    ("obstacle:height=-0.1", "height=-0.1 must be >= 0 m"),
+    ("rough:seed=1.5", "seed=1.5 must be a whole number"),
+    ("rough:size=4xabc", "size=abc is not a number"),
+    ("steps:cell=5", "cell=5 m is larger than the grid's extent 4 m"),
+    ("gaps:width=0.5,spacing=0.4", "width=0.5 must be less than spacing=0.4"),
+    ("flat:amp=1", "flat has no key 'amp'; it takes none"),
+    ("heightmap:size=4x4", "heightmap needs a PNG file"),
+    ("steps:cell=0.04,cell=0.04", "cell is given twice"),
+    ("rough:seed=1,seed=2", "seed is given twice"),
+    ("rough:amp", "'amp' is not key=value; rough takes amp, wavelength, seed, size, cell"),
+])
+def test_bad_specs_are_one_line(text, message):
+    with pytest.raises(terrain.TerrainError, match=None) as err:
+        terrain.parse(text)
+    assert message in str(err.value) and "\n" not in str(err.value)
+
+
+def test_generators_are_pure_functions_of_the_vertices():
+    x, y = terrain.vertices((1.0, 0.5), (11, 21))
+    assert x.shape == (11, 21) and x[0, 0] == -1.0 and y[-1, 0] == 0.5 and x[0, -1] == 1.0
+    assert not generators.flat(x, y).any()
+
+
+def test_auto_steps_a_terrain_with_mjx_and_says_why(capsys):
+    from hopper_mjx import engine
+
+    m = model.load(terrain=terrain.parse("steps").terrain())
+    assert engine.make("auto", m).name == "mjx"
+    notice = capsys.readouterr().err
+    assert notice.startswith("note: engine auto uses mjx") and "floor plane" in notice and notice.count("\n") == 1
+    with pytest.raises(ValueError, match="not a chain model"):
+        engine.make("chain", m)
