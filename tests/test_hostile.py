@@ -195,3 +195,14 @@ def refusals(tmp_path_factory, trained):  # noqa: F811
 @pytest.mark.parametrize("k", range(len(CASES)), ids=[f"{c}:{' '.join(a)[:40]}" for c, a, _ in CASES])
 def test_hostile_input_is_refused_in_one_line(refusals, k):
     assert_refused(refusals[k], CASES[k][2])
+
+
+def test_a_chunk_larger_than_the_grid_runs_as_the_grid(tmp_path):
+    """`--chunk 100000000` padded every chunk to that size; a chunk is now never larger than the grid."""
+    from hopper_mjx.sweep.__main__ import check, parser
+
+    args = parser().parse_args(["gravity", "--values", "1.62,9.81", "--num", "3", "--chunk", "100000000",
+                                "--out", str(tmp_path / "s")])
+    specs, _ = check(args)
+    assert [s.chunk for s in specs] == [6]
+    assert not (tmp_path / "s").exists()
