@@ -7,6 +7,7 @@ with colours and resolvable mesh paths, for a viewer such as Foxglove's 3D panel
 import sys
 
 from hopper_mjx import checks, command
+from hopper_mjx.files import atomic_write_text
 from hopper_mjx.model.checks import check_urdf
 
 
@@ -17,8 +18,7 @@ def export_urdf(args) -> int:
     if args.export_urdf == "-":
         sys.stdout.write(text)
     else:
-        with open(args.export_urdf, "w") as f:
-            f.write(text)
+        atomic_write_text(args.export_urdf, text)
         print(f"wrote {args.export_urdf}: the URDF of {args.urdf or 'the seed monoped'} for display")
     return 0
 
@@ -48,8 +48,7 @@ def main(argv=None) -> int:
         model = spec.compile()
     except ValueError as err:  # includes URDFError
         return checks.fail(err)
-    with open(args.export, "w") as f:
-        f.write(spec.to_xml())
+    atomic_write_text(args.export, spec.to_xml())
     print(f"wrote {args.export}: {model.nbody - 1} bodies, {model.njnt} joints, "
           f"{model.nu} motors, {model.nsensor} sensors, mass {model.body_mass.sum():.3f} kg")
     return 0
