@@ -474,7 +474,7 @@ def plot_rewards(history: list[dict], path: Path, title: str) -> None:
     ax.set_title(f"{title}, the batched monoped")
     ax.grid(alpha=0.3)
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
+    files.atomic_write(path, lambda f: fig.savefig(f, dpi=120, format=Path(path).suffix[1:] or None))
     plt.close(fig)
 
 
@@ -494,12 +494,12 @@ def main(argv=None) -> int:
                           height=args.eval_height, num=args.eval_num, seed=args.seed, speed=args.eval_speed,
                           urdf=args.urdf)
         table = evaluation_table(result, args.eval_height)
-        (Path(args.out) / "evaluation.json").write_text(json.dumps(result, indent=1))
-        (Path(args.out) / "evaluation.md").write_text(table + "\n")
+        atomic_write_text(Path(args.out) / "evaluation.json", json.dumps(result, indent=1))
+        atomic_write_text(Path(args.out) / "evaluation.md", table + "\n")
         print(table)
     if args.scan_checkpoints:
         found = first_checkpoint_at_threshold(args)
-        (Path(args.out) / "threshold.json").write_text(json.dumps(found, indent=1))
+        atomic_write_text(Path(args.out) / "threshold.json", json.dumps(found, indent=1))
         print(f"no checkpoint meets the threshold ({threshold(args.task)})" if found is None else
               f"first at step {found['step']:,}, {found['wall_time'] / 60:.1f} min of training")
     return 0

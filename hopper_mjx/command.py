@@ -64,7 +64,8 @@ def stop(signum: int) -> None:
             pass
     _end_filter()
     name = signal.Signals(signum).name
-    os.write(2, f"interrupted ({name}): {_said[0]}\n".encode())
+    start = "\n" if os.isatty(2) else ""  # off the terminal's ^C or progress bar
+    os.write(2, f"{start}interrupted ({name}): {_said[0]}\n".encode())
     os._exit(STOP_CODES.get(signum, 128 + signum))
 
 

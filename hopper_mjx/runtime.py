@@ -10,7 +10,9 @@
   moved to another CPU) would otherwise load code using instructions this CPU
   lacks, which XLA reports on every load as "Target machine feature ... is not
   supported on the host machine ... This could lead to execution errors such as
-  SIGILL" (and which would crash if such an instruction ran).
+  SIGILL" (and which would crash if such an instruction ran). XLA prints the same
+  alarm on the very CPU that compiled, for two tuning preferences it takes for
+  features: `hopper_mjx.command` drops exactly those lines from a command's stderr.
 """
 
 from __future__ import annotations
@@ -42,8 +44,8 @@ def cpu_cache_dir(base: Path | str) -> Path:
 
 def configure(*, devices: int | None = None, cache_dir: Path | str | None = CACHE_DIR) -> None:
     """Call before the first JAX computation of the process."""
-    # XLA's C++ log warns "Assume version compatibility" at every persistent-cache load: noise
-    # on stderr for a user. Errors still print; TF_CPP_MIN_LOG_LEVEL=0 brings the warnings back.
+    # XLA's C++ log without its INFO lines; warnings and errors still print (a command's stderr
+    # filter drops the known false alarms among them); TF_CPP_MIN_LOG_LEVEL=0 shows everything.
     os.environ.setdefault("TF_CPP_MIN_LOG_LEVEL", "1")
     import jax  # here, not at module level: commands check their arguments before importing JAX
 

@@ -105,6 +105,7 @@ def prepare_hostile(folder: Path) -> None:
         (folder / name).write_text(text)
     (folder / "unrelated").mkdir()  # a folder of the user's, holding a results.csv of theirs
     (folder / "unrelated" / "results.csv").write_text("mine\n")
+    (folder / "empty").mkdir()  # made by the user, not by a sweep
     (folder / "notes").mkdir()
     (folder / "notes" / "todo.txt").write_text("mine\n")
     cut = folder / "cut_sweep"  # a sweep's folder after a power cut: its manifest cut short
@@ -163,6 +164,9 @@ CASES = [
     # run folders that are not what they seem
     ("sweep", ["gravity", "--out", "unrelated"], "--out unrelated exists and is not a sweep's folder"),
     ("sweep", ["gravity", "--out", "notes"], "--out notes exists and is not a sweep's folder"),
+    ("sweep", ["gains", "--param", "speed_gain", "--values", "0.1,0.2", "--out", "empty"],
+     "--out empty exists and is not a sweep's folder"),
+    ("sweep", ["compare", "--controllers", "raibert", "--out", "empty"], "--out empty exists and is not"),
     ("sweep", ["compare", "--controllers", "raibert", "--out", "notes"], "--out notes exists and is not"),
     ("sweep", ["gravity", "--out", "cut_sweep"], "--out cut_sweep: its manifest.json is damaged"),
     ("sweep", ["gravity", "--out", "list_sweep"], "--out list_sweep: its manifest.json is not a sweep's"),
@@ -195,3 +199,14 @@ def refusals(tmp_path_factory, trained):  # noqa: F811
 @pytest.mark.parametrize("k", range(len(CASES)), ids=[f"{c}:{' '.join(a)[:40]}" for c, a, _ in CASES])
 def test_hostile_input_is_refused_in_one_line(refusals, k):
     assert_refused(refusals[k], CASES[k][2])
+
+
+def test_a_chunk_larger_than_the_grid_runs_as_the_grid(tmp_path):
+    """`--chunk 100000000` padded every chunk to that size; a chunk is now never larger than the grid."""
+    from hopper_mjx.sweep.__main__ import check, parser
+
+    args = parser().parse_args(["gravity", "--values", "1.62,9.81", "--num", "3", "--chunk", "100000000",
+                                "--out", str(tmp_path / "s")])
+    specs, _ = check(args)
+    assert [s.chunk for s in specs] == [6]
+    assert not (tmp_path / "s").exists()

@@ -68,6 +68,7 @@ class Stopped(NamedTuple):
     latency: float  # s from the signal to the exit
     folder: Path
     before: dict  # the folder's listing just before the signal
+    after: dict  # and once the process ended
 
 
 def run_to_end(argv, folder: Path) -> subprocess.CompletedProcess:
@@ -89,14 +90,16 @@ def interrupt(argv, folder: Path, signum, when) -> Stopped:
     proc.send_signal(signum)
     try:
         _, err = proc.communicate(timeout=TIMEOUT)
+        latency = time.monotonic() - sent
     finally:
-        proc.kill()
-    return Stopped(proc.returncode, err, time.monotonic() - sent, folder, before)
+        proc.kill()  # a process that did not stop
+    return Stopped(proc.returncode, err, latency, folder, before, listing(folder))
 
 
 @pytest.fixture(scope="module")
 def stops(tmp_path_factory):
-    """Every case's stop, and (beside them) an uninterrupted sweep: its folder."""
+    """Every case's stop, an uninterrupted sweep's folder (run beside them), and the reruns of the sweep
+    and the training stopped mid-run (listed before their reruns changed them)."""
     base = tmp_path_factory.mktemp("interrupts")
     with ThreadPoolExecutor(WORKERS) as pool:
         (base / "whole").mkdir()
@@ -105,7 +108,10 @@ def stops(tmp_path_factory):
                    for k, (tool, signum, when, _) in enumerate(CASES)]
         done = [f.result() for f in futures]
         assert whole.result().returncode == 0, whole.result().stderr[-2000:]
-    return done, base / "whole"
+        # The reruns, beside each other: the sweep's and training's.
+        reruns = {tool: pool.submit(run_to_end, TOOLS[tool], done[_case(tool, "mid-run")].folder)
+                  for tool in ("sweep", "train")}
+        return done, base / "whole", {tool: f.result() for tool, f in reruns.items()}
 
 
 @pytest.mark.parametrize("k", range(len(CASES)),
@@ -117,7 +123,7 @@ def test_a_signal_stops_the_run_at_once_in_one_line(stops, k):
     assert done.returncode == 128 + signum, done.stderr[-2000:]
     assert len(lines) == 1 and lines[0].startswith(f"interrupted ({signal.Signals(signum).name}): "), done.stderr
     assert done.latency < MAX_LATENCY, f"stopped {done.latency:.2f} s after the signal"
-    left = listing(done.folder)
+    left = done.after
     assert not [p for p in left if p.endswith(".tmp")]  # no half-written file
     assert not {"o.npz", "r.bag"} & set(left)  # simulate's and record's outputs: whole or absent
     finished = {p for p in done.before if p.endswith((".npy", "hopper_env.json", "metrics.json", "manifest.json"))}
@@ -129,23 +135,22 @@ def _case(tool: str, moment: str) -> int:
 
 
 def test_a_rerun_of_an_interrupted_sweep_gives_the_same_bytes(stops):
-    done, whole = stops
-    stopped = done[_case("sweep", "mid-run")]
+    done, whole, reruns = stops
+    stopped, rerun = done[_case("sweep", "mid-run")], reruns["sweep"]
     assert "finished chunks are saved in s; rerun the same command to resume" in stopped.stderr
-    kept = sorted(p.name for p in (stopped.folder / "s" / "chunks").glob("*.npy"))
+    kept = [p for p in stopped.after if p.startswith("s/chunks/") and p.endswith(".npy")]
     assert 1 <= len(kept) < 4  # stopped mid-run: some chunks done, not all
-    rerun = run_to_end(SWEEP, stopped.folder)
     assert rerun.returncode == 0, rerun.stderr[-2000:]
     compared = ["results.csv", "table.txt"] + [f"chunks/{k:05d}.npy" for k in range(4)]
     assert all(filecmp.cmp(whole / "s" / name, stopped.folder / "s" / name, shallow=False) for name in compared)
 
 
 def test_a_rerun_of_interrupted_training_resumes(stops):
-    done, _ = stops
-    stopped = done[_case("train", "mid-run")]
-    saved = sorted(p.parent.name for p in (stopped.folder / "run" / "checkpoints").glob("*/hopper_env.json"))
+    done, _, reruns = stops
+    stopped, rerun = done[_case("train", "mid-run")], reruns["train"]
+    saved = sorted(Path(p).parent.name for p in stopped.after if p.startswith("run/checkpoints/")
+                   and p.endswith("/hopper_env.json"))
     assert saved and "rerun the same command to resume" in stopped.stderr
-    rerun = run_to_end(TRAIN, stopped.folder)
     assert rerun.returncode == 0, rerun.stderr[-2000:]
     last = stopped.folder / "run" / "checkpoints" / saved[-1]
     assert f"resuming from {last.resolve()} (step {int(saved[-1]):,})" in rerun.stdout

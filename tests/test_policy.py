@@ -106,16 +106,17 @@ def test_sweep_compare_judges_the_policy_and_raibert_alike(trained, tmp_path, ca
     from hopper_mjx.sweep import __main__ as sweep
 
     out, _ = trained
+    folder = tmp_path / "compared"  # new: a sweep writes only into a folder it made
     args = ["compare", "--controllers", f"raibert,policy:{out}", "--values", "9.81,1.62", "--num", "2",
-            "--duration", "0.2", "--chunk", "4", "--height", "0.15", "--no-progress", "--out", str(tmp_path)]
+            "--duration", "0.2", "--chunk", "4", "--height", "0.15", "--no-progress", "--out", str(folder)]
     assert sweep.main(args) == 0
-    groups = json.loads((tmp_path / "comparison.json").read_text())["groups"]
+    groups = json.loads((folder / "comparison.json").read_text())["groups"]
     assert [(g["controller"], g["gravity"], g["n"]) for g in groups] == [
         ("raibert", 9.81, 2), ("raibert", 1.62, 2), ("policy-run", 9.81, 2), ("policy-run", 1.62, 2)]
-    assert (tmp_path / "gravity.png").stat().st_size > 1000
-    table = (tmp_path / "table.txt").read_text()
+    assert (folder / "gravity.png").stat().st_size > 1000
+    table = (folder / "table.txt").read_text()
     assert table.count("raibert") == 2 and table.count("policy-run") == 2
-    manifests = [json.loads((tmp_path / d / "manifest.json").read_text()) for d in ("raibert", "policy-run")]
+    manifests = [json.loads((folder / d / "manifest.json").read_text()) for d in ("raibert", "policy-run")]
     assert manifests[0]["controller"] == "raibert" and manifests[1]["controller"] == f"policy:{out}"
     assert {k: v for k, v in manifests[0].items() if k != "controller"} == \
         {k: v for k, v in manifests[1].items() if k != "controller"}  # same grid, kicks, commands

@@ -8,6 +8,7 @@ the URDF the simulation loads, with colours and resolvable mesh paths, for a vie
 import sys
 
 from hopper_mjx import checks, command
+from hopper_mjx.files import atomic_write_text
 from hopper_mjx.model.checks import check_urdf
 from hopper_mjx.terrain.spec import check_terrain, terrain_help
 
@@ -19,8 +20,7 @@ def export_urdf(args) -> int:
     if args.export_urdf == "-":
         sys.stdout.write(text)
     else:
-        with open(args.export_urdf, "w") as f:
-            f.write(text)
+        atomic_write_text(args.export_urdf, text)
         print(f"wrote {args.export_urdf}: the URDF of {args.urdf or 'the seed monoped'} for display")
     return 0
 

@@ -42,6 +42,7 @@ from pathlib import Path
 import numpy as np
 
 from hopper_mjx import budget, cli, command, registry, runtime
+from hopper_mjx.files import atomic_write, atomic_write_text
 from hopper_mjx.scenario import Physics
 
 DISTINCT_GRAVITIES = 64  # distinct values, tiled over the batch: one native MjModel each
@@ -341,7 +342,7 @@ def plot_scaling(records: list[dict], path: str) -> None:
     ratio.grid(True, which="both", alpha=0.3)
     fig.suptitle(f"monoped, {records[0]['steps']} steps, controller {records[0]['controller']}")
     fig.tight_layout()
-    fig.savefig(path, dpi=100)
+    atomic_write(path, lambda f: fig.savefig(f, dpi=100, format=Path(path).suffix[1:] or None))
     plt.close(fig)
 
 
@@ -423,7 +424,7 @@ def main(argv=None) -> int:
     except (ValueError, argparse.ArgumentTypeError) as err:
         return cli.fail(err)
     if args.json:
-        Path(args.json).write_text(json.dumps(result, indent=2) + "\n")
+        atomic_write_text(args.json, json.dumps(result, indent=2) + "\n")
     return 0
 
 

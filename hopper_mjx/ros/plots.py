@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from hopper_mjx import cli, command
+from hopper_mjx.files import atomic_write
 from hopper_mjx.ros import echo, messages
 
 AXES = ("x", "y", "z")
@@ -102,7 +103,7 @@ def plot_bag(path: str | Path, out: str | Path, instances: list[int] | None = No
     if labels is not None and len(labels) != len(chosen):
         raise ValueError(f"{len(labels)} labels for {len(chosen)} plotted robots")
     fig = figure([(title, read_signals(path, i)) for title, i in zip(labels or names, chosen)])
-    fig.savefig(out, dpi=dpi)
+    atomic_write(out, lambda f: fig.savefig(f, dpi=dpi, format=Path(out).suffix[1:] or None))
     return Path(out)
 
 

@@ -104,7 +104,7 @@ def check(args):
         cli.check_controller(name, args.height, args.speed, physics)  # a policy: its folder and trained range
     out = args.out or Path("runs") / f"{args.kind}-{datetime.now(timezone.utc):%Y%m%d-%H%M%S}"
     cli.check_writable("--out", out, folder=True, make_parents=True)
-    if args.kind == "compare" and out.is_dir() and any(out.iterdir()) and not any(out.glob(f"*/{folder.MANIFEST}")):
+    if args.kind == "compare" and out.exists() and not any(out.glob(f"*/{folder.MANIFEST}")):
         raise ValueError(f"--out {out} exists and is not a comparison's folder; a sweep writes only into a "
                          "folder it made: use another --out")
     for spec in specs:  # a folder of another sweep, or of no sweep, is refused before anything is built

@@ -1,8 +1,8 @@
 """A sweep's output folder: claimed by its manifest, resumed only by the same sweep, never another's.
 
 The manifest (the sweep's arguments) marks a folder as a sweep's. A folder that exists without
-one is someone else's, and a sweep refuses it rather than write (and overwrite `results.csv`)
-there. A power cut leaves a damaged manifest or chunk behind: the manifest is refused in one
+one, even an empty one, is someone else's, and a sweep refuses it rather than write (and
+overwrite `results.csv`) there. A power cut leaves a damaged manifest or chunk behind: the manifest is refused in one
 line; a chunk that cannot be read is recomputed. Reads JSON and NumPy only, so that the command
 line checks the folder before anything is compiled.
 """
@@ -10,11 +10,13 @@ line checks the folder before anything is compiled.
 from __future__ import annotations
 
 import json
+import os
+import shutil
 from pathlib import Path
 
 import numpy as np
 
-from hopper_mjx.files import atomic_write
+from hopper_mjx.files import atomic_write, partial
 from hopper_mjx.sweep.grid import SweepSpec
 
 MANIFEST = "manifest.json"
@@ -29,7 +31,7 @@ def check(out: Path, spec: SweepSpec) -> None:
     out = Path(out)
     path = out / MANIFEST
     if not path.exists():
-        if out.is_dir() and any(out.iterdir()):
+        if out.exists():  # even empty: a sweep's own folder is never without its manifest (`claim`)
             raise ManifestMismatch(f"--out {out} exists and is not a sweep's folder (no {MANIFEST}); "
                                    "a sweep writes only into a folder it made: use another --out")
         return
@@ -50,12 +52,24 @@ def check(out: Path, spec: SweepSpec) -> None:
 
 
 def claim(out: Path, spec: SweepSpec) -> None:
-    """Creates OUT with the spec as its manifest, or checks that OUT holds this very sweep."""
+    """Creates OUT with the spec as its manifest, or checks that OUT holds this very sweep. The folder
+    appears with its manifest in it (made beside it, then renamed), so a stop at any moment never leaves
+    a folder of ours that looks like someone else's."""
     out = Path(out)
     check(out, spec)
-    if not (out / MANIFEST).exists():
-        out.mkdir(parents=True, exist_ok=True)
-        atomic_write(out / MANIFEST, lambda f: f.write(json.dumps(spec.to_json(), indent=1).encode()))
+    if (out / MANIFEST).exists():
+        return
+    out.parent.mkdir(parents=True, exist_ok=True)
+    made = out.with_name(f"{out.name}.claim-{os.getpid()}")
+    with partial(made):
+        shutil.rmtree(made, ignore_errors=True)
+        made.mkdir()
+        atomic_write(made / MANIFEST, lambda f: f.write(json.dumps(spec.to_json(), indent=1).encode()))
+        try:
+            os.rename(made, out)
+        except OSError:  # another process of this sweep claimed it first (a shared filesystem)
+            shutil.rmtree(made, ignore_errors=True)
+            check(out, spec)
 
 
 def chunk_path(out: Path, k: int) -> Path:

@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
+from hopper_mjx.files import atomic_write, atomic_write_text
 from hopper_mjx.sweep.grid import PLANETS, Instances, SweepSpec
 
 INTEGER_COLUMNS = {"replicate", "seed", "hops", "fell", "diverged"}
@@ -38,7 +39,7 @@ def write_csv(path: Path, header: list[str], body: list[list]) -> None:
     writer = csv.writer(buf, lineterminator="\n")
     writer.writerow(header)
     writer.writerows([_cell(h, v) for h, v in zip(header, row)] for row in body)
-    path.write_text(buf.getvalue())
+    atomic_write_text(path, buf.getvalue())
 
 
 def survived(table: np.ndarray, columns: tuple[str, ...]) -> np.ndarray:
@@ -102,7 +103,7 @@ def _pyplot():
 
 
 def save(fig, path: Path) -> None:
-    fig.savefig(path, dpi=90)
+    atomic_write(path, lambda f: fig.savefig(f, dpi=90, format=Path(path).suffix[1:] or None))
     _pyplot().close(fig)
 
 
@@ -187,11 +188,11 @@ def write(out: Path, spec: SweepSpec, inst: Instances, table: np.ndarray, column
     groups = group_summary(spec, inst, table, columns)
     summary = {"groups": groups, "note": "survival over all replicates; every other aggregate over the survivors",
                "arguments": spec.to_json(), "versions": versions(), "run": facts}
-    (out / "summary.json").write_text(json.dumps(summary, indent=1))
+    atomic_write_text(out / "summary.json", json.dumps(summary, indent=1))
     figure = gravity_figure if spec.kind == "gravity" else gains_figure
     save(figure(spec, groups), out / f"{spec.kind}.png")
     text = table_text(spec, groups)
-    (out / "table.txt").write_text(text + "\n")
+    atomic_write_text(out / "table.txt", text + "\n")
     return text
 
 
@@ -199,8 +200,8 @@ def write_comparison(out: Path, spec: SweepSpec, results: list[tuple[str, list[d
     """One table (table.txt, comparison.json) and one plot (gravity.png) of several controllers'
     gravity sweeps: same gravities, kicks, commands and metrics."""
     rows_ = [{"controller": name, **g} for name, groups in results for g in groups]
-    (out / "comparison.json").write_text(json.dumps({"groups": rows_, "arguments": spec.to_json()}, indent=1))
+    atomic_write_text(out / "comparison.json", json.dumps({"groups": rows_, "arguments": spec.to_json()}, indent=1))
     save(gravity_figure(spec, results[0][1], series=results), out / "gravity.png")
     text = table_text(spec, rows_, label="controller")
-    (out / "table.txt").write_text(text + "\n")
+    atomic_write_text(out / "table.txt", text + "\n")
     return text

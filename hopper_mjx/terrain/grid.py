@@ -12,6 +12,8 @@ from typing import NamedTuple
 
 import numpy as np
 
+from hopper_mjx.files import atomic_write, atomic_write_text
+
 HFIELD = "terrain"  # the hfield asset's name in the compiled model
 BASE_DEPTH = 0.1  # m of solid below the lowest vertex (MuJoCo's size[3]); contacts below it are missed
 FLAT_SPAN = 1e-6  # m: MuJoCo refuses an hfield whose elevation range size[2] is 0; a level grid gets this
@@ -100,7 +102,7 @@ def write_mjcf(spec, path) -> list[str]:
     model = spec.compile()
     text = spec.to_xml()
     if model.nhfield == 0:  # nothing to move out: MuJoCo's own text as it is
-        path.write_text(text)
+        atomic_write_text(path, text)
         return [str(path)]
     root = ET.fromstring(text)
     written = []
@@ -108,9 +110,9 @@ def write_mjcf(spec, path) -> list[str]:
         k = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_HFIELD, element.get("name"))
         nrow, ncol, adr = int(model.hfield_nrow[k]), int(model.hfield_ncol[k]), int(model.hfield_adr[k])
         data = path.with_name(f"{path.stem}_{element.get('name')}.bin")
-        with open(data, "wb") as f:
-            f.write(np.array([nrow, ncol], dtype="<i4").tobytes())
-            f.write(np.asarray(model.hfield_data[adr:adr + nrow * ncol], dtype="<f4").tobytes())
+        head = np.array([nrow, ncol], dtype="<i4").tobytes()
+        values = np.asarray(model.hfield_data[adr:adr + nrow * ncol], dtype="<f4").tobytes()
+        atomic_write(data, lambda f, blob=head + values: f.write(blob))
         element.attrib.pop("elevation", None)
         element.attrib.pop("nrow", None)  # the file gives them
         element.attrib.pop("ncol", None)
@@ -122,5 +124,5 @@ def write_mjcf(spec, path) -> list[str]:
                                                                          geom.get("name"))]))
         written.append(str(data))
     ET.indent(root)
-    path.write_text(ET.tostring(root, encoding="unicode") + "\n")
+    atomic_write_text(path, ET.tostring(root, encoding="unicode") + "\n")  # after its data: it names them
     return [str(path), *written]

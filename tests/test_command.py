@@ -1,0 +1,75 @@
+"""What a command's process sets up (hopper_mjx.command): stderr without XLA's false alarms, and only those.
+
+A healthy run from a warm compile cache prints no error- or warning-level line: XLA:CPU checks the
+tuning preferences it compiled with (+prefer-no-gather, +prefer-no-scatter) as if they were CPU
+features, at every load from the cache, and logs an error warning of "SIGILL" for each.
+"""
+
+import os
+import re
+import subprocess
+import sys
+import threading
+
+from test_bad_inputs import ENV
+
+from hopper_mjx import command
+
+ALARM = re.compile(r"^[EWF]\d{4} |SIGILL", re.M)  # an XLA C++ log line of level warning and up, or the alarm
+FALSE = ("E1124 20:17:20.346371   10668 cpu_aot_loader.cc:220] Loading XLA:CPU AOT result. Target machine feature "
+         "+prefer-no-gather is not  supported on the host machine. ... This could lead to execution errors such as "
+         "SIGILL.")
+REAL = FALSE.replace("+prefer-no-gather", "+avx512f")  # compiled for an ISA this CPU lacks: a real alarm
+
+
+def forwarded(text: bytes) -> bytes:
+    """What `command._forward` passes on of `text`, written in two pieces (a line split between reads)."""
+    read, write = os.pipe()
+    out_read, out_write = os.pipe()
+    thread = threading.Thread(target=command._forward, args=(read, out_write))
+    thread.start()
+    os.write(write, text[:50])
+    os.write(write, text[50:])
+    os.close(write)
+    thread.join()
+    os.close(out_write)
+    with os.fdopen(out_read, "rb") as f:
+        return f.read()
+
+
+def test_the_filter_drops_the_false_alarms_and_nothing_else():
+    note = "W1124 20:17:20.152611   10660 pjrt_executable.cc:642] Assume version compatibility. PjRt-IFRT does not"
+    lines = ["wrote o.npz", FALSE, FALSE.replace("gather", "scatter"), note, REAL, "error: a real one", "no newline"]
+    assert forwarded("\n".join(lines).encode()) == "\n".join([lines[0], REAL, lines[5], lines[6]]).encode()
+
+
+def simulate(cache, **env):
+    return subprocess.run([sys.executable, "-m", "hopper_mjx.simulate", "--num", "1", "--duration", "0.05", "--out",
+                           os.devnull], env={**ENV, "HOPPER_MJX_CACHE": str(cache), **env}, capture_output=True,
+                          text=True, timeout=600)
+
+
+def test_a_run_from_a_warm_cache_prints_no_alarm(tmp_path):
+    """The same tiny run three times on a fresh cache: it compiles and fills the cache, then loads from
+    it without an alarm; with the filter off (TF_CPP_MIN_LOG_LEVEL=0) the load does print XLA's alarm,
+    so the run in between was a load, and the filter is what keeps its stderr clean."""
+    cold = simulate(tmp_path)
+    assert cold.returncode == 0 and not ALARM.search(cold.stderr), cold.stderr[-3000:]
+    assert any(p.is_file() for p in tmp_path.rglob("*"))  # the compiled program is in the cache
+    warm = simulate(tmp_path)
+    assert warm.returncode == 0 and not ALARM.search(warm.stderr), warm.stderr[-3000:]
+    unfiltered = simulate(tmp_path, TF_CPP_MIN_LOG_LEVEL="0")
+    assert unfiltered.returncode == 0 and "+prefer-no-gather" in unfiltered.stderr, unfiltered.stderr[-3000:]
+
+
+def test_only_the_packages_commands_arm_the_signals(monkeypatch):
+    """Importing the package from Python (here: pytest) changes no signal handler."""
+    monkeypatch.setattr(sys, "orig_argv", [sys.executable, "-m", "hopper_mjx.sweep", "gravity"])
+    assert command.is_command()
+    monkeypatch.setattr(sys, "orig_argv", [sys.executable, "-m", "pytest", "-q"])
+    monkeypatch.setattr(sys, "argv", ["pytest", "-q"])
+    assert not command.is_command()
+    monkeypatch.setattr(sys, "orig_argv", [sys.executable, str(command.PACKAGE_ROOT / "experiments" / "train.py")])
+    monkeypatch.setattr(sys, "argv", [str(command.PACKAGE_ROOT / "experiments" / "train.py")])
+    assert command.is_command()
+    assert not command._armed.is_set()  # this test process was never armed
