@@ -102,6 +102,7 @@ def add_batch_options(p: argparse.ArgumentParser, *, gravity=(9.81, 3.71, 1.62),
                    help="pid: joint gains from a seed-style monoped.yaml or .yml (the file, or the seed's "
                         "package or config/ folder holding it; default: the shipped one)")
     p.add_argument("--urdf", default=None, help="monoped URDF (default: the shipped one)")
+    add_randomize_option(p)
     p.add_argument("--scenario", type=Path, default=None, metavar="FILE.yaml",
                    help="a scenario file: these options' values by name (gravity: [9.81, 1.62], num: 8, "
                         "controller: raibert, urdf: my.urdf, ...; paths from the file's folder); the command "
@@ -109,6 +110,41 @@ def add_batch_options(p: argparse.ArgumentParser, *, gravity=(9.81, 3.71, 1.62),
     p.add_argument("--timestep", type=float, default=None, help="physics step, s (default: the world's, or 0.001)")
     p.add_argument("--chunk", type=int, default=256, help="instances per vmapped chunk on a device")
     add_engine_option(p)
+
+
+def add_randomize_option(p: argparse.ArgumentParser) -> None:
+    """The one --randomize option: each instance's robot drawn with --seed (`hopper_mjx.randomize`)."""
+    p.add_argument("--randomize", default=None, metavar="NAME=DIST,...",
+                   help="robot parameters drawn per instance with --seed, e.g. \"foot_friction=uniform(0.4,1.0),"
+                        "body_mass=scale(0.9,1.1),dof_damping=0.02..0.2\"; DIST: a number, a..b, uniform(a,b), "
+                        "loguniform(a,b), normal(mu,sigma) or scale(a,b) (times the URDF's value); NAME: "
+                        f"{', '.join(registry.PARAMETERS)} (docs/variation.md)")
+
+
+def check_randomize(text: str | None, engine: str, mj_model_of, n: int, seed: int):
+    """--randomize read and drawn once (before JAX is imported): an unknown parameter, a bad distribution,
+    an engine that cannot take the varied fields, or a drawn value outside its parameter's range raise
+    ValueError. `mj_model_of()` compiles the nominal model (only when there is a variation). Returns the
+    `randomize.Spec` or None."""
+    if not text:
+        return None
+    from hopper_mjx.randomize import Spec, check_engine_varies
+
+    try:
+        spec = Spec.parse(text)
+    except ValueError as err:
+        raise ValueError(f"--randomize: {err}") from None
+    try:
+        check_engine_varies(engine, spec.fields)
+    except ValueError as err:
+        raise ValueError(f"--randomize: {err}; use --engine mjx or auto") from None
+    from hopper_mjx.model import variation
+
+    try:
+        variation.draw(spec, mj_model_of(), n, seed)
+    except ValueError as err:
+        raise ValueError(f"--randomize: {err}") from None
+    return spec
 
 
 def add_engine_option(p: argparse.ArgumentParser, *, extra_help: str = "") -> None:
@@ -180,9 +216,13 @@ def check_batch(args) -> Scenario:
     if warning:
         print(warning, file=sys.stderr)
     budget.check_memory("--num", len(rows) * args.num)  # before the rows are repeated; the recording: check_rates
+    from hopper_mjx import model
+
+    variation = check_randomize(args.randomize, args.engine, lambda: model.load(args.urdf, **options),
+                                len(rows) * args.num, args.seed)
     return Scenario(gravity=np.repeat(rows, args.num, axis=0), model_options=options, urdf=args.urdf,
-                    engine=args.engine, controller=args.controller, height=args.height, speed=tuple(args.speed),
-                    gains=gains, seed=args.seed, chunk=args.chunk)
+                    variation=variation, engine=args.engine, controller=args.controller, height=args.height,
+                    speed=tuple(args.speed), gains=gains, seed=args.seed, chunk=args.chunk)
 
 
 # Values one sample of each stream records per instance, for the size estimate (the monoped's nq + nv for

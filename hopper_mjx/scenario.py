@@ -21,6 +21,7 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from hopper_mjx import registry
+from hopper_mjx.randomize import Spec
 
 FLAT = "flat"  # the ground every instance stands on today; terrain fills this field in
 
@@ -39,7 +40,7 @@ class Scenario:
     model_options: dict = field(default_factory=dict)  # keywords of model.load a world sets: timestep, friction
     urdf: str | None = None  # the robot (None: the shipped seed monoped)
     ground: str = FLAT
-    variation: None = None  # per-instance robot parameters: none yet, every instance is the URDF's robot
+    variation: Spec | None = None  # per-instance robot parameters, drawn with `seed` (None: the URDF's robot)
     engine: str = registry.DEFAULT_ENGINE
     controller: str = "hold"  # a registry.CONTROLLERS name or policy:PATH
     height: float = 0.10  # m, commanded apex rise over the standing height (raibert, hopping policies)
@@ -63,8 +64,24 @@ class Scenario:
         from hopper_mjx import model
         from hopper_mjx.sim import Sim
 
-        sim = Sim(model.load(self.urdf, **self.model_options), engine=self.engine, chunk=self.chunk)
+        varies = self.variation.fields if self.variation else frozenset()
+        sim = Sim(model.load(self.urdf, **self.model_options), engine=self.engine, chunk=self.chunk, varies=varies)
         return Built(sim, *self._controller(sim))
+
+    def draws(self, mj_model) -> dict[str, np.ndarray]:
+        """{model field: (N, ...)} float64 of each instance's robot, drawn with the scenario's seed (empty
+        without a variation); raises ValueError naming a parameter that drew a value outside its range."""
+        if not self.variation:
+            return {}
+        from hopper_mjx.model import variation
+
+        return variation.draw(self.variation, mj_model, self.n, self.seed)
+
+    def varied(self, mj_model) -> dict[str, np.ndarray]:
+        """`draws` and the constants MuJoCo derives from them, per instance: what `Sim.reset` takes."""
+        from hopper_mjx.model.variation import with_constants
+
+        return with_constants(mj_model, self.draws(mj_model))
 
     def _controller(self, sim):
         """(controller, params): the registry's `control.make`, or a trained policy."""
@@ -85,7 +102,8 @@ class Scenario:
 
         sim, controller, params = self.build()
         start = time.perf_counter()
-        final, traj = sim.run(self.gravity, controller, params, duration=duration, sensors=sensors, key=self.seed)
+        final, traj = sim.run(self.gravity, controller, params, duration=duration, sensors=sensors, key=self.seed,
+                              variation=self.varied(sim.mj_model))
         jax.block_until_ready(traj)
         wall = time.perf_counter() - start
         steps = len(traj.time["state"]) * sensors.periods(sim.layout.timestep)["state"]

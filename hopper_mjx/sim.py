@@ -47,6 +47,9 @@ class State(NamedTuple):
     key: jax.Array  # (N, 2) uint32, per-instance PRNG key for sensor noise
     cstate: CState  # the controller's state (with its per-instance parameters)
     diverged: jax.Array  # (N,) bool, the instance's state went non-finite
+    # Model field -> (N, ...) values of each instance's robot (`model.variation`); empty: every instance is
+    # the nominal robot, and the compiled step is the one without variation.
+    variation: dict = {}
 
 
 class Trajectory(NamedTuple):
@@ -89,13 +92,16 @@ def _check_gravity(gravity) -> np.ndarray:
 class Sim:
     """A compiled monoped model batched over instances and local devices."""
 
-    def __init__(self, mj_model: mujoco.MjModel, *, engine: str = "auto", chunk: int = 256, devices=None):
+    def __init__(self, mj_model: mujoco.MjModel, *, engine: str = "auto", chunk: int = 256, devices=None,
+                 varies: frozenset[str] = frozenset()):
+        """`varies`: the model fields a variation may set per instance (`reset(..., variation=)`), so that
+        the engine is one that takes them at run time."""
         if chunk < 1:
             raise ValueError("chunk must be >= 1")
         self.mj_model = mj_model
         self.robot = Robot.of(mj_model)  # the robot facts, measured once and passed down
         self.layout = self.robot.layout
-        self.engine = engines.make(engine, mj_model)
+        self.engine = engines.make(engine, mj_model, frozenset(varies))
         self.devices = tuple(devices or jax.local_devices())
         self.mesh = Mesh(np.array(self.devices), (AXIS,))
         self.model = jax.device_put(self.engine.model, NamedSharding(self.mesh, PartitionSpec()))
@@ -113,15 +119,18 @@ class Sim:
         params: Any = None,
         qpos=None,
         qvel=None,
+        variation: dict | None = None,
     ) -> State:
         """Initial state for N = len(gravity) instances.
 
         gravity: (N, 3) m/s²; qpos/qvel: (nq,) or (N, nq) / (nv,) or (N, nv),
         default the robot's stance (upright at rest, the foot `model.robot.CLEARANCE`
-        above the floor); params: per-instance controller parameters (leading axis N) or None.
+        above the floor); params: per-instance controller parameters (leading axis N) or None;
+        variation: {model field: (N, ...)} of each instance's robot (`model.variation.with_constants`).
         """
         g = _check_gravity(gravity)
         n = g.shape[0]
+        variation = self._check_variation(variation or {}, n)
         qpos = self.robot.stance_qpos if qpos is None else qpos
         qvel = np.zeros(self.layout.nv) if qvel is None else qvel
         qpos = np.broadcast_to(np.asarray(qpos, dtype=np.float32), (n, self.layout.nq))
@@ -140,7 +149,23 @@ class Sim:
             key=jax.random.split(key, n),
             cstate=cstate,
             diverged=jnp.zeros(n, dtype=bool),
+            variation=variation,
         )
+
+    def _check_variation(self, variation: dict, n: int) -> dict:
+        """The per-instance fields checked, as float32 arrays (like the rest of the state), each (n, *field shape)."""
+        out = {}
+        for field, values in variation.items():
+            if field not in self.engine.varies:
+                raise ValueError(f"the {self.engine.name} engine cannot vary {field} per instance")
+            nominal = np.shape(getattr(self.mj_model, field))
+            values = np.asarray(values)
+            if values.shape != (n, *nominal):
+                raise ValueError(f"variation {field} must be {(n, *nominal)}, got {values.shape}")
+            if not np.isfinite(values).all():
+                raise ValueError(f"variation {field} must be finite")
+            out[field] = jnp.asarray(values, dtype=jnp.float32)
+        return out
 
     # -- rollout --------------------------------------------------------------
     def rollout(
@@ -185,12 +210,14 @@ class Sim:
         key: int | jax.Array = 0,
         qpos=None,
         qvel=None,
+        variation: dict | None = None,
     ) -> tuple[State, Trajectory]:
         """The batch-run path of every tool: N = len(gravity) instances from `reset` for
         `duration` s, rounded to whole periods of every stream (`steps_for`)."""
         if not (math.isfinite(duration) and duration > 0):
             raise ValueError(f"duration must be > 0 s, got {duration}")
-        state = self.reset(gravity, key=key, controller=controller, params=params, qpos=qpos, qvel=qvel)
+        state = self.reset(gravity, key=key, controller=controller, params=params, qpos=qpos, qvel=qvel,
+                           variation=variation)
         steps = steps_for(duration, self.layout.timestep, sensors)
         return self.rollout(state, controller, steps=steps, sensors=sensors)
 
@@ -266,6 +293,7 @@ def _instance_rollout(engine, controller, steps, tick, periods, sensors):
         return (model, state), sig
 
     def run(model, state):
+        model = engine.vary(model, state.variation)  # this instance's robot: per instance only where varied
         (_, state), sig = jax.lax.scan(one_tick, (model, state), None, length=steps // tick)
         every = {k: p // tick for k, p in periods.items()}
         decimate = lambda tree, stream: jax.tree_util.tree_map(lambda x: x[:: every[stream]], tree)

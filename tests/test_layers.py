@@ -14,7 +14,7 @@ PACKAGE = "hopper_mjx"
 # and ROS I/O -> tools.
 LAYERS = (
     ("startup", "registry", "files", "budget"),  # what precedes importing MuJoCo; the names; file writes; sizes
-    ("checks", "runtime"),  # checks: the command line's value, path and name checks
+    ("checks", "runtime", "randomize"),  # checks: the command line's value, path and name checks; variation specs
     ("model",),
     ("engine",),
     ("signals",),

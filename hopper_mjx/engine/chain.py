@@ -22,6 +22,7 @@ import jax
 import jax.numpy as jnp
 import mujoco
 
+from hopper_mjx import registry
 from hopper_mjx.engine import chain_algebra as al
 from hopper_mjx.engine import chain_constraint, chain_smooth, chain_solver
 from hopper_mjx.engine.chain_model import ChainModel, NotChain, describe
@@ -84,11 +85,18 @@ class ChainEngine:
     name = "chain"
     # A diverged instance keeps these from its last finite state (the rest is recomputed).
     freeze_fields = ("qpos", "qvel", "qacc_warmstart")
+    varies = registry.CHAIN_VARIES  # the model's numbers are folded into the step at trace time
 
     def __init__(self, mj_model: mujoco.MjModel):
         self.chain = describe(mj_model)
         self.nu = int(mj_model.nu)
         self.model = ChainParams(gate=jnp.array(True))
+
+    def vary(self, model: ChainParams, values: dict) -> ChainParams:
+        """Instance values of the model's fields: none yet (`engine.make` sends a variation to mjx)."""
+        if values:
+            raise ValueError(f"the chain engine cannot take {', '.join(sorted(values))} at run time")
+        return model
 
     def make_data(self, qpos, qvel) -> ChainData:
         qpos = jnp.asarray(qpos)
