@@ -91,6 +91,20 @@ CASES = [
     ("sweep", ["gravity", "--num", "100000000", "--out", "s"], "--num: 900,000,000 instances would need about"),
     ("sweep", ["gravity", "--duration", "1e9", "--out", "s"], "--duration: 1e+09 s at a 0.001 s step is"),
     ("ros.record", ["--num", "100000000", "--out", "r.bag"], "would need about"),
+    # A variation that cannot be drawn, or drew a robot that cannot be.
+    ("simulate", ["--randomize", "wing_mass=1"], "--randomize: unknown parameter 'wing_mass'; choose from: body_mass,"),
+    ("simulate", ["--randomize", "foot_friction=uniform(1.0,0.4)"],
+     "--randomize: foot_friction: uniform(1,0.4): bounds reversed (1 > 0.4)"),
+    ("simulate", ["--randomize", "base_mass=scale(0.9,inf)"],
+     "--randomize: base_mass: scale(0.9,inf) has a non-finite bound"),
+    ("simulate", ["--randomize", "base_mass=normal(5,5)", "--num", "16"],
+     "--randomize: base_mass drew a value of -"),
+    ("simulate", ["--randomize", "foot_friction=-0.2..0.5", "--num", "16"],
+     "--randomize: foot_friction drew a value of -0."),
+    ("simulate", ["--randomize", "dof_damping=0.1", "--engine", "chain"],
+     "--randomize: the chain engine cannot vary dof_damping per instance yet; use --engine mjx or auto"),
+    ("render", ["--video", "h.gif", "--randomize", "base_mass=0"], "--randomize: base_mass drew a value of 0 kg"),
+    ("ros.record", ["--randomize", "base_mass=5,base_mass=6"], "--randomize: base_mass given twice"),
 ]
 
 

@@ -72,6 +72,33 @@ def draw(spec: Spec, mj_model: mujoco.MjModel, n: int, seed: int) -> dict[str, n
     return values
 
 
+def columns(spec: Spec, mj_model: mujoco.MjModel, values: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """{column name: (N,)} of each drawn parameter, one column per element it draws: `base_mass`,
+    `body_mass_upperleg`, `dof_damping_kfe`, `base_com_z` (for a table such as a sweep's results.csv)."""
+    out = {}
+    for name, _ in spec.items:
+        par = registry.PARAMETERS[name]
+        field = values[par.field]
+        at = rows(mj_model, par.elements)
+        if par.field in _PER_AXIS:
+            for r in at:
+                out.update({f"{name}_{axis}": field[:, r, k] for k, axis in enumerate("xyz")})
+            continue
+        labels = _labels(mj_model, par.elements, at)
+        for r, label in zip(at, labels):
+            value = field[:, r] if field.ndim == 2 else field[:, r, 0]
+            out[name if len(at) == 1 else f"{name}_{label}"] = value
+    return out
+
+
+def _labels(m: mujoco.MjModel, elements: str, at: list[int]) -> list[str]:
+    if elements in ("joints", "actuators"):
+        return [j.removesuffix("_joint") for j in JOINTS]
+    if elements == "bodies":
+        return [m.body(b).name for b in at]
+    return [elements] * len(at)
+
+
 def _check_range(name: str, par: registry.Parameter, drawn: np.ndarray) -> None:
     low_bad = drawn <= par.low if par.open_low else drawn < par.low
     bad = low_bad | (drawn > par.high) | ~np.isfinite(drawn)

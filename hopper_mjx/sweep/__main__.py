@@ -52,6 +52,7 @@ def parser() -> argparse.ArgumentParser:
         s.add_argument("--kick", type=float, default=KICK, help="std of the random initial velocity, m/s and rad/s")
         s.add_argument("--seed", type=int, default=0)
         s.add_argument("--urdf", default=None, help="monoped URDF (default: the shipped one)")
+        cli.add_randomize_option(s)
         s.add_argument("--chunk", type=int, default=256, help="instances per compiled call")
         cli.add_engine_option(s)
         s.add_argument("--out", type=Path, default=None, help="output folder (default runs/<kind>-<UTC time>)")
@@ -96,13 +97,17 @@ def check(args):
     if len(set(names)) != len(names):
         raise ValueError(f"--controllers lists one twice: {args.controllers}")
     chunk = check_size(args, len(gravity))
+    from hopper_mjx import model  # the variation is drawn once here, so a robot that cannot be is refused now
+
+    variation = cli.check_randomize(args.randomize, args.engine, lambda: model.load(args.urdf), args.num, args.seed)
     specs = []
     for name in names:
         specs.append(SweepSpec(kind="gains" if args.kind == "gains" else "gravity", gravity=gravity, num=args.num,
                                duration=args.duration, height=args.height, speed=tuple(args.speed), seed=args.seed,
                                kick=args.kick, chunk=chunk, engine=args.engine,
                                param=getattr(args, "param", None), controller=name, urdf=args.urdf,
-                               values=tuple(args.values) if args.kind == "gains" else ()))
+                               values=tuple(args.values) if args.kind == "gains" else (),
+                               randomize=str(variation or "")))
         cli.check_controller(name, args.height, args.speed, args.urdf)  # a policy: its folder and trained range
     out = args.out or Path("runs") / f"{args.kind}-{datetime.now(timezone.utc):%Y%m%d-%H%M%S}"
     cli.check_writable("--out", out, folder=True, make_parents=True)

@@ -3,7 +3,8 @@
 A `SweepSpec` holds every argument that changes results; it is saved as the
 run's manifest, so a rerun into the same folder can tell a resume from a
 different experiment. Instances are ordered gain-major, then gravity, then
-replicate, and chunked in that order.
+replicate, and chunked in that order. Replicate r has the same kick, and the same robot under
+--randomize, at every grid point (common random numbers).
 """
 
 from __future__ import annotations
@@ -15,6 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from hopper_mjx import checks, registry
+from hopper_mjx.randomize import Spec, check_engine_varies
 
 PLANETS = {1.62: "Moon", 3.71: "Mars", 9.81: "Earth"}
 DEFAULT_GRAVITY = (0.5, 1.0, 1.62, 2.5, 3.71, 5.0, 7.5, 9.81, 12.0)  # m/s²
@@ -41,6 +43,7 @@ class SweepSpec:
     engine: str = "auto"  # hopper_mjx.engine name
     controller: str = "raibert"  # or policy:PATH, a policy trained by experiments/train.py
     urdf: str | None = None  # the monoped's URDF (None: the shipped one)
+    randomize: str = ""  # the robot of each replicate (hopper_mjx.randomize; "": the URDF's)
 
     def __post_init__(self):
         if self.kind not in ("gravity", "gains"):
@@ -66,6 +69,11 @@ class SweepSpec:
         if self.chunk < 1:
             raise ValueError(f"--chunk must be >= 1, got {self.chunk}")
         checks.check_engine(self.engine)
+        try:
+            variation = Spec.parse(self.randomize)
+            check_engine_varies(self.engine, variation.fields)
+        except ValueError as err:
+            raise ValueError(f"--randomize: {err}") from None
         if self.controller != "raibert" and not registry.is_policy(self.controller):
             raise ValueError(f"--controller {self.controller!r}: a sweep runs raibert or policy:PATH")
         if self.kind == "gains" and self.controller != "raibert":
@@ -81,6 +89,10 @@ class SweepSpec:
     def to_json(self) -> dict:
         return dataclasses.asdict(self)
 
+    @property
+    def variation(self) -> Spec:
+        return Spec.parse(self.randomize)
+
 
 @dataclass(frozen=True)
 class Instances:
@@ -90,6 +102,7 @@ class Instances:
     replicate: np.ndarray  # (n,) int
     value: np.ndarray  # (n,) swept gain value (NaN for a gravity sweep)
     qvel: np.ndarray  # (n, nv) initial velocity: the random kick
+    robot: dict = dataclasses.field(default_factory=dict)  # column name -> (n,) drawn robot parameter
 
     def __len__(self) -> int:
         return len(self.gravity)
