@@ -69,7 +69,7 @@ PARAMETERS = {
                                "applied torque and its limit", open_low=True),
 }
 # The model fields the chain engine takes as run-time values (every other varied field needs mjx).
-CHAIN_VARIES: frozenset[str] = frozenset()
+CHAIN_VARIES: frozenset[str] = frozenset({"dof_damping", "pair_friction"})
 
 
 def listed(registry: dict[str, str]) -> str:

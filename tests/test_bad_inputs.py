@@ -101,8 +101,8 @@ CASES = [
      "--randomize: base_mass drew a value of -"),
     ("simulate", ["--randomize", "foot_friction=-0.2..0.5", "--num", "16"],
      "--randomize: foot_friction drew a value of -0."),
-    ("simulate", ["--randomize", "dof_damping=0.1", "--engine", "chain"],
-     "--randomize: the chain engine cannot vary dof_damping per instance yet; use --engine mjx or auto"),
+    ("simulate", ["--randomize", "dof_damping=0.1,base_mass=5", "--engine", "chain"],
+     "--randomize: the chain engine cannot vary body_mass per instance yet; use --engine mjx or auto"),
     ("render", ["--video", "h.gif", "--randomize", "base_mass=0"], "--randomize: base_mass drew a value of 0 kg"),
     ("ros.record", ["--randomize", "base_mass=5,base_mass=6"], "--randomize: base_mass given twice"),
 ]

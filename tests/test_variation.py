@@ -110,9 +110,10 @@ def test_the_constants_are_mujocos_own_for_each_instance(mj_model):
     assert variation.with_constants(mj_model, {}) == {}
 
 
-def _c_path(m: mujoco.MjModel, gravity, qpos0, steps: int, lay: Layout) -> np.ndarray:
+def _c_path(m: mujoco.MjModel, gravity, qpos0, steps: int, lay: Layout, limp: bool = False) -> np.ndarray:
     """Base position (steps, 3) of MuJoCo C stepping `m` from qpos0 under the hold controller, which
-    knows the nominal robot's layout `lay` only (its gear: a varied gear scales the torque it applies)."""
+    knows the nominal robot's layout `lay` only (its gear: a varied gear scales the torque it applies),
+    or `limp`."""
     m.opt.gravity[:] = gravity
     d = mujoco.MjData(m)
     d.qpos[:] = qpos0
@@ -122,6 +123,7 @@ def _c_path(m: mujoco.MjModel, gravity, qpos0, steps: int, lay: Layout) -> np.nd
     for _ in range(steps):
         base.append(d.qpos[:3].copy())
         torque = HOLD_GAINS["p"] * (target - d.qpos[joints]) - HOLD_GAINS["d"] * d.qvel[dofs]
+        torque *= not limp
         d.ctrl[acts] = np.clip(torque, -limit, limit) / np.asarray(lay.gear)
         mujoco.mj_step(m, d)
     return np.array(base)
@@ -169,10 +171,50 @@ def test_same_seed_same_draws_and_results(recorded, tmp_path):
 def test_auto_takes_mjx_for_a_variation_the_chain_cannot_take(mj_model, capsys):
     from hopper_mjx.sim import Sim
 
-    batch = cli.check_batch(simulate.parser().parse_args(["--randomize", "foot_friction=0.5"]))
+    batch = cli.check_batch(simulate.parser().parse_args(["--randomize", "foot_friction=0.5,base_mass=5"]))
     sim = Sim(mj_model, engine=batch.engine, varies=batch.variation.fields)
     assert sim.engine.name == "mjx"
-    assert "note: engine auto uses mjx (the chain engine cannot vary pair_friction per instance yet)" in \
+    assert "note: engine auto uses mjx (the chain engine cannot vary body_mass per instance yet)" in \
         capsys.readouterr().err
-    with pytest.raises(ValueError, match="the chain engine cannot vary pair_friction"):
+    with pytest.raises(ValueError, match="the chain engine cannot vary body_mass"):
         Sim(sim.mj_model, engine="chain", varies=batch.variation.fields)
+    # Friction and damping it takes at run time: auto keeps the chain.
+    assert Sim(mj_model, varies=frozenset({"pair_friction", "dof_damping"})).engine.name == "chain"
+
+
+def test_friction_and_damping_leave_mujocos_constants_as_they_are(mj_model):
+    drawn = variation.draw(Spec.parse("foot_friction=0.4..1,dof_damping=0..1,dof_frictionloss=0..0.3"), mj_model, 4,
+                           seed=0)
+    assert variation.with_constants(mj_model, drawn).keys() == drawn.keys()
+    for i in range(4):
+        m = variation.instance_model(mj_model, drawn, i)
+        for c in variation.CONSTANTS:
+            np.testing.assert_array_equal(getattr(m, c), getattr(mj_model, c), err_msg=c)
+
+
+@pytest.fixture(scope="module")
+def damped_on_chain(tmp_path_factory):
+    """`simulate --randomize` of joint damping and foot friction on the chain, which takes both as run-time
+    values: a limp drop, whose joints fold at touchdown as their damping lets them."""
+    out = tmp_path_factory.mktemp("vary") / "chain.npz"
+    argv = ["--gravity", "9.81,1.62", "--num", "4", "--duration", "0.4", "--controller", "none", "--rate", "1000",
+            "--engine", "chain", "--seed", "5", "--randomize", "dof_damping=uniform(0.02,2.0),foot_friction=0.4..1",
+            "--out", str(out)]
+    assert simulate.main(argv) == 0
+    return dict(np.load(out))
+
+
+def test_the_chain_takes_damping_and_friction_per_instance_as_mujoco_c_does(mj_model, damped_on_chain):
+    f = damped_on_chain
+    drawn = {"dof_damping": f["model_dof_damping"], "pair_friction": f["model_pair_friction"]}
+    steps, lay = f["qpos"].shape[1], Layout.of(mj_model)
+    apart = []
+    for i in range(len(f["gravity"])):
+        assert f["contact"][i].any() and np.argmax(f["contact"][i]) < steps - 100
+        m_i = variation.instance_model(mj_model, drawn, i)
+        path = _c_path(m_i, f["gravity"][i], f["qpos"][i, 0], steps, lay, limp=True)
+        err = np.abs(path - f["qpos"][i, :, :3]).max()
+        assert err < 1e-3, f"instance {i}: chain and MuJoCo C differ by {err:.2e} m"
+        nominal = _c_path(copy.deepcopy(mj_model), f["gravity"][i], f["qpos"][i, 0], steps, lay, limp=True)
+        apart.append(np.abs(nominal - f["qpos"][i, :, :3]).max())
+    assert max(apart) > 5e-3, apart

@@ -26,6 +26,7 @@ from hopper_mjx.randomize import Spec
 # Fields `mj_setConst` derives from masses, inertias, armature and gear that MJX's step reads (MJX reads
 # body_sameframe, which changes with a moved centre of mass, nowhere).
 CONSTANTS = ("body_subtreemass", "body_invweight0", "dof_invweight0", "dof_M0", "actuator_acc0")
+FEEDS_CONSTANTS = {"body_mass", "body_inertia", "body_ipos", "dof_armature", "actuator_gear"}  # the rest do not
 # Columns of a row a parameter sets: None, the whole row; a list, those columns (one draw shared by them
 # unless the parameter draws per axis).
 _COLUMNS = {"body_inertia": None, "body_ipos": [0, 1, 2], "pair_friction": [0, 1], "actuator_gear": [0]}
@@ -122,9 +123,10 @@ def instance_model(mj_model: mujoco.MjModel, values: dict[str, np.ndarray], i: i
 
 
 def with_constants(mj_model: mujoco.MjModel, values: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
-    """`values` and the derived `CONSTANTS` of each instance (N, ...), computed by MuJoCo C."""
-    if not values:
-        return {}
+    """`values` and, when a varied field feeds them, the derived `CONSTANTS` of each instance (N, ...),
+    computed by MuJoCo C (friction and damping leave them as they are)."""
+    if not FEEDS_CONSTANTS & set(values):
+        return dict(values)
     m, n = copy.deepcopy(mj_model), len(next(iter(values.values())))
     d = mujoco.MjData(m)
     out = {c: np.empty((n, *np.shape(getattr(m, c)))) for c in CONSTANTS}
