@@ -103,6 +103,8 @@ def add_batch_options(p: argparse.ArgumentParser, *, gravity=(9.81, 3.71, 1.62),
                         "package or config/ folder holding it; default: the shipped one)")
     p.add_argument("--urdf", default=None, help="monoped URDF (default: the shipped one)")
     add_randomize_option(p)
+    p.add_argument("--motor", default="ideal",
+                   help=f"what becomes of the controller's torque at the joint: {registry.listed(registry.MOTORS)}")
     p.add_argument("--scenario", type=Path, default=None, metavar="FILE.yaml",
                    help="a scenario file: these options' values by name (gravity: [9.81, 1.62], num: 8, "
                         "controller: raibert, urdf: my.urdf, ...; paths from the file's folder); the command "
@@ -195,6 +197,10 @@ def check_batch(args) -> Scenario:
         raise ValueError(f"--chunk must be >= 1, got {args.chunk}")
     check_seed(args.seed)
     check_engine(args.engine)
+    try:
+        registry.check("motor", registry.MOTORS, args.motor)
+    except ValueError as err:
+        raise ValueError(f"--motor: {err}") from None
     if args.timestep is not None:
         check_range("--timestep", args.timestep, low=0, high=MAX_TIMESTEP, open_low=True)
     from hopper_mjx.model.checks import check_urdf  # MuJoCo's import waits for the cheap checks above
@@ -221,8 +227,8 @@ def check_batch(args) -> Scenario:
     variation = check_randomize(args.randomize, args.engine, lambda: model.load(args.urdf, **options),
                                 len(rows) * args.num, args.seed)
     return Scenario(gravity=np.repeat(rows, args.num, axis=0), model_options=options, urdf=args.urdf,
-                    variation=variation, engine=args.engine, controller=args.controller, height=args.height,
-                    speed=tuple(args.speed), gains=gains, seed=args.seed, chunk=args.chunk)
+                    variation=variation, motor=args.motor, engine=args.engine, controller=args.controller,
+                    height=args.height, speed=tuple(args.speed), gains=gains, seed=args.seed, chunk=args.chunk)
 
 
 # Values one sample of each stream records per instance, for the size estimate (the monoped's nq + nv for

@@ -68,6 +68,10 @@ PARAMETERS = {
                                "motor strength: the controllers command the URDF's gear, so this scales the "
                                "applied torque and its limit", open_low=True),
 }
+MOTORS = {
+    "ideal": "the controller's torque up to the URDF's effort limit",
+    "dc": "a DC motor's torque-speed line: the URDF's effort at rest, nothing beyond its velocity limit",
+}
 # The model fields the chain engine takes as run-time values (every other varied field needs mjx).
 CHAIN_VARIES: frozenset[str] = frozenset({"dof_damping", "pair_friction"})
 

@@ -41,6 +41,7 @@ class Scenario:
     urdf: str | None = None  # the robot (None: the shipped seed monoped)
     ground: str = FLAT
     variation: Spec | None = None  # per-instance robot parameters, drawn with `seed` (None: the URDF's robot)
+    motor: str = "ideal"  # a registry.MOTORS name: what becomes of the controller's torque at the joint
     engine: str = registry.DEFAULT_ENGINE
     controller: str = "hold"  # a registry.CONTROLLERS name or policy:PATH
     height: float = 0.10  # m, commanded apex rise over the standing height (raibert, hopping policies)
@@ -77,6 +78,17 @@ class Scenario:
 
         return variation.draw(self.variation, mj_model, self.n, self.seed)
 
+    def motors(self, robot) -> dict[str, np.ndarray]:
+        """Each instance's motor parameters ({} for ideal motors), from the URDF's limits (`control.motor`)."""
+        if self.motor == "ideal":
+            return {}
+        from hopper_mjx.control.motor import dc_params
+        from hopper_mjx.model import loader
+
+        path = self.urdf or loader.DEFAULT_URDF
+        leg = loader.describe(loader.read_text(path, "URDF file", loader.URDFError), str(path))
+        return dc_params(leg.transmissions, robot.layout, self.n)
+
     def varied(self, mj_model) -> dict[str, np.ndarray]:
         """`draws` and the constants MuJoCo derives from them, per instance: what `Sim.reset` takes."""
         from hopper_mjx.model.variation import with_constants
@@ -103,7 +115,7 @@ class Scenario:
         sim, controller, params = self.build()
         start = time.perf_counter()
         final, traj = sim.run(self.gravity, controller, params, duration=duration, sensors=sensors, key=self.seed,
-                              variation=self.varied(sim.mj_model))
+                              variation=self.varied(sim.mj_model), motor=self.motors(sim.robot))
         jax.block_until_ready(traj)
         wall = time.perf_counter() - start
         steps = len(traj.time["state"]) * sensors.periods(sim.layout.timestep)["state"]

@@ -26,6 +26,7 @@ from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
 from hopper_mjx import engine as engines
 from hopper_mjx import signals
+from hopper_mjx.control import motor
 from hopper_mjx.control.base import Controller, CState, zero_torque
 from hopper_mjx.model import world
 from hopper_mjx.model.robot import Robot
@@ -50,6 +51,8 @@ class State(NamedTuple):
     # Model field -> (N, ...) values of each instance's robot (`model.variation`); empty: every instance is
     # the nominal robot, and the compiled step is the one without variation.
     variation: dict = {}
+    # The motors between controller and joint (`control.motor`): {} ideal, else {motor_*: (N, 3)} of `dc` motors.
+    motor: dict = {}
 
 
 class Trajectory(NamedTuple):
@@ -120,13 +123,15 @@ class Sim:
         qpos=None,
         qvel=None,
         variation: dict | None = None,
+        motor: dict | None = None,
     ) -> State:
         """Initial state for N = len(gravity) instances.
 
         gravity: (N, 3) m/s²; qpos/qvel: (nq,) or (N, nq) / (nv,) or (N, nv),
         default the robot's stance (upright at rest, the foot `model.robot.CLEARANCE`
         above the floor); params: per-instance controller parameters (leading axis N) or None;
-        variation: {model field: (N, ...)} of each instance's robot (`model.variation.with_constants`).
+        variation: {model field: (N, ...)} of each instance's robot (`model.variation.with_constants`);
+        motor: {} or None ideal motors, else `control.motor.dc_params` (N, 3) each.
         """
         g = _check_gravity(gravity)
         n = g.shape[0]
@@ -150,6 +155,7 @@ class Sim:
             cstate=cstate,
             diverged=jnp.zeros(n, dtype=bool),
             variation=variation,
+            motor={k: jnp.asarray(v, jnp.float32) for k, v in (motor or {}).items()},
         )
 
     def _check_variation(self, variation: dict, n: int) -> dict:
@@ -211,20 +217,21 @@ class Sim:
         qpos=None,
         qvel=None,
         variation: dict | None = None,
+        motor: dict | None = None,
     ) -> tuple[State, Trajectory]:
         """The batch-run path of every tool: N = len(gravity) instances from `reset` for
         `duration` s, rounded to whole periods of every stream (`steps_for`)."""
         if not (math.isfinite(duration) and duration > 0):
             raise ValueError(f"duration must be > 0 s, got {duration}")
         state = self.reset(gravity, key=key, controller=controller, params=params, qpos=qpos, qvel=qvel,
-                           variation=variation)
+                           variation=variation, motor=motor)
         steps = steps_for(duration, self.layout.timestep, sensors)
         return self.rollout(state, controller, steps=steps, sensors=sensors)
 
     def _compiled_rollout(self, controller, steps, tick, periods, sensors, chunk):
         cache_key = (controller, steps, sensors, chunk)  # tick and periods follow from sensors
         if cache_key not in self._compiled:
-            one = _instance_rollout(self.engine, controller, steps, tick, periods, sensors)
+            one = _instance_rollout(self.engine, self.layout, controller, steps, tick, periods, sensors)
 
             def per_device(model, state):
                 n_local = state.gravity.shape[0]
@@ -255,7 +262,7 @@ def _pad(state: State, size: int) -> State:
     )
 
 
-def _instance_rollout(engine, controller, steps, tick, periods, sensors):
+def _instance_rollout(engine, layout, controller, steps, tick, periods, sensors):
     """One instance's rollout: `steps` physics steps, a record every `tick` steps."""
 
     def physics_step(model, state, record, previous):
@@ -263,6 +270,8 @@ def _instance_rollout(engine, controller, steps, tick, periods, sensors):
         (after forward, before integrate) where it is true, else `previous` is passed on."""
         d = state.data
         ctrl, cstate = controller.act(state.cstate, signals.observe(engine, model, d), state.gravity)
+        if state.motor:  # decided at trace time: ideal motors leave the program as it was
+            ctrl = motor.limit(layout, state.motor, ctrl, d.qvel)
         d1 = engine.forward(model, d.replace(ctrl=ctrl), state.gravity)
         measure = lambda: signals.measure(engine, model, d1, state.gravity)
         # An unbatched predicate stays a real conditional under vmap: off-tick steps skip the signals.

@@ -26,9 +26,10 @@ def sensor_config(args):
     return signals.SensorConfig.uniform(args.rate, gyro_noise=args.gyro_noise, accel_noise=args.accel_noise)
 
 
-def arrays(traj, gravity, diverged, drawn: dict | None = None) -> dict[str, np.ndarray]:
+def arrays(traj, gravity, diverged, drawn: dict | None = None, motors: dict | None = None) -> dict[str, np.ndarray]:
     """The arrays saved to the .npz file, from a trajectory of the batch; `drawn`: each instance's robot
-    ({model field: (N, ...)}, `Scenario.draws`), saved as `model_<field>`."""
+    ({model field: (N, ...)}, `Scenario.draws`), saved as `model_<field>`; `motors`: its motor parameters
+    (`Scenario.motors`: motor_stall_torque, motor_no_load_speed, (N, 3) joint order), saved as they are."""
     out = {
         "time": traj.time["state"],
         "gravity": gravity,
@@ -46,6 +47,7 @@ def arrays(traj, gravity, diverged, drawn: dict | None = None) -> dict[str, np.n
         "contact_pos": traj.contact.pos,
         "diverged": diverged,
         **{f"model_{field}": values for field, values in (drawn or {}).items()},
+        **(motors or {}),
     }
     return {k: np.asarray(v) for k, v in out.items()}
 
@@ -54,7 +56,7 @@ def run(args, batch: Scenario | None = None) -> dict[str, np.ndarray]:
     """Simulates as the arguments say (`batch`: already checked) and returns the arrays saved to the .npz file."""
     batch = batch or cli.check_batch(args)
     sim, final, traj = batch.run(args.duration, sensor_config(args))
-    return arrays(traj, batch.gravity, final.diverged, batch.draws(sim.mj_model))
+    return arrays(traj, batch.gravity, final.diverged, batch.draws(sim.mj_model), batch.motors(sim.robot))
 
 
 def run_live(args, batch: Scenario, stream) -> dict[str, np.ndarray]:
@@ -79,7 +81,8 @@ def run_live(args, batch: Scenario, stream) -> dict[str, np.ndarray]:
         while run_.played_until < end - 1e-9:
             run_.poll()
             time.sleep(run_.seconds_to_next())
-    return arrays(live.joined(played, end), playing.gravity, played[-1].diverged, batch.draws(playing.sim.mj_model))
+    return arrays(live.joined(played, end), playing.gravity, played[-1].diverged, batch.draws(playing.sim.mj_model),
+                  batch.motors(playing.sim.robot))
 
 
 def parser() -> argparse.ArgumentParser:

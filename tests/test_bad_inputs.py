@@ -105,6 +105,7 @@ CASES = [
      "--randomize: the chain engine cannot vary body_mass per instance yet; use --engine mjx or auto"),
     ("render", ["--video", "h.gif", "--randomize", "base_mass=0"], "--randomize: base_mass drew a value of 0 kg"),
     ("ros.record", ["--randomize", "base_mass=5,base_mass=6"], "--randomize: base_mass given twice"),
+    ("simulate", ["--motor", "stepper"], "--motor: unknown motor 'stepper'; choose from: ideal, dc"),
 ]
 
 

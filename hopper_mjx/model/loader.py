@@ -63,6 +63,7 @@ class Transmission:
     actuator: str
     reduction: float
     effort: float  # N·m at the joint, from <limit effort>
+    velocity: float = math.inf  # rad/s at the joint, from <limit velocity> (absent or 0: none given)
 
 
 @dataclass(frozen=True)
@@ -166,12 +167,17 @@ def _transmissions(robot: ET.Element, joints: dict[str, ET.Element]) -> list[Tra
         effort = _number(joints[jname].find("limit"), "effort", f"joint '{jname}' <limit>")
         if effort <= 0:
             raise URDFError(f"joint '{jname}' has effort limit {effort}: it must be positive")
+        velocity = joints[jname].find("limit").get("velocity")
+        velocity = _number(joints[jname].find("limit"), "velocity", f"joint '{jname}' <limit>") if velocity else 0.0
+        if velocity < 0:
+            raise URDFError(f"joint '{jname}' has velocity limit {velocity}: it must be >= 0 (0: none)")
         transmissions.append(
             Transmission(
                 joint=jname,
                 actuator=(actuator.get("name") if actuator is not None else None) or f"{jname}_motor",
                 reduction=reduction or 1.0,
                 effort=effort,
+                velocity=velocity or math.inf,
             )
         )
     return transmissions
