@@ -82,12 +82,9 @@ class Scenario:
         """Each instance's motor parameters ({} for ideal motors), from the URDF's limits (`control.motor`)."""
         if self.motor == "ideal":
             return {}
-        from hopper_mjx.control.motor import dc_params
-        from hopper_mjx.model import loader
+        from hopper_mjx.control.motor import dc_of_urdf
 
-        path = self.urdf or loader.DEFAULT_URDF
-        leg = loader.describe(loader.read_text(path, "URDF file", loader.URDFError), str(path))
-        return dc_params(leg.transmissions, robot.layout, self.n)
+        return dc_of_urdf(self.urdf, robot.layout, self.n)
 
     def varied(self, mj_model) -> dict[str, np.ndarray]:
         """`draws` and the constants MuJoCo derives from them, per instance: what `Sim.reset` takes."""

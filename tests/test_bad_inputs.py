@@ -106,6 +106,9 @@ CASES = [
     ("render", ["--video", "h.gif", "--randomize", "base_mass=0"], "--randomize: base_mass drew a value of 0 kg"),
     ("ros.record", ["--randomize", "base_mass=5,base_mass=6"], "--randomize: base_mass given twice"),
     ("simulate", ["--motor", "stepper"], "--motor: unknown motor 'stepper'; choose from: ideal, dc"),
+    ("sweep", ["gravity", "--motor", "stepper", "--out", "s"], "--motor: unknown motor 'stepper'; choose from: ideal"),
+    ("sweep", ["gravity", "--randomize", "base_mass=uniform(6,5)", "--out", "s"],
+     "--randomize: base_mass: uniform(6,5): bounds reversed"),
 ]
 
 

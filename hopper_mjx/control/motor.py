@@ -35,6 +35,15 @@ def dc_params(transmissions, layout: Layout, n: int) -> dict[str, np.ndarray]:
     return {STALL: np.tile(np.asarray(stall, float), (n, 1)), NO_LOAD: np.tile(np.asarray(speed, float), (n, 1))}
 
 
+def dc_of_urdf(urdf, layout: Layout, n: int) -> dict[str, np.ndarray]:
+    """`dc_params` of a URDF file (None: the shipped monoped)."""
+    from hopper_mjx.model import loader
+
+    path = urdf or loader.DEFAULT_URDF
+    leg = loader.describe(loader.read_text(path, "URDF file", loader.URDFError), str(path))
+    return dc_params(leg.transmissions, layout, n)
+
+
 def envelope(stall, no_load, speed):
     """(lowest, highest) joint torque N·m a DC motor gives at joint speed `speed` rad/s."""
     ratio = speed / no_load

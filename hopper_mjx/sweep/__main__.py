@@ -53,6 +53,7 @@ def parser() -> argparse.ArgumentParser:
         s.add_argument("--seed", type=int, default=0)
         s.add_argument("--urdf", default=None, help="monoped URDF (default: the shipped one)")
         cli.add_randomize_option(s)
+        s.add_argument("--motor", default="ideal", help=f"the motors: {registry.listed(registry.MOTORS)}")
         s.add_argument("--chunk", type=int, default=256, help="instances per compiled call")
         cli.add_engine_option(s)
         s.add_argument("--out", type=Path, default=None, help="output folder (default runs/<kind>-<UTC time>)")
@@ -107,7 +108,7 @@ def check(args):
                                kick=args.kick, chunk=chunk, engine=args.engine,
                                param=getattr(args, "param", None), controller=name, urdf=args.urdf,
                                values=tuple(args.values) if args.kind == "gains" else (),
-                               randomize=str(variation or "")))
+                               randomize=str(variation or ""), motor=args.motor))
         cli.check_controller(name, args.height, args.speed, args.urdf)  # a policy: its folder and trained range
     out = args.out or Path("runs") / f"{args.kind}-{datetime.now(timezone.utc):%Y%m%d-%H%M%S}"
     cli.check_writable("--out", out, folder=True, make_parents=True)

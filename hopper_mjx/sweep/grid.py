@@ -44,6 +44,7 @@ class SweepSpec:
     controller: str = "raibert"  # or policy:PATH, a policy trained by experiments/train.py
     urdf: str | None = None  # the monoped's URDF (None: the shipped one)
     randomize: str = ""  # the robot of each replicate (hopper_mjx.randomize; "": the URDF's)
+    motor: str = "ideal"  # a registry.MOTORS name
 
     def __post_init__(self):
         if self.kind not in ("gravity", "gains"):
@@ -69,6 +70,8 @@ class SweepSpec:
         if self.chunk < 1:
             raise ValueError(f"--chunk must be >= 1, got {self.chunk}")
         checks.check_engine(self.engine)
+        if self.motor not in registry.MOTORS:
+            raise ValueError(f"--motor: unknown motor {self.motor!r}; choose from: {', '.join(registry.MOTORS)}")
         try:
             variation = Spec.parse(self.randomize)
             check_engine_varies(self.engine, variation.fields)

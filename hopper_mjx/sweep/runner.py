@@ -19,6 +19,7 @@ import numpy as np
 from tqdm import tqdm
 
 from hopper_mjx import metrics, model, registry, signals
+from hopper_mjx.control import motor
 from hopper_mjx.control.raibert import raibert, raibert_params
 from hopper_mjx.files import atomic_write
 from hopper_mjx.model import variation
@@ -40,6 +41,8 @@ class ChunkRunner:
     def __init__(self, spec: SweepSpec, instances: Instances, sim: Sim, robots: dict):
         """`robots`: {model field: (num, ...)} each replicate's robot (`variation.with_constants`), or {}."""
         self.spec, self.instances, self.sim, self.robots = spec, instances, sim, robots
+        # The URDF's motors on every instance of a chunk, or ideal ones.
+        self.motors = motor.dc_of_urdf(spec.urdf, sim.layout, spec.chunk) if spec.motor == "dc" else {}
         self.policy = registry.policy_path(spec.controller) if registry.is_policy(spec.controller) else None
         if self.policy is None:
             self.controller = raibert(sim.robot)
@@ -75,7 +78,8 @@ class ChunkRunner:
         final, traj = self.sim.run(gravity_vectors(inst.gravity[full]), self.controller, self.params(full),
                                    duration=self.spec.duration, sensors=SENSORS, key=self.spec.seed,
                                    qvel=inst.qvel[full],
-                                   variation={f: v[inst.replicate[full]] for f, v in self.robots.items()})
+                                   variation={f: v[inst.replicate[full]] for f, v in self.robots.items()},
+                                   motor=self.motors)
         result = metrics.hop_metrics(traj, inst.gravity[full], command_speed=self.spec.speed,
                                      standing_height=self.sim.robot.standing_height,
                                      work=np.asarray(final.cstate.work), mass=self.mass(full))
