@@ -133,7 +133,11 @@ def check(args) -> None:
         raise ValueError(f"--task: {err}") from None
     if args.algo not in ALGORITHMS:
         raise ValueError(f"--algo {args.algo!r} is unknown; choose from {', '.join(ALGORITHMS)}")
-    cli.check_ideal_motors(cli.check_physics(args), "training (its Brax environments)")
+    physics = cli.check_physics(args)
+    tool = "training (its Brax environments)"
+    cli.refuse_terrain(physics.ground, tool)
+    cli.refuse_variation(physics, tool)
+    cli.check_ideal_motors(physics, tool)
     _layers(args.policy_layers), _layers(args.value_layers)
     if args.gravity_range is not None:
         lo, hi = _pair(args.gravity_range, "--gravity-range")

@@ -105,6 +105,8 @@ def _typed(action: argparse.Action, value, path, key):
         if not isinstance(value, bool):
             raise ValueError(f"--scenario {path}: {key} must be true or false, got {value!r}")
         return value
+    if isinstance(value, dict):  # a block of NAME: VALUE lines (randomize:), as the option's NAME=VALUE,...
+        value = ",".join(f"{k}={v}" for k, v in value.items())
     try:
         if action.nargs in ("+", "*"):
             items = value if isinstance(value, list) else [value]

@@ -115,6 +115,11 @@ def add_physics_options(p: argparse.ArgumentParser, *, engine_help: str = "") ->
     """The options of a `scenario.Physics`, one set for every tool; `check_physics` reads them."""
     p.add_argument("--urdf", default=None, help="monoped URDF (default: the shipped one)")
     p.add_argument("--terrain", default="flat", metavar="SPEC", help=terrain_help())
+    p.add_argument("--randomize", default=None, metavar="NAME=DIST,...",
+                   help="robot parameters drawn per instance with --seed, e.g. \"foot_friction=uniform(0.4,1.0),"
+                        "body_mass=scale(0.9,1.1),dof_damping=0.02..0.2\"; DIST: a number, a..b, uniform(a,b), "
+                        "loguniform(a,b), normal(mu,sigma) or scale(a,b) (times the URDF's value); NAME: "
+                        f"{', '.join(registry.PARAMETERS)} (docs/variation.md)")
     p.add_argument("--engine", default=registry.DEFAULT_ENGINE,
                    help=f"physics engine: {registry.listed(registry.ENGINES)}; default {registry.DEFAULT_ENGINE}"
                         + engine_help)
@@ -162,6 +167,31 @@ def check_ground(text: str, engines, n: int = 1):
     return ground
 
 
+def check_randomize(text: str | None, engines):
+    """--randomize read (`hopper_mjx.randomize.Spec`, or None without it): an unknown parameter, a bad
+    distribution, or an engine that cannot take the varied fields raise ValueError."""
+    if not text:
+        return None
+    from hopper_mjx.randomize import Spec, check_engine_varies
+
+    try:
+        spec = Spec.parse(text)
+    except ValueError as err:
+        raise ValueError(f"--randomize: {err}") from None
+    for engine in engines:
+        try:
+            check_engine_varies(engine, spec.fields)
+        except ValueError as err:
+            raise ValueError(f"--randomize: {err}; use --engine mjx or auto") from None
+    return spec
+
+
+def refuse_variation(physics: Physics, tool: str) -> None:
+    """For a tool that cannot run per-instance robots yet: --randomize refused in one line."""
+    if physics.variation is not None:
+        raise ValueError(f"--randomize: {tool} runs the URDF's robot only, for now")
+
+
 def check_ideal_motors(physics: Physics, tool: str) -> None:
     """Refuses a motor model or delay in a tool that does not run them yet (rather than ignore them)."""
     if physics.motor != registry.DEFAULT_MOTOR or physics.action_delay or physics.push:
@@ -177,21 +207,23 @@ def check_delay(physics: Physics, duration: float | None) -> None:
 
 
 def check_physics(args, model_options: dict | None = None, *, engines: list[str] | None = None,
-                  n: int = 1) -> Physics:
+                  n: int = 1, seed: int = 0) -> Physics:
     """The checked `Physics` of `add_physics_options`' options (with the model options a tool or its
     world sets); `engines`: the names a tool that runs several takes from --engine (else one); `n`:
-    the instances that hold the ground's heights (its memory is checked for them)."""
+    the instances that hold the ground's heights and whose robots are drawn with `seed` (a drawn value
+    out of its range is refused before anything runs)."""
     for name in engines or [args.engine]:
         check_engine(name)
     ground = check_ground(args.terrain, engines or [args.engine], n)
+    variation = check_randomize(args.randomize, engines or [args.engine])
     try:
         registry.check("motor", registry.MOTORS, args.motor)
     except ValueError as err:
         raise ValueError(f"--motor: {err}") from None
     check_range("--action-delay", args.action_delay, low=0)
     push = check_push(args.push)
-    physics = Physics(urdf=args.urdf, model_options=dict(model_options or {}), ground=ground, engine=args.engine,
-                      motor=args.motor, action_delay=args.action_delay / 1e3, push=push)
+    physics = Physics(urdf=args.urdf, model_options=dict(model_options or {}), ground=ground, variation=variation,
+                      engine=args.engine, motor=args.motor, action_delay=args.action_delay / 1e3, push=push)
     if push is not None:
         from hopper_mjx.pushes import Pushes
 
@@ -210,6 +242,13 @@ def check_physics(args, model_options: dict | None = None, *, engines: list[str]
         if physics.motor == "dc" and no_speed:
             raise ValueError(f"--motor dc: the URDF gives no <limit velocity> (the motor's no-load speed) for "
                              f"{', '.join(no_speed)}")
+    if variation is not None:  # drawn once now (MuJoCo's compile, no JAX): a value out of its range is refused
+        from hopper_mjx.model import variation as draws
+
+        try:
+            draws.draw(variation, physics.mj_model, n, seed)
+        except ValueError as err:
+            raise ValueError(f"--randomize: {err}") from None
     return physics
 
 
@@ -267,7 +306,8 @@ def check_batch(args) -> Scenario:
     else:
         rows, options, warning = from_worlds
     options.setdefault("timestep", args.timestep or DEFAULT_TIMESTEP)
-    physics = check_physics(args, options, n=len(rows) * args.num)  # the ground's memory, for N instances
+    # The ground's memory and the robots' draws, for the N instances.
+    physics = check_physics(args, options, n=len(rows) * args.num, seed=args.seed)
     check_delay(physics, args.duration)
     check_controller(args.controller, args.height, args.speed, physics)
     gains = check_gains(args)

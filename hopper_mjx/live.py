@@ -114,13 +114,15 @@ class HopCounter:
 class LiveBatch:
     """A batch of the core and its controller, advanced one chunk at a time."""
 
-    def __init__(self, sim, controller, params, gravity: np.ndarray, *, seed: int = 0, sensors=None):
+    def __init__(self, sim, controller, params, gravity: np.ndarray, *, seed: int = 0, sensors=None,
+                 variation: dict | None = None):
         from hopper_mjx import signals
         from hopper_mjx.sim import steps_for
 
         self.sim, self.controller, self.params = sim, controller, params
         self.gravity = np.asarray(gravity, dtype=float)
         self.seed = seed
+        self.variation = variation  # each instance's robot, kept over resets
         self.sensors = sensors or signals.SensorConfig()  # the seed's 50 Hz on every stream, as record
         self.steps = steps_for(CHUNK_TIME, sim.layout.timestep, self.sensors)
         self.epoch = 0
@@ -130,7 +132,9 @@ class LiveBatch:
     @classmethod
     def build(cls, scenario, sensors=None) -> LiveBatch:
         """The batch of a `Scenario` (e.g. `cli.check_batch`'s), streams at `sensors`' rates."""
-        return cls(*scenario.build(), scenario.gravity, seed=scenario.seed, sensors=sensors)
+        built = scenario.build()
+        return cls(*built, scenario.gravity, seed=scenario.seed, sensors=sensors,
+                   variation=scenario.varied(built.sim.mj_model))
 
     @property
     def n(self) -> int:
@@ -138,7 +142,8 @@ class LiveBatch:
 
     def reset(self) -> None:
         command = self.command() if self.epoch else None
-        self.state = self.sim.reset(self.gravity, key=self.seed, controller=self.controller, params=self.params)
+        self.state = self.sim.reset(self.gravity, key=self.seed, controller=self.controller, params=self.params,
+                                    variation=self.variation)
         if command is not None:  # a reset keeps the commands the user set
             self._set_command(command["speed"], command["height"])
         self.hop_counter = HopCounter(self.n)

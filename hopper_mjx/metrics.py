@@ -118,7 +118,7 @@ def hop_metrics(
     command_speed=(0.0, 0.0),
     standing_height: float,
     work=None,
-    mass: float | None = None,
+    mass=None,
     last_hops: int = 5,
     speed_window: float = 5.0,
 ) -> dict[str, np.ndarray]:
@@ -127,7 +127,8 @@ def hop_metrics(
     traj: a `hopper_mjx.sim.Trajectory` (uses its state and contact streams);
     gravity: (N, 3) vectors or (N,) magnitudes, m/s²; command_speed: (2,) or (N, 2) m/s;
     standing_height: m (`Robot.standing_height`); work: (N,) J the motors did
-    (e.g. the Raibert controller state's `work`) and mass: kg, for the cost of transport;
+    (e.g. the Raibert controller state's `work`) and mass: kg (or (N,) kg, each instance's robot), for
+    the cost of transport;
     last_hops: hops averaged; speed_window: s of speed averaging before the end or fall.
     """
     qpos = np.asarray(traj.qpos, dtype=float)
@@ -239,7 +240,7 @@ def _mean_velocity(qpos, t_state, end, speed_window) -> np.ndarray:
 
 
 def _check_work(work, mass) -> None:
-    if work is not None and (mass is None or not mass > 0):
+    if work is not None and (mass is None or not np.all(np.asarray(mass) > 0)):
         raise ValueError("the cost of transport needs the robot's mass (kg) along with the work")
 
 

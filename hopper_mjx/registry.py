@@ -1,12 +1,15 @@
-"""The names a user types, each defined once: controllers, engines, tasks, terrains and the policy prefix.
+"""The names a user types, each defined once: controllers, engines, tasks, terrains, motors, varied parameters,
+the policy prefix.
 
-The factories (`control.make`, `engine.make`, `envs.make`) dispatch on these names, and every
-`--controller`, `--engine` and `--task` choice, help text and error message is derived from
-them. This module imports nothing, so that a command can refuse a bad name before JAX or
-MuJoCo is loaded.
+The factories (`control.make`, `engine.make`, `envs.make`, `model.variation.draw`) dispatch on
+these names, and every `--controller`, `--engine`, `--task` and `--randomize` choice, help text
+and error message is derived from them. This module imports only the standard library's `typing`,
+so that a command can refuse a bad name before JAX or MuJoCo is loaded.
 """
 
 from __future__ import annotations
+
+from typing import NamedTuple
 
 POLICY_PREFIX = "policy:"  # `policy:PATH`: a policy trained by experiments/train.py, run as a controller
 
@@ -42,6 +45,47 @@ TASKS = {
     "hop": "hop in place to a commanded apex",
     "hop_velocity": "hop to a commanded apex at a commanded (vx, vy)",
 }
+
+
+
+
+class Parameter(NamedTuple):
+    """A robot parameter drawn per instance (`--randomize NAME=...`): the MuJoCo model field it sets,
+    on which elements (model.variation resolves them), its unit and the range a drawn value must lie in."""
+
+    field: str
+    elements: str  # bodies (every robot link), base, hip, thigh, shank, foot, joints, actuators, foot_pair
+    unit: str
+    what: str
+    low: float = 0.0
+    high: float = float("inf")
+    open_low: bool = False  # low itself excluded (a mass of 0 is no body)
+    offset: bool = False  # a drawn value is added to the nominal one, not put in its place
+
+
+_MASS = "mass of the {} link"
+PARAMETERS = {
+    "body_mass": Parameter("body_mass", "bodies", "kg", "every link's mass, drawn per link", open_low=True),
+    "base_mass": Parameter("body_mass", "base", "kg", _MASS.format("base"), open_low=True),
+    "hip_mass": Parameter("body_mass", "hip", "kg", _MASS.format("hip"), open_low=True),
+    "thigh_mass": Parameter("body_mass", "thigh", "kg", _MASS.format("thigh (upper leg)"), open_low=True),
+    "shank_mass": Parameter("body_mass", "shank", "kg", _MASS.format("shank (lower leg)"), open_low=True),
+    "foot_mass": Parameter("body_mass", "foot", "kg", _MASS.format("foot"), open_low=True),
+    "body_inertia": Parameter("body_inertia", "bodies", "kg·m²",
+                              "every link's principal inertia, one draw per link for its three axes", open_low=True),
+    "base_com": Parameter("body_ipos", "base", "m", "offset of the base's centre of mass, per axis (x, y, z), "
+                          "added to the URDF's", low=-0.1, high=0.1, offset=True),
+    "foot_friction": Parameter("pair_friction", "foot_pair", "1",
+                               "sliding friction of the foot-floor contact (both directions)", high=10.0),
+    "dof_damping": Parameter("dof_damping", "joints", "N·m·s/rad", "viscous damping of haa, hfe, kfe"),
+    "dof_armature": Parameter("dof_armature", "joints", "kg·m²", "rotor inertia reflected at haa, hfe, kfe"),
+    "dof_frictionloss": Parameter("dof_frictionloss", "joints", "N·m", "dry friction of haa, hfe, kfe"),
+    "actuator_gear": Parameter("actuator_gear", "actuators", "N·m per unit of control",
+                               "motor strength: the controllers command the URDF's gear, so this scales the "
+                               "applied torque and its limit", open_low=True),
+}
+# The model fields the chain engine takes as run-time values (every other varied field needs mjx).
+CHAIN_VARIES: frozenset[str] = frozenset({"dof_damping", "pair_friction"})
 
 
 def listed(registry: dict[str, str]) -> str:

@@ -20,13 +20,14 @@ from __future__ import annotations
 
 import sys
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field, fields
 from functools import cached_property
 from typing import Any, NamedTuple
 
 import numpy as np
 
 from hopper_mjx import registry
+from hopper_mjx.randomize import Spec
 from hopper_mjx.terrain import FLAT, Ground
 
 
@@ -45,7 +46,7 @@ class Physics:
     urdf: str | None = None  # the robot (None: the shipped seed monoped)
     model_options: dict = field(default_factory=dict)  # keywords of model.load a world sets: timestep, friction
     ground: Ground = FLAT  # every instance on this ground (`terrain.parse` of a --terrain spec)
-    variation: None = None  # per-instance robot parameters: none yet, every instance is the URDF's robot
+    variation: Spec | None = None  # per-instance robot parameters, drawn per instance (None: the URDF's robot)
     engine: str = registry.DEFAULT_ENGINE
     motor: str = registry.DEFAULT_MOTOR  # a registry.MOTORS name: what the joints' motors are (hopper_mjx.actuators)
     action_delay: float = 0.0  # s from a controller's command to the motors' torque, whole physics steps
@@ -80,21 +81,24 @@ class Physics:
         from hopper_mjx.sim import Sim
 
         pushes = None if self.push is None else Pushes.of(*self.push, self.timestep)
+        varies = self.variation.fields if self.variation else frozenset()
         return Sim(self.mj_model, engine=self.engine, chunk=chunk, devices=devices, motor=self.motor,
-                   delay_steps=self.delay_steps, pushes=pushes)
+                   delay_steps=self.delay_steps, pushes=pushes, varies=varies)
 
     def to_json(self) -> dict:
-        """The fields, as a run's manifest or config records them."""
-        return asdict(self)
+        """The fields as a run's manifest or config records them (the ground and the variation as their specs)."""
+        record = {f.name: getattr(self, f.name) for f in fields(self)}
+        return record | {"ground": str(self.ground), "variation": str(self.variation) if self.variation else None}
 
     def flags(self) -> list[str]:
         """The command-line options that give this physics but its engine (`cli.add_physics_options`'),
         for a child process; of a world's model options only the timestep has a flag."""
         extra = set(self.model_options) - {"timestep"}
-        if extra or self.variation is not None:
-            raise ValueError(f"this physics has no command-line form ({', '.join(sorted(extra)) or 'variation'})")
+        if extra:
+            raise ValueError(f"this physics has no command-line form ({', '.join(sorted(extra))})")
         return ((["--urdf", str(self.urdf)] if self.urdf else [])
                 + (["--terrain", str(self.ground)] if not self.ground.is_flat else [])
+                + (["--randomize", str(self.variation)] if self.variation else [])
                 + (["--timestep", repr(self.timestep)] if "timestep" in self.model_options else [])
                 + (["--motor", self.motor] if self.motor != registry.DEFAULT_MOTOR else [])
                 + (["--action-delay", repr(self.action_delay * 1e3)] if self.action_delay else [])
@@ -125,6 +129,21 @@ class Scenario:
         sim = self.physics.sim(chunk=self.chunk)
         return Built(sim, *self._controller(sim))
 
+    def draws(self, mj_model) -> dict[str, np.ndarray]:
+        """{model field: (N, ...)} float64 of each instance's robot, drawn with the scenario's seed (empty
+        without a variation); raises ValueError naming a parameter that drew a value outside its range."""
+        if not self.physics.variation:
+            return {}
+        from hopper_mjx.model import variation
+
+        return variation.draw(self.physics.variation, mj_model, self.n, self.seed)
+
+    def varied(self, mj_model) -> dict[str, np.ndarray]:
+        """`draws` and the constants MuJoCo derives from them, per instance: what `Sim.reset` takes."""
+        from hopper_mjx.model.variation import with_constants
+
+        return with_constants(mj_model, self.draws(mj_model))
+
     def _controller(self, sim):
         """(controller, params): the registry's `control.make`, or a trained policy."""
         if registry.is_policy(self.controller):
@@ -144,7 +163,8 @@ class Scenario:
 
         sim, controller, params = self.build()
         start = time.perf_counter()
-        final, traj = sim.run(self.gravity, controller, params, duration=duration, sensors=sensors, key=self.seed)
+        final, traj = sim.run(self.gravity, controller, params, duration=duration, sensors=sensors, key=self.seed,
+                              variation=self.varied(sim.mj_model))
         jax.block_until_ready(traj)
         wall = time.perf_counter() - start
         steps = len(traj.time["state"]) * sensors.periods(sim.layout.timestep)["state"]

@@ -51,6 +51,9 @@ class State(NamedTuple):
     diverged: jax.Array  # (N,) bool, the instance's state went non-finite
     drive: Drive | tuple = ()  # the motors' figures and state (hopper_mjx.actuators); () for ideal motors
     step: jax.Array | tuple = ()  # (N,) int32 physics steps taken, for the pushes' schedule; () without pushes
+    # Model field -> (N, ...) values of each instance's robot (`model.variation`); empty: every instance is
+    # the nominal robot, and the compiled step is the one without variation.
+    variation: dict = {}
 
 
 class Trajectory(NamedTuple):
@@ -94,15 +97,18 @@ class Sim:
     """A compiled monoped model batched over instances and local devices."""
 
     def __init__(self, mj_model: mujoco.MjModel, *, engine: str = "auto", chunk: int = 256, devices=None,
-                 motor: str = registry.DEFAULT_MOTOR, delay_steps: int = 0, pushes: Pushes | None = None):
+                 motor: str = registry.DEFAULT_MOTOR, delay_steps: int = 0, pushes: Pushes | None = None,
+                 varies: frozenset[str] = frozenset()):
         """motor: a registry.MOTORS name; delay_steps: every instance's action delay by default, and
-        the longest one a batch may be given (`reset(motor=...)`); pushes: random pushes during runs."""
+        the longest one a batch may be given (`reset(motor=...)`); pushes: random pushes during runs;
+        varies: the model fields a variation may set per instance (`reset(..., variation=)`), so that
+        the engine is one that takes them at run time."""
         if chunk < 1:
             raise ValueError("chunk must be >= 1")
         self.mj_model = mj_model
         self.robot = Robot.of(mj_model)  # the robot facts, measured once and passed down
         self.layout = self.robot.layout
-        self.engine = engines.make(engine, mj_model)
+        self.engine = engines.make(engine, mj_model, frozenset(varies))
         self.actuation = Actuation(self.layout, motor, delay_steps)
         self.delay_steps = delay_steps
         self.pushes = pushes
@@ -124,6 +130,7 @@ class Sim:
         qpos=None,
         qvel=None,
         motor: Motor | None = None,
+        variation: dict | None = None,
     ) -> State:
         """Initial state for N = len(gravity) instances.
 
@@ -131,10 +138,12 @@ class Sim:
         default the robot's stance (upright at rest, the foot `model.robot.CLEARANCE`
         above the floor); params: per-instance controller parameters (leading axis N) or None;
         motor: per-instance motor figures (`self.actuation.motor(N, ...)`), default the URDF's
-        with the Sim's delay.
+        with the Sim's delay; variation: {model field: (N, ...)} of each instance's robot
+        (`model.variation.with_constants`).
         """
         g = _check_gravity(gravity)
         n = g.shape[0]
+        variation = self._check_variation(variation or {}, n)
         qpos = self.robot.stance_qpos if qpos is None else qpos
         qvel = np.zeros(self.layout.nv) if qvel is None else qvel
         qpos = np.broadcast_to(np.asarray(qpos, dtype=np.float32), (n, self.layout.nq))
@@ -157,7 +166,23 @@ class Sim:
             diverged=jnp.zeros(n, dtype=bool),
             drive=() if motor is None else self.actuation.init(motor),
             step=() if self.pushes is None else jnp.zeros(n, jnp.int32),
+            variation=variation,
         )
+
+    def _check_variation(self, variation: dict, n: int) -> dict:
+        """The per-instance fields checked, as float32 arrays (like the rest of the state), each (n, *field shape)."""
+        out = {}
+        for field, values in variation.items():
+            if field not in self.engine.varies:
+                raise ValueError(f"the {self.engine.name} engine cannot vary {field} per instance")
+            nominal = np.shape(getattr(self.mj_model, field))
+            values = np.asarray(values)
+            if values.shape != (n, *nominal):
+                raise ValueError(f"variation {field} must be {(n, *nominal)}, got {values.shape}")
+            if not np.isfinite(values).all():
+                raise ValueError(f"variation {field} must be finite")
+            out[field] = jnp.asarray(values, dtype=jnp.float32)
+        return out
 
     # -- rollout --------------------------------------------------------------
     def rollout(
@@ -203,13 +228,14 @@ class Sim:
         qpos=None,
         qvel=None,
         motor: Motor | None = None,
+        variation: dict | None = None,
     ) -> tuple[State, Trajectory]:
         """The batch-run path of every tool: N = len(gravity) instances from `reset` for
         `duration` s, rounded to whole periods of every stream (`steps_for`)."""
         if not (math.isfinite(duration) and duration > 0):
             raise ValueError(f"duration must be > 0 s, got {duration}")
         state = self.reset(gravity, key=key, controller=controller, params=params, qpos=qpos, qvel=qvel,
-                           motor=motor)
+                           motor=motor, variation=variation)
         steps = steps_for(duration, self.layout.timestep, sensors)
         return self.rollout(state, controller, steps=steps, sensors=sensors)
 
@@ -293,6 +319,7 @@ def _instance_rollout(engine, actuation: Actuation, pushes: Pushes | None, contr
         return (model, state), sig
 
     def run(model, state):
+        model = engine.vary(model, state.variation)  # this instance's robot: per instance only where varied
         (_, state), sig = jax.lax.scan(one_tick, (model, state), None, length=steps // tick)
         every = {k: p // tick for k, p in periods.items()}
         decimate = lambda tree, stream: jax.tree_util.tree_map(lambda x: x[:: every[stream]], tree)

@@ -27,10 +27,11 @@ def sensor_config(args):
     return signals.SensorConfig.uniform(args.rate, gyro_noise=args.gyro_noise, accel_noise=args.accel_noise)
 
 
-def arrays(traj, gravity, diverged, drive=(), push=None) -> dict[str, np.ndarray]:
+def arrays(traj, gravity, diverged, drive=(), push=None, drawn: dict | None = None) -> dict[str, np.ndarray]:
     """The arrays saved to the .npz file, from a trajectory of the batch (and the final motors' `drive`,
     `hopper_mjx.actuators.Drive`: each instance's motor figures and the energy drawn; the pushes'
-    (interval s, speed m/s))."""
+    (interval s, speed m/s); `drawn`: each instance's robot ({model field: (N, ...)}, `Scenario.draws`),
+    saved as `model_<field>`)."""
     out = {
         "time": traj.time["state"],
         "gravity": gravity,
@@ -47,6 +48,7 @@ def arrays(traj, gravity, diverged, drive=(), push=None) -> dict[str, np.ndarray
         "contact_force": traj.contact.force,
         "contact_pos": traj.contact.pos,
         "diverged": diverged,
+        **{f"model_{field}": values for field, values in (drawn or {}).items()},
     }
     if drive:
         motor = drive.motor
@@ -61,8 +63,8 @@ def arrays(traj, gravity, diverged, drive=(), push=None) -> dict[str, np.ndarray
 def run(args, batch: Scenario | None = None) -> dict[str, np.ndarray]:
     """Simulates as the arguments say (`batch`: already checked) and returns the arrays saved to the .npz file."""
     batch = batch or cli.check_batch(args)
-    _, final, traj = batch.run(args.duration, sensor_config(args))
-    return arrays(traj, batch.gravity, final.diverged, final.drive, batch.physics.push)
+    sim, final, traj = batch.run(args.duration, sensor_config(args))
+    return arrays(traj, batch.gravity, final.diverged, final.drive, batch.physics.push, batch.draws(sim.mj_model))
 
 
 def run_live(args, batch: Scenario, stream) -> dict[str, np.ndarray]:
@@ -87,7 +89,8 @@ def run_live(args, batch: Scenario, stream) -> dict[str, np.ndarray]:
         while run_.played_until < end - 1e-9:
             run_.poll()
             time.sleep(run_.seconds_to_next())
-    return arrays(live.joined(played, end), playing.gravity, played[-1].diverged)
+    return arrays(live.joined(played, end), playing.gravity, played[-1].diverged, playing.state.drive,
+                  batch.physics.push, batch.draws(playing.sim.mj_model))
 
 
 def parser() -> argparse.ArgumentParser:

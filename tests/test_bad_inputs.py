@@ -124,6 +124,23 @@ CASES = [
     ("perf.profile", ["--terrain", "crater:rim=-1", "--engine", "mjx"], "--terrain: rim=-1 must be >= 0 m"),
     ("simulate", ["--terrain", "obstacle:height=0.2,x=-0.05"], "--terrain obstacle:height=0.2,x=-0.05: the ground "
                                                                "within 0.1 m of the start rises to 0.200 m"),
+    # A variation that cannot be drawn, or drew a robot that cannot be.
+    ("simulate", ["--randomize", "wing_mass=1"], "--randomize: unknown parameter 'wing_mass'; choose from: body_mass,"),
+    ("simulate", ["--randomize", "foot_friction=uniform(1.0,0.4)"],
+     "--randomize: foot_friction: uniform(1,0.4): bounds reversed (1 > 0.4)"),
+    ("simulate", ["--randomize", "base_mass=scale(0.9,inf)"],
+     "--randomize: base_mass: scale(0.9,inf) has a non-finite bound"),
+    ("simulate", ["--randomize", "base_mass=normal(5,5)", "--num", "16"],
+     "--randomize: base_mass drew a value of -"),
+    ("simulate", ["--randomize", "foot_friction=-0.2..0.5", "--num", "16"],
+     "--randomize: foot_friction drew a value of -0."),
+    ("simulate", ["--randomize", "dof_damping=0.1,base_mass=5", "--engine", "chain"],
+     "--randomize: the chain engine cannot vary body_mass per instance yet; use --engine mjx or auto"),
+    ("render", ["--video", "h.gif", "--randomize", "base_mass=0"], "--randomize: base_mass drew a value of 0 kg"),
+    ("ros.record", ["--randomize", "base_mass=5,base_mass=6"], "--randomize: base_mass given twice"),
+    ("sweep", ["gravity", "--motor", "stepper", "--out", "s"], "--motor: unknown motor 'stepper'; choose from: ideal"),
+    ("sweep", ["gravity", "--randomize", "base_mass=uniform(6,5)", "--out", "s"],
+     "--randomize: base_mass: uniform(6,5): bounds reversed"),
 ]
 
 

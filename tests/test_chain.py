@@ -316,3 +316,30 @@ def test_models_outside_the_topology_are_refused_with_one_line(seed_model):
     spec.worldbody.add_body(name="lonely").add_geom(size=[0.1, 0, 0])
     with pytest.raises(NotChain, match="free joint"):
         describe(spec.compile())
+
+
+@pytest.mark.parametrize("mu, damping", [(0.3, 0.02), (0.9, 1.5)])
+def test_float64_stages_with_run_time_damping_and_foot_friction_match_mujoco_c(seed_model, seed_states, mu, damping):
+    """The chain takes an instance's joint damping and foot friction as run-time values (per-instance robots,
+    hopper_mjx.model.variation): every stage agrees with MuJoCo C given a model holding those values."""
+    from hopper_mjx.model.variation import draw
+    from hopper_mjx.randomize import Spec
+
+    values = draw(Spec.parse(f"foot_friction={mu},dof_damping={damping}"), seed_model, 1, seed=0)
+    varied = copy.deepcopy(seed_model)
+    varied.pair_friction[:], varied.dof_damping[:] = values["pair_friction"][0], values["dof_damping"][0]
+    c = mujoco_c(converged(varied, 50), *seed_states)
+    jax.config.update("jax_enable_x64", True)
+    try:
+        engine = chain.make(converged(seed_model, 20))  # the nominal model: the values come at run time
+        instance = {k: jnp.asarray(v[0], jnp.float64) for k, v in values.items()}
+        params = engine.vary(engine.model, instance)
+        args = [jnp.asarray(x, jnp.float64) for x in seed_states]
+        out = chain_stages(engine)(params, *args, jnp.zeros_like(args[1]))
+    finally:
+        jax.config.update("jax_enable_x64", False)
+    for stage in STAGES:
+        err = np.abs(np.asarray(out[stage]) - c[stage]).max()
+        assert err <= 1e-9, f"{stage}: chain and MuJoCo C differ by {err:.2e}"
+    nominal = mujoco_c(converged(seed_model, 50), *seed_states)
+    assert np.abs(nominal["qacc"] - c["qacc"]).max() > 1e-2  # the values change the answer

@@ -16,7 +16,7 @@ LAYERS = (
     ("registry", "files", "budget"),  # the names; file writes; sizes
     ("command",),  # what a command's process sets up: interrupts, stderr
     ("startup",),  # what precedes importing MuJoCo
-    ("checks", "runtime"),  # checks: the command line's value, path and name checks
+    ("checks", "runtime", "randomize"),  # the command line's value, path and name checks; variation specs
     ("terrain",),  # height grids, their spec and their MuJoCo hfield; the height scan
     ("model",),
     ("engine",),

@@ -56,6 +56,21 @@ def test_a_scenario_file_sets_options_and_the_command_line_wins(tmp_path):
     assert s.physics.urdf == str(urdf)  # a path in the file is read from the file's folder
 
 
+def test_a_randomize_block_is_the_same_variation_as_the_option(tmp_path):
+    from hopper_mjx.randomize import Spec
+
+    f = tmp_path / "rough.yaml"
+    f.write_text("num: 4\nseed: 3\nrandomize:\n  foot_friction: uniform(0.4, 1.0)\n  base_mass: scale(0.9,1.1)\n"
+                 "  dof_damping: 0.1\n  base_com: -0.02..0.02\n")
+    s = scenario_of(["--scenario", str(f)])
+    same = scenario_of(["--num", "4", "--seed", "3", "--randomize",
+                        "foot_friction=0.4..1,base_mass=scale(0.9,1.1),dof_damping=0.1,base_com=-0.02..0.02"])
+    assert s.physics.variation == same.physics.variation == Spec.parse(str(same.physics.variation))
+    assert s.physics.variation.names == ("foot_friction", "base_mass", "dof_damping", "base_com")
+    assert scenario_of(["--scenario", str(f), "--randomize", "dof_armature=0.01"]).physics.variation.names == \
+        ("dof_armature",)  # the command line wins over the file, as for every option
+
+
 @pytest.mark.parametrize("text, message", [
     ("gravity: [9.81]\nwings: 2\n", "unknown option(s) wings; known: "),
     ("- 9.81\n", "must be a mapping of option names to values"),

@@ -4,8 +4,11 @@
 
 Every engine has, per instance and pure (the core vmaps them):
 
-- `name`, `model` (the pytree passed into the compiled function) and `freeze_fields`
-  (data fields a diverged instance keeps from its last finite state);
+- `name`, `model` (the pytree passed into the compiled function), `freeze_fields`
+  (data fields a diverged instance keeps from its last finite state) and `varies` (the model
+  fields it takes per instance at run time);
+- `vary(model, values) -> model`: one instance's model, `values` {field: array} replacing
+  the nominal fields (`model.variation` draws them); `{}` returns `model` unchanged;
 - `make_data(qpos, qvel) -> data` at time 0;
 - `forward(model, data, gravity) -> data`: uses `data.ctrl` (actuator order), sets `qacc`
   and the contacts;
@@ -29,6 +32,7 @@ import mujoco
 
 from hopper_mjx import registry
 from hopper_mjx.engine.mjx import MjxEngine
+from hopper_mjx.randomize import check_engine_varies
 
 
 @runtime_checkable
@@ -38,6 +42,9 @@ class Engine(Protocol):
     name: str
     model: Any
     freeze_fields: tuple[str, ...]
+    varies: frozenset[str]
+
+    def vary(self, model, values: dict) -> Any: ...
 
     def make_data(self, qpos, qvel) -> Any: ...
 
@@ -53,20 +60,23 @@ def check_name(name: str) -> None:
     registry.check("engine", registry.ENGINES, name)
 
 
-def make(name: str, mj_model: mujoco.MjModel):
-    """The engine called `name` for a compiled monoped; "chain" raises `NotChain` (a
-    ValueError) for a model outside its topology, "auto" falls back to "mjx"."""
+def make(name: str, mj_model: mujoco.MjModel, varies: frozenset[str] = frozenset()):
+    """The engine called `name` for a compiled monoped whose model `varies` these fields per instance;
+    "chain" raises `NotChain` (a ValueError) for a model outside its topology and ValueError for a
+    field it cannot vary, "auto" falls back to "mjx" for either."""
     check_name(name)
+    check_engine_varies(name, varies)
     if name in ("auto", "chain"):
         from hopper_mjx.engine import chain
 
         try:
+            check_engine_varies("chain", varies)
             return chain.make(mj_model)
-        except chain.NotChain as err:
+        except ValueError as err:  # NotChain, or a varied field
             if name == "chain":
                 raise
             print(f"note: engine auto uses mjx ({err})", file=sys.stderr)
-    return MjxEngine(mj_model)
+    return MjxEngine(mj_model, varies)
 
 
 __all__ = ["Engine", "MjxEngine", "check_name", "make"]

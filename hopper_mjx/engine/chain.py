@@ -10,7 +10,8 @@ instances:
     -> (integrate) Euler with implicit joint damping
 
 Each stage's outputs are stored once (`chain_stage.stored`); the engine's `model` pytree
-only carries the run-time true predicate that makes that work.
+carries the run-time true predicate that makes that work and, for a batch of per-instance
+robots (`vary`), the instance's joint damping and foot friction in place of their constants.
 """
 
 from __future__ import annotations
@@ -22,6 +23,7 @@ import jax
 import jax.numpy as jnp
 import mujoco
 
+from hopper_mjx import registry
 from hopper_mjx.engine import chain_algebra as al
 from hopper_mjx.engine import chain_constraint, chain_smooth, chain_solver
 from hopper_mjx.engine.chain_model import ChainModel, NotChain, describe
@@ -31,9 +33,12 @@ __all__ = ["ChainData", "ChainEngine", "NotChain", "make"]
 
 
 class ChainParams(NamedTuple):
-    """The compiled function's model argument: a run-time true gate for `stored`."""
+    """The compiled function's model argument: a run-time true gate for `stored`, and the instance's
+    values of the fields it takes at run time (None: the model's own, folded in as constants)."""
 
     gate: jax.Array
+    damping: jax.Array | None = None  # (nv,) N·m·s/rad, dof_damping; its hinge entries are used
+    foot_friction: jax.Array | None = None  # (2,) the foot pair's sliding friction (pair_friction)
 
 
 @jax.tree_util.register_dataclass
@@ -62,12 +67,12 @@ def _vector(values, dtype) -> jax.Array:
     return jnp.stack([jnp.asarray(v, dtype) for v in values])
 
 
-def _smooth(cm: ChainModel, gate, pose, qpos, qvel, ctrl, gravity):
+def _smooth(cm: ChainModel, gate, pose, qpos, qvel, ctrl, gravity, damping):
     """Mass matrix, qfrc_smooth and the unconstrained acceleration."""
     mass = chain_smooth.mass_matrix(cm, gate, pose)
     bias = chain_smooth.bias(cm, gate, pose, qvel, gravity)
     qfrc_smooth = stored(gate, lambda *a: tuple(
-        al.sub(f, b) for f, b in zip(chain_smooth.applied_forces(cm, *a), bias)), qpos, qvel, ctrl)
+        al.sub(f, b) for f, b in zip(chain_smooth.applied_forces(cm, *a), bias)), qpos, qvel, ctrl, damping)
     return mass, qfrc_smooth, chain_solver.solve_spd(gate, mass, qfrc_smooth)
 
 
@@ -84,11 +89,33 @@ class ChainEngine:
     name = "chain"
     # A diverged instance keeps these from its last finite state (the rest is recomputed).
     freeze_fields = ("qpos", "qvel", "qacc_warmstart")
+    varies = registry.CHAIN_VARIES  # the model's numbers are folded into the step at trace time
 
     def __init__(self, mj_model: mujoco.MjModel):
         self.chain = describe(mj_model)
         self.nu = int(mj_model.nu)
+        self.foot_pair = next(p for p, pair in enumerate(self.chain.pairs) if pair.is_foot)
         self.model = ChainParams(gate=jnp.array(True))
+
+    def vary(self, model: ChainParams, values: dict) -> ChainParams:
+        """One instance's model: its joint damping and foot friction as run-time values (`varies`;
+        `engine.make` sends any other varied field to mjx); no values, the model's constants stay folded
+        (the same program)."""
+        other = set(values) - self.varies
+        if other:
+            raise ValueError(f"the chain engine cannot take {', '.join(sorted(other))} at run time")
+        if "dof_damping" in values:
+            model = model._replace(damping=values["dof_damping"])
+        if "pair_friction" in values:  # the foot pair's row; registry's parameters vary no other pair
+            model = model._replace(foot_friction=values["pair_friction"][self.foot_pair, :2])
+        return model
+
+    def _damping(self, model: ChainParams) -> tuple:
+        """Each dof's damping: the folded constants, or the instance's values on the hinges."""
+        cm = self.chain
+        if model.damping is None:
+            return cm.damping
+        return cm.damping[:6] + tuple(model.damping[i] for i in range(6, cm.nv))  # the free base keeps its own
 
     def make_data(self, qpos, qvel) -> ChainData:
         qpos = jnp.asarray(qpos)
@@ -107,8 +134,8 @@ class ChainEngine:
         ctrl = tuple(data.ctrl[i] for i in range(self.nu))
         gravity = tuple(jnp.asarray(gravity, dtype)[i] for i in range(3))
         pose = chain_smooth.kinematics(cm, gate, qpos)
-        mass, qfrc_smooth, qacc_smooth = _smooth(cm, gate, pose, qpos, qvel, ctrl, gravity)
-        rows, foot = chain_constraint.rows(cm, gate, pose, qpos, qvel)
+        mass, qfrc_smooth, qacc_smooth = _smooth(cm, gate, pose, qpos, qvel, ctrl, gravity, self._damping(model))
+        rows, foot = chain_constraint.rows(cm, gate, pose, qpos, qvel, model.foot_friction)
         warm = tuple(data.qacc_warmstart[i] for i in range(cm.nv))
         sol = chain_solver.solve(gate, mass, qfrc_smooth, qacc_smooth, warm, rows, iterations=cm.iterations,
                                  ls_iterations=cm.ls_iterations, tolerance=cm.tolerance,
@@ -123,10 +150,10 @@ class ChainEngine:
     def integrate(self, model: ChainParams, data: ChainData, gravity) -> ChainData:
         """Semi-implicit Euler; joint damping implicit as MuJoCo's: (M + h B) a = qfrc_smooth + qfrc_constraint."""
         cm, h = self.chain, self.chain.timestep
-        qacc = data.qacc
-        if cm.eulerdamp and any(cm.damping):
+        qacc, damping = data.qacc, self._damping(model)
+        if cm.eulerdamp and (model.damping is not None or any(cm.damping)):
             upper = iter(data.mass[k] for k in range(data.mass.shape[0]))
-            damped = {(i, j): next(upper) + (h * cm.damping[i] if i == j else 0.0)
+            damped = {(i, j): next(upper) + (h * damping[i] if i == j else 0.0)
                       for i in range(cm.nv) for j in range(i, cm.nv)}
             total = data.qfrc_smooth + data.qfrc_constraint
             qacc = _vector(chain_solver.solve_spd(model.gate, damped, tuple(total[i] for i in range(cm.nv))),

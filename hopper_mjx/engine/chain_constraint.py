@@ -18,7 +18,7 @@ from typing import NamedTuple
 import jax.numpy as jnp
 
 from hopper_mjx.engine import chain_algebra as al
-from hopper_mjx.engine.chain_model import ChainModel, ContactPair, SolParams
+from hopper_mjx.engine.chain_model import ChainModel, ContactPair, SolParams, pyramid_invweight
 from hopper_mjx.engine.chain_smooth import Pose, dof_body
 from hopper_mjx.engine.chain_stage import stored
 
@@ -121,14 +121,14 @@ def _slots(pair: ContactPair, pose: Pose, normal, height):
     return slots
 
 
-def _directions(cm: ChainModel, pair: ContactPair) -> tuple:
+def _directions(cm: ChainModel, pair: ContactPair, friction) -> tuple:
     """World directions of the pair's rows: the normal, or the pyramid's edges n +- mu t."""
     frame = cm.contact_frame
     normal = frame[0:3]
     if pair.condim == 1:
         return (normal,)
     out = []
-    for t, mu in ((frame[3:6], pair.friction[0]), (frame[6:9], pair.friction[1])):
+    for t, mu in ((frame[3:6], friction[0]), (frame[6:9], friction[1])):
         out.append(tuple(n + mu * ti for n, ti in zip(normal, t)))
         out.append(tuple(n - mu * ti for n, ti in zip(normal, t)))
     return tuple(out)
@@ -140,17 +140,21 @@ def _all_slots(cm: ChainModel, pose: Pose):
     return tuple(tuple(_slots(pair, pose, normal, height)) for pair in cm.pairs)
 
 
-def _assemble(cm: ChainModel, pose: Pose, qpos, qvel, slots) -> tuple[Rows, FootContact]:
+def _assemble(cm: ChainModel, pose: Pose, qpos, qvel, slots, foot_friction) -> tuple[Rows, FootContact]:
     jac, weight, aref = _limit_rows(cm, qpos, qvel)
     foot = None
     for pair, pair_slots in zip(cm.pairs, slots):
-        directions = _directions(cm, pair)
+        friction, invweight = pair.friction, pair.invweight
+        if pair.is_foot and foot_friction is not None and pair.condim == 3:  # this instance's friction
+            friction = (foot_friction[0], foot_friction[1])
+            invweight = pyramid_invweight(pair.body_invweight, friction[0], cm.impratio)
+        directions = _directions(cm, pair, friction)
         for dist, point in pair_slots:
             exists = dist <= pair.include_margin
             first = len(jac)
             for direction in directions:
                 row = _point_jacobian(cm, pose, pair.body, point, direction)
-                d, a = _row(cm, pair.sol, pair.invweight, row, qvel, dist - pair.include_margin, exists)
+                d, a = _row(cm, pair.sol, invweight, row, qvel, dist - pair.include_margin, exists)
                 jac.append(row), weight.append(d), aref.append(a)
             if pair.is_foot:
                 touching = dist < 0
@@ -160,7 +164,8 @@ def _assemble(cm: ChainModel, pose: Pose, qpos, qvel, slots) -> tuple[Rows, Foot
     return Rows(tuple(jac), tuple(weight), tuple(aref)), foot
 
 
-def rows(cm: ChainModel, gate, pose: Pose, qpos, qvel) -> tuple[Rows, FootContact]:
-    """All constraint rows (MuJoCo's order: limits, then contacts by pair) and the foot's."""
+def rows(cm: ChainModel, gate, pose: Pose, qpos, qvel, foot_friction=None) -> tuple[Rows, FootContact]:
+    """All constraint rows (MuJoCo's order: limits, then contacts by pair) and the foot's; `foot_friction`:
+    (2,) the foot pair's sliding friction as run-time values (None: the model's, folded in)."""
     slots = stored(gate, lambda p: _all_slots(cm, p), pose)
-    return stored(gate, lambda *a: _assemble(cm, *a), pose, qpos, qvel, slots)
+    return stored(gate, lambda *a: _assemble(cm, *a), pose, qpos, qvel, slots, foot_friction)

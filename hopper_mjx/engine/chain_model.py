@@ -71,6 +71,13 @@ class ContactPair:
     sol: SolParams
     invweight: float  # row's approximate inverse mass, MuJoCo's diagApprox rule
     is_foot: bool
+    body_invweight: float  # the body's translational invweight0, from which `invweight` follows
+
+
+def pyramid_invweight(body_invweight, mu, impratio: float):
+    """MuJoCo's one approximate inverse mass for every edge of a condim-3 pyramid of friction mu
+    (a float, or a run-time value for a varied friction)."""
+    return body_invweight * (1 + mu * mu) * 2 * mu * mu / impratio
 
 
 @dataclass(frozen=True)
@@ -211,18 +218,17 @@ def _pairs(m: mujoco.MjModel, floor: int) -> tuple[ContactPair, ...]:
         condim = int(m.pair_dim[p])
         _require(condim in (1, 3), f"contact pair {p} has condim {condim} (1 or 3 supported)")
         body = int(m.geom_bodyid[g2]) - 1
-        invweight = float(m.body_invweight0[body + 1, 0])  # the floor is on the world: no share
+        invweight = body_invweight = float(m.body_invweight0[body + 1, 0])  # the floor is on the world: no share
         friction = (float(m.pair_friction[p, 0]), float(m.pair_friction[p, 1]))
         if condim == 3:  # MuJoCo's pyramid: one approximate inverse mass for all edges
             _require(friction[0] > 0 and friction[1] > 0, f"contact pair {p} has zero friction with condim 3")
-            mu = friction[0]
-            invweight = invweight * (1 + mu * mu) * 2 * mu * mu / float(m.opt.impratio)
+            invweight = pyramid_invweight(invweight, friction[0], float(m.opt.impratio))
         margin, gap = float(m.pair_margin[p]), float(m.pair_gap[p])
         pairs.append(ContactPair(
             body=body, kind=kind, size=_vec(m.geom_size[g2]), pos=_vec(m.geom_pos[g2]),
             rot=const_mat(_quat_mat(m.geom_quat[g2])), condim=condim, friction=friction, margin=margin,
             include_margin=margin - gap, sol=_sol(m.pair_solref[p], m.pair_solimp[p]), invweight=invweight,
-            is_foot=m.geom(g2).name == FOOT_GEOM,
+            is_foot=m.geom(g2).name == FOOT_GEOM, body_invweight=body_invweight,
         ))
     _require(sum(p.is_foot for p in pairs) == 1 and any(p.is_foot and p.kind == "sphere" for p in pairs),
              f"no sphere foot geom {FOOT_GEOM!r} paired with the floor")

@@ -194,9 +194,10 @@ def _point_acc(acc, alpha, omega, r):
     return al.vadd(acc, al.vadd(al.cross(alpha, r), al.cross(omega, al.cross(omega, r))))
 
 
-def applied_forces(cm: ChainModel, qpos, qvel, ctrl) -> tuple:
-    """Actuator forces (clamped like MuJoCo: ctrl, actuator force, joint force range) minus damping."""
-    qfrc = [al.mul(-d, v) for d, v in zip(cm.damping, qvel)]
+def applied_forces(cm: ChainModel, qpos, qvel, ctrl, damping=None) -> tuple:
+    """Actuator forces (clamped like MuJoCo: ctrl, actuator force, joint force range) minus damping
+    (`damping`: each dof's, constants or run-time values; default the model's)."""
+    qfrc = [al.mul(-d, v) for d, v in zip(damping or cm.damping, qvel)]
     act = [0.0] * cm.nv
     for (dof, gear, gain, b0, b1, b2, ctrl_range, force_range), qadr, u in zip(cm.actuators, cm.actuator_qpos, ctrl):
         if ctrl_range is not None:

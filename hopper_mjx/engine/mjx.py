@@ -12,10 +12,13 @@ import copy
 import jax
 import jax.numpy as jnp
 import mujoco
+import numpy as np
 from mujoco import mjx
 from mujoco.mjx._src import support  # contact_force: decodes MJX's pyramidal/elliptic efc rows
 
+from hopper_mjx import registry
 from hopper_mjx.model.layout import Layout
+from hopper_mjx.model.variation import CONSTANTS
 
 _INTEGRATORS = {
     mujoco.mjtIntegrator.mjINT_EULER: mjx.euler,
@@ -57,14 +60,32 @@ class MjxEngine:
     name = "mjx"
     # A diverged instance keeps these from its last finite state (the rest is recomputed).
     freeze_fields = ("qpos", "qvel", "act", "qacc_warmstart")
+    # Every field a parameter sets, and the constants derived from them: MJX reads them all as arrays.
+    varies = frozenset(p.field for p in registry.PARAMETERS.values()) | frozenset(CONSTANTS)
 
-    def __init__(self, mj_model: mujoco.MjModel):
-        self.source = without_sensors(mj_model)
+    def __init__(self, mj_model: mujoco.MjModel, varies: frozenset[str] = frozenset()):
+        nominal = without_sensors(mj_model)
+        self.source = nominal
+        if "dof_frictionloss" in varies:
+            # MJX lays out a joint's dry-friction row only where the model has friction (fixed at trace time):
+            # a varied joint needs its row, so the layout comes from a copy with friction on every hinge, and
+            # the nominal values go back in (a row whose friction is 0 adds no force).
+            self.source = copy.deepcopy(nominal)
+            hinges = nominal.dof_frictionloss[6:]
+            self.source.dof_frictionloss[6:] = np.where(hinges > 0, hinges, 1.0)
         self.foot_geom = Layout.of(mj_model).foot_geom
         self._integrate = _INTEGRATORS[mujoco.mjtIntegrator(mj_model.opt.integrator)]
         # On this process's first device: under jax.distributed the default device may be another process's.
         self.device = jax.local_devices()[0]
         self.model = mjx.put_model(self.source, device=self.device)
+        if self.source is not nominal:
+            lossless = jnp.asarray(nominal.dof_frictionloss, self.model.dof_frictionloss.dtype)
+            self.model = self.model.replace(dof_frictionloss=lossless)
+
+    def vary(self, model: mjx.Model, values: dict) -> mjx.Model:
+        """One instance's model: its values of the varied fields (and their derived constants) in place
+        of the nominal ones; no values, the nominal model itself (the same compiled program)."""
+        return model.replace(**{f: jnp.asarray(v, getattr(model, f).dtype) for f, v in values.items()})
 
     def make_data(self, qpos: jax.Array, qvel: jax.Array) -> mjx.Data:
         return mjx.make_data(self.source, device=self.device).replace(qpos=qpos, qvel=qvel)

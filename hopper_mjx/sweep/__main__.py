@@ -87,7 +87,7 @@ def check(args):
     from hopper_mjx.sweep.grid import SweepSpec
 
     gravity = gravity_from_worlds(args) if args.world is not None else tuple(args.gravity or args.default_gravity)
-    physics = cli.check_physics(args)
+    physics = cli.check_physics(args, n=args.num, seed=args.seed)  # one robot per replicate, drawn now
     cli.refuse_terrain(physics.ground, "a sweep")
     cli.check_delay(physics, args.duration)
     names = args.controllers.split(",") if args.kind == "compare" else [getattr(args, "controller", "raibert")]

@@ -3,7 +3,8 @@
 A `SweepSpec` holds every argument that changes results; it is saved as the
 run's manifest, so a rerun into the same folder can tell a resume from a
 different experiment. Instances are ordered gain-major, then gravity, then
-replicate, and chunked in that order.
+replicate, and chunked in that order. Replicate r has the same kick, and the same robot under
+--randomize, at every grid point (common random numbers).
 """
 
 from __future__ import annotations
@@ -15,6 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from hopper_mjx import checks, registry
+from hopper_mjx.randomize import Spec
 from hopper_mjx.scenario import Physics
 
 PLANETS = {1.62: "Moon", 3.71: "Mars", 9.81: "Earth"}
@@ -81,7 +83,14 @@ class SweepSpec:
                 raise ValueError(f"--values must differ, got {list(self.values)}")
 
     def to_json(self) -> dict:
-        return dataclasses.asdict(self)
+        """The manifest: the grid's arguments and the physics' fields, side by side."""
+        grid = {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.name != "physics"}
+        return grid | self.physics.to_json()
+
+    @property
+    def variation(self) -> Spec:
+        """Which robot parameters each replicate draws (empty: the URDF's robot)."""
+        return self.physics.variation or Spec()
 
 
 @dataclass(frozen=True)
@@ -92,6 +101,7 @@ class Instances:
     replicate: np.ndarray  # (n,) int
     value: np.ndarray  # (n,) swept gain value (NaN for a gravity sweep)
     qvel: np.ndarray  # (n, nv) initial velocity: the random kick
+    robot: dict = dataclasses.field(default_factory=dict)  # column name -> (n,) drawn robot parameter
 
     def __len__(self) -> int:
         return len(self.gravity)

@@ -18,11 +18,13 @@ INTEGER_COLUMNS = {"replicate", "seed", "hops", "fell", "diverged"}
 
 
 def rows(spec: SweepSpec, inst: Instances, table: np.ndarray, columns: tuple[str, ...]) -> tuple[list[str], list[list]]:
-    header = ["gravity", "replicate", "seed"] + ([spec.param] if spec.kind == "gains" else []) + list(columns)
+    header = ["gravity", "replicate", "seed"] + ([spec.param] if spec.kind == "gains" else []) + list(inst.robot)
+    header += list(columns)
     out = []
     for i in range(len(inst)):
         row = [inst.gravity[i], inst.replicate[i], spec.seed]
         row += [inst.value[i]] if spec.kind == "gains" else []
+        row += [v[i] for v in inst.robot.values()]
         out.append(row + list(table[i]))
     return header, out
 

@@ -10,6 +10,7 @@ needed), which writes the merged outputs.
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from pathlib import Path
 
@@ -20,6 +21,7 @@ from tqdm import tqdm
 from hopper_mjx import metrics, registry, signals
 from hopper_mjx.control.raibert import raibert, raibert_params
 from hopper_mjx.files import atomic_write
+from hopper_mjx.model import variation
 from hopper_mjx.sim import Sim, gravity_vectors, steps_for
 from hopper_mjx.sweep.folder import chunk_path, claim, read_chunk
 from hopper_mjx.sweep.grid import Instances, SweepSpec, expand
@@ -35,8 +37,9 @@ SENSORS = signals.SensorConfig(imu_rate=100, odom_rate=100, contact_rate=1000, s
 class ChunkRunner:
     """One compiled rollout + metrics, applied to chunks of the grid."""
 
-    def __init__(self, spec: SweepSpec, instances: Instances, sim: Sim):
-        self.spec, self.instances, self.sim = spec, instances, sim
+    def __init__(self, spec: SweepSpec, instances: Instances, sim: Sim, robots: dict):
+        """`robots`: {model field: (num, ...)} each replicate's robot (`variation.with_constants`), or {}."""
+        self.spec, self.instances, self.sim, self.robots = spec, instances, sim, robots
         self.policy = registry.policy_path(spec.controller) if registry.is_policy(spec.controller) else None
         if self.policy is None:
             self.controller = raibert(sim.robot)
@@ -58,6 +61,12 @@ class ChunkRunner:
         gains = {spec.param: self.instances.value[full]} if spec.kind == "gains" else {}
         return raibert_params(len(full), height=spec.height, speed=spec.speed, **gains)
 
+    def mass(self, full: np.ndarray):
+        """kg of each instance's robot (its drawn link masses), for the cost of transport and power."""
+        if "body_mass" not in self.robots:
+            return self.sim.layout.total_mass
+        return self.robots["body_mass"][self.instances.replicate[full]].sum(axis=1)
+
     def __call__(self, index: np.ndarray) -> np.ndarray:
         """Metrics (len(index), len(COLUMNS)) of the given instances."""
         n = len(index)
@@ -65,11 +74,11 @@ class ChunkRunner:
         inst = self.instances
         final, traj = self.sim.run(gravity_vectors(inst.gravity[full]), self.controller, self.params(full),
                                    duration=self.spec.duration, sensors=SENSORS, key=self.spec.seed,
-                                   qvel=inst.qvel[full])
+                                   qvel=inst.qvel[full],
+                                   variation={f: v[inst.replicate[full]] for f, v in self.robots.items()})
         result = metrics.hop_metrics(traj, inst.gravity[full], command_speed=self.spec.speed,
                                      standing_height=self.sim.robot.standing_height,
-                                     work=np.asarray(motor_energy(final)),
-                                     mass=self.sim.layout.total_mass)
+                                     work=np.asarray(motor_energy(final)), mass=self.mass(full))
         result["diverged"] = np.asarray(final.diverged)
         return np.stack([np.asarray(result[c], dtype=np.float64) for c in COLUMNS], axis=1)[:n]
 
@@ -87,12 +96,15 @@ def run(spec: SweepSpec, out: Path, *, progress: bool = True) -> tuple[Instances
     (out / "chunks").mkdir(exist_ok=True)
     sim = spec.physics.sim()
     instances = expand(spec, sim.layout.nv)
+    drawn = variation.draw(spec.variation, sim.mj_model, spec.num, spec.seed)  # one robot per replicate
+    robot = variation.columns(spec.variation, sim.mj_model, drawn)
+    instances = dataclasses.replace(instances, robot={k: v[instances.replicate] for k, v in robot.items()})
     chunks = [np.arange(i, min(i + spec.chunk, len(instances))) for i in range(0, len(instances), spec.chunk)]
     me, procs = jax.process_index(), jax.process_count()
     mine = list(range(me, len(chunks), procs))
     saved = {k: read_chunk(out, k, len(chunks[k]), len(COLUMNS)) for k in mine}
     todo = [k for k in mine if saved[k] is None]  # missing, or damaged by a kill mid-write: (re)computed
-    runner = ChunkRunner(spec, instances, sim) if todo else None
+    runner = ChunkRunner(spec, instances, sim, variation.with_constants(sim.mj_model, drawn)) if todo else None
 
     start, simulated = time.perf_counter(), 0
     bar = tqdm(total=sum(len(chunks[k]) for k in todo) * spec.duration, unit="inst·s", disable=not progress,

@@ -255,7 +255,8 @@ def check_terrain(text: str, n: int = 1) -> Ground:
     except TerrainError as err:
         raise ValueError(f"--terrain: {err}") from None
     nrow, ncol = ground.shape
-    budget.check_memory(f"--terrain {text}" + (", --num" if n > 1 else ""), n, held_floats=nrow * ncol)
+    if not ground.is_flat:  # the plane holds nothing per instance: the batch's own size is checked where it is laid out
+        budget.check_memory(f"--terrain {text}" + (", --num" if n > 1 else ""), n, held_floats=nrow * ncol)
     if ground.path:  # decoded now, once it is known to fit: a damaged image is refused before anything is built
         try:
             read_png(ground.path)

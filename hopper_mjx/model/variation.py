@@ -1,0 +1,139 @@
+"""A variation spec drawn per instance into MuJoCo model fields, and the constants those fields imply.
+
+    values = draw(spec, mj_model, n=64, seed=0)     # {"body_mass": (64, nbody), "pair_friction": (64, npair, 5)}
+    values = with_constants(mj_model, values)       # + body_invweight0, dof_invweight0, ... per instance
+    m_i = instance_model(mj_model, values, i)       # instance i as a MuJoCo C model (mj_setConst called)
+
+Each varied field is drawn whole, (N, *field shape): the nominal model's values where the spec
+leaves them, so instance i is re-created by setting the fields into a copy of the model. MuJoCo
+derives constants from masses and inertias once, at compile time (`mj_setConst`: the constraint
+regularisation's body/dof invweight0, subtree masses, ...); they are recomputed here per instance
+with MuJoCo C, so an engine given `with_constants` steps each instance as MuJoCo C would.
+"""
+
+from __future__ import annotations
+
+import copy
+
+import mujoco
+import numpy as np
+
+from hopper_mjx import registry
+from hopper_mjx.model.layout import Layout
+from hopper_mjx.model.loader import JOINTS
+from hopper_mjx.randomize import Spec
+
+# Fields `mj_setConst` derives from masses, inertias, armature and gear that MJX's step reads (MJX reads
+# body_sameframe, which changes with a moved centre of mass, nowhere).
+CONSTANTS = ("body_subtreemass", "body_invweight0", "dof_invweight0", "dof_M0", "actuator_acc0")
+FEEDS_CONSTANTS = {"body_mass", "body_inertia", "body_ipos", "dof_armature", "actuator_gear"}  # the rest do not
+# Columns of a row a parameter sets: None, the whole row; a list, those columns (one draw shared by them
+# unless the parameter draws per axis).
+_COLUMNS = {"body_inertia": None, "body_ipos": [0, 1, 2], "pair_friction": [0, 1], "actuator_gear": [0]}
+_PER_AXIS = {"body_ipos"}  # one draw per column (x, y, z), not one per row
+
+
+def rows(mj_model: mujoco.MjModel, elements: str) -> list[int]:
+    """Indices into a field's first axis for a `registry.Parameter.elements` name."""
+    m = mj_model
+    lay = Layout.of(m)
+    joints = [m.joint(name) for name in JOINTS]
+    links = {"base": int(m.jnt_bodyid[0]), "hip": int(joints[0].bodyid[0]), "thigh": int(joints[1].bodyid[0]),
+             "shank": int(joints[2].bodyid[0]), "foot": int(m.geom_bodyid[lay.foot_geom])}
+    if elements in links:
+        return [links[elements]]
+    if elements == "bodies":
+        return [b for b in range(1, m.nbody) if m.body_mass[b] > 0 or b in links.values()]
+    if elements == "joints":
+        return list(lay.joint_dof)
+    if elements == "actuators":
+        return list(lay.actuator_of_joint)
+    if elements == "foot_pair":
+        return [int(p) for p in np.flatnonzero((m.pair_geom1 == lay.foot_geom) | (m.pair_geom2 == lay.foot_geom))]
+    raise ValueError(f"unknown elements {elements!r}")
+
+
+def draw(spec: Spec, mj_model: mujoco.MjModel, n: int, seed: int) -> dict[str, np.ndarray]:
+    """{field: (n, *field shape)} float64 of every field the spec varies; raises ValueError naming a
+    parameter whose drawn value lies outside its valid range (`registry.PARAMETERS`)."""
+    values = {}
+    for name, dist in spec.items:
+        par = registry.PARAMETERS[name]
+        nominal = np.asarray(getattr(mj_model, par.field), dtype=float)
+        field = values.setdefault(par.field, np.broadcast_to(nominal, (n, *nominal.shape)).copy())
+        index = np.ix_(rows(mj_model, par.elements), _COLUMNS.get(par.field) or range(nominal.shape[-1])) \
+            if nominal.ndim == 2 else (rows(mj_model, par.elements),)
+        at = nominal[index]
+        # One draw per element (per row; per row and axis for the centre of mass), spread over its columns.
+        shape = at.shape[:1] + (1,) if nominal.ndim == 2 and par.field not in _PER_AXIS else at.shape
+        drawn = dist.draw(spec.rng(seed, name), np.ones(shape), n)
+        drawn = at * drawn if dist.kind == "scale" else np.broadcast_to(drawn, (n, *at.shape))
+        _check_range(name, par, drawn)
+        field[(slice(None), *index)] = at + drawn if par.offset else drawn
+    return values
+
+
+def columns(spec: Spec, mj_model: mujoco.MjModel, values: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """{column name: (N,)} of each drawn parameter, one column per element it draws: `base_mass`,
+    `body_mass_upperleg`, `dof_damping_kfe`, `base_com_z` (for a table such as a sweep's results.csv)."""
+    out = {}
+    for name, _ in spec.items:
+        par = registry.PARAMETERS[name]
+        field = values[par.field]
+        at = rows(mj_model, par.elements)
+        if par.field in _PER_AXIS:
+            for r in at:
+                out.update({f"{name}_{axis}": field[:, r, k] for k, axis in enumerate("xyz")})
+            continue
+        labels = _labels(mj_model, par.elements, at)
+        for r, label in zip(at, labels):
+            value = field[:, r] if field.ndim == 2 else field[:, r, 0]
+            out[name if len(at) == 1 else f"{name}_{label}"] = value
+    return out
+
+
+def _labels(m: mujoco.MjModel, elements: str, at: list[int]) -> list[str]:
+    if elements in ("joints", "actuators"):
+        return [j.removesuffix("_joint") for j in JOINTS]
+    if elements == "bodies":
+        return [m.body(b).name for b in at]
+    return [elements] * len(at)
+
+
+def _check_range(name: str, par: registry.Parameter, drawn: np.ndarray) -> None:
+    low_bad = drawn <= par.low if par.open_low else drawn < par.low
+    bad = low_bad | (drawn > par.high) | ~np.isfinite(drawn)
+    if bad.any():
+        i = int(np.argwhere(bad)[0][0])
+        value = float(drawn[bad][0])
+        lower = f"{'>' if par.open_low else '>='} {par.low:g}"
+        upper = "" if par.high == float("inf") else f" and <= {par.high:g}"
+        kind = "an offset" if par.offset else "a value"
+        raise ValueError(f"{name} drew {kind} of {value:g} {par.unit} for instance {i}; it must be {lower}{upper}")
+
+
+def instance_model(mj_model: mujoco.MjModel, values: dict[str, np.ndarray], i: int) -> mujoco.MjModel:
+    """Instance i as a MuJoCo C model: a copy with its drawn fields set and the derived constants recomputed."""
+    m = copy.deepcopy(mj_model)
+    for field, v in values.items():
+        if field not in CONSTANTS:
+            getattr(m, field)[:] = v[i]
+    mujoco.mj_setConst(m, mujoco.MjData(m))
+    return m
+
+
+def with_constants(mj_model: mujoco.MjModel, values: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """`values` and, when a varied field feeds them, the derived `CONSTANTS` of each instance (N, ...),
+    computed by MuJoCo C (friction and damping leave them as they are)."""
+    if not FEEDS_CONSTANTS & set(values):
+        return dict(values)
+    m, n = copy.deepcopy(mj_model), len(next(iter(values.values())))
+    d = mujoco.MjData(m)
+    out = {c: np.empty((n, *np.shape(getattr(m, c)))) for c in CONSTANTS}
+    for i in range(n):  # one copy reused: every varied field is set whole each time
+        for field, v in values.items():
+            getattr(m, field)[:] = v[i]
+        mujoco.mj_setConst(m, d)
+        for c in CONSTANTS:
+            out[c][i] = getattr(m, c)
+    return {**values, **out}

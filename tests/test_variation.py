@@ -1,0 +1,220 @@
+"""Per-instance robots: the variation spec, its seeded draws, and the batch run with a model per instance
+against MuJoCo C given each instance's recorded model (mj_setConst recomputing what the masses imply)."""
+
+import copy
+
+import mujoco
+import numpy as np
+import pytest
+
+from hopper_mjx import cli, registry, simulate
+from hopper_mjx.control.base import HOLD_GAINS
+from hopper_mjx.model import variation
+from hopper_mjx.model.layout import Layout
+from hopper_mjx.randomize import Dist, Spec
+
+# Masses, inertias, centre of mass, friction, damping, armature, dry friction and motor strength at once.
+EVERYTHING = ("body_mass=scale(0.8,1.2),body_inertia=scale(0.8,1.2),base_com=uniform(-0.02,0.02),"
+              "foot_friction=uniform(0.4,1.0),dof_damping=uniform(0.02,0.5),dof_armature=0..0.01,"
+              "dof_frictionloss=uniform(0,0.2),actuator_gear=scale(0.8,1.2)")
+
+
+def test_a_spec_reads_every_distribution_and_prints_back_the_same():
+    spec = Spec.parse("foot_friction=0.4..1, base_mass=scale(0.9,1.1),dof_damping=0.1,"
+                      "dof_armature=loguniform(1e-4,1e-2),hip_mass=normal(0.5,0.05)")
+    assert dict(spec.items) == {"foot_friction": Dist("uniform", 0.4, 1.0), "base_mass": Dist("scale", 0.9, 1.1),
+                                "dof_damping": Dist("fixed", 0.1), "dof_armature": Dist("loguniform", 1e-4, 1e-2),
+                                "hip_mass": Dist("normal", 0.5, 0.05)}
+    assert Spec.parse(str(spec)) == spec
+    assert spec.fields == {"pair_friction", "body_mass", "dof_damping", "dof_armature"}
+    assert Spec.of({"foot_friction": "0.4..1.0", "dof_damping": 0.1}) == Spec.parse("foot_friction=0.4..1,"
+                                                                                    "dof_damping=0.1")
+
+
+@pytest.mark.parametrize("text, message", [
+    ("wheel_mass=1", "unknown parameter 'wheel_mass'"),
+    ("base_mass=uniform(2,1)", "bounds reversed"),
+    ("base_mass=uniform(1,inf)", "non-finite bound"),
+    ("base_mass=normal(5,-1)", "sigma must be >= 0"),
+    ("dof_armature=loguniform(0,1)", "loguniform needs bounds > 0"),
+    ("base_com=scale(0.9,1.1)", "base_com is an offset"),
+    ("base_mass", "is not NAME=DISTRIBUTION"),
+    ("base_mass=heavy", "cannot read 'heavy'"),
+    ("base_mass=1,base_mass=2", "base_mass given twice"),
+])
+def test_a_bad_spec_is_refused_naming_what_is_wrong(text, message):
+    with pytest.raises(ValueError, match=message):
+        Spec.parse(text)
+
+
+def test_draws_are_the_seeds_and_land_where_the_parameter_says(mj_model):
+    spec = Spec.parse(EVERYTHING + ",base_mass=5.5")
+    a, b = variation.draw(spec, mj_model, 64, seed=3), variation.draw(spec, mj_model, 64, seed=3)
+    c = variation.draw(spec, mj_model, 64, seed=4)
+    assert a.keys() == b.keys() == c.keys() == spec.fields
+    for field in a:
+        assert a[field].shape == (64, *np.shape(getattr(mj_model, field)))
+        np.testing.assert_array_equal(a[field], b[field])
+        assert not np.allclose(a[field], c[field]), field
+    m = mj_model
+    lay = Layout.of(m)
+    base = int(m.jnt_bodyid[0])
+    assert (a["body_mass"][:, base] == 5.5).all()  # given later than body_mass: it wins on the base
+    others = [b for b in range(2, m.nbody)]
+    ratio = a["body_mass"][:, others] / m.body_mass[others]
+    assert ratio.min() >= 0.8 and ratio.max() <= 1.2 and ratio.std() > 0.05
+    assert (a["body_mass"][:, 0] == 0).all()  # the world body is no link
+    # One factor per link for its three principal axes: the inertia stays a physical one.
+    factor = a["body_inertia"][:, 1:] / m.body_inertia[1:]
+    np.testing.assert_allclose(factor, factor[:, :, :1].repeat(3, axis=2))
+    offset = a["body_ipos"][:, base] - m.body_ipos[base]
+    assert np.abs(offset).max() <= 0.02 and np.abs(offset).min() < 0.02 and offset.std(axis=0).min() > 0.005
+    foot = a["pair_friction"][:, [p for p in range(m.npair) if m.pair_geom2[p] == lay.foot_geom][0]]
+    np.testing.assert_array_equal(foot[:, 0], foot[:, 1])  # both sliding directions, one draw
+    assert 0.4 <= foot[:, 0].min() and foot[:, 0].max() <= 1.0
+    np.testing.assert_array_equal(foot[:, 2:], np.broadcast_to(m.pair_friction[0, 2:], (64, 3)))
+    assert (a["dof_damping"][:, :6] == 0).all()  # the free base is not a joint
+    gear = a["actuator_gear"]
+    assert (gear[:, :, 1:] == 0).all() and 0.8 <= (gear[:, :, 0] / m.actuator_gear[:, 0]).min()
+
+
+def test_adding_a_parameter_leaves_the_others_draws_as_they_were(mj_model):
+    one = variation.draw(Spec.parse("foot_friction=0.4..1"), mj_model, 16, seed=0)
+    two = variation.draw(Spec.parse("dof_damping=0..1,foot_friction=0.4..1"), mj_model, 16, seed=0)
+    np.testing.assert_array_equal(one["pair_friction"], two["pair_friction"])
+
+
+def test_a_value_outside_the_parameters_range_is_refused_naming_the_instance(mj_model):
+    with pytest.raises(ValueError, match=r"base_mass drew a value of -[\d.]+ kg for instance \d+; it must be > 0"):
+        variation.draw(Spec.parse("base_mass=normal(5,5)"), mj_model, 64, seed=0)
+    with pytest.raises(ValueError, match="foot_friction drew a value of 11 1 for instance 0; it must be >= 0 and <= "):
+        variation.draw(Spec.parse("foot_friction=11"), mj_model, 4, seed=0)
+
+
+def test_every_parameter_names_a_field_and_elements_of_the_model(mj_model):
+    for name, par in registry.PARAMETERS.items():
+        assert hasattr(mj_model, par.field), name
+        assert variation.rows(mj_model, par.elements), name
+
+
+def test_the_constants_are_mujocos_own_for_each_instance(mj_model):
+    """with_constants gives what mj_setConst gives on the instance's model (and the nominal ones unvaried)."""
+    drawn = variation.draw(Spec.parse("body_mass=scale(0.5,2),dof_armature=0..0.05"), mj_model, 3, seed=1)
+    full = variation.with_constants(mj_model, drawn)
+    for i in range(3):
+        m = variation.instance_model(mj_model, drawn, i)
+        for c in variation.CONSTANTS:
+            np.testing.assert_allclose(full[c][i], getattr(m, c), rtol=1e-12)
+    # The masses do move the constraint's regularisation (what MJX's contact rows read).
+    assert np.abs(full["body_invweight0"] / np.maximum(mj_model.body_invweight0, 1e-12) - 1).max() > 0.05
+    assert variation.with_constants(mj_model, {}) == {}
+
+
+def _c_path(m: mujoco.MjModel, gravity, qpos0, steps: int, lay: Layout, limp: bool = False) -> np.ndarray:
+    """Base position (steps, 3) of MuJoCo C stepping `m` from qpos0 under the hold controller, which
+    knows the nominal robot's layout `lay` only (its gear: a varied gear scales the torque it applies),
+    or `limp`."""
+    m.opt.gravity[:] = gravity
+    d = mujoco.MjData(m)
+    d.qpos[:] = qpos0
+    joints, dofs, acts = list(lay.joint_qpos), list(lay.joint_dof), list(lay.actuator_of_joint)
+    target, limit = d.qpos[joints].copy(), np.asarray(lay.effort_limit)
+    base = []
+    for _ in range(steps):
+        base.append(d.qpos[:3].copy())
+        torque = HOLD_GAINS["p"] * (target - d.qpos[joints]) - HOLD_GAINS["d"] * d.qvel[dofs]
+        torque *= not limp
+        d.ctrl[acts] = np.clip(torque, -limit, limit) / np.asarray(lay.gear)
+        mujoco.mj_step(m, d)
+    return np.array(base)
+
+
+@pytest.fixture(scope="module")
+def recorded(tmp_path_factory):
+    """`simulate --randomize` on mjx: 8 instances at 9.81 and 1.62 holding their stance through touchdown."""
+    out = tmp_path_factory.mktemp("vary") / "run.npz"
+    argv = ["--gravity", "9.81,1.62", "--num", "4", "--duration", "0.4", "--controller", "hold", "--rate", "1000",
+            "--engine", "mjx", "--seed", "5", "--randomize", EVERYTHING, "--out", str(out)]
+    assert simulate.main(argv) == 0
+    return dict(np.load(out))
+
+
+def test_each_instance_follows_mujoco_c_given_its_recorded_model(mj_model, recorded):
+    f = recorded
+    drawn = {k.removeprefix("model_"): v for k, v in f.items() if k.startswith("model_")}
+    assert set(drawn) == Spec.parse(EVERYTHING).fields
+    steps, lay = f["qpos"].shape[1], Layout.of(mj_model)
+    apart = []
+    for i in range(len(f["gravity"])):
+        touchdown = int(np.argmax(f["contact"][i]))
+        assert f["contact"][i].any() and touchdown < steps - 100, "the comparison must include touchdown"
+        path = _c_path(variation.instance_model(mj_model, drawn, i), f["gravity"][i], f["qpos"][i, 0], steps, lay)
+        err = np.abs(path - f["qpos"][i, :, :3]).max()
+        assert err < 1e-3, f"instance {i}: mjx and MuJoCo C differ by {err:.2e} m"
+        nominal = _c_path(copy.deepcopy(mj_model), f["gravity"][i], f["qpos"][i, 0], steps, lay)
+        apart.append(np.abs(nominal - f["qpos"][i, :, :3]).max())
+    # Not the nominal robot: the variation moved the paths well beyond the tolerance.
+    assert max(apart) > 5e-3, apart
+
+
+def test_same_seed_same_draws_and_results(recorded, tmp_path):
+    out = tmp_path / "again.npz"
+    argv = ["--gravity", "9.81,1.62", "--num", "4", "--duration", "0.4", "--controller", "hold", "--rate", "1000",
+            "--engine", "mjx", "--seed", "5", "--randomize", EVERYTHING, "--out", str(out)]
+    assert simulate.main(argv) == 0
+    again = dict(np.load(out))
+    assert again.keys() == recorded.keys()
+    for k in again:
+        np.testing.assert_array_equal(again[k], recorded[k], err_msg=k)
+
+
+def test_auto_takes_mjx_for_a_variation_the_chain_cannot_take(mj_model, capsys):
+    from hopper_mjx.sim import Sim
+
+    batch = cli.check_batch(simulate.parser().parse_args(["--randomize", "foot_friction=0.5,base_mass=5"]))
+    sim = Sim(mj_model, engine=batch.physics.engine, varies=batch.physics.variation.fields)
+    assert sim.engine.name == "mjx"
+    assert "note: engine auto uses mjx (the chain engine cannot vary body_mass per instance yet)" in \
+        capsys.readouterr().err
+    with pytest.raises(ValueError, match="the chain engine cannot vary body_mass"):
+        Sim(sim.mj_model, engine="chain", varies=batch.physics.variation.fields)
+    # Friction and damping it takes at run time: auto keeps the chain.
+    assert Sim(mj_model, varies=frozenset({"pair_friction", "dof_damping"})).engine.name == "chain"
+
+
+def test_friction_and_damping_leave_mujocos_constants_as_they_are(mj_model):
+    drawn = variation.draw(Spec.parse("foot_friction=0.4..1,dof_damping=0..1,dof_frictionloss=0..0.3"), mj_model, 4,
+                           seed=0)
+    assert variation.with_constants(mj_model, drawn).keys() == drawn.keys()
+    for i in range(4):
+        m = variation.instance_model(mj_model, drawn, i)
+        for c in variation.CONSTANTS:
+            np.testing.assert_array_equal(getattr(m, c), getattr(mj_model, c), err_msg=c)
+
+
+@pytest.fixture(scope="module")
+def damped_on_chain(tmp_path_factory):
+    """`simulate --randomize` of joint damping and foot friction on the chain, which takes both as run-time
+    values: a limp drop, whose joints fold at touchdown as their damping lets them."""
+    out = tmp_path_factory.mktemp("vary") / "chain.npz"
+    argv = ["--gravity", "9.81,1.62", "--num", "4", "--duration", "0.4", "--controller", "none", "--rate", "1000",
+            "--engine", "chain", "--seed", "5", "--randomize", "dof_damping=uniform(0.02,2.0),foot_friction=0.4..1",
+            "--out", str(out)]
+    assert simulate.main(argv) == 0
+    return dict(np.load(out))
+
+
+def test_the_chain_takes_damping_and_friction_per_instance_as_mujoco_c_does(mj_model, damped_on_chain):
+    f = damped_on_chain
+    drawn = {"dof_damping": f["model_dof_damping"], "pair_friction": f["model_pair_friction"]}
+    steps, lay = f["qpos"].shape[1], Layout.of(mj_model)
+    apart = []
+    for i in range(len(f["gravity"])):
+        assert f["contact"][i].any() and np.argmax(f["contact"][i]) < steps - 100
+        m_i = variation.instance_model(mj_model, drawn, i)
+        path = _c_path(m_i, f["gravity"][i], f["qpos"][i, 0], steps, lay, limp=True)
+        err = np.abs(path - f["qpos"][i, :, :3]).max()
+        assert err < 1e-3, f"instance {i}: chain and MuJoCo C differ by {err:.2e} m"
+        nominal = _c_path(copy.deepcopy(mj_model), f["gravity"][i], f["qpos"][i, 0], steps, lay, limp=True)
+        apart.append(np.abs(nominal - f["qpos"][i, :, :3]).max())
+    assert max(apart) > 5e-3, apart
