@@ -24,16 +24,20 @@ import mujoco
 
 from hopper_mjx.engine import chain_algebra as al
 from hopper_mjx.engine import chain_constraint, chain_smooth, chain_solver
-from hopper_mjx.engine.chain_model import ChainModel, NotChain, describe
+from hopper_mjx.engine.chain_hfield import TerrainParams
+from hopper_mjx.engine.chain_model import ChainModel, NotChain, describe, terrain_heights
 from hopper_mjx.engine.chain_stage import stored
 
-__all__ = ["ChainData", "ChainEngine", "NotChain", "make"]
+__all__ = ["ChainData", "ChainEngine", "ChainParams", "NotChain", "TerrainParams", "make", "terrain_heights"]
 
 
 class ChainParams(NamedTuple):
-    """The compiled function's model argument: a run-time true gate for `stored`."""
+    """The compiled function's model argument: a run-time true gate for `stored`, and on a
+    heightfield floor its heights (a run-time input: a new terrain of the same grid does not
+    recompile, and vmapping this leaf gives each instance its own)."""
 
     gate: jax.Array
+    terrain: TerrainParams | None = None
 
 
 @jax.tree_util.register_dataclass
@@ -89,6 +93,22 @@ class ChainEngine:
         self.chain = describe(mj_model)
         self.nu = int(mj_model.nu)
         self.model = ChainParams(gate=jnp.array(True))
+        if self.chain.terrain is not None:
+            t = self.chain.terrain
+            self.model = self.with_heights(terrain_heights(mj_model), t.origin[2] - t.base)
+
+    def with_heights(self, heights, bottom=None) -> ChainParams:
+        """The model argument on the terrain `heights` ((nrow, ncol) m, world, on this model's
+        grid; a leading batch axis gives each instance its own), its prisms' `bottom` (world z)
+        by default `base` below its lowest vertex, where the model convention puts it."""
+        t = self.chain.terrain
+        if t is None:
+            raise ValueError("the model's floor is a plane, not a heightfield")
+        heights = jnp.asarray(heights)
+        if heights.shape[-2:] != (t.nrow, t.ncol):
+            raise ValueError(f"heights must be ({t.nrow}, {t.ncol}) for this model, got {heights.shape}")
+        bottom = jnp.min(heights, axis=(-2, -1)) - t.base if bottom is None else jnp.asarray(bottom, heights.dtype)
+        return ChainParams(gate=jnp.array(True), terrain=TerrainParams(heights, bottom))
 
     def make_data(self, qpos, qvel) -> ChainData:
         qpos = jnp.asarray(qpos)
@@ -108,7 +128,7 @@ class ChainEngine:
         gravity = tuple(jnp.asarray(gravity, dtype)[i] for i in range(3))
         pose = chain_smooth.kinematics(cm, gate, qpos)
         mass, qfrc_smooth, qacc_smooth = _smooth(cm, gate, pose, qpos, qvel, ctrl, gravity)
-        rows, foot = chain_constraint.rows(cm, gate, pose, qpos, qvel)
+        rows, foot = chain_constraint.rows(cm, gate, pose, qpos, qvel, model.terrain)
         warm = tuple(data.qacc_warmstart[i] for i in range(cm.nv))
         sol = chain_solver.solve(gate, mass, qfrc_smooth, qacc_smooth, warm, rows, iterations=cm.iterations,
                                  ls_iterations=cm.ls_iterations, tolerance=cm.tolerance,

@@ -18,6 +18,7 @@ from typing import NamedTuple
 import jax.numpy as jnp
 
 from hopper_mjx.engine import chain_algebra as al
+from hopper_mjx.engine import chain_hfield
 from hopper_mjx.engine.chain_model import ChainModel, ContactPair, SolParams
 from hopper_mjx.engine.chain_smooth import Pose, dof_body
 from hopper_mjx.engine.chain_stage import stored
@@ -34,7 +35,7 @@ class Rows(NamedTuple):
 
 class FootContact(NamedTuple):
     touching: object  # () bool: foot-floor distance < 0
-    pos: tuple  # contact point, world (zeros when not touching)
+    pos: tuple  # contact point (the mean of several on a heightfield), world (zeros when not touching)
     rows: tuple  # indices of the foot's rows in Rows
     directions: tuple  # per foot row: world direction of its force on the foot
 
@@ -121,9 +122,10 @@ def _slots(pair: ContactPair, pose: Pose, normal, height):
     return slots
 
 
-def _directions(cm: ChainModel, pair: ContactPair) -> tuple:
-    """World directions of the pair's rows: the normal, or the pyramid's edges n +- mu t."""
-    frame = cm.contact_frame
+def _directions(cm: ChainModel, pair: ContactPair, frame=None) -> tuple:
+    """World directions of the pair's rows: the normal, or the pyramid's edges n +- mu t
+    (`frame`: the contact's, by default the plane's)."""
+    frame = cm.contact_frame if frame is None else frame
     normal = frame[0:3]
     if pair.condim == 1:
         return (normal,)
@@ -134,33 +136,59 @@ def _directions(cm: ChainModel, pair: ContactPair) -> tuple:
     return tuple(out)
 
 
-def _all_slots(cm: ChainModel, pose: Pose):
+def _terrain_slots(cm: ChainModel, pair: ContactPair, pose: Pose, terrain) -> list:
+    """Per heightfield contact slot of the (sphere) pair: (exists, distance, point relative to
+    O, row directions)."""
+    centre = al.vadd(pose.origin[pair.body], al.matvec(pose.rot[pair.body], pair.pos))
+    world = al.vadd(centre, pose.base_pos)
+    slots = []
+    for con in chain_hfield.sphere_contacts(cm.terrain, terrain, world, pair.size[0]):
+        directions = _directions(cm, pair, chain_hfield.make_frame(con.normal))
+        slots.append((con.exists, con.dist, al.vsub(con.pos, pose.base_pos), directions))
+    return slots
+
+
+def _all_slots(cm: ChainModel, pose: Pose, terrain):
+    """Per pair, per slot: (exists, distance, point relative to O, row directions)."""
+    if cm.terrain is not None:
+        return tuple(tuple(_terrain_slots(cm, pair, pose, terrain)) for pair in cm.pairs)
     normal = cm.contact_frame[0:3]
     height = al.dot(normal, al.vsub(pose.base_pos, cm.floor_point))  # base origin above the floor
-    return tuple(tuple(_slots(pair, pose, normal, height)) for pair in cm.pairs)
+    return tuple(tuple((dist <= pair.include_margin, dist, point, _directions(cm, pair))
+                       for dist, point in _slots(pair, pose, normal, height)) for pair in cm.pairs)
+
+
+def _foot(pose: Pose, slots, rows) -> FootContact:
+    """The foot's contact from its slots (one on the plane; several on a heightfield, the
+    point then their mean)."""
+    touching = [dist < 0 for _, dist, _, _ in slots]
+    world = [al.vadd(point, pose.base_pos) for _, _, point, _ in slots]
+    directions = tuple(d for _, _, _, ds in slots for d in ds)
+    if len(slots) == 1:
+        return FootContact(touching[0], tuple(jnp.where(touching[0], x, 0.0) for x in world[0]), rows, directions)
+    count = al.total(jnp.where(t, 1.0, 0.0) for t in touching)
+    scale = 1 / jnp.maximum(count, 1.0)
+    pos = tuple(scale * al.total(jnp.where(t, w[k], 0.0) for t, w in zip(touching, world)) for k in range(3))
+    return FootContact(count > 0, pos, rows, directions)
 
 
 def _assemble(cm: ChainModel, pose: Pose, qpos, qvel, slots) -> tuple[Rows, FootContact]:
     jac, weight, aref = _limit_rows(cm, qpos, qvel)
     foot = None
     for pair, pair_slots in zip(cm.pairs, slots):
-        directions = _directions(cm, pair)
-        for dist, point in pair_slots:
-            exists = dist <= pair.include_margin
-            first = len(jac)
+        first = len(jac)
+        for exists, dist, point, directions in pair_slots:
             for direction in directions:
                 row = _point_jacobian(cm, pose, pair.body, point, direction)
                 d, a = _row(cm, pair.sol, pair.invweight, row, qvel, dist - pair.include_margin, exists)
                 jac.append(row), weight.append(d), aref.append(a)
-            if pair.is_foot:
-                touching = dist < 0
-                world = al.vadd(point, pose.base_pos)
-                foot = FootContact(touching, tuple(jnp.where(touching, x, 0.0) for x in world),
-                                   tuple(range(first, len(jac))), directions)
+        if pair.is_foot:
+            foot = _foot(pose, pair_slots, tuple(range(first, len(jac))))
     return Rows(tuple(jac), tuple(weight), tuple(aref)), foot
 
 
-def rows(cm: ChainModel, gate, pose: Pose, qpos, qvel) -> tuple[Rows, FootContact]:
-    """All constraint rows (MuJoCo's order: limits, then contacts by pair) and the foot's."""
-    slots = stored(gate, lambda p: _all_slots(cm, p), pose)
+def rows(cm: ChainModel, gate, pose: Pose, qpos, qvel, terrain=None) -> tuple[Rows, FootContact]:
+    """All constraint rows (MuJoCo's order: limits, then contacts by pair) and the foot's;
+    `terrain` (chain_hfield.TerrainParams) for a heightfield floor."""
+    slots = stored(gate, lambda p, t: _all_slots(cm, p, t), pose, terrain)
     return stored(gate, lambda *a: _assemble(cm, *a), pose, qpos, qvel, slots)
