@@ -1,16 +1,16 @@
 """The chain engine: MuJoCo's step specialised, at trace time, to one monoped's topology.
 
-A free base, a serial chain of hinges and a sphere foot on a plane floor (any URDF the
-loader accepts; `chain_model.describe` says why another model is not one). The step is
-MuJoCo's, stage by stage, written as per-instance scalar arithmetic with the model's
-numbers as constants, so that `vmap` turns every quantity into one contiguous vector over
-instances:
+A free base, a serial chain of hinges and a sphere foot on a plane floor, or on a
+heightfield (`chain_hfield`), for any URDF the loader accepts (`chain_model.describe` says
+why another model is not one). The step is MuJoCo's, stage by stage, written as
+per-instance scalar arithmetic with the model's numbers as constants, so that `vmap` turns
+every quantity into one contiguous vector over instances:
 
     kinematics -> mass matrix, bias, actuation, damping -> constraint rows -> Newton solve
     -> (integrate) Euler with implicit joint damping
 
 Each stage's outputs are stored once (`chain_stage.stored`); the engine's `model` pytree
-only carries the run-time true predicate that makes that work.
+carries the run-time true predicate that makes that work and a heightfield's heights.
 """
 
 from __future__ import annotations
@@ -89,8 +89,16 @@ class ChainEngine:
     # A diverged instance keeps these from its last finite state (the rest is recomputed).
     freeze_fields = ("qpos", "qvel", "qacc_warmstart")
 
-    def __init__(self, mj_model: mujoco.MjModel):
+    def __init__(self, mj_model: mujoco.MjModel, max_foot_contacts: int | None = None):
+        """`max_foot_contacts` (heightfield floors): keep only the foot's deepest this many
+        contacts, fewer constraint rows than the block's 2 x rows x cols prisms; C's answer
+        whenever at most that many exist, the shallowest dropped otherwise. None: all."""
         self.chain = describe(mj_model)
+        if max_foot_contacts is not None:
+            if self.chain.terrain is None or max_foot_contacts < 1:
+                raise ValueError("max_foot_contacts needs a heightfield floor and must be >= 1")
+            self.chain = dataclasses.replace(
+                self.chain, terrain=dataclasses.replace(self.chain.terrain, max_contacts=int(max_foot_contacts)))
         self.nu = int(mj_model.nu)
         self.model = ChainParams(gate=jnp.array(True))
         if self.chain.terrain is not None:
@@ -175,6 +183,6 @@ def _advance_qpos(cm: ChainModel, qpos: jax.Array, qvel: jax.Array) -> jax.Array
     return jnp.concatenate([qpos[:3] + h * qvel[:3], quat, hinges])
 
 
-def make(mj_model: mujoco.MjModel) -> ChainEngine:
+def make(mj_model: mujoco.MjModel, max_foot_contacts: int | None = None) -> ChainEngine:
     """The chain engine of `mj_model`; `NotChain` (one line why) when the model is outside it."""
-    return ChainEngine(mj_model)
+    return ChainEngine(mj_model, max_foot_contacts)

@@ -20,7 +20,8 @@ vertical edges; its slanted top edge is a top edge).
 
 The grid is regular, so the cells the sphere can reach are a fixed block (its size known at
 trace time) whose corner follows the sphere: each of its 2 x rows x cols prisms is a contact
-slot, present when the sphere penetrates it. The heights are a run-time input.
+slot, present when the sphere penetrates it (or, with `Terrain.max_contacts`, the deepest
+few of them fill that many slots). The heights are a run-time input.
 """
 
 from __future__ import annotations
@@ -32,6 +33,7 @@ import jax.numpy as jnp
 
 from hopper_mjx.engine import chain_algebra as al
 from hopper_mjx.engine.chain_model import Terrain
+from hopper_mjx.engine.chain_stage import stored
 
 
 class TerrainParams(NamedTuple):
@@ -133,8 +135,9 @@ def _block_start(t: Terrain, centre, radius):
     return row, col
 
 
-def sphere_contacts(t: Terrain, terrain: TerrainParams, centre, radius: float) -> tuple[Contact, ...]:
-    """One contact slot per prism of the block around the sphere (world centre `centre`)."""
+def sphere_contacts(t: Terrain, terrain: TerrainParams, centre, radius: float, gate=None) -> tuple[Contact, ...]:
+    """One contact slot per prism of the block around the sphere (world centre `centre`);
+    with `gate`, each prism's contact is a stored stage (chain_stage)."""
     rows, cols = t.block
     row, col = _block_start(t, centre, radius)
     block = jax.lax.dynamic_slice(terrain.heights, (row, col), (rows + 1, cols + 1))
@@ -150,7 +153,40 @@ def sphere_contacts(t: Terrain, terrain: TerrainParams, centre, radius: float) -
         for c in range(cols):
             a, b, cc, d = vertex(r, c), vertex(r, c + 1), vertex(r + 1, c), vertex(r + 1, c + 1)
             for top in ((a, cc, d), (a, d, b)):
-                out.append(_prism_contact(centre, top, terrain.bottom, radius))
+                if gate is None:
+                    out.append(_prism_contact(centre, top, terrain.bottom, radius))
+                else:
+                    out.append(stored(gate, lambda *a: _prism_contact(*a, radius), centre, top, terrain.bottom))
+    if t.max_contacts is not None and t.max_contacts < len(out):
+        return deepest(tuple(out), t.max_contacts)
+    return tuple(out)
+
+
+def deepest(contacts: tuple[Contact, ...], keep: int) -> tuple[Contact, ...]:
+    """The `keep` deepest present contacts (absent slots where fewer exist), deepest first:
+    fewer constraint rows, the same contacts as C whenever at most `keep` exist."""
+    key = [jnp.where(c.exists, c.dist, jnp.inf) for c in contacts]
+    out = []
+    for _ in range(keep):
+        least = key[0]
+        for k in key[1:]:
+            least = jnp.minimum(least, k)
+        found = jnp.isfinite(least)
+        taken, hits = jnp.zeros((), bool), []
+        for i, k in enumerate(key):
+            hit = (k == least) & ~taken & found
+            taken = taken | hit
+            hits.append(hit)
+            key[i] = jnp.where(hit, jnp.inf, k)
+
+        def pick(field):
+            total = 0.0
+            for hit, c in zip(hits, contacts):
+                total = total + jnp.where(hit, field(c), 0.0)
+            return total
+        out.append(Contact(found, pick(lambda c: c.dist), tuple(pick(lambda c, j=j: c.pos[j]) for j in range(3)),
+                           tuple(jnp.where(found, pick(lambda c, j=j: c.normal[j]), float(j == 2))
+                                 for j in range(3))))
     return tuple(out)
 
 

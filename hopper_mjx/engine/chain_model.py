@@ -4,8 +4,9 @@
 serial chain of bodies each with at most one hinge, explicit sphere / box contact pairs
 with a plane floor, or the sphere foot alone with a heightfield floor, Euler with implicit
 joint damping, Newton on a pyramidal cone) and raises `NotChain` with one line saying why
-when the model is outside it. The result is a frozen dataclass of floats and tuples: the step reads it at trace time, so
-every axis, offset, inertia and solver parameter is a constant of the compiled function.
+when the model is outside it. The result is a frozen dataclass of floats and tuples: the
+step reads it at trace time, so every axis, offset, inertia and solver parameter is a
+constant of the compiled function (a heightfield's heights are not: `terrain_heights`).
 """
 
 from __future__ import annotations
@@ -90,6 +91,7 @@ class Terrain:
     dx: float
     dy: float
     block: tuple[int, int]  # (rows, cols) of cells around the foot that can hold its contacts
+    max_contacts: int | None = None  # keep the deepest this many foot contacts (None: all, as C)
 
 
 @dataclass(frozen=True)
