@@ -136,23 +136,22 @@ def _directions(cm: ChainModel, pair: ContactPair, frame=None) -> tuple:
     return tuple(out)
 
 
-def _terrain_slots(cm: ChainModel, pair: ContactPair, pose: Pose, terrain, gate) -> list:
+def _terrain_slots(cm: ChainModel, pair: ContactPair, pose: Pose, terrain) -> list:
     """Per heightfield contact slot of the (sphere) pair: (exists, distance, point relative to
     O, row directions)."""
     centre = al.vadd(pose.origin[pair.body], al.matvec(pose.rot[pair.body], pair.pos))
     world = al.vadd(centre, pose.base_pos)
     slots = []
-    for con in chain_hfield.sphere_contacts(cm.terrain, terrain, world, pair.size[0], gate):
+    for con in chain_hfield.sphere_contacts(cm.terrain, terrain, world, pair.size[0]):
         directions = _directions(cm, pair, chain_hfield.make_frame(con.normal))
         slots.append((con.exists, con.dist, al.vsub(con.pos, pose.base_pos), directions))
     return slots
 
 
-def _all_slots(cm: ChainModel, pose: Pose, terrain, gate=None):
-    """Per pair, per slot: (exists, distance, point relative to O, row directions); `gate`
-    stores each heightfield prism's contact as its own stage."""
+def _all_slots(cm: ChainModel, pose: Pose, terrain):
+    """Per pair, per slot: (exists, distance, point relative to O, row directions)."""
     if cm.terrain is not None:
-        return tuple(tuple(_terrain_slots(cm, pair, pose, terrain, gate)) for pair in cm.pairs)
+        return tuple(tuple(_terrain_slots(cm, pair, pose, terrain)) for pair in cm.pairs)
     normal = cm.contact_frame[0:3]
     height = al.dot(normal, al.vsub(pose.base_pos, cm.floor_point))  # base origin above the floor
     return tuple(tuple((dist <= pair.include_margin, dist, point, _directions(cm, pair))
@@ -191,8 +190,5 @@ def _assemble(cm: ChainModel, pose: Pose, qpos, qvel, slots) -> tuple[Rows, Foot
 def rows(cm: ChainModel, gate, pose: Pose, qpos, qvel, terrain=None) -> tuple[Rows, FootContact]:
     """All constraint rows (MuJoCo's order: limits, then contacts by pair) and the foot's;
     `terrain` (chain_hfield.TerrainParams) for a heightfield floor."""
-    if cm.terrain is None:
-        slots = stored(gate, lambda p, t: _all_slots(cm, p, t), pose, terrain)
-    else:  # many prisms: each its own stage (one big fusion recomputes shared values)
-        slots = _all_slots(cm, pose, terrain, gate)
+    slots = stored(gate, lambda p, t: _all_slots(cm, p, t), pose, terrain)
     return stored(gate, lambda *a: _assemble(cm, *a), pose, qpos, qvel, slots)

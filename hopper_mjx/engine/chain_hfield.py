@@ -33,7 +33,6 @@ import jax.numpy as jnp
 
 from hopper_mjx.engine import chain_algebra as al
 from hopper_mjx.engine.chain_model import Terrain
-from hopper_mjx.engine.chain_stage import stored
 
 
 class TerrainParams(NamedTuple):
@@ -135,9 +134,8 @@ def _block_start(t: Terrain, centre, radius):
     return row, col
 
 
-def sphere_contacts(t: Terrain, terrain: TerrainParams, centre, radius: float, gate=None) -> tuple[Contact, ...]:
-    """One contact slot per prism of the block around the sphere (world centre `centre`);
-    with `gate`, each prism's contact is a stored stage (chain_stage)."""
+def sphere_contacts(t: Terrain, terrain: TerrainParams, centre, radius: float) -> tuple[Contact, ...]:
+    """One contact slot per prism of the block around the sphere (world centre `centre`)."""
     rows, cols = t.block
     row, col = _block_start(t, centre, radius)
     block = jax.lax.dynamic_slice(terrain.heights, (row, col), (rows + 1, cols + 1))
@@ -153,10 +151,7 @@ def sphere_contacts(t: Terrain, terrain: TerrainParams, centre, radius: float, g
         for c in range(cols):
             a, b, cc, d = vertex(r, c), vertex(r, c + 1), vertex(r + 1, c), vertex(r + 1, c + 1)
             for top in ((a, cc, d), (a, d, b)):
-                if gate is None:
-                    out.append(_prism_contact(centre, top, terrain.bottom, radius))
-                else:
-                    out.append(stored(gate, lambda *a: _prism_contact(*a, radius), centre, top, terrain.bottom))
+                out.append(_prism_contact(centre, top, terrain.bottom, radius))
     if t.max_contacts is not None and t.max_contacts < len(out):
         return deepest(tuple(out), t.max_contacts)
     return tuple(out)
