@@ -3,8 +3,9 @@
 The foot sphere meets the terrain's triangle prisms as C's mjc_ConvexHField does. C finds each
 contact with GJK + EPA to `opt.ccd_tolerance`; the chain computes the point EPA converges to.
 So: at C's default tolerance the distances agree to within it; with C's tolerance tightened
-(1e-14) every stage agrees in float64 to ~1e-9. Trajectories through touchdown (float32, the
+(1e-14) every stage agrees in float64 to ~1e-9. Trajectories through touchdown (float64, the
 model's own options) stay within 1e-3 m of C. A new terrain is a new input, not a new compile.
+The models here have no base-box pairs: the chain refuses those on a heightfield (not written).
 """
 
 from __future__ import annotations
