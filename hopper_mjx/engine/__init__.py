@@ -19,8 +19,9 @@ Every engine has, per instance and pure (the core vmaps them):
 `data` is a pytree with `qpos`, `qvel`, `qacc`, `ctrl`, `time` and `.replace(**fields)`.
 "mjx" (MuJoCo MJX, any model) is the reference and the fallback; "chain" is MuJoCo's step
 specialised to the monoped's topology (free base, serial chain of hinges, sphere foot on a
-plane; several times faster on CPU); "auto" picks "chain" when the model qualifies and
-otherwise "mjx", with a one-line notice on stderr saying why.
+plane, or on a heightfield without the base box's pairs; several times faster on CPU);
+"auto" picks "chain" when the model qualifies and otherwise "mjx", with a one-line notice
+on stderr saying why.
 """
 
 from __future__ import annotations

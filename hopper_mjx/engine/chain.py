@@ -1,17 +1,18 @@
 """The chain engine: MuJoCo's step specialised, at trace time, to one monoped's topology.
 
-A free base, a serial chain of hinges and a sphere foot on a plane floor (any URDF the
-loader accepts; `chain_model.describe` says why another model is not one). The step is
-MuJoCo's, stage by stage, written as per-instance scalar arithmetic with the model's
-numbers as constants, so that `vmap` turns every quantity into one contiguous vector over
-instances:
+A free base, a serial chain of hinges and a sphere foot on a plane floor, or on a
+heightfield (`chain_hfield`), for any URDF the loader accepts (`chain_model.describe` says
+why another model is not one). The step is MuJoCo's, stage by stage, written as
+per-instance scalar arithmetic with the model's numbers as constants, so that `vmap` turns
+every quantity into one contiguous vector over instances:
 
     kinematics -> mass matrix, bias, actuation, damping -> constraint rows -> Newton solve
     -> (integrate) Euler with implicit joint damping
 
 Each stage's outputs are stored once (`chain_stage.stored`); the engine's `model` pytree
-carries the run-time true predicate that makes that work and, for a batch of per-instance
-robots (`vary`), the instance's joint damping and foot friction in place of their constants.
+carries the run-time true predicate that makes that work, a heightfield's heights, and, for a
+batch of per-instance robots (`vary`), the instance's joint damping and foot friction in place of
+their constants.
 """
 
 from __future__ import annotations
@@ -26,17 +27,21 @@ import mujoco
 from hopper_mjx import registry
 from hopper_mjx.engine import chain_algebra as al
 from hopper_mjx.engine import chain_constraint, chain_smooth, chain_solver
-from hopper_mjx.engine.chain_model import ChainModel, NotChain, describe
+from hopper_mjx.engine.chain_hfield import TerrainParams
+from hopper_mjx.engine.chain_model import ChainModel, NotChain, describe, terrain_heights
 from hopper_mjx.engine.chain_stage import stored
 
-__all__ = ["ChainData", "ChainEngine", "NotChain", "make"]
+__all__ = ["ChainData", "ChainEngine", "ChainParams", "NotChain", "TerrainParams", "make", "terrain_heights"]
 
 
 class ChainParams(NamedTuple):
-    """The compiled function's model argument: a run-time true gate for `stored`, and the instance's
-    values of the fields it takes at run time (None: the model's own, folded in as constants)."""
+    """The compiled function's model argument: a run-time true gate for `stored`; on a heightfield
+    floor its heights (a run-time input: a new terrain of the same grid does not recompile, and
+    vmapping this leaf gives each instance its own); and the instance's values of the fields it takes
+    at run time (None: the model's own, folded in as constants)."""
 
     gate: jax.Array
+    terrain: TerrainParams | None = None
     damping: jax.Array | None = None  # (nv,) N·m·s/rad, dof_damping; its hinge entries are used
     foot_friction: jax.Array | None = None  # (2,) the foot pair's sliding friction (pair_friction)
 
@@ -91,11 +96,35 @@ class ChainEngine:
     freeze_fields = ("qpos", "qvel", "qacc_warmstart")
     varies = registry.CHAIN_VARIES  # the model's numbers are folded into the step at trace time
 
-    def __init__(self, mj_model: mujoco.MjModel):
+    def __init__(self, mj_model: mujoco.MjModel, max_foot_contacts: int | None = None):
+        """`max_foot_contacts` (heightfield floors): keep only the foot's deepest this many
+        contacts, fewer constraint rows than the block's 2 x rows x cols prisms; C's answer
+        whenever at most that many exist, the shallowest dropped otherwise. None: all."""
         self.chain = describe(mj_model)
+        if max_foot_contacts is not None:
+            if self.chain.terrain is None or max_foot_contacts < 1:
+                raise ValueError("max_foot_contacts needs a heightfield floor and must be >= 1")
+            self.chain = dataclasses.replace(
+                self.chain, terrain=dataclasses.replace(self.chain.terrain, max_contacts=int(max_foot_contacts)))
         self.nu = int(mj_model.nu)
         self.foot_pair = next(p for p, pair in enumerate(self.chain.pairs) if pair.is_foot)
         self.model = ChainParams(gate=jnp.array(True))
+        if self.chain.terrain is not None:
+            t = self.chain.terrain
+            self.model = self.with_heights(terrain_heights(mj_model), t.origin[2] - t.base)
+
+    def with_heights(self, heights, bottom=None) -> ChainParams:
+        """The model argument on the terrain `heights` ((nrow, ncol) m, world, on this model's
+        grid; a leading batch axis gives each instance its own), its prisms' `bottom` (world z)
+        by default `base` below its lowest vertex, where the model convention puts it."""
+        t = self.chain.terrain
+        if t is None:
+            raise ValueError("the model's floor is a plane, not a heightfield")
+        heights = jnp.asarray(heights)
+        if heights.shape[-2:] != (t.nrow, t.ncol):
+            raise ValueError(f"heights must be ({t.nrow}, {t.ncol}) for this model, got {heights.shape}")
+        bottom = jnp.min(heights, axis=(-2, -1)) - t.base if bottom is None else jnp.asarray(bottom, heights.dtype)
+        return ChainParams(gate=jnp.array(True), terrain=TerrainParams(heights, bottom))
 
     def vary(self, model: ChainParams, values: dict) -> ChainParams:
         """One instance's model: its joint damping and foot friction as run-time values (`varies`;
@@ -135,7 +164,7 @@ class ChainEngine:
         gravity = tuple(jnp.asarray(gravity, dtype)[i] for i in range(3))
         pose = chain_smooth.kinematics(cm, gate, qpos)
         mass, qfrc_smooth, qacc_smooth = _smooth(cm, gate, pose, qpos, qvel, ctrl, gravity, self._damping(model))
-        rows, foot = chain_constraint.rows(cm, gate, pose, qpos, qvel, model.foot_friction)
+        rows, foot = chain_constraint.rows(cm, gate, pose, qpos, qvel, model.terrain, model.foot_friction)
         warm = tuple(data.qacc_warmstart[i] for i in range(cm.nv))
         sol = chain_solver.solve(gate, mass, qfrc_smooth, qacc_smooth, warm, rows, iterations=cm.iterations,
                                  ls_iterations=cm.ls_iterations, tolerance=cm.tolerance,
@@ -182,6 +211,6 @@ def _advance_qpos(cm: ChainModel, qpos: jax.Array, qvel: jax.Array) -> jax.Array
     return jnp.concatenate([qpos[:3] + h * qvel[:3], quat, hinges])
 
 
-def make(mj_model: mujoco.MjModel) -> ChainEngine:
+def make(mj_model: mujoco.MjModel, max_foot_contacts: int | None = None) -> ChainEngine:
     """The chain engine of `mj_model`; `NotChain` (one line why) when the model is outside it."""
-    return ChainEngine(mj_model)
+    return ChainEngine(mj_model, max_foot_contacts)

@@ -18,6 +18,7 @@ from typing import NamedTuple
 import jax.numpy as jnp
 
 from hopper_mjx.engine import chain_algebra as al
+from hopper_mjx.engine import chain_hfield
 from hopper_mjx.engine.chain_model import ChainModel, ContactPair, SolParams, pyramid_invweight
 from hopper_mjx.engine.chain_smooth import Pose, dof_body
 from hopper_mjx.engine.chain_stage import stored
@@ -34,7 +35,7 @@ class Rows(NamedTuple):
 
 class FootContact(NamedTuple):
     touching: object  # () bool: foot-floor distance < 0
-    pos: tuple  # contact point, world (zeros when not touching)
+    pos: tuple  # contact point (the mean of several on a heightfield), world (zeros when not touching)
     rows: tuple  # indices of the foot's rows in Rows
     directions: tuple  # per foot row: world direction of its force on the foot
 
@@ -121,9 +122,10 @@ def _slots(pair: ContactPair, pose: Pose, normal, height):
     return slots
 
 
-def _directions(cm: ChainModel, pair: ContactPair, friction) -> tuple:
-    """World directions of the pair's rows: the normal, or the pyramid's edges n +- mu t."""
-    frame = cm.contact_frame
+def _directions(cm: ChainModel, pair: ContactPair, friction, frame=None) -> tuple:
+    """World directions of the pair's rows: the normal, or the pyramid's edges n +- mu t
+    (`frame`: the contact's, by default the plane's)."""
+    frame = cm.contact_frame if frame is None else frame
     normal = frame[0:3]
     if pair.condim == 1:
         return (normal,)
@@ -134,10 +136,38 @@ def _directions(cm: ChainModel, pair: ContactPair, friction) -> tuple:
     return tuple(out)
 
 
-def _all_slots(cm: ChainModel, pose: Pose):
+def _terrain_slots(cm: ChainModel, pair: ContactPair, pose: Pose, terrain) -> list:
+    """Per heightfield contact slot of the (sphere) pair: (exists, distance, point relative to
+    O, contact frame)."""
+    centre = al.vadd(pose.origin[pair.body], al.matvec(pose.rot[pair.body], pair.pos))
+    world = al.vadd(centre, pose.base_pos)
+    slots = []
+    for con in chain_hfield.sphere_contacts(cm.terrain, terrain, world, pair.size[0]):
+        slots.append((con.exists, con.dist, al.vsub(con.pos, pose.base_pos), chain_hfield.make_frame(con.normal)))
+    return slots
+
+
+def _all_slots(cm: ChainModel, pose: Pose, terrain):
+    """Per pair, per slot: (exists, distance, point relative to O, contact frame: None for the plane's)."""
+    if cm.terrain is not None:
+        return tuple(tuple(_terrain_slots(cm, pair, pose, terrain)) for pair in cm.pairs)
     normal = cm.contact_frame[0:3]
     height = al.dot(normal, al.vsub(pose.base_pos, cm.floor_point))  # base origin above the floor
-    return tuple(tuple(_slots(pair, pose, normal, height)) for pair in cm.pairs)
+    return tuple(tuple((dist <= pair.include_margin, dist, point, None)
+                       for dist, point in _slots(pair, pose, normal, height)) for pair in cm.pairs)
+
+
+def _foot(pose: Pose, slots, rows, directions) -> FootContact:
+    """The foot's contact from its slots (one on the plane; several on a heightfield, the
+    point then their mean) and its rows' directions."""
+    touching = [dist < 0 for _, dist, _, _ in slots]
+    world = [al.vadd(point, pose.base_pos) for _, _, point, _ in slots]
+    if len(slots) == 1:
+        return FootContact(touching[0], tuple(jnp.where(touching[0], x, 0.0) for x in world[0]), rows, directions)
+    count = al.total(jnp.where(t, 1.0, 0.0) for t in touching)
+    scale = 1 / jnp.maximum(count, 1.0)
+    pos = tuple(scale * al.total(jnp.where(t, w[k], 0.0) for t, w in zip(touching, world)) for k in range(3))
+    return FootContact(count > 0, pos, rows, directions)
 
 
 def _assemble(cm: ChainModel, pose: Pose, qpos, qvel, slots, foot_friction) -> tuple[Rows, FootContact]:
@@ -148,24 +178,22 @@ def _assemble(cm: ChainModel, pose: Pose, qpos, qvel, slots, foot_friction) -> t
         if pair.is_foot and foot_friction is not None and pair.condim == 3:  # this instance's friction
             friction = (foot_friction[0], foot_friction[1])
             invweight = pyramid_invweight(pair.body_invweight, friction[0], cm.impratio)
-        directions = _directions(cm, pair, friction)
-        for dist, point in pair_slots:
-            exists = dist <= pair.include_margin
-            first = len(jac)
+        first, pair_directions = len(jac), ()
+        for exists, dist, point, frame in pair_slots:
+            directions = _directions(cm, pair, friction, frame)
+            pair_directions += directions
             for direction in directions:
                 row = _point_jacobian(cm, pose, pair.body, point, direction)
                 d, a = _row(cm, pair.sol, invweight, row, qvel, dist - pair.include_margin, exists)
                 jac.append(row), weight.append(d), aref.append(a)
-            if pair.is_foot:
-                touching = dist < 0
-                world = al.vadd(point, pose.base_pos)
-                foot = FootContact(touching, tuple(jnp.where(touching, x, 0.0) for x in world),
-                                   tuple(range(first, len(jac))), directions)
+        if pair.is_foot:
+            foot = _foot(pose, pair_slots, tuple(range(first, len(jac))), pair_directions)
     return Rows(tuple(jac), tuple(weight), tuple(aref)), foot
 
 
-def rows(cm: ChainModel, gate, pose: Pose, qpos, qvel, foot_friction=None) -> tuple[Rows, FootContact]:
-    """All constraint rows (MuJoCo's order: limits, then contacts by pair) and the foot's; `foot_friction`:
-    (2,) the foot pair's sliding friction as run-time values (None: the model's, folded in)."""
-    slots = stored(gate, lambda p: _all_slots(cm, p), pose)
+def rows(cm: ChainModel, gate, pose: Pose, qpos, qvel, terrain=None, foot_friction=None) -> tuple[Rows, FootContact]:
+    """All constraint rows (MuJoCo's order: limits, then contacts by pair) and the foot's; `terrain`
+    (chain_hfield.TerrainParams) for a heightfield floor; `foot_friction`: (2,) the foot pair's sliding
+    friction as run-time values (None: the model's, folded in)."""
+    slots = stored(gate, lambda p, t: _all_slots(cm, p, t), pose, terrain)
     return stored(gate, lambda *a: _assemble(cm, *a), pose, qpos, qvel, slots, foot_friction)

@@ -1,11 +1,12 @@
 """The chain engine's view of a compiled model: every number it needs, as Python constants.
 
 `describe(mj_model)` reads the topology the chain engine is written for (a free base, a
-serial chain of bodies each with at most one hinge, explicit plane-sphere / plane-box
-contact pairs with the floor, Euler with implicit joint damping, Newton on a pyramidal
-cone) and raises `NotChain` with one line saying why when the model is outside it. The
-result is a frozen dataclass of floats and tuples: the step reads it at trace time, so
-every axis, offset, inertia and solver parameter is a constant of the compiled function.
+serial chain of bodies each with at most one hinge, explicit sphere / box contact pairs
+with a plane floor, or the sphere foot alone with a heightfield floor, Euler with implicit
+joint damping, Newton on a pyramidal cone) and raises `NotChain` with one line saying why
+when the model is outside it. The result is a frozen dataclass of floats and tuples: the
+step reads it at trace time, so every axis, offset, inertia and solver parameter is a
+constant of the compiled function (a heightfield's heights are not: `terrain_heights`).
 """
 
 from __future__ import annotations
@@ -81,6 +82,26 @@ def pyramid_invweight(body_invweight, mu, impratio: float):
 
 
 @dataclass(frozen=True)
+class Terrain:
+    """A heightfield floor's grid (its heights are a run-time input, `terrain_heights`).
+
+    Vertex (r, c) lies at x = origin_x - hx + dx c, y = origin_y - hy + dy r; each cell is
+    two triangles split along the diagonal (c, r)-(c + 1, r + 1), each the top of a prism
+    whose bottom lies `base` below the geom origin (MuJoCo's mjc_ConvexHField)."""
+
+    nrow: int
+    ncol: int
+    hx: float
+    hy: float
+    base: float
+    origin: tuple[float, float, float]  # the hfield geom's position, world
+    dx: float
+    dy: float
+    block: tuple[int, int]  # (rows, cols) of cells around the foot that can hold its contacts
+    max_contacts: int | None = None  # keep the deepest this many foot contacts (None: all, as C)
+
+
+@dataclass(frozen=True)
 class ChainModel:
     nq: int
     nv: int
@@ -97,6 +118,7 @@ class ChainModel:
     floor_point: tuple[float, float, float]
     contact_frame: tuple  # 3x3 rows: normal, tangent 1, tangent 2 (MuJoCo's mju_makeFrame)
     pairs: tuple[ContactPair, ...]
+    terrain: Terrain | None  # None: the floor is the plane
     timestep: float
     iterations: int
     ls_iterations: int
@@ -212,7 +234,7 @@ def _pairs(m: mujoco.MjModel, floor: int) -> tuple[ContactPair, ...]:
     pairs = []
     for p in range(m.npair):
         g1, g2 = int(m.pair_geom1[p]), int(m.pair_geom2[p])
-        _require(g1 == floor, f"contact pair {p} does not have the floor plane as its first geom")
+        _require(g1 == floor, f"contact pair {p} does not have the floor as its first geom")
         kind = _SHAPES.get(int(m.geom_type[g2]))
         _require(kind is not None, f"contact pair {p} is not with a sphere or a box")
         condim = int(m.pair_dim[p])
@@ -235,14 +257,50 @@ def _pairs(m: mujoco.MjModel, floor: int) -> tuple[ContactPair, ...]:
     return tuple(pairs)
 
 
+_FLOORS = (int(mujoco.mjtGeom.mjGEOM_PLANE), int(mujoco.mjtGeom.mjGEOM_HFIELD))
+
+
 def _floor(m: mujoco.MjModel) -> int:
-    planes = [g for g in range(m.ngeom) if m.geom_type[g] == mujoco.mjtGeom.mjGEOM_PLANE]
-    _require(len(planes) == 1 and m.geom_bodyid[planes[0]] == 0, "there is not exactly one floor plane on the world")
+    planes = [g for g in range(m.ngeom) if int(m.geom_type[g]) in _FLOORS]
+    _require(len(planes) == 1 and m.geom_bodyid[planes[0]] == 0,
+             "there is not exactly one floor (plane or heightfield) on the world")
     for a in range(m.ngeom):
         for b in range(a + 1, m.ngeom):
             filtered = (m.geom_contype[a] & m.geom_conaffinity[b]) | (m.geom_contype[b] & m.geom_conaffinity[a])
             _require(not filtered, "geoms collide outside the explicit contact pairs")
     return planes[0]
+
+
+def _terrain(m: mujoco.MjModel, floor: int, pairs: tuple[ContactPair, ...]) -> Terrain | None:
+    """The heightfield floor's grid, or None on a plane; `NotChain` for what is not written yet."""
+    if m.geom_type[floor] != mujoco.mjtGeom.mjGEOM_HFIELD:
+        return None
+    _require(np.allclose(m.geom_quat[floor], [1, 0, 0, 0], rtol=0, atol=0), "the heightfield floor is turned")
+    _require(all(p.is_foot for p in pairs),
+             "the base box against a heightfield floor is not written yet (only the foot sphere is)")
+    foot = next(p for p in pairs if p.is_foot)
+    _require(foot.margin == 0 and foot.include_margin == 0, "the foot-heightfield pair has a margin or gap")
+    _require(not m.opt.disableflags & mujoco.mjtDisableBit.mjDSBL_NATIVECCD,
+             "native CCD is off (the heightfield contacts would be libccd's)")
+    h = int(m.geom_dataid[floor])
+    nrow, ncol = int(m.hfield_nrow[h]), int(m.hfield_ncol[h])
+    hx, hy, _, base = (float(x) for x in m.hfield_size[h])
+    dx, dy = 2 * hx / (ncol - 1), 2 * hy / (nrow - 1)
+    # Cells a sphere of this radius can reach: its box spans at most floor(2r / d) + 2 of them.
+    diameter = 2 * foot.size[0]
+    block = (int(diameter // dy) + 2, int(diameter // dx) + 2)
+    _require(nrow > block[0] and ncol > block[1], f"the heightfield grid {nrow}x{ncol} is smaller than the foot")
+    return Terrain(nrow=nrow, ncol=ncol, hx=hx, hy=hy, base=base, origin=_vec(m.geom_pos[floor]), dx=dx, dy=dy,
+                   block=block)
+
+
+def terrain_heights(m: mujoco.MjModel) -> np.ndarray:
+    """The heightfield floor's vertex heights (nrow, ncol), world m, as MuJoCo C reads them."""
+    floor = _floor(m)
+    h = int(m.geom_dataid[floor])
+    data = m.hfield_data[m.hfield_adr[h]:m.hfield_adr[h] + m.hfield_nrow[h] * m.hfield_ncol[h]]
+    grid = np.asarray(data, dtype=float).reshape(int(m.hfield_nrow[h]), int(m.hfield_ncol[h]))
+    return m.geom_pos[floor, 2] + grid * m.hfield_size[h, 2]
 
 
 def _actuators(m: mujoco.MjModel):
@@ -273,6 +331,7 @@ def describe(m: mujoco.MjModel) -> ChainModel:
     floor = _floor(m)
     normal = _quat_mat(m.geom_quat[floor]).reshape(3, 3)[:, 2]
     acts, act_qpos, frc = _actuators(m)
+    pairs = _pairs(m, floor)
     opt = m.opt
     dis = mujoco.mjtDisableBit
     return ChainModel(
@@ -281,7 +340,7 @@ def describe(m: mujoco.MjModel) -> ChainModel:
         damping=tuple(float(x) for x in m.dof_damping), armature=tuple(float(x) for x in m.dof_armature),
         actuators=acts, actuator_qpos=act_qpos, joint_force_range=frc,
         floor_normal=_vec(normal), floor_point=_vec(m.geom_pos[floor]), contact_frame=_make_frame(normal),
-        pairs=_pairs(m, floor), timestep=float(opt.timestep), iterations=int(opt.iterations),
+        pairs=pairs, terrain=_terrain(m, floor, pairs), timestep=float(opt.timestep), iterations=int(opt.iterations),
         ls_iterations=int(opt.ls_iterations), tolerance=float(opt.tolerance),
         cost_scale=1.0 / (float(m.stat.meaninertia) * max(1, int(m.nv))), impratio=float(opt.impratio),
         warmstart=not opt.disableflags & dis.mjDSBL_WARMSTART,
