@@ -19,7 +19,7 @@ LAYERS = (
     ("engine",),
     ("signals",),
     ("control",),
-    ("metrics",),
+    ("metrics", "thresholds"),  # thresholds: each task's bar on the metrics, and the ranking of checkpoints
     ("sim",),
     ("envs",),
     ("scenario",),  # the typed description of a batch, built once: robot, worlds, engine, controller
