@@ -30,6 +30,12 @@ import mujoco
 from hopper_mjx import registry
 from hopper_mjx.engine.mjx import MjxEngine
 
+# XLA:CPU's newer fusion emitters recompute the chained body transforms of
+# mjx.kinematics inside each fused consumer; the classic emitters keep the step
+# ~35% cheaper here (docs/performance.md), and compile it much faster. Same arithmetic,
+# so same results. Every jit of an engine step on CPU passes these.
+CPU_COMPILER_OPTIONS = {"xla_cpu_use_fusion_emitters": False}
+
 
 @runtime_checkable
 class Engine(Protocol):
@@ -69,4 +75,4 @@ def make(name: str, mj_model: mujoco.MjModel):
     return MjxEngine(mj_model)
 
 
-__all__ = ["Engine", "MjxEngine", "check_name", "make"]
+__all__ = ["CPU_COMPILER_OPTIONS", "Engine", "MjxEngine", "check_name", "make"]
