@@ -10,7 +10,8 @@ evaluations), and on the kicked gravity sweep of the run's policy (RUN/sweep/: `
 gravity --controller policy:RUN`, nine default gravities, the default kick) the worst gravity's survival,
 apex error |rise/command - 1| and speed error. Each task's reference controller (raibert for the hopping
 tasks, balance for stand) is swept the same way (OUT's folder, reference-<task>/). With --sweep the
-missing sweeps are run (each resumable); without it a run without a sweep shows n/a. One plot beside
+missing sweeps are run (each resumable); without it a run without a sweep shows n/a; ∞ marks an error
+with no survivor or no hop to measure it on. One plot beside
 the table (OUT with .png): every seed's evaluation reward against training minutes.
 """
 
@@ -18,6 +19,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import statistics
 import sys
 from pathlib import Path
@@ -115,8 +117,9 @@ def spread(values, fmt: str) -> str:
     values = [v for v in values if v is not None]
     if not values:
         return "n/a"
-    text = format(statistics.median(values), fmt)
-    return text if len(values) == 1 else f"{text} [{format(min(values), fmt)}–{format(max(values), fmt)}]"
+    show = lambda v: format(v, fmt) if math.isfinite(v) else "∞"  # an error with no survivor or hop to measure
+    text = show(statistics.median(values))
+    return text if len(values) == 1 else f"{text} [{show(min(values))}–{show(max(values))}]"
 
 
 HEADER = ("| task × algorithm | seeds | at threshold | min to threshold | env steps/s | worst survival "
@@ -171,7 +174,7 @@ def build(paths: list[Path], out: Path, *, do_sweep: bool, num: int, duration: f
     references = {}
     for task in sorted({r["task"] for r in records}):
         first = next(r for r in records if r["task"] == task)
-        folder = out.parent / f"{out.stem}-reference-{task}"
+        folder = out.parent / f"reference-{task}"
         if do_sweep and not (folder / "summary.json").is_file():
             run_sweep(REFERENCE[task], folder, first["height"], first["speed"], num, duration)
         references[task] = {"controller": REFERENCE[task], **sweep_measures(folder, task, first["height"])}
