@@ -78,7 +78,7 @@ class Scenario:
         from hopper_mjx import control
 
         return control.make(self.controller, sim.robot, self.n, height=self.height, speed=self.speed, gains=self.gains,
-                            engine=sim.engine, mj_model=sim.mj_model)
+                            mj_model=sim.mj_model)
 
     def run(self, duration: float, sensors):
         """(Sim, final state, trajectory as NumPy) of the whole batch for `duration` s; prints the rate."""

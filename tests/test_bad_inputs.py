@@ -184,7 +184,7 @@ def test_the_checks_know_what_the_library_accepts(sim):
     from hopper_mjx.envs import tasks
 
     for name in registry.CONTROLLERS:
-        assert control.make(name, sim.robot, 2, engine=sim.engine, mj_model=sim.mj_model)[0].name == name
+        assert control.make(name, sim.robot, 2, mj_model=sim.mj_model)[0].name == name
     with pytest.raises(ValueError, match="unknown controller 'bogus'; choose from: none, hold, pid, raibert, balance"):
         control.make("bogus", sim.robot, 2)
     assert list(tasks.TASKS) == list(registry.TASKS)

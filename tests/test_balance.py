@@ -95,7 +95,7 @@ def test_the_controller_holds_the_equilibrium_in_the_core(sim):
     kicks (std 0.03 m/s, rad/s) are another matter: docs/control.md measures them."""
     from hopper_mjx import control
 
-    controller, params = control.make("balance", sim.robot, 2, engine=sim.engine, mj_model=sim.mj_model)
+    controller, params = control.make("balance", sim.robot, 2, mj_model=sim.mj_model)
     start = np.stack([bal.equilibrium(sim.mj_model, g)[0] for g in GRAVITIES])
     _, traj = sim.run(gravity_vectors(np.array(GRAVITIES)), controller, params, duration=2.0, qpos=start)
     qpos = np.asarray(traj.qpos)

@@ -279,7 +279,7 @@ class BalanceState(NamedTuple):
     work: jax.Array  # () J, |τ·q̇| integrated, as Raibert's (the sweep's cost of transport reads it)
 
 
-def balance(robot: Robot, engine, mj_model: mujoco.MjModel, grid=GRID) -> Controller:
+def balance(robot: Robot, mj_model: mujoco.MjModel, grid=GRID) -> Controller:
     """`balance`: u = τ₀(g) - K(g)·(x - x₀(g)), K and the equilibrium interpolated in log g over `grid`,
     clipped at the effort limits. Raises ValueError if a grid point is not stabilisable."""
     found = designs(mj_model, grid)

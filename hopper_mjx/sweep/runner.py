@@ -40,7 +40,7 @@ class ChunkRunner:
         self.spec, self.instances, self.sim = spec, instances, sim
         self.policy = registry.policy_path(spec.controller) if registry.is_policy(spec.controller) else None
         if spec.controller == "balance":  # commands nothing: it stands
-            self.controller = balance(sim.robot, sim.engine, sim.mj_model)
+            self.controller = balance(sim.robot, sim.mj_model)
         elif self.policy is None:
             self.controller = raibert(sim.robot)
         else:  # brax is imported only when a policy is swept
