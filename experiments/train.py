@@ -8,8 +8,9 @@ physics on the chain engine (`--engine mjx` for MuJoCo MJX).
     python -m hopper_mjx.simulate --controller policy:runs/hop-ppo --gravity 9.81,3.71,1.62 --duration 10
 
 Writes into --out: checkpoints/<env step>/ (every evaluation), policy/ (the final
-params, loadable by `hopper_mjx.envs.policy` as `policy:PATH`), metrics.json (arguments,
-task config, one record per evaluation, wall time) and reward_curve.png.
+params, loadable by `hopper_mjx.envs.policy` as `policy:PATH`; with --scan-checkpoints the best
+evaluated checkpoint instead, see selection.json), metrics.json (arguments, task config, one
+record per evaluation, wall time) and reward_curve.png.
 """
 
 from __future__ import annotations
@@ -24,12 +25,13 @@ import time
 from pathlib import Path
 
 from hopper_mjx import cli, command, files, registry, runtime
+from hopper_mjx import thresholds as threshold_rule
 from hopper_mjx.files import atomic_write_text
+from hopper_mjx.thresholds import APEX_TOLERANCE, MIN_HOPS, SPEED_TOLERANCE  # noqa: F401 (one definition)
 
 HISTORY = "metrics.json"
-MIN_HOPS = 5  # hops in --eval-duration that count as hopping (the threshold of --scan-checkpoints)
-APEX_TOLERANCE = 0.15  # the hopping tasks' threshold: apex rise within this fraction of the command
-SPEED_TOLERANCE = 0.1  # m/s, the hopping tasks' threshold: mean horizontal speed error (drift when hopping in place)
+SCAN = "scan.json"  # every scanned checkpoint's evaluation
+SELECTION = "selection.json"  # which checkpoint policy/ holds, and why
 
 
 ALGORITHMS = ("ppo", "sac")
@@ -72,6 +74,9 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--sac-min-replay", type=int, default=8192, help="SAC: env steps collected before learning")
     p.add_argument("--sac-grad-updates", type=int, default=8, help="SAC: gradient updates per env step batch")
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seeds", type=int, default=None, metavar="K",
+                   help="train K seeds, --seed, --seed+1, ..., one after another, each into --out/seed-<s>/ "
+                        "(each resumable as one run is; results.py builds the table from them)")
     p.add_argument("--evaluate", action="store_true",
                    help="afterwards, run the policy and the Raibert controller in the core at --eval-gravity "
                         "for --eval-duration s and compare their hop metrics (evaluation.json / .md)")
@@ -82,11 +87,11 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--eval-speed", type=cli.floats("--eval-speed"), default=[0.0, 0.0],
                    help="commanded VX,VY m/s of the evaluation")
     p.add_argument("--scan-checkpoints", action="store_true",
-                   help="afterwards, evaluate the checkpoints in step order as --evaluate does (policy only) "
-                        "and report the first that meets the task's threshold at every --eval-gravity (stand: "
+                   help="afterwards, evaluate every checkpoint as --evaluate does (policy only; scan.json), "
+                        "report the first that meets the task's threshold at every --eval-gravity (stand: "
                         f"every instance survives; hop and hop_velocity: and >= {MIN_HOPS} hops, apex within "
                         f"{APEX_TOLERANCE * 100:.0f} %%, drift or speed error <= {SPEED_TOLERANCE} m/s) in "
-                        "threshold.json; "
+                        "threshold.json, and make policy/ the best of them (selection.json); "
                         "checkpoints whose Brax evaluation episodes ended early are skipped")
     return p
 
@@ -148,6 +153,10 @@ def check(args) -> None:
         if getattr(args, flag) < 1:
             raise ValueError(f"--{flag.replace('_', '-')} must be >= 1, got {getattr(args, flag)}")
     cli.check_seed(args.seed)
+    if args.seeds is not None:
+        if args.seeds < 1:
+            raise ValueError(f"--seeds must be >= 1, got {args.seeds}")
+        cli.check_seed(args.seed + args.seeds - 1)
     # The evaluation's options too: a mistake there would otherwise surface after the whole training run.
     for g in _floats(args.eval_gravity, "--eval-gravity"):
         cli.check_range("--eval-gravity", g, low=0, open_low=True)
@@ -398,49 +407,68 @@ def evaluate(policy_path, *, gravities, duration: float, height: float, num: int
     return out
 
 
-def threshold(task: str) -> str:
-    """The task's threshold in words (what --scan-checkpoints asks of every --eval-gravity)."""
-    if task == "stand":
-        return "every instance survives"
-    speed = "mean speed error" if task == "hop_velocity" else "mean drift"
-    return (f"every instance survives with >= {MIN_HOPS} hops, apex rise within {APEX_TOLERANCE:.0%} of the "
-            f"command and {speed} <= {SPEED_TOLERANCE} m/s")
+threshold = threshold_rule.describe
 
 
 def meets_threshold(task: str, row: dict, height: float) -> bool:
-    """Does one gravity's `evaluate` row meet `threshold(task)` for a commanded rise `height`?"""
-    alive = row["survival"] == 1
-    if task == "stand" or not alive:
-        return alive
-    if row["min_hops"] < MIN_HOPS:
-        return False
-    # Hops that miss the apex (buzzing on a stiff leg counts lift-offs too) or drift away are not the task.
-    return (row["apex_height"] is not None and abs(row["apex_height"] / height - 1) <= APEX_TOLERANCE
-            and row["tracking_error"] is not None and row["tracking_error"] <= SPEED_TOLERANCE)
+    """Does one gravity's `evaluate` row meet the task's threshold (`hopper_mjx.thresholds`)?"""
+    return threshold_rule.meets(task, row, height)
 
 
-def first_checkpoint_at_threshold(args) -> dict | None:
-    """The first checkpoint whose policy meets the task's `threshold` at every --eval-gravity over
-    --eval-duration s, with the training wall time at which it was saved; None if none does.
-    Checkpoints whose Brax evaluation episodes lasted < 95 % of --episode-length already fell in
-    training, and are not run."""
+def scan_checkpoints(args) -> list[dict]:
+    """Every checkpoint's policy evaluated as --evaluate does (policy only), in step order, each with the
+    training wall time at which it was saved; resumable (SCAN keeps those already run). Checkpoints whose
+    Brax evaluation episodes lasted < 95 % of --episode-length already fell in training, and are not run."""
     out = Path(args.out)
     rows = {r["step"]: r for r in read_history(out / HISTORY)["history"]}
     gravities = _floats(args.eval_gravity, "--eval-gravity")
+    settings = {"gravities": gravities, "duration": args.eval_duration, "height": args.eval_height,
+                "num": args.eval_num, "seed": args.seed, "speed": list(args.eval_speed)}
+    saved = json.loads((out / SCAN).read_text()) if (out / SCAN).exists() else {}
+    done = {s["step"]: s for s in saved.get("checkpoints", [])} if saved.get("settings") == settings else {}
+    scanned = []
     for path in sorted((out / "checkpoints").glob("[0-9]" * 12)):
-        row = rows.get(int(path.name), {})
+        step = int(path.name)
+        row = rows.get(step, {})
         if row.get("eval/avg_episode_length", args.episode_length) < 0.95 * args.episode_length:
             continue
-        result = evaluate(path, gravities=gravities, duration=args.eval_duration, height=args.eval_height,
-                          num=args.eval_num, seed=args.seed, speed=args.eval_speed, raibert_too=False,
-                          urdf=args.urdf)["policy"]
-        print(f"step {int(path.name):>10,} ({row.get('wall_time', math.nan) / 60:.1f} min): "
-              + ", ".join(f"g {g}: {r['survival']:.0%} alive, >= {r['min_hops']} hops" for g, r in result.items()),
-              flush=True)
-        if all(meets_threshold(args.task, r, args.eval_height) for r in result.values()):
-            return {"step": int(path.name), "wall_time": row.get("wall_time"), "threshold": threshold(args.task),
-                    "evaluation": result}
+        if step not in done:
+            result = evaluate(path, gravities=gravities, duration=args.eval_duration, height=args.eval_height,
+                              num=args.eval_num, seed=args.seed, speed=args.eval_speed, raibert_too=False,
+                              urdf=args.urdf)["policy"]
+            done[step] = {"step": step, "wall_time": row.get("wall_time"), "evaluation": result}
+            print(f"step {step:>10,} ({row.get('wall_time', math.nan) / 60:.1f} min): "
+                  + ", ".join(f"g {g}: {r['survival']:.0%} alive, >= {r['min_hops']} hops"
+                              for g, r in result.items()), flush=True)
+        scanned.append(done[step])
+        atomic_write_text(out / SCAN, json.dumps({"settings": settings, "checkpoints": scanned}, indent=1))
+    return scanned
+
+
+def first_at_threshold(task: str, scanned: list[dict], height: float) -> dict | None:
+    """The first scanned checkpoint that meets the task's threshold at every gravity; None if none does."""
+    for s in scanned:
+        if all(meets_threshold(task, r, height) for r in s["evaluation"].values()):
+            return {**s, "threshold": threshold(task)}
     return None
+
+
+def select_policy(args, scanned: list[dict]) -> dict | None:
+    """Copies the best scanned checkpoint (`hopper_mjx.thresholds.best`) into policy/ and records the
+    choice in SELECTION: its step, wall time, measures and rank."""
+    out = Path(args.out)
+    chosen = threshold_rule.best(args.task, scanned, args.eval_height)
+    if chosen is None:
+        return None
+    shutil.rmtree(out / "policy", ignore_errors=True)
+    shutil.copytree(out / "checkpoints" / f"{chosen['step']:012d}", out / "policy")
+    record = {**chosen, "rule": "most gravities at the threshold, then the worst gravity's survival, then its "
+              "error over the threshold's bounds (hopper_mjx.thresholds.rank)",
+              "rank": list(threshold_rule.rank(args.task, chosen["evaluation"], args.eval_height)),
+              "threshold": threshold(args.task), "meets": all(meets_threshold(args.task, r, args.eval_height)
+                                                              for r in chosen["evaluation"].values())}
+    atomic_write_text(out / SELECTION, json.dumps(record, indent=1))
+    return record
 
 
 def _mean(values) -> float | None:
@@ -482,16 +510,52 @@ def plot_rewards(history: list[dict], path: Path, title: str) -> None:
     plt.close(fig)
 
 
+def seed_runs(args) -> list[argparse.Namespace]:
+    """The runs a command asks for: itself, or with --seeds K one per seed, each into --out/seed-<s>."""
+    if args.seeds is None:
+        return [args]
+    return [argparse.Namespace(**{**vars(args), "seed": s, "seeds": None, "out": str(Path(args.out) / f"seed-{s}")})
+            for s in range(args.seed, args.seed + args.seeds)]
+
+
 def main(argv=None) -> int:
     args = parser().parse_args(argv)
     runtime.configure()
+    runs = seed_runs(args)
     try:
-        check(args)
+        check(args)  # with --seeds: every option, and --out as the seeds' parent
+        if args.seeds is not None:
+            Path(args.out).mkdir(parents=True, exist_ok=True)
+        for run in runs:  # each seed's folder (one of another task or algorithm is refused)
+            check(run)
+    except ValueError as err:
+        return cli.fail(err)
+    for run in runs:
+        if len(runs) > 1:
+            print(f"== seed {run.seed}: {run.out}", flush=True)
+        code = train_and_report(run)
+        if code:
+            return code
+    return 0
+
+
+def train_and_report(args) -> int:
+    """One seed's training, then its scan and evaluation as the arguments ask."""
+    try:
         record = train(args)
     except ValueError as err:
         return cli.fail(err)
     print(f"wrote {args.out}/policy (step {record['final_step']:,}), {HISTORY}, reward_curve.png; "
           f"{record['wall_time'] / 60:.1f} min of training")
+    if args.scan_checkpoints:  # first: the policy evaluated below is the one the scan selects
+        scanned = scan_checkpoints(args)
+        found = first_at_threshold(args.task, scanned, args.eval_height)
+        (Path(args.out) / "threshold.json").write_text(json.dumps(found, indent=1))
+        print(f"no checkpoint meets the threshold ({threshold(args.task)})" if found is None else
+              f"first at step {found['step']:,}, {found['wall_time'] / 60:.1f} min of training")
+        chosen = select_policy(args, scanned)
+        if chosen is not None:
+            print(f"policy/ holds the best evaluated checkpoint, step {chosen['step']:,} ({SELECTION})")
     if args.evaluate:
         gravities = _floats(args.eval_gravity, "--eval-gravity")
         result = evaluate(Path(args.out) / "policy", gravities=gravities, duration=args.eval_duration,
@@ -501,11 +565,6 @@ def main(argv=None) -> int:
         atomic_write_text(Path(args.out) / "evaluation.json", json.dumps(result, indent=1))
         atomic_write_text(Path(args.out) / "evaluation.md", table + "\n")
         print(table)
-    if args.scan_checkpoints:
-        found = first_checkpoint_at_threshold(args)
-        atomic_write_text(Path(args.out) / "threshold.json", json.dumps(found, indent=1))
-        print(f"no checkpoint meets the threshold ({threshold(args.task)})" if found is None else
-              f"first at step {found['step']:,}, {found['wall_time'] / 60:.1f} min of training")
     return 0
 
 

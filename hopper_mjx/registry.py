@@ -18,7 +18,10 @@ CONTROLLERS = {
     "hold": "keep the initial joint angles",
     "pid": "the seed's joint position controllers, holding them",
     "raibert": "hop to --height and --speed",
+    "balance": "stand still on the foot: an LQR about the stance (holds it at rest; kicks topple it, docs/control.md)",
 }
+# The controllers a gravity sweep runs beside `policy:PATH`: the tasks' references.
+SWEEP_CONTROLLERS = ("raibert", "balance")
 ENGINES = {
     "auto": "chain when the model qualifies, else mjx",
     "chain": "MuJoCo's step specialised to the monoped",

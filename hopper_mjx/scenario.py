@@ -155,7 +155,8 @@ class Scenario:
             return policy.policy_controller(sim.mj_model, path), params
         from hopper_mjx import control
 
-        return control.make(self.controller, sim.robot, self.n, height=self.height, speed=self.speed, gains=self.gains)
+        return control.make(self.controller, sim.robot, self.n, height=self.height, speed=self.speed, gains=self.gains,
+                            mj_model=sim.mj_model)
 
     def run(self, duration: float, sensors):
         """(Sim, final state, trajectory as NumPy) of the whole batch for `duration` s; prints the rate."""

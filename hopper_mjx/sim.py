@@ -36,10 +36,7 @@ gravity_vectors = world.gravity_vectors  # the gravity convention lives beside t
 
 AXIS = "instances"
 DIVERGED_SPEED = 1e6  # rad/s or m/s: beyond this a state is taken as diverged
-# XLA:CPU's newer fusion emitters recompute the chained body transforms of
-# mjx.kinematics inside each fused consumer; the classic emitters keep the step
-# ~35% cheaper here (docs/performance.md). Same arithmetic, so same results.
-CPU_COMPILER_OPTIONS = {"xla_cpu_use_fusion_emitters": False}
+CPU_COMPILER_OPTIONS = engines.CPU_COMPILER_OPTIONS
 
 class State(NamedTuple):
     """The batch's state; every leaf has the instance axis first."""

@@ -43,7 +43,7 @@ CASES = [
     ("simulate", ["--num", "0"], "--num must be >= 1, got 0"),
     ("simulate", ["--num", "abc"], "argument --num: invalid int value: 'abc'"),
     ("simulate", ["--controller", "jump"], "--controller: unknown controller 'jump'; choose from: none, hold, pid, "
-                                             "raibert, policy:PATH"),
+                                             "raibert, balance, policy:PATH"),
     ("simulate", ["--rate", "7"], "--rate: imu_rate=7.0 Hz must divide the physics rate 1000 Hz"),
     ("render", ["--video", "h.gif", "--fps", "30"], "--fps: imu_rate=30.0 Hz must divide the physics rate"),
     ("simulate", ["--timestep", "0.5"], "--timestep must be finite and > 0 and <= 0.01, got 0.5"),
@@ -252,8 +252,8 @@ def test_the_checks_know_what_the_library_accepts(sim):
     from hopper_mjx.envs import tasks
 
     for name in registry.CONTROLLERS:
-        assert control.make(name, sim.robot, 2)[0].name == name
-    with pytest.raises(ValueError, match="unknown controller 'bogus'; choose from: none, hold, pid, raibert"):
+        assert control.make(name, sim.robot, 2, mj_model=sim.mj_model)[0].name == name
+    with pytest.raises(ValueError, match="unknown controller 'bogus'; choose from: none, hold, pid, raibert, balance"):
         control.make("bogus", sim.robot, 2)
     assert list(tasks.TASKS) == list(registry.TASKS)
     assert cli.DEFAULT_TIMESTEP == loader.DEFAULT_TIMESTEP

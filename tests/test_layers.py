@@ -22,7 +22,7 @@ LAYERS = (
     ("engine",),
     ("signals",),
     ("control", "actuators", "pushes"),  # what the controllers command; what the motors make of it; shoves
-    ("metrics",),
+    ("metrics", "thresholds"),  # thresholds: each task's bar on the metrics, and the ranking of checkpoints
     ("sim",),
     ("envs",),
     ("scenario",),  # the typed description of a batch, built once: robot, worlds, engine, controller

@@ -180,6 +180,111 @@ def test_each_task_has_its_threshold():
         assert not meets(task, tracking_error=0.11) and not meets(task, apex_height=None)
 
 
+
+def _rows(**by_gravity):
+    """Scan rows per gravity from (survival, apex rise m, drift m/s) triples, 10 hops each."""
+    return {g: {"survival": s, "min_hops": 10, "apex_height": a, "tracking_error": e}
+            for g, (s, a, e) in by_gravity.items()}
+
+
+def test_the_best_checkpoint_is_ranked_on_the_thresholds_measures():
+    """Most gravities at the threshold first, then the worst survival, then the worst error over the bounds;
+    a later checkpoint that falls or misses the apex is not chosen over an earlier one that does not."""
+    from hopper_mjx import thresholds
+
+    good = _rows(**{"9.81": (1.0, 0.101, 0.02), "1.62": (1.0, 0.095, 0.03)})  # worst: 5 % apex, 0.3 of 0.1 m/s
+    better = _rows(**{"9.81": (1.0, 0.100, 0.01), "1.62": (1.0, 0.099, 0.02)})
+    collapsed = _rows(**{"9.81": (1.0, 0.100, 0.01), "1.62": (0.9, 0.100, 0.01)})  # one gravity loses 10 %
+    off_apex = _rows(**{"9.81": (1.0, 0.055, 0.01), "1.62": (1.0, 0.133, 0.01)})  # the issue's -45 / +33 %
+    scanned = [{"step": 100, "evaluation": good}, {"step": 200, "evaluation": better},
+               {"step": 300, "evaluation": collapsed}, {"step": 400, "evaluation": off_apex}]
+    assert thresholds.best("hop", scanned, 0.10)["step"] == 200
+    assert thresholds.rank("hop", good, 0.10) == (2, 1.0, pytest.approx(-1 / 3))
+    assert thresholds.rank("hop", off_apex, 0.10)[0] == 0
+    assert thresholds.best("hop", scanned[2:], 0.10)["step"] == 300  # one gravity at the bar beats none
+    ties = [{"step": 500, "evaluation": good}, *scanned[:1]]
+    assert thresholds.best("hop", ties, 0.10)["step"] == 100  # among equals, the earliest
+    stand = [{"step": 1, "evaluation": collapsed}, {"step": 2, "evaluation": off_apex}]
+    assert thresholds.best("stand", stand, 0.10)["step"] == 2  # stand: survival, then drift
+    assert thresholds.best("hop", [], 0.10) is None
+
+
+def test_the_selected_checkpoint_becomes_the_policy_and_the_choice_is_recorded(trained):
+    """select_policy copies the chosen checkpoint into policy/ (its params, byte for byte) and writes
+    selection.json with its step, measures and rank."""
+    import json
+
+    out, _ = trained
+    steps = [int(p.name) for p in _checkpoints(out) if p.name.isdigit()]  # not a save cut short (resume test)
+    first, last = steps[0], steps[-1]
+    assert first != last
+    rows = {first: _rows(**{"9.81": (1.0, 0.100, 0.01)}), last: _rows(**{"9.81": (0.5, 0.100, 0.01)})}
+    args = train_script.parser().parse_args([*TINY, *PPO, "--out", str(out), "--eval-height", "0.10"])
+    chosen = train_script.select_policy(args, [{"step": s, "wall_time": 1.0, "evaluation": rows[s]}
+                                               for s in (first, last)])
+    assert chosen["step"] == first and chosen["meets"]
+    record = json.loads((out / train_script.SELECTION).read_text())
+    assert record["step"] == first and record["evaluation"]["9.81"]["survival"] == 1.0
+    assert record["rank"] == [1, 1.0, pytest.approx(-0.1)]
+    source = out / "checkpoints" / f"{first:012d}"
+    for f in source.rglob("*"):
+        if f.is_file():
+            assert (out / "policy" / f.relative_to(source)).read_bytes() == f.read_bytes()
+
+
+
+
+SEEDED = [*TINY, "--task", "hop", "--algo", "ppo", "--seed", "3"]  # with Brax's evaluations: reward curves
+
+
+@pytest.fixture(scope="module")
+def seeded(tmp_path_factory):
+    """A --seeds 2 run (seeds 3 and 4), and seed 3 alone again into another folder."""
+    base = tmp_path_factory.mktemp("seeds")
+    assert train_script.main([*SEEDED, "--seeds", "2", "--out", str(base / "seeds")]) == 0
+    assert train_script.main([*SEEDED, "--out", str(base / "again")]) == 0
+    return base
+
+
+def test_seeds_train_one_folder_each_and_a_seed_reruns_bit_for_bit(seeded):
+    """--seeds 2 --seed 3 trains seed-3/ and seed-4/ (different params); the same seed and arguments again,
+    into another folder, give the same params bit for bit (on this machine)."""
+    from brax.training import checkpoint
+
+    assert sorted(p.name for p in (seeded / "seeds").iterdir()) == ["seed-3", "seed-4"]
+    three, four = (checkpoint.load(seeded / "seeds" / f"seed-{s}" / "policy") for s in (3, 4))
+    assert any(not np.array_equal(a, b) for a, b in zip(_leaves(three), _leaves(four)))
+    again = checkpoint.load(seeded / "again" / "policy")
+    for a, b in zip(_leaves(three), _leaves(again), strict=True):
+        np.testing.assert_array_equal(a, b)
+
+
+def test_the_results_table_is_read_from_the_run_folders(seeded, tmp_path):
+    """experiments/results.py over a --seeds parent: one hop x PPO row of 2 seeds whose env steps/s are the
+    median [min-max] of each run's own median rate, every seed's curve in the plot's data, n/a for sweeps
+    not run (no --sweep)."""
+    import json
+    import statistics
+
+    results = _load_script("results")
+    out = tmp_path / "results.md"
+    assert results.main([str(seeded / "seeds"), "--out", str(out)]) == 0
+    data = json.loads(out.with_suffix(".json").read_text())
+    assert [r["seed"] for r in data["runs"]] == [3, 4]
+    rates = []
+    for seed in (3, 4):
+        history = json.loads((seeded / "seeds" / f"seed-{seed}" / "metrics.json").read_text())["history"]
+        rates.append(statistics.median(r["training/sps"] for r in history if r.get("training/sps")))
+        run = next(r for r in data["runs"] if r["seed"] == seed)
+        assert run["curve"] == [[r["wall_time"] / 60, r["eval/episode_reward"]] for r in history
+                                if "eval/episode_reward" in r] and len(run["curve"]) >= 2
+    row = next(line for line in out.read_text().splitlines() if line.startswith("| hop × PPO"))
+    cells = [c.strip() for c in row.split("|")[1:-1]]
+    assert cells[1] == "2" and cells[2] == "0 of 0 scanned"
+    assert cells[4] == f"{statistics.median(rates):,.0f} [{min(rates):,.0f}–{max(rates):,.0f}]"
+    assert cells[5:] == ["n/a"] * 3
+    assert out.with_suffix(".png").stat().st_size > 10_000
+
 def test_train_rejects_an_out_it_cannot_make_in_one_line(tmp_path, capsys):
     (tmp_path / "a_file").write_text("")
     for out, message in ((tmp_path / "a_file" / "run", "its folder " + str(tmp_path / "a_file") + " is not a folder"),

@@ -35,6 +35,12 @@ from hopper_mjx import registry
 from hopper_mjx.engine.mjx import MjxEngine
 from hopper_mjx.randomize import check_engine_varies
 
+# XLA:CPU's newer fusion emitters recompute the chained body transforms of
+# mjx.kinematics inside each fused consumer; the classic emitters keep the step
+# ~35% cheaper here (docs/performance.md), and compile it much faster. Same arithmetic,
+# so same results. Every jit of an engine step on CPU passes these.
+CPU_COMPILER_OPTIONS = {"xla_cpu_use_fusion_emitters": False}
+
 
 @runtime_checkable
 class Engine(Protocol):
@@ -80,4 +86,4 @@ def make(name: str, mj_model: mujoco.MjModel, varies: frozenset[str] = frozenset
     return MjxEngine(mj_model, varies)
 
 
-__all__ = ["Engine", "MjxEngine", "check_name", "make"]
+__all__ = ["CPU_COMPILER_OPTIONS", "Engine", "MjxEngine", "check_name", "make"]

@@ -41,10 +41,12 @@ def parser() -> argparse.ArgumentParser:
             s.add_argument("--param", required=True, help="Raibert gain to sweep (a RaibertConfig field)")
             s.add_argument("--values", type=cli.floats("--values"), required=True, help="its values")
         if kind == "gravity":
-            s.add_argument("--controller", default="raibert", help="raibert or policy:PATH (experiments/train.py)")
+            s.add_argument("--controller", default="raibert",
+                           help="raibert, balance (the stand reference) or policy:PATH (experiments/train.py)")
         if kind == "compare":
             s.add_argument("--controllers", required=True,
-                           help="comma-separated: raibert and/or policy:PATH, each swept with the same kicks")
+                           help="comma-separated: raibert, balance and/or policy:PATH, each swept with the "
+                           "same kicks")
         s.add_argument("--num", type=int, default=num, help=f"replicates per grid point (default {num})")
         s.add_argument("--duration", type=float, default=duration, help="simulated seconds per instance")
         s.add_argument("--height", type=float, default=0.10, help="commanded apex rise over standing height, m")
@@ -146,7 +148,9 @@ def _host_port(text: str) -> bool:
 
 
 def label(controller: str) -> str:
-    return "raibert" if controller == "raibert" else "policy-" + Path(registry.policy_path(controller)).name
+    if controller in registry.SWEEP_CONTROLLERS:
+        return controller
+    return "policy-" + Path(registry.policy_path(controller)).name
 
 
 def run_one(args, spec, folder: Path):

@@ -68,8 +68,9 @@ class SweepSpec:
         if self.chunk < 1:
             raise ValueError(f"--chunk must be >= 1, got {self.chunk}")
         checks.check_engine(self.physics.engine)
-        if self.controller != "raibert" and not registry.is_policy(self.controller):
-            raise ValueError(f"--controller {self.controller!r}: a sweep runs raibert or policy:PATH")
+        if self.controller not in registry.SWEEP_CONTROLLERS and not registry.is_policy(self.controller):
+            raise ValueError(f"--controller {self.controller!r}: a sweep runs "
+                             f"{', '.join(registry.SWEEP_CONTROLLERS)} or policy:PATH")
         if self.kind == "gains" and self.controller != "raibert":
             raise ValueError("a gains sweep varies Raibert's gains: use --controller raibert")
         if self.kind == "gains":

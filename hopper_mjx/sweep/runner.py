@@ -19,6 +19,7 @@ import numpy as np
 from tqdm import tqdm
 
 from hopper_mjx import metrics, registry, signals
+from hopper_mjx.control.balance import balance
 from hopper_mjx.control.raibert import raibert, raibert_params
 from hopper_mjx.files import atomic_write
 from hopper_mjx.model import variation
@@ -41,7 +42,9 @@ class ChunkRunner:
         """`robots`: {model field: (num, ...)} each replicate's robot (`variation.with_constants`), or {}."""
         self.spec, self.instances, self.sim, self.robots = spec, instances, sim, robots
         self.policy = registry.policy_path(spec.controller) if registry.is_policy(spec.controller) else None
-        if self.policy is None:
+        if spec.controller == "balance":  # commands nothing: it stands
+            self.controller = balance(sim.robot, sim.mj_model)
+        elif self.policy is None:
             self.controller = raibert(sim.robot)
         else:  # brax is imported only when a policy is swept
             from hopper_mjx.envs.policy import policy_controller, read
@@ -53,6 +56,8 @@ class ChunkRunner:
     def params(self, full: np.ndarray):
         """Every instance's command (and swept gain): the same for Raibert and a policy."""
         spec = self.spec
+        if spec.controller == "balance":
+            return None
         if self.policy is not None:
             from hopper_mjx.envs.policy import policy_params
 

@@ -1,0 +1,208 @@
+"""The learning results table, built from training run folders (experiments/train.py), not by hand.
+
+    python experiments/results.py runs/hop-ppo runs/stand-sac --out results.md          # tables from the folders
+    python experiments/results.py runs/hop-ppo --out results.md --sweep                 # also run the sweeps
+
+A RUN folder is one training run, or a `--seeds` parent holding seed-<s>/ runs. Per task x algorithm,
+over its seeds, the median and [min-max] of: minutes of training to the task's threshold (threshold.json
+of --scan-checkpoints; `hopper_mjx.thresholds`), env steps/s (Brax's, the median over the run's
+evaluations), and on the kicked gravity sweep of the run's policy (RUN/sweep/: `python -m hopper_mjx.sweep
+gravity --controller policy:RUN`, nine default gravities, the default kick) the worst gravity's survival,
+apex error |rise/command - 1| and speed error. Each task's reference controller (raibert for the hopping
+tasks, balance for stand) is swept the same way (OUT's folder, reference-<task>/). With --sweep the
+missing sweeps are run (each resumable); without it a run without a sweep shows n/a; ∞ marks an error
+with no survivor or no hop to measure it on. One plot beside
+the table (OUT with .png): every seed's evaluation reward against training minutes.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import statistics
+import sys
+from pathlib import Path
+
+from hopper_mjx import cli
+
+REFERENCE = {"stand": "balance", "hop": "raibert", "hop_velocity": "raibert"}
+SWEEP = "sweep"
+
+
+def parser() -> argparse.ArgumentParser:
+    p = cli.parser("experiments/results.py", __doc__)
+    p.add_argument("runs", nargs="+", type=Path, help="training run folders, or --seeds parents of seed-<s>/ runs")
+    p.add_argument("--out", type=Path, required=True, help="the table's Markdown file (the plot: same name, .png)")
+    p.add_argument("--sweep", action="store_true", help="run the missing gravity sweeps (policies and references)")
+    p.add_argument("--num", type=int, default=64, help="sweep replicates per gravity (default 64)")
+    p.add_argument("--duration", type=float, default=10.0, help="sweep seconds per instance (default 10)")
+    return p
+
+
+def runs_of(paths: list[Path]) -> list[Path]:
+    """Every run folder (one holding metrics.json) among `paths` and their seed-<s>/ children."""
+    found = []
+    for path in paths:
+        children = sorted(path.glob("seed-*/metrics.json"), key=lambda p: int(p.parent.name.split("-")[1]))
+        if (path / "metrics.json").is_file():
+            found.append(path)
+        elif children:
+            found += [c.parent for c in children]
+        else:
+            raise ValueError(f"{path} is not a training run (no metrics.json) nor a parent of seed-<s>/ runs")
+    return found
+
+
+def _json(path: Path):
+    try:
+        return json.loads(path.read_text())
+    except (OSError, ValueError) as err:
+        raise ValueError(f"{path}: cannot be read ({err})") from None
+
+
+def command(args: dict) -> tuple[float, tuple[float, float]]:
+    """(commanded apex rise m, speed (vx, vy) m/s) a run is judged on: its evaluation's."""
+    if args["task"] == "stand":
+        return 0.0, (0.0, 0.0)
+    return float(args["eval_height"]), tuple(float(v) for v in args["eval_speed"])
+
+
+def sweep_measures(folder: Path, task: str, height: float) -> dict:
+    """The worst gravity's survival, apex error and speed error of a finished sweep (None: no sweep)."""
+    if not (folder / "summary.json").is_file():
+        return {"survival": None, "apex_error": None, "speed_error": None}
+    groups = _json(folder / "summary.json")["groups"]
+    apex = [g.get("apex_height") for g in groups]
+    speed = [g.get("tracking_error") for g in groups]
+    return {
+        "survival": min(g["survival"] for g in groups),
+        "apex_error": None if task == "stand" else (max(abs(a / height - 1) for a in apex)
+                                                     if all(a is not None for a in apex) else float("inf")),
+        "speed_error": max(speed) if all(s is not None for s in speed) else float("inf"),
+    }
+
+
+def run_sweep(controller: str, folder: Path, height: float, speed, num: int, duration: float) -> None:
+    """The kicked gravity sweep of `controller` into `folder` (resumes a cut-short one), by the sweep's own
+    command."""
+    from hopper_mjx.sweep.__main__ import main as sweep
+
+    argv = ["gravity", "--controller", controller, "--num", str(num), "--duration", str(duration),
+            "--height", str(height), "--speed", f"{speed[0]},{speed[1]}", "--out", str(folder), "--no-progress"]
+    if sweep(argv) != 0:
+        raise ValueError(f"the sweep of {controller} into {folder} failed")
+
+
+def run_record(run: Path, do_sweep: bool, num: int, duration: float) -> dict:
+    """One run's row: its task, algorithm, seed and measures."""
+    record = _json(run / "metrics.json")
+    args = record["args"]
+    height, speed = command(args)
+    found = _json(run / "threshold.json") if (run / "threshold.json").is_file() else None
+    rates = [r["training/sps"] for r in record["history"] if r.get("training/sps")]
+    if do_sweep and not (run / SWEEP / "summary.json").is_file():
+        run_sweep(f"policy:{run}", run / SWEEP, height, speed, num, duration)
+    return {"run": str(run), "task": args["task"], "algo": args["algo"], "seed": args["seed"],
+            "scanned": (run / "threshold.json").is_file(),
+            "minutes_to_threshold": None if found is None else found["wall_time"] / 60,
+            "steps_per_s": statistics.median(rates) if rates else None,
+            "curve": [(r["wall_time"] / 60, r["eval/episode_reward"]) for r in record["history"]
+                      if "eval/episode_reward" in r],
+            **sweep_measures(run / SWEEP, args["task"], height), "height": height, "speed": list(speed)}
+
+
+def spread(values, fmt: str) -> str:
+    """'median [min-max]' of the defined values; n/a if none."""
+    values = [v for v in values if v is not None]
+    if not values:
+        return "n/a"
+    show = lambda v: format(v, fmt) if math.isfinite(v) else "∞"  # an error with no survivor or hop to measure
+    text = show(statistics.median(values))
+    return text if len(values) == 1 else f"{text} [{show(min(values))}–{show(max(values))}]"
+
+
+HEADER = ("| task × algorithm | seeds | at threshold | min to threshold | env steps/s | worst survival "
+          "| worst apex error | worst speed error m/s |\n|---|---|---|---|---|---|---|---|")
+
+
+def table(records: list[dict], references: dict) -> str:
+    lines = [HEADER]
+    for (task, algo) in sorted({(r["task"], r["algo"]) for r in records}):
+        rows = [r for r in records if (r["task"], r["algo"]) == (task, algo)]
+        reached = sum(r["minutes_to_threshold"] is not None for r in rows)
+        scanned = sum(r["scanned"] for r in rows)
+        lines.append(f"| {task} × {algo.upper()} | {len(rows)} | {reached} of {scanned} scanned "
+                     f"| {spread([r['minutes_to_threshold'] for r in rows], '.1f')} "
+                     f"| {spread([r['steps_per_s'] for r in rows], ',.0f')} "
+                     f"| {spread([r['survival'] for r in rows], '.0%')} "
+                     f"| {spread([r['apex_error'] for r in rows], '.0%')} "
+                     f"| {spread([r['speed_error'] for r in rows], '.3f')} |")
+    for task, ref in sorted(references.items()):
+        lines.append(f"| {task} × {ref['controller']} (reference) | — | — | — | — "
+                     f"| {spread([ref['survival']], '.0%')} | {spread([ref['apex_error']], '.0%')} "
+                     f"| {spread([ref['speed_error']], '.3f')} |")
+    return "\n".join(lines)
+
+
+def plot(records: list[dict], path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(7, 4))
+    groups = sorted({(r["task"], r["algo"]) for r in records})
+    for colour, group in zip(plt.rcParams["axes.prop_cycle"].by_key()["color"] * 4, groups):
+        for i, r in enumerate(x for x in records if (x["task"], x["algo"]) == group):
+            t, reward = zip(*r["curve"]) if r["curve"] else ((), ())
+            ax.plot(t, reward, "o-", ms=3, color=colour, alpha=0.8,
+                    label=f"{group[0]} × {group[1].upper()}" if i == 0 else None)
+    ax.set_xlabel("training wall time, min")
+    ax.set_ylabel("evaluation episode reward")
+    ax.set_title("every seed's curve")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def build(paths: list[Path], out: Path, *, do_sweep: bool, num: int, duration: float) -> str:
+    """Reads (and with `do_sweep` sweeps) every run, writes OUT (.md), OUT .json and OUT .png; returns the table."""
+    records = [run_record(run, do_sweep, num, duration) for run in runs_of(paths)]
+    references = {}
+    for task in sorted({r["task"] for r in records}):
+        first = next(r for r in records if r["task"] == task)
+        folder = out.parent / f"reference-{task}"
+        if do_sweep and not (folder / "summary.json").is_file():
+            run_sweep(REFERENCE[task], folder, first["height"], first["speed"], num, duration)
+        references[task] = {"controller": REFERENCE[task], **sweep_measures(folder, task, first["height"])}
+    text = table(records, references)
+    out.write_text(f"{text}\n")
+    out.with_suffix(".json").write_text(json.dumps({"runs": records, "references": references}, indent=1))
+    plot(records, out.with_suffix(".png"))
+    return text
+
+
+def main(argv=None) -> int:
+    args = parser().parse_args(argv)
+    try:
+        cli.check_writable("--out", args.out)
+        if args.num < 1 or not args.duration > 0:
+            raise ValueError("--num must be >= 1 and --duration > 0 s")
+        runs_of(args.runs)
+    except ValueError as err:
+        return cli.fail(err)
+    from hopper_mjx import runtime
+
+    runtime.configure()
+    try:
+        print(build(args.runs, args.out, do_sweep=args.sweep, num=args.num, duration=args.duration))
+    except ValueError as err:
+        return cli.fail(err)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

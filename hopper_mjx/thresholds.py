@@ -1,0 +1,69 @@
+"""Each task's threshold and how checkpoints are ranked on its measures: one definition, used by the
+checkpoint scan of experiments/train.py (time to threshold, the policy it keeps) and by the results table.
+
+A *row* is one evaluation gravity's measures of a controller, as `experiments/train.py`'s `evaluate`
+returns them: `survival` (fraction of instances up at the end), `min_hops`, `apex_height` (m of rise,
+mean over survivors, None if none hopped) and `tracking_error` (m/s, mean over survivors).
+"""
+
+from __future__ import annotations
+
+import math
+
+MIN_HOPS = 5  # hops in the evaluation that count as hopping
+APEX_TOLERANCE = 0.15  # the hopping tasks: apex rise within this fraction of the command
+SPEED_TOLERANCE = 0.1  # m/s, the hopping tasks: mean horizontal speed error (drift when hopping in place)
+
+
+def describe(task: str) -> str:
+    """The task's threshold in words (what it asks of every evaluation gravity)."""
+    if task == "stand":
+        return "every instance survives"
+    speed = "mean speed error" if task == "hop_velocity" else "mean drift"
+    return (f"every instance survives with >= {MIN_HOPS} hops, apex rise within {APEX_TOLERANCE:.0%} of the "
+            f"command and {speed} <= {SPEED_TOLERANCE} m/s")
+
+
+def apex_error(row: dict, height: float) -> float:
+    """Relative apex error |rise / command - 1| (inf when nothing hopped)."""
+    return math.inf if row.get("apex_height") is None else abs(row["apex_height"] / height - 1)
+
+
+def speed_error(row: dict) -> float:
+    """Mean speed error, m/s (inf when nothing survived)."""
+    return math.inf if row.get("tracking_error") is None else row["tracking_error"]
+
+
+def meets(task: str, row: dict, height: float) -> bool:
+    """Does one gravity's row meet the task's threshold for a commanded rise `height`?"""
+    alive = row["survival"] == 1
+    if task == "stand" or not alive:
+        return alive
+    if row["min_hops"] < MIN_HOPS:
+        return False
+    # Hops that miss the apex (buzzing on a stiff leg counts lift-offs too) or drift away are not the task.
+    return apex_error(row, height) <= APEX_TOLERANCE and speed_error(row) <= SPEED_TOLERANCE
+
+
+def shortfall(task: str, row: dict, height: float) -> float:
+    """How far one gravity's row is from the threshold's error bounds, in units of each bound (<= 1: within
+    both); for `stand`, the drift over `SPEED_TOLERANCE` (standing still is part of standing)."""
+    if task == "stand":
+        return speed_error(row) / SPEED_TOLERANCE
+    return max(apex_error(row, height) / APEX_TOLERANCE, speed_error(row) / SPEED_TOLERANCE)
+
+
+def rank(task: str, rows: dict, height: float) -> tuple:
+    """A key to maximise over checkpoints (`rows`: gravity -> row): first the gravities at the threshold,
+    then the worst gravity's survival, then the worst gravity's `shortfall` (smaller is better)."""
+    values = list(rows.values())
+    return (sum(meets(task, r, height) for r in values), min(r["survival"] for r in values),
+            -max(shortfall(task, r, height) for r in values))
+
+
+def best(task: str, scanned: list[dict], height: float) -> dict | None:
+    """The scanned checkpoint ({"step", "evaluation": rows, ...}) with the highest `rank`; the earliest among
+    equals. None if nothing was scanned."""
+    if not scanned:
+        return None
+    return max(scanned, key=lambda s: (rank(task, s["evaluation"], height), -s["step"]))
