@@ -128,8 +128,9 @@ def latest_checkpoint(out: Path) -> tuple[Path, int] | None:
     return path, int(path.name)
 
 
-def check(args) -> None:
-    """Raises ValueError naming the first bad argument; JSON reads only, nothing is built."""
+def check(args):
+    """The run's `scenario.Physics`; raises ValueError naming the first bad argument (JSON reads only,
+    nothing is built)."""
     from hopper_mjx import envs
 
     try:
@@ -179,15 +180,16 @@ def check(args) -> None:
             raise ValueError(f"--out {args.out} holds a {algo} policy of task {config.task!r} with "
                              f"{net['observation_size']} observations; --task {args.task} --algo {args.algo} "
                              f"needs {size}: use another --out")
+    return physics
 
 
-def task_config(args):
-    from hopper_mjx import envs, model
+def task_config(args, physics):
+    from hopper_mjx import envs
 
-    overrides = {"observe_gravity": args.observe_gravity, "engine": args.engine}
+    overrides = {"observe_gravity": args.observe_gravity, "engine": physics.engine}
     if args.gravity_range is not None:
         overrides["gravity_range"] = _pair(args.gravity_range, "--gravity-range")
-    return envs.make(args.task, model.load(args.urdf), **overrides)
+    return envs.make(args.task, physics.mj_model, **overrides)
 
 
 def _shared(args, env, factory, remaining: int, start_step: int, resume, per_train_step: int) -> dict:
@@ -281,13 +283,13 @@ def read_history(path: Path) -> dict:
     return record
 
 
-def train(args) -> dict:
-    """Trains (or resumes) as the arguments say; returns the metrics record also saved to metrics.json."""
+def train(args, physics) -> dict:
+    """Trains (or resumes) as the arguments say on `physics` (`check`'s); returns the metrics record also
+    saved to metrics.json."""
     import jax
 
     from hopper_mjx.envs import policy, tfevents
 
-    check(args)
     out = Path(args.out).resolve()  # orbax writes checkpoints to absolute paths only
     devices = jax.local_device_count()
     if args.num_envs % devices:
@@ -296,7 +298,7 @@ def train(args) -> dict:
         raise ValueError("--batch-size x --num-minibatches must be a multiple of --num-envs")
     out.mkdir(parents=True, exist_ok=True)
     command.on_stop(f"the checkpoints are saved in {out / 'checkpoints'}; rerun the same command to resume")
-    env = task_config(args)
+    env = task_config(args, physics)
     config = env.config
     factory, checkpoint = networks(args)
     network_config = checkpoint.network_config(env.observation_size, env.action_size, True, factory)
@@ -369,8 +371,8 @@ def evaluation_batch(gravities, num: int, seed: int, nv: int):
     return instances.gravity, instances.qvel
 
 
-def evaluate(policy_path, *, gravities, duration: float, height: float, num: int, seed: int = 0,
-             speed=(0.0, 0.0), raibert_too: bool = True, urdf: str | None = None) -> dict:
+def evaluate(policy_path, physics, *, gravities, duration: float, height: float, num: int, seed: int = 0,
+             speed=(0.0, 0.0), raibert_too: bool = True) -> dict:
     """Hop metrics of the policy and (`raibert_too`) of the Raibert controller, same batch, same commands.
 
     Each controller runs `num` instances per gravity for `duration` s in the core,
@@ -379,14 +381,14 @@ def evaluate(policy_path, *, gravities, duration: float, height: float, num: int
     """
     import numpy as np
 
-    from hopper_mjx import metrics, model
+    from hopper_mjx import metrics
     from hopper_mjx.control import raibert
     from hopper_mjx.envs import policy
-    from hopper_mjx.sim import Sim, gravity_vectors
+    from hopper_mjx.sim import gravity_vectors
     from hopper_mjx.sweep.runner import SENSORS
 
-    mj_model = model.load(urdf)
-    sim = Sim(mj_model)
+    mj_model = physics.mj_model
+    sim = physics.sim()
     g, kick = evaluation_batch(gravities, num, seed, sim.layout.nv)
     sensors = SENSORS  # the sweep's streams and kicks: the numbers compare with a sweep's
     controllers = {"policy": (policy.policy_controller(mj_model, policy_path),
@@ -415,7 +417,7 @@ def meets_threshold(task: str, row: dict, height: float) -> bool:
     return threshold_rule.meets(task, row, height)
 
 
-def scan_checkpoints(args) -> list[dict]:
+def scan_checkpoints(args, physics) -> list[dict]:
     """Every checkpoint's policy evaluated as --evaluate does (policy only), in step order, each with the
     training wall time at which it was saved; resumable (SCAN keeps those already run). Checkpoints whose
     Brax evaluation episodes lasted < 95 % of --episode-length already fell in training, and are not run."""
@@ -433,9 +435,9 @@ def scan_checkpoints(args) -> list[dict]:
         if row.get("eval/avg_episode_length", args.episode_length) < 0.95 * args.episode_length:
             continue
         if step not in done:
-            result = evaluate(path, gravities=gravities, duration=args.eval_duration, height=args.eval_height,
-                              num=args.eval_num, seed=args.seed, speed=args.eval_speed, raibert_too=False,
-                              urdf=args.urdf)["policy"]
+            result = evaluate(path, physics, gravities=gravities, duration=args.eval_duration,
+                              height=args.eval_height, num=args.eval_num, seed=args.seed, speed=args.eval_speed,
+                              raibert_too=False)["policy"]
             done[step] = {"step": step, "wall_time": row.get("wall_time"), "evaluation": result}
             print(f"step {step:>10,} ({row.get('wall_time', math.nan) / 60:.1f} min): "
                   + ", ".join(f"g {g}: {r['survival']:.0%} alive, >= {r['min_hops']} hops"
@@ -526,31 +528,30 @@ def main(argv=None) -> int:
         check(args)  # with --seeds: every option, and --out as the seeds' parent
         if args.seeds is not None:
             Path(args.out).mkdir(parents=True, exist_ok=True)
-        for run in runs:  # each seed's folder (one of another task or algorithm is refused)
-            check(run)
+        physics = [check(run) for run in runs]  # each seed's folder (one of another task or algorithm is refused)
     except ValueError as err:
         return cli.fail(err)
-    for run in runs:
+    for run, run_physics in zip(runs, physics):
         if len(runs) > 1:
             print(f"== seed {run.seed}: {run.out}", flush=True)
-        code = train_and_report(run)
+        code = train_and_report(run, run_physics)
         if code:
             return code
     return 0
 
 
-def train_and_report(args) -> int:
-    """One seed's training, then its scan and evaluation as the arguments ask."""
+def train_and_report(args, physics) -> int:
+    """One seed's training on `physics`, then its scan and evaluation as the arguments ask."""
     try:
-        record = train(args)
+        record = train(args, physics)
     except ValueError as err:
         return cli.fail(err)
     print(f"wrote {args.out}/policy (step {record['final_step']:,}), {HISTORY}, reward_curve.png; "
           f"{record['wall_time'] / 60:.1f} min of training")
     if args.scan_checkpoints:  # first: the policy evaluated below is the one the scan selects
-        scanned = scan_checkpoints(args)
+        scanned = scan_checkpoints(args, physics)
         found = first_at_threshold(args.task, scanned, args.eval_height)
-        (Path(args.out) / "threshold.json").write_text(json.dumps(found, indent=1))
+        atomic_write_text(Path(args.out) / "threshold.json", json.dumps(found, indent=1))
         print(f"no checkpoint meets the threshold ({threshold(args.task)})" if found is None else
               f"first at step {found['step']:,}, {found['wall_time'] / 60:.1f} min of training")
         chosen = select_policy(args, scanned)
@@ -558,9 +559,8 @@ def train_and_report(args) -> int:
             print(f"policy/ holds the best evaluated checkpoint, step {chosen['step']:,} ({SELECTION})")
     if args.evaluate:
         gravities = _floats(args.eval_gravity, "--eval-gravity")
-        result = evaluate(Path(args.out) / "policy", gravities=gravities, duration=args.eval_duration,
-                          height=args.eval_height, num=args.eval_num, seed=args.seed, speed=args.eval_speed,
-                          urdf=args.urdf)
+        result = evaluate(Path(args.out) / "policy", physics, gravities=gravities, duration=args.eval_duration,
+                          height=args.eval_height, num=args.eval_num, seed=args.seed, speed=args.eval_speed)
         table = evaluation_table(result, args.eval_height)
         atomic_write_text(Path(args.out) / "evaluation.json", json.dumps(result, indent=1))
         atomic_write_text(Path(args.out) / "evaluation.md", table + "\n")

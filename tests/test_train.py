@@ -53,7 +53,7 @@ def _ppo_start_params(out, resume):
     args = train_script.parser().parse_args([*TINY, *PPO, "--out", str(out)])
     factory, _ = train_script.networks(args)
     seen = {}
-    train_script.run_ppo(args, train_script.task_config(args), factory, args.timesteps, 0,
+    train_script.run_ppo(args, train_script.task_config(args, train_script.check(args)), factory, args.timesteps, 0,
                          (resume, 0), progress=lambda *_: None,
                          save_checkpoint=lambda step, params: seen.setdefault(int(step), params))
     return seen[0]
