@@ -5,15 +5,12 @@ from __future__ import annotations
 
 import copy
 
-import jax
-import jax.numpy as jnp
 import mujoco
 import numpy as np
 import pytest
 
 from hopper_mjx import metrics
 from hopper_mjx.control import balance as bal
-from hopper_mjx.engine import chain
 from hopper_mjx.model.layout import Layout
 from hopper_mjx.sim import gravity_vectors
 
@@ -63,30 +60,6 @@ def test_stance_falls_unaided_and_lqr_stabilises_it(mj_model, c_linear):
         assert bal.pbh(lin.a, lin.b) < 1e-9  # the whole state: not stabilisable
         without_yaw = np.array([i for i in range(2 * lay.nv) if i not in (bal.YAW, lay.nv + bal.YAW)])
         assert bal.pbh(lin.a[np.ix_(without_yaw, without_yaw)], lin.b[without_yaw]) < 1e-9  # x, y: rolling
-
-
-@pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="open: the chain engine's jacfwd differs from MuJoCo C's finite differences "
-                   "by 1.2 % of max |A| at Earth (measured 2026-11-24), with the solver converged and started away "
-                   "from the answer; not yet traced to a stage")
-def test_jax_linearisation_matches_mujoco_c(mj_model, c_linear):
-    """jax.jacfwd of the chain engine's step (float64) against MuJoCo C's finite differences."""
-    m = copy.deepcopy(mj_model)
-    m.opt.iterations, m.opt.ls_iterations, m.opt.tolerance = 100, 20, 1e-15
-    jax.config.update("jax_enable_x64", True)
-    try:
-        lay = Layout.of(m)
-        jacobians = bal.velocity_jacobians(chain.make(m), lay)
-        out = {g: [np.asarray(j) for j in jacobians(jnp.asarray(c_linear[g].qpos), jnp.asarray(c_linear[g].torque),
-                                                    jnp.asarray(g))] for g in GRAVITIES}
-    finally:
-        jax.config.update("jax_enable_x64", False)
-    for g in GRAVITIES:
-        ref = c_linear[g]
-        mine = bal.discrete(lay, ref.qpos, ref.torque, *out[g])
-        for name in ("a", "b"):
-            err = np.abs(getattr(mine, name) - getattr(ref, name)).max() / np.abs(getattr(ref, name)).max()
-            assert err < 1e-5, (g, name, err)
 
 
 def test_the_controller_holds_the_equilibrium_in_the_core(sim):

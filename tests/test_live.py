@@ -314,9 +314,9 @@ def test_simulate_streams_live_what_it_saves(tmp_path, batch, monkeypatch):
     """`simulate --foxglove` plays the batch live: every value a client receives is in the .npz.
     Run in this process on this module's compiled batch (the same arguments build the same one)."""
     from hopper_mjx import runtime
-    from hopper_mjx.scenario import Scenario
+    from hopper_mjx.scenario import Built, Scenario
 
-    monkeypatch.setattr(Scenario, "build", lambda self: (batch.sim, batch.controller, batch.params))
+    monkeypatch.setattr(Scenario, "build", lambda self: Built(batch.sim, batch.controller, batch.params))
     monkeypatch.setattr(runtime, "configure", lambda: None)  # done once for the test process
     with socket.socket() as probe:
         probe.bind(("127.0.0.1", 0))

@@ -166,6 +166,6 @@ def test_auto_steps_a_terrain_with_mjx_and_says_why(capsys):
     m = model.load(terrain=terrain.parse("steps").terrain())
     assert engine.make("auto", m).name == "mjx"
     notice = capsys.readouterr().err
-    assert notice.startswith("note: engine auto uses mjx") and "floor plane" in notice and notice.count("\n") == 1
+    assert notice.startswith("note: engine auto uses mjx") and "heightfield" in notice and notice.count("\n") == 1
     with pytest.raises(ValueError, match="not a chain model"):
         engine.make("chain", m)

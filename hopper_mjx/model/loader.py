@@ -348,8 +348,7 @@ def build_spec(urdf: str | os.PathLike | None = None, *, timestep: float = DEFAU
             gear=[t.reduction, 0, 0, 0, 0, 0],
             ctrllimited=True,
             ctrlrange=[-t.effort / t.reduction, t.effort / t.reduction],
-            # MuJoCo has no joint speed limit; the motor models read the URDF's from here (Layout.speed_limit).
-            userdata=[t.velocity],
+            userdata=[t.velocity],  # MuJoCo has no joint speed limit: the motor models read it here
         )
     return spec
 
