@@ -283,13 +283,14 @@ def read_history(path: Path) -> dict:
     return record
 
 
-def train(args, physics) -> dict:
-    """Trains (or resumes) as the arguments say on `physics` (`check`'s); returns the metrics record also
-    saved to metrics.json."""
+def train(args, physics=None) -> dict:
+    """Trains (or resumes) as the arguments say on `physics` (`check`'s, checked here when not given);
+    returns the metrics record also saved to metrics.json."""
     import jax
 
     from hopper_mjx.envs import policy, tfevents
 
+    physics = check(args) if physics is None else physics
     out = Path(args.out).resolve()  # orbax writes checkpoints to absolute paths only
     devices = jax.local_device_count()
     if args.num_envs % devices:
