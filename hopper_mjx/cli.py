@@ -84,7 +84,8 @@ def add_batch_options(p: argparse.ArgumentParser, *, gravity=(9.81, 3.71, 1.62),
                         "one instance each (x --num)")
     p.add_argument("--world", type=Path, nargs="+", default=None, metavar="FILE.world",
                    help="Gazebo world files instead of --gravity, one instance each (x --num): their gravity "
-                        "vectors, physics step and ground friction (e.g. hopper_mjx/model/low_gravity.world)")
+                        "vectors, physics step, ground friction and <heightmap> ground "
+                        "(e.g. hopper_mjx/model/low_gravity.world)")
     p.set_defaults(default_gravity=list(gravity))
     p.add_argument("--num", type=int, default=1, help="instances per gravity value or world")
     p.add_argument("--duration", type=float, default=duration, help="simulated time, s")
@@ -207,14 +208,16 @@ def check_delay(physics: Physics, duration: float | None) -> None:
 
 
 def check_physics(args, model_options: dict | None = None, *, engines: list[str] | None = None,
-                  n: int = 1, seed: int = 0) -> Physics:
+                  n: int = 1, seed: int = 0, terrain: str | None = None) -> Physics:
     """The checked `Physics` of `add_physics_options`' options (with the model options a tool or its
-    world sets); `engines`: the names a tool that runs several takes from --engine (else one); `n`:
-    the instances that hold the ground's heights and whose robots are drawn with `seed` (a drawn value
-    out of its range is refused before anything runs)."""
+    world sets, and the ground `terrain` its world sets, a --terrain spec); `engines`: the names a tool
+    that runs several takes from --engine (else one); `n`: the instances that hold the ground's heights
+    and whose robots are drawn with `seed` (a drawn value out of its range is refused before anything runs)."""
     for name in engines or [args.engine]:
         check_engine(name)
-    ground = check_ground(args.terrain, engines or [args.engine], n)
+    if terrain is not None and args.terrain != "flat":
+        raise ValueError(f"give --terrain or a world's <heightmap> ({terrain}), not both")
+    ground = check_ground(terrain or args.terrain, engines or [args.engine], n)
     variation = check_randomize(args.randomize, engines or [args.engine])
     try:
         registry.check("motor", registry.MOTORS, args.motor)
@@ -262,7 +265,7 @@ def read_worlds(paths, gravity_given: str | None = None):
 
 
 def batch_from_worlds(args):
-    """(gravity rows, model options, warning) of --world, or None without it."""
+    """(gravity rows, model options, terrain spec or None, warning) of --world, or None without it."""
     if args.world is None:
         return None
     from hopper_mjx.model import loader
@@ -272,7 +275,7 @@ def batch_from_worlds(args):
     if args.timestep is not None and "timestep" in options and abs(options["timestep"] - args.timestep) > 1e-12:
         raise ValueError(f"--timestep {args.timestep:g} contradicts the world's <max_step_size> "
                          f"{options['timestep']:g}; leave one out")
-    return worlds.gravity, options, worlds.warning()
+    return worlds.gravity, options, worlds.terrain, worlds.warning()
 
 
 def check_batch(args) -> Scenario:
@@ -300,14 +303,14 @@ def check_batch(args) -> Scenario:
         from hopper_mjx.model.world import gravity_vectors
 
         try:
-            rows, options, warning = gravity_vectors(args.gravity or args.default_gravity), {}, None
+            rows, options, terrain, warning = gravity_vectors(args.gravity or args.default_gravity), {}, None, None
         except ValueError as err:
             raise ValueError(f"--gravity: {err}") from None
     else:
-        rows, options, warning = from_worlds
+        rows, options, terrain, warning = from_worlds
     options.setdefault("timestep", args.timestep or DEFAULT_TIMESTEP)
     # The ground's memory and the robots' draws, for the N instances.
-    physics = check_physics(args, options, n=len(rows) * args.num, seed=args.seed)
+    physics = check_physics(args, options, n=len(rows) * args.num, seed=args.seed, terrain=terrain)
     check_delay(physics, args.duration)
     check_controller(args.controller, args.height, args.speed, physics)
     gains = check_gains(args)

@@ -144,3 +144,50 @@ def test_sweep_takes_downward_worlds_as_its_gravity_grid(tmp_path):
                                       "--out", str(tmp_path / "run")])
     (spec,), out = sweep.check(args)  # one spec: one controller
     assert spec.gravity == (1.62, 3.71) and out == tmp_path / "run" and not out.exists()
+
+
+def _heightmap_world(tmp_path, heightmap: str, pose: str = ""):
+    world_file = tmp_path / "hills.world"
+    world_file.write_text(sdf(f"""<gravity>0 0 -3.71</gravity>
+<model name="hills"><static>true</static>{pose}<link name="link"><collision name="collision">
+  <geometry><heightmap>{heightmap}</heightmap></geometry>
+  <surface><friction><ode><mu>0.6</mu><mu2>0.6</mu2></ode></friction></surface>
+</collision></link></model>"""))
+    return world_file
+
+
+def test_a_gazebo_heightmap_is_the_ground_the_compiled_model_holds(tmp_path):
+    """A world's <heightmap> (PNG relative to the world file, <size> x y z) becomes the terrain: the
+    compiled hfield holds the image's grey values times z, its top row at +y, as Gazebo lays it."""
+    import imageio.v3 as iio
+
+    from hopper_mjx import simulate
+    from hopper_mjx.cli import check_batch
+    from hopper_mjx.engine.chain import terrain_heights
+
+    grey = np.add.outer(np.arange(9), 3 * np.arange(17)).astype(np.uint8) * 3  # 9 rows x 17 columns, distinct
+    (tmp_path / "img").mkdir()
+    iio.imwrite(tmp_path / "img" / "hills.png", grey)
+    world_file = _heightmap_world(tmp_path, "<uri>file://img/hills.png</uri><size>3 2 0.12</size>")
+    w = world.read(world_file)
+    assert w.terrain == f"heightmap:{tmp_path / 'img' / 'hills.png'},size=3x2,height=0.12"
+    assert w.ground_friction == (0.6, 0.6)
+    scenario = check_batch(simulate.parser().parse_args(["--world", str(world_file), "--engine", "mjx"]))
+    heights = terrain_heights(scenario.physics.mj_model)
+    np.testing.assert_allclose(heights, 0.12 * grey[::-1] / 255.0, atol=1e-6)  # float32 hfield data
+    hfield = scenario.physics.mj_model.hfield_size[0]
+    assert tuple(hfield[:2]) == (1.5, 1.0)  # half extents
+    with pytest.raises(ValueError, match=r"give --terrain or a world's <heightmap> \(heightmap:.*\), not both"):
+        check_batch(simulate.parser().parse_args(["--world", str(world_file), "--terrain", "rough"]))
+
+
+@pytest.mark.parametrize("heightmap, pose, message", [
+    ("<uri>model://hills/hills.png</uri>", "", "needs Gazebo's resource paths"),
+    ("<uri>hills.png</uri><pos>1 0 0</pos>", "", r"<pos> 1 0 0 moves it off the origin"),
+    ("<uri>hills.png</uri>", "<pose>0 0 0.5 0 0 0</pose>", "the model's <pose> 0 0 0.5 0 0 0 moves it off"),
+    ("<uri>hills.png</uri><size>1 -1 1</size>", "", "<size> must be 3 lengths > 0"),
+    ("<size>1 1 1</size>", "", "has no <uri>"),
+])
+def test_heightmaps_the_terrain_cannot_lay_as_gazebo_does_are_refused(tmp_path, heightmap, pose, message):
+    with pytest.raises(world.WorldError, match=message):
+        world.read(_heightmap_world(tmp_path, heightmap, pose))

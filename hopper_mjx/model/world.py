@@ -11,6 +11,10 @@ What MuJoCo can honour is taken:
   surfaces' coefficients by taking the smaller, so the foot-floor friction is
   min(ground, foot) per direction. Gazebo's stock `model://ground_plane` has
   mu = 100, mu2 = 50 (its model.sdf).
+- a ground model whose collision is a `<heightmap>` (its `<uri>` a greyscale PNG, a
+  path relative to the world file or `file://`; `<size>` x y z in m; `<pos>` at the
+  origin): the terrain `heightmap:FILE,size=XxY,height=Z` (docs/terrain.md), as
+  Gazebo lays it, black at z = 0 and white at z = Z, the image's top row at +y.
 
 Every other element is ignored, and `parse` lists them, so that the caller can
 name them all in one warning line. A batch compiles one MuJoCo model, so worlds
@@ -50,6 +54,7 @@ class World:
     gravity: tuple[float, float, float]  # m/s², world frame (z up), the vector itself
     timestep: float | None  # s, <physics><max_step_size>, None when not given
     ground_friction: tuple[float, float] | None  # (mu, mu2) of the ground surface; None: no ground found
+    terrain: str | None  # a <heightmap> ground as a --terrain spec; None: the ground is a plane
     ignored: tuple[str, ...]  # elements with no effect here, as paths like physics/real_time_factor
 
 
@@ -103,16 +108,45 @@ def _friction(surface: ET.Element | None, where: str, ignored: list[str]) -> tup
     return (mu[0], mu[1])
 
 
-def _ground(model: ET.Element, ignored: list[str]) -> tuple[float, float] | None:
-    """The friction of an inline model that is a static plane (Gazebo's ground), else None."""
+def _ground(model: ET.Element, base: Path, ignored: list[str]) -> tuple[tuple[float, float], str | None] | None:
+    """(friction, terrain spec or None) of an inline model that is a level plane or a heightmap (Gazebo's
+    ground), else None."""
     name = model.get("name", "?")
     for collision in model.iter("collision"):
+        surface = collision.find("surface")
         if collision.find("geometry/plane") is not None:
             normal = collision.findtext("geometry/plane/normal")
             if normal is not None and _vector(normal, 3, f"model '{name}' plane normal") != (0.0, 0.0, 1.0):
                 raise WorldError(f"model '{name}': only a level ground plane (normal 0 0 1) is supported")
-            return _friction(collision.find("surface"), f"model[{name}]/surface", ignored)
+            return _friction(surface, f"model[{name}]/surface", ignored), None
+        if (heightmap := collision.find("geometry/heightmap")) is not None:
+            return _friction(surface, f"model[{name}]/surface", ignored), _heightmap(model, heightmap, base)
     return None
+
+
+def _heightmap(model: ET.Element, heightmap: ET.Element, base: Path) -> str:
+    """A <heightmap> as a --terrain spec; WorldError for what the terrain cannot lay as Gazebo does."""
+    where = f"model '{model.get('name', '?')}' <heightmap>"
+    uri = (heightmap.findtext("uri") or "").strip()
+    if not uri:
+        raise WorldError(f"{where} has no <uri>")
+    if "://" in uri.removeprefix("file://"):
+        raise WorldError(f"{where}: <uri> {uri} needs Gazebo's resource paths; give the PNG's path (relative to "
+                         "the world file) or file://PATH")
+    path = Path(uri.removeprefix("file://"))
+    path = path if path.is_absolute() else base / path
+    if "," in str(path):  # the terrain spec separates its items with commas
+        raise WorldError(f"{where}: the image path {path} has a comma; rename it")
+    size = _vector(heightmap.findtext("size") or "1 1 1", 3, f"{where} <size>")
+    if not all(v > 0 for v in size):
+        raise WorldError(f"{where} <size> must be 3 lengths > 0 in m, got {heightmap.findtext('size')!r}")
+    # The terrain is centred at the origin with black at z = 0, where every instance starts.
+    offsets = {"<pos>": heightmap.findtext("pos"), "the model's <pose>": model.findtext("pose")}
+    for what, text in offsets.items():
+        if text is not None and any(_vector(text, len(text.split()), f"{where} {what}")):
+            raise WorldError(f"{where}: {what} {text.strip()} moves it off the origin; the terrain is centred there "
+                             "with its black at z = 0")
+    return f"heightmap:{path},size={size[0]:g}x{size[1]:g},height={size[2]:g}"
 
 
 def _physics(physics: ET.Element, ignored: list[str]) -> tuple[float | None, tuple[float, ...] | None]:
@@ -132,7 +166,8 @@ def _physics(physics: ET.Element, ignored: list[str]) -> tuple[float | None, tup
 
 
 def parse(text: str, source: str = "<string>") -> World:
-    """Reads one SDF world (see the module docstring for what is taken)."""
+    """Reads one SDF world (see the module docstring for what is taken); a heightmap's image path is
+    relative to the folder of `source`."""
     try:
         root = ET.fromstring(text)
     except ET.ParseError as err:
@@ -141,7 +176,8 @@ def parse(text: str, source: str = "<string>") -> World:
     if world is None:
         raise WorldError(f"{source}: expected <sdf><world>...</world></sdf>, found <{root.tag}>")
     ignored: list[str] = []
-    gravity = timestep = ground = None
+    gravity = timestep = ground = terrain = None
+    base = Path(source).parent
     physics_seen = False
     for child in world:
         if child.tag == "gravity":
@@ -154,8 +190,8 @@ def parse(text: str, source: str = "<string>") -> World:
             ground = GROUND_PLANE_MU
         elif child.tag == "include":
             ignored.append(f"include {(child.findtext('uri') or '?').strip()}")
-        elif child.tag == "model" and (found := _ground(child, ignored)) is not None:
-            ground = found
+        elif child.tag == "model" and (found := _ground(child, base, ignored)) is not None:
+            ground, terrain = found
         else:
             ignored.append(child.tag if child.tag != "model" else f"model[{child.get('name', '?')}]")
     return World(
@@ -164,6 +200,7 @@ def parse(text: str, source: str = "<string>") -> World:
         gravity=tuple(float(v) for v in (gravity or SDF_DEFAULT_GRAVITY)),
         timestep=timestep,
         ground_friction=ground,
+        terrain=terrain,
         ignored=tuple(ignored),
     )
 
@@ -188,6 +225,7 @@ class WorldBatch:
     gravity: np.ndarray  # (K, 3) m/s², one row per world
     timestep: float | None  # s, shared by every world that sets it
     ground_friction: tuple[float, float] | None  # shared (mu, mu2), None: no world named a ground
+    terrain: str | None  # the shared <heightmap> ground as a --terrain spec, None: a plane
 
     def model_options(self, foot_mu: float) -> dict:
         """Keyword arguments of `model.load` that the worlds set (timestep, foot-floor friction)."""
@@ -226,4 +264,13 @@ def batch(worlds) -> WorldBatch:
         gravity=gravity,
         timestep=_shared(worlds, "timestep", "<max_step_size>"),
         ground_friction=_shared(worlds, "ground_friction", "the ground's friction"),
+        terrain=_same_terrain(worlds),
     )
+
+
+def _same_terrain(worlds: tuple[World, ...]) -> str | None:
+    terrains = {w.terrain for w in worlds}
+    if len(terrains) > 1:
+        listed = ", ".join(f"{Path(w.source).name}: {w.terrain or 'a plane'}" for w in worlds)
+        raise WorldError(f"worlds batched together must share their ground (one compiled model), got {listed}")
+    return terrains.pop()

@@ -74,6 +74,9 @@ def gravity_from_worlds(args) -> tuple[float, ...]:
     if changed:
         raise ValueError(f"--world sets another {' and '.join(changed)} than a sweep runs with "
                          "(0.001 s, friction 1): simulate and record take it")
+    if worlds.terrain is not None:
+        raise ValueError(f"--world: its <heightmap> ground is read by simulate, render and record; a sweep takes "
+                         f"its ground from --terrain ({worlds.terrain})")
     for w, (gx, gy, gz) in zip(worlds.worlds, worlds.gravity):
         if gx or gy or not gz < 0:
             raise ValueError(f"--world {w.source}: gravity {w.gravity} is not a downward pull; a sweep needs one "
