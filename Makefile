@@ -10,7 +10,7 @@ install: $(VENV)/.installed
 # The viewer's test (hopper_mjx.view) runs it on a virtual X display driven by scripted key presses.
 RENDER_DEBS := libegl1 libopengl0 libgl1-mesa-dri xvfb xdotool
 # ROS's own message definitions (.msg files only): tests compare our bags' definitions with them.
-ROS_MSG_DEBS := ros-std-msgs ros-geometry-msgs ros-sensor-msgs ros-nav-msgs ros-rosgraph-msgs
+ROS_MSG_DEBS := ros-std-msgs ros-geometry-msgs ros-sensor-msgs ros-nav-msgs ros-rosgraph-msgs ros-visualization-msgs
 SYSTEM_DEBS := $(RENDER_DEBS) $(ROS_MSG_DEBS)
 
 $(VENV)/.installed: pyproject.toml

@@ -500,3 +500,34 @@ def test_view_shows_the_robots_labelled_with_their_gravity_and_obeys_its_keys(xv
 
     vy = [i["base_velocity"][1] for i in kicked["instances"]]
     assert kicked["selected"] == 1 and vy[1] > 0.2 and abs(vy[0]) < 0.05 and abs(vy[2]) < 0.05
+
+
+def test_the_stream_advertises_the_ground_as_one_marker_a_client_decodes(mj_model):
+    """On a terrain, attach advertises /terrain and serialises its marker once: decoded with the
+    advertised ROS 1 schema (genpy), it holds MuJoCo's triangles of the compiled ground."""
+    import types
+
+    import genpy.dynamic
+
+    from hopper_mjx import model, terrain
+    from hopper_mjx.ros import messages, record
+
+    ground = terrain.parse("crater:radius=0.2,depth=0.05,rim=0.01,size=0.6,cell=0.1").terrain()
+    hills = model.load(terrain=ground)
+    stream = FoxgloveStream.start(0, [0])
+    try:
+        stream.attach(types.SimpleNamespace(n=1, sim=types.SimpleNamespace(mj_model=hills)))
+        channel = stream.channels[messages.TERRAIN_TOPIC]
+        text, _ = stream.store.generate_msgdef(messages.MSGTYPES["terrain"], ros_version=1)
+        marker = genpy.dynamic.generate_dynamic("visualization_msgs/Marker", text)["visualization_msgs/Marker"]()
+        marker.deserialize(stream._terrain)
+        flat = FoxgloveStream.start(0, [0])
+        flat.attach(types.SimpleNamespace(n=1, sim=types.SimpleNamespace(mj_model=mj_model)))
+        assert messages.TERRAIN_TOPIC not in flat.channels and flat._terrain is None
+        flat.close()
+    finally:
+        stream.close()
+    assert channel is not None and (marker.type, marker.header.frame_id) == (11, "world")
+    corners = np.array([[p.x, p.y, p.z] for p in marker.points])
+    np.testing.assert_array_equal(corners, record.terrain_triangles(hills))
+    assert len(corners) == 3 * 2 * 6 * 6 and corners[:, 2].min() < -0.04  # 7 x 7 vertices; the bowl's floor

@@ -5,6 +5,7 @@ under `hold`) is written as a ROS 1 bag, a ROS 2 MCAP bag and a single-robot bag
 the same run through `simulate` is the reference for every value.
 """
 
+import dataclasses
 import io
 import subprocess
 import sys
@@ -15,7 +16,7 @@ import matplotlib.image
 import numpy as np
 import pytest
 
-from hopper_mjx import simulate
+from hopper_mjx import simulate, terrain
 from hopper_mjx.model.layout import Layout
 from hopper_mjx.ros import echo, msgdefs, plots, record
 from hopper_mjx.ros.messages import MSGTYPES, topic_names
@@ -26,6 +27,7 @@ RATES = {"imu": 100, "odom": 50, "contact": 100, "joint_states": 25}  # Hz, diff
 REFERENCE_RATE = 100  # Hz of the simulate run; every recorded rate divides it
 KINDS = ("imu", "odom", "joint_states", "contact")
 TOL = 1e-6
+HILLS = terrain.parse("rough:amp=0.03,wavelength=0.2,seed=3,size=0.5x0.3,cell=0.1")  # 4 x 6 vertices
 
 
 @pytest.fixture(scope="module")
@@ -37,8 +39,11 @@ def recorded(tmp_path_factory):
     ])
     rec = record.simulate_batch(args)
     folder = tmp_path_factory.mktemp("bags")
+    hills = dataclasses.replace(rec, terrain=terrain.triangles(HILLS.terrain()))  # the format, not the physics
     return {
         "rec": rec,
+        "terrain": record.write(hills, folder / "hills.bag", "ros1"),
+        "terrain_mcap": record.write(hills, folder / "hills_mcap", "mcap"),
         "ros1": record.write(rec, folder / "both.bag", "ros1"),
         "mcap": record.write(rec, folder / "both_mcap", "mcap"),
         "single": record.write(rec, folder / "moon.bag", "ros1", instances=[1]),
@@ -228,7 +233,7 @@ def test_echo_cli_stdout_is_genpys_formatting_byte_for_byte(recorded):
         assert done.stdout == want.encode(), topic
 
 
-ROS_MSG_PACKAGES = ("std_msgs", "geometry_msgs", "sensor_msgs", "nav_msgs", "rosgraph_msgs")
+ROS_MSG_PACKAGES = ("std_msgs", "geometry_msgs", "sensor_msgs", "nav_msgs", "rosgraph_msgs", "visualization_msgs")
 
 
 def genmsg_definitions(search: dict) -> dict:
@@ -251,8 +256,10 @@ def test_bag_definitions_are_ros_own_text_and_md5(recorded):
     .msg files (Debian's ros-*-msgs, installed by the Makefile) and, for gazebo_msgs, on ours."""
     import rosbag
 
-    with rosbag.Bag(str(recorded["ros1"])) as bag:
-        stored = {c.datatype: (c.msg_def, c.md5sum) for c in bag._connections.values()}
+    stored = {}
+    for bag_file in (recorded["ros1"], recorded["terrain"]):
+        with rosbag.Bag(str(bag_file)) as bag:
+            stored |= {c.datatype: (c.msg_def, c.md5sum) for c in bag._connections.values()}
     ours = genmsg_definitions({p: [str(msgdefs.MSG_DIR / p)] for p in (*ROS_MSG_PACKAGES, "gazebo_msgs")})
     assert stored == ours
     assert stored["sensor_msgs/Imu"][1] == "6a62c6daae103f4ff57a132d6f95cec2"  # the md5 every ROS 1 tool knows
@@ -263,6 +270,38 @@ def test_bag_definitions_are_ros_own_text_and_md5(recorded):
     ros = genmsg_definitions({p: [str(system / p / "msg")] for p in ROS_MSG_PACKAGES}
                              | {"gazebo_msgs": [str(msgdefs.MSG_DIR / "gazebo_msgs")]})
     assert stored == ros
+
+
+@pytest.mark.parametrize("reader", ["ros1-ros-rosbag", "mcap-mcap_ros2"])
+def test_the_terrain_is_one_marker_of_mujocos_triangles(recorded, reader):
+    """A terrain run's bag holds the ground once, at the first instant, as a TRIANGLE_LIST marker in the
+    world frame: every triangle's corners lie on the ground as MuJoCo's triangles (the height scan,
+    checked against MuJoCo C's rays) have it, and each faces up."""
+    from hopper_mjx.terrain.scan import height_at
+
+    fmt, read = READERS[reader]
+    types, messages = read(recorded["terrain" if fmt == "ros1" else "terrain_mcap"])
+    assert types["/terrain"] == ("visualization_msgs/Marker" if fmt == "ros1" else "visualization_msgs/msg/Marker")
+    ((t, marker),) = messages["/terrain"]
+    assert t == min(t for topic in messages for t, _ in messages[topic]) and marker.header.frame_id == "world"
+    assert (marker.type, marker.action) == (11, 0)
+    corners = np.array([[p.x, p.y, p.z] for p in marker.points]).reshape(-1, 3, 3)
+    assert len(corners) == 2 * 3 * 5  # (4 - 1) x (6 - 1) cells, two triangles each
+    ground = HILLS.terrain()
+    centroid = corners.mean(axis=1)  # inside one triangle: the scan's height there is the plane's through it
+    scanned = height_at(ground.heights, ground.size, centroid[:, 0], centroid[:, 1])  # float32: 1e-8 m
+    np.testing.assert_allclose(centroid[:, 2], scanned, atol=1e-7)  # the other diagonal would be mm off
+    np.testing.assert_allclose(np.sort(np.unique(corners[:, :, 2])), np.sort(np.unique(ground.heights)), atol=0)
+    up = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])[:, 2]
+    assert (up > 0).all()
+
+
+def test_a_terrain_recording_takes_its_ground_from_the_compiled_model():
+    from hopper_mjx import model
+
+    corners = record.terrain_triangles(model.load(terrain=HILLS.terrain()))
+    np.testing.assert_allclose(corners, terrain.triangles(HILLS.terrain()), atol=1e-7)  # MuJoCo's float32 heights
+    assert record.terrain_triangles(model.load()) is None
 
 
 def test_echo_cli_on_an_mcap_bag(recorded, capsys):

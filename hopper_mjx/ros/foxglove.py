@@ -10,7 +10,9 @@ several instances), each with its ROS 1 message definition as the schema (`ros1m
 ROS 1-serialised messages, so Foxglove decodes them as it decodes a ROS 1 bag or a live
 rosbridge. `/tf` adds what robot_state_publisher and the odometry's frame would give a ROS
 user: world -> base and each link from its parent (the URDF's link frames, tf-prefixed like
-the topics), at the joint-state rate, so that Foxglove's 3D panel can pose the URDF.
+the topics), at the joint-state rate, so that Foxglove's 3D panel can pose the URDF. On a
+terrain, `/terrain` carries the ground as one triangle-list marker (visualization_msgs/Marker),
+sent again with every chunk so that a client that joins late draws it too.
 Messages are built from the played chunks by `messages.messages` and published as their
 stamps fall due, with the server's time (the Time capability) following simulated time.
 A chunk is serialised only while some client is subscribed to one of its channels.
@@ -18,6 +20,7 @@ A chunk is serialised only while some client is subscribed to one of its channel
 
 from __future__ import annotations
 
+import dataclasses
 from contextlib import contextmanager
 
 import numpy as np
@@ -67,6 +70,7 @@ class FoxgloveStream:
         self.channels: dict[str, object] = {}
         self.batch = None
         self._messages: dict[int, list[tuple[float, str, bytes]]] = {}  # id(chunk) -> its messages
+        self._terrain: bytes | None = None  # the ground's marker, serialised once (tens of thousands of points)
 
     @classmethod
     def start(cls, port: int, instances: list[int], host: str = "127.0.0.1") -> FoxgloveStream:
@@ -100,6 +104,13 @@ class FoxgloveStream:
         topics = {t: messages.MSGTYPES[kind] for n in names for kind, t in n.items()}
         topics["/clock"] = messages.MSGTYPES["clock"]
         topics[TF_TOPIC] = TF_MSGTYPE
+        corners = record.terrain_triangles(batch.sim.mj_model)
+        if corners is not None:
+            msgtype = messages.MSGTYPES["terrain"]
+            build = messages._Builder(self.store, ros1=True)
+            marker = build.terrain(build.header(0, 0.0, "world"), corners)
+            self._terrain = bytes(self.store.serialize_ros1(marker, msgtype))
+            topics[messages.TERRAIN_TOPIC] = msgtype
         for topic, msgtype in topics.items():
             text, _ = self.store.generate_msgdef(msgtype, ros_version=1)
             schema = foxglove.Schema(name=msgtype.replace("/msg/", "/"), encoding="ros1msg", data=text.encode())
@@ -112,10 +123,13 @@ class FoxgloveStream:
             self._messages = {}  # only the chunk playing is kept
             batch = self.batch
             rec = record.recording(batch.sim, chunk.traj, batch.gravity, batch.sensors, chunk.diverged)
+            rec = dataclasses.replace(rec, terrain=None)  # sent from its serialised copy below
             out = [(t, topic, bytes(self.store.serialize_ros1(msg, msgtype)))
                    for topic, msgtype, t, msg in messages.messages(rec, self.instances, self.store, ros1=True,
                                                                     first_seq=chunk.first_seq)]
             out += self._tf_messages(chunk)
+            if self._terrain is not None:
+                out.append((float(rec.clock_time[0]), messages.TERRAIN_TOPIC, self._terrain))
             out.sort(key=lambda m: m[0])
             self._messages[key] = out
         return self._messages[key]

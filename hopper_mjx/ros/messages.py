@@ -25,7 +25,10 @@ MSGTYPES = {
     "joint_states": "sensor_msgs/msg/JointState",
     "contact": "gazebo_msgs/msg/ContactsState",
     "clock": "rosgraph_msgs/msg/Clock",
+    "terrain": "visualization_msgs/msg/Marker",
 }
+TERRAIN_TOPIC = "/terrain"  # the ground as one triangle-list marker in the world frame (rviz and Foxglove draw it)
+TERRAIN_COLOUR = (0.55, 0.47, 0.36, 1.0)  # RGBA: earth
 
 
 def topic_names(instance: int | None) -> dict[str, str]:
@@ -132,6 +135,26 @@ class _Builder:
             ))
         return t["gazebo_msgs/msg/ContactsState"](header=header, states=states)
 
+    def terrain(self, header, corners: np.ndarray):
+        """The ground's triangles (`corners` (3 K, 3) m, world) as a visualization_msgs/Marker TRIANGLE_LIST."""
+        t = self.t
+        cls = t["visualization_msgs/msg/Marker"]
+        point = t["geometry_msgs/msg/Point"]
+        identity = t["geometry_msgs/msg/Pose"](position=point(x=0.0, y=0.0, z=0.0),
+                                                 orientation=self.quaternion((1.0, 0.0, 0.0, 0.0)))
+        extra = {}  # ROS 2's Marker has texture and mesh-file fields that ROS 1's lacks: left empty
+        if "texture" in cls.__dataclass_fields__:
+            empty = np.zeros(0, dtype=np.uint8)
+            extra = {"texture_resource": "", "uv_coordinates": [],
+                     "texture": t["sensor_msgs/msg/CompressedImage"](header=header, format="", data=empty),
+                     "mesh_file": t["visualization_msgs/msg/MeshFile"](filename="", data=empty)}
+        return cls(
+            header=header, ns="terrain", id=0, type=11, action=0, pose=identity,  # 11: TRIANGLE_LIST, 0: ADD
+            scale=self.vector((1.0, 1.0, 1.0)), color=t["std_msgs/msg/ColorRGBA"](*TERRAIN_COLOUR),
+            lifetime=t["builtin_interfaces/msg/Duration"](sec=0, nanosec=0), frame_locked=False,
+            points=[point(x=float(x), y=float(y), z=float(z)) for x, y, z in corners], colors=[], text="",
+            mesh_resource="", mesh_use_embedded_materials=False, **extra)
+
     def clock(self, seconds: float):
         return self.t["rosgraph_msgs/msg/Clock"](clock=self.stamp(seconds))
 
@@ -182,6 +205,9 @@ def messages(rec, instances: list[int], store, ros1: bool,
             msg = b.contacts(b.header(seq0["contact"] + k, t, "world"), bool(c.flag[i, k]), c.force[i, k], c.pos[i, k],
                              rec.floor_normal, collision1, t)
             yield topics["contact"], MSGTYPES["contact"], t, msg
+    if rec.terrain is not None:  # once, at the first instant: the ground does not move
+        t0 = float(rec.clock_time[0])
+        yield TERRAIN_TOPIC, MSGTYPES["terrain"], t0, b.terrain(b.header(0, t0, "world"), rec.terrain)
     for t in rec.clock_time:
         yield "/clock", MSGTYPES["clock"], t, b.clock(t)
 

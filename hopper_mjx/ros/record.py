@@ -52,6 +52,7 @@ class Recording:
     floor_normal: np.ndarray  # (3,) world frame, pointing from the floor to the foot
     clock_time: np.ndarray  # (T,) s, every instant at which some stream was sampled
     diverged: np.ndarray  # (N,) bool
+    terrain: np.ndarray | None = None  # (3 K, 3) m: the corners of the ground's K triangles; None: a plane
 
 
 # -- simulation --------------------------------------------------------------------------------
@@ -91,7 +92,16 @@ def recording(sim, traj, gravity, sensors, diverged) -> Recording:
         floor_normal=floor_normal,
         clock_time=clock_time,
         diverged=np.asarray(diverged),
+        terrain=terrain_triangles(sim.mj_model),
     )
+
+
+def terrain_triangles(mj_model) -> np.ndarray | None:
+    """The corners of the model's ground triangles (None on a plane), as MuJoCo holds the heights."""
+    from hopper_mjx import terrain
+
+    ground = terrain.from_model(mj_model)
+    return None if ground is None else terrain.triangles(ground)
 
 
 def simulate_batch(args, batch: Scenario | None = None) -> Recording:

@@ -16,10 +16,11 @@ from hopper_mjx.terrain.grid import (
                                  from_model,
                                  hfield,
                                  to_spec,
+                                 triangles,
                                  vertices,
                                  write_mjcf,
 )
 from hopper_mjx.terrain.spec import FLAT, Ground, TerrainError, parse
 
 __all__ = ["BASE_DEPTH", "FLAT", "FLAT_SPAN", "HFIELD", "Ground", "HField", "Terrain", "TerrainError", "from_model",
-           "hfield", "parse", "to_spec", "vertices", "write_mjcf"]
+           "hfield", "parse", "to_spec", "triangles", "vertices", "write_mjcf"]

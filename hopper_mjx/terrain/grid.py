@@ -33,6 +33,17 @@ class Terrain(NamedTuple):
         return (np.linspace(-self.size[0], self.size[0], ncol), np.linspace(-self.size[1], self.size[1], nrow))
 
 
+def triangles(terrain: Terrain) -> np.ndarray:
+    """(2 (nrow-1) (ncol-1) x 3, 3) m: the corners of MuJoCo's triangles, three rows a triangle, counter-
+    clockwise seen from above; each cell split along its diagonal from vertex (r, c) to (r+1, c+1), as
+    MuJoCo splits it (and `scan` reads it), so a drawing shows the ground the robots touch."""
+    xs, ys = terrain.axes()
+    x, y = np.meshgrid(xs, ys)
+    points = np.stack([x, y, np.asarray(terrain.heights, dtype=np.float64)], axis=-1)
+    a, b, c, d = points[:-1, :-1], points[:-1, 1:], points[1:, 1:], points[1:, :-1]  # (r,c) (r,c+1) (r+1,c+1) (r+1,c)
+    return np.stack([np.stack([a, b, c], -2), np.stack([a, c, d], -2)], -3).reshape(-1, 3)
+
+
 def vertices(size: tuple[float, float], shape: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
     """(x, y) of every vertex of a (nrow, ncol) grid of half-extents `size`, each (nrow, ncol)."""
     nrow, ncol = shape
