@@ -36,7 +36,7 @@ from brax.envs.base import Env, State
 from hopper_mjx import engine as engines
 from hopper_mjx import metrics, signals
 from hopper_mjx import model as hopper_model
-from hopper_mjx.control.base import joint_state, pd, saturate, to_ctrl
+from hopper_mjx.control.base import PDScale, joint_state, pd, saturate, scaled, to_ctrl
 from hopper_mjx.model import robot
 from hopper_mjx.model.layout import Layout
 from hopper_mjx.model.world import EARTH_GRAVITY
@@ -165,10 +165,11 @@ def joint_targets(layout: Layout, cfg: MonopedConfig, stance: jax.Array, action:
     return jnp.clip(target, rng[:, 0], rng[:, 1])
 
 
-def pd_torque(layout: Layout, cfg: MonopedConfig, target: jax.Array, obs) -> jax.Array:
-    """The PD law on joint angles -> joint torques (haa, hfe, kfe), saturated at the effort limits."""
+def pd_torque(layout: Layout, cfg: MonopedConfig, target: jax.Array, obs, scale: PDScale | None = None) -> jax.Array:
+    """The PD law on joint angles -> joint torques (haa, hfe, kfe), saturated at the effort limits;
+    `scale`: an instance's factors on kp and kd."""
     q, qd = joint_state(layout, obs)
-    return saturate(layout, pd(jnp.asarray(cfg.kp), jnp.asarray(cfg.kd), target - q, qd))
+    return saturate(layout, pd(*scaled(jnp.asarray(cfg.kp), jnp.asarray(cfg.kd), scale), target - q, qd))
 
 
 # The robot's own signals in the observation, in order, with their sizes (`observe` checks them).
