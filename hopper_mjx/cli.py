@@ -120,7 +120,8 @@ def add_physics_options(p: argparse.ArgumentParser, *, engine_help: str = "") ->
                         "body_mass=scale(0.9,1.1),dof_damping=0.02..0.2\"; DIST: a number, a..b, uniform(a,b), "
                         "loguniform(a,b), normal(mu,sigma) or scale(a,b) (times the URDF's value); NAME: "
                         f"{', '.join(registry.PARAMETERS)}; the controller's, motors' and sensors': "
-                        f"{', '.join(registry.CONTROL_PARAMETERS)} (docs/variation.md)")
+                        f"{', '.join(registry.CONTROL_PARAMETERS)}; or a preset among them: "
+                        f"{', '.join(registry.RANDOMIZE_PRESETS)} (docs/variation.md)")
     p.add_argument("--engine", default=registry.DEFAULT_ENGINE,
                    help=f"physics engine: {registry.listed(registry.ENGINES)}; default {registry.DEFAULT_ENGINE}"
                         + engine_help)

@@ -127,13 +127,18 @@ class Spec:
 
     @classmethod
     def parse(cls, text: str) -> "Spec":
-        """'name=dist,name=dist'; raises ValueError naming the first bad item."""
+        """'name=dist,name=dist', or a preset's name among them (`registry.RANDOMIZE_PRESETS`); raises
+        ValueError naming the first bad item."""
         items = []
         for item in _items(text):
             name, eq, dist = item.partition("=")
             name = name.strip()
+            if not eq and name in registry.RANDOMIZE_PRESETS:
+                items += [(n, d) for n, _, d in (i.partition("=") for i in _items(registry.RANDOMIZE_PRESETS[name]))]
+                continue
             if not eq:
-                raise ValueError(f"{item.strip()!r} is not NAME=DISTRIBUTION")
+                raise ValueError(f"{item.strip()!r} is not NAME=DISTRIBUTION (nor a preset: "
+                                 f"{', '.join(registry.RANDOMIZE_PRESETS)})")
             items.append((name, dist))
         return cls.of(dict(_unique(items)))
 

@@ -89,6 +89,13 @@ PARAMETERS = {
                                "motor strength: the controllers command the URDF's gear, so this scales the "
                                "applied torque and its limit", open_low=True),
 }
+# `--randomize NAME`: a named set of parameters. `playground`: MuJoCo Playground's locomotion randomisation as
+# docs/variation.md's robustness table runs it (foot friction, link masses, the base's centre of mass, motor
+# strength, action delay).
+RANDOMIZE_PRESETS = {
+    "playground": "foot_friction=0.4..1.0,body_mass=scale(0.9,1.1),base_com=-0.02..0.02,"
+                  "actuator_gear=scale(0.8,1.2),action_delay=0..10",
+}
 # The model fields the chain engine takes as run-time values (every other varied field needs mjx).
 CHAIN_VARIES: frozenset[str] = frozenset({"dof_damping", "pair_friction"})
 

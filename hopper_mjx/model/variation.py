@@ -149,7 +149,8 @@ def _check_range(name: str, par: registry.Parameter | registry.ControlParameter,
         lower = f"{'>' if par.open_low else '>='} {par.low:g}"
         upper = "" if par.high == float("inf") else f" and <= {par.high:g}"
         kind = "an offset" if par.offset else "a value"
-        raise ValueError(f"{name} drew {kind} of {value:g} {par.unit} for instance {i}; it must be {lower}{upper}")
+        unit = "" if par.unit == "1" else f" {par.unit}"  # a factor or a friction coefficient has none
+        raise ValueError(f"{name} drew {kind} of {value:g}{unit} for instance {i}; it must be {lower}{upper}")
 
 
 def instance_model(mj_model: mujoco.MjModel, values: dict[str, np.ndarray], i: int) -> mujoco.MjModel:

@@ -63,6 +63,8 @@ def group_summary(spec: SweepSpec, inst: Instances, table: np.ndarray, columns: 
                           diverged=int(table[sel, columns.index("diverged")].sum()))
             # Hop metrics describe steady hopping: the survivors' (a fallen run's last hops are its collapse).
             steady = sel & alive
+            error = np.abs(table[steady, columns.index("apex_height")] - spec.height)
+            record["apex_error"] = float(error[np.isfinite(error)].mean()) if np.isfinite(error).any() else None
             for c, name in enumerate(columns):
                 if name in ("fell", "diverged"):
                     continue
@@ -79,7 +81,8 @@ def versions() -> dict:
 
 def table_text(spec: SweepSpec, groups: list[dict], label: str | None = None) -> str:
     cols = [("g m/s²", "gravity", "{:.2f}"), ("", "label", "{}"), ("n", "n", "{}"), ("alive", "survival", "{:.0%}"),
-            ("hops", "hops", "{:.1f}"), ("apex m", "apex_height", "{:.3f}"), ("arc m", "flight_rise", "{:.3f}"),
+            ("hops", "hops", "{:.1f}"), ("apex m", "apex_height", "{:.3f}"), ("|apex err|", "apex_error", "{:.3f}"),
+            ("arc m", "flight_rise", "{:.3f}"),
             ("flight s", "flight_time", "{:.3f}"), ("stance s", "stance_time", "{:.3f}"),
             ("period s", "hop_period", "{:.3f}"), ("duty", "duty_factor", "{:.2f}"), ("v m/s", "mean_speed", "{:+.2f}"),
             ("|v err|", "tracking_error", "{:.2f}"), ("CoT", "cost_of_transport", "{:.2f}")]
