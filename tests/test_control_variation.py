@@ -63,24 +63,33 @@ def observing_hold(layout) -> Controller:
 
 
 @pytest.fixture(scope="module")
-def batch(mj_model):
-    """The batch run twice with one compile: (sim, qpos0, [(final, trajectory)] * 2)."""
+def batch(mj_model, tmp_path_factory):
+    """The batch run with one compile, then again from the values its .npz file recorded (`simulate.arrays`):
+    (sim, qpos0, [(final, trajectory)] * 2)."""
+    from hopper_mjx import registry, simulate
+
     sim = Sim(mj_model, engine="chain", max_delay=8, sensing=Sensing(max_delay=8, noisy=True))
     n = len(CASES)
-    action, sensor, kp, kd = (np.array(c) for c in zip(*CASES))
+    action, sensor, kp, kd = (np.array(c, dtype=float) for c in zip(*CASES))
     qpos0 = np.array(sim.robot.stance_qpos)
     qpos0[2] += DROP
     noise = np.zeros(n)
     noise[NOISY] = 1.0
-    sensing = {"delay": sensor, "gyro_noise": GYRO_STD * noise, "gyro_bias": np.outer(noise, BIAS),
-               "odom_pos_noise": POS_STD * noise, "accel_noise": ACCEL_STD * noise}
+    # As `Scenario.controls` draws them (delays in ms: 1 ms steps here).
+    controls = {"action_delay": action, "sensor_delay": sensor, "kp_scale": np.outer(kp, np.ones(3)),
+                "kd_scale": np.outer(kd, np.ones(3)), "gyro_noise": GYRO_STD * noise,
+                "gyro_bias": np.outer(noise, BIAS), "odom_pos_noise": POS_STD * noise, "accel_noise": ACCEL_STD * noise}
     controller = observing_hold(sim.layout)
-    runs = []
+    runs, file = [], tmp_path_factory.mktemp("recorded") / "run.npz"
     for _ in range(2):
-        final, traj = sim.run(gravity_vectors([9.81] * n), controller, pd_scale(n, kp[:, None], kd[:, None]),
+        final, traj = sim.run(gravity_vectors([9.81] * n), controller,
+                              pd_scale(n, controls["kp_scale"], controls["kd_scale"]),
                               duration=STEPS * sim.layout.timestep, sensors=SENSORS, qpos=qpos0, key=3,
-                              motor=sim.actuation.motor(n, delay_steps=action), sensing=sensing)
+                              **sim.per_instance(controls))
         runs.append(jax.tree_util.tree_map(np.asarray, (final, traj)))
+        np.savez(file, **simulate.arrays(traj, np.zeros((n, 3)), final.diverged, final.drive, controls=controls))
+        with np.load(file) as recorded:  # the next run: what the file holds, and nothing else
+            controls = {k: recorded[k] for k in registry.CONTROL_PARAMETERS if k in recorded}
     return sim, qpos0, runs
 
 
@@ -104,10 +113,11 @@ def test_each_instances_delays_and_gains_are_mujoco_cs_given_the_same(mj_model, 
 def test_sensor_noise_and_bias_are_each_instances_own(batch):
     """The noisy instance's controller reads its IMU rate with the bias (the mean over the run), its recorded
     IMU and odometry carry its noise's std and bias; every other instance reads exact values, as late as its
-    sensor delay, and records exact values; the same seed gives the same noise."""
+    sensor delay, and records exact values. The run re-created from the values its file recorded (and the
+    same seed) is the same run, noise and all."""
     _, _, [(final, traj), (final2, traj2)] = batch
-    np.testing.assert_array_equal(traj.imu.gyro, traj2.imu.gyro)
-    np.testing.assert_array_equal(final.cstate[1], final2.cstate[1])
+    for a, b in ((traj.qpos, traj2.qpos), (traj.imu.gyro, traj2.imu.gyro), (final.cstate[1], final2.cstate[1])):
+        np.testing.assert_array_equal(a, b)
     read_rate = final.cstate[1] / STEPS  # the mean rate the controller read
     true_rate = traj.qvel[:, :, 3:6].mean(axis=1)  # every step's state (1 kHz)
     np.testing.assert_allclose(read_rate[NOISY] - true_rate[NOISY], BIAS, atol=4 * GYRO_STD / math.sqrt(STEPS))
