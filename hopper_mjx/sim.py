@@ -193,14 +193,14 @@ class Sim:
         out = {}
         figures = {k: controls[f"motor_{k}"] for k in ("stall_torque", "no_load_speed", "torque_limit")
                    if f"motor_{k}" in controls}
-        if figures or "action_delay" in controls:
+        if (figures or "action_delay" in controls) and not self.actuation.passthrough:  # else all ideal, prompt
             n = len(next(iter(controls.values())))
             delay = steps("action_delay") if "action_delay" in controls else self.delay_steps
             out["motor"] = self.actuation.motor(n, delay_steps=delay, **figures)
         sensing = {k: controls[k] for k in FIGURES if k in controls}
         if "sensor_delay" in controls:
             sensing["delay"] = steps("sensor_delay")
-        if sensing:
+        if sensing and not self.sensing.passthrough:  # else every drawn delay is 0 and no noise is drawn
             out["sensing"] = sensing
         return out
 
