@@ -115,11 +115,16 @@ HOLD_GAINS = {"p": 400.0, "d": 8.0}  # N·m/rad and N·m·s/rad; stiff enough to
 
 
 def hold(layout: Layout, p: float = HOLD_GAINS["p"], d: float = HOLD_GAINS["d"]) -> Controller:
-    """`hold`: PD back to the joint angles the instance started with; params: a `PDScale` or None."""
+    """`hold`: PD back to the joint angles the instance started with; params: a `PDScale` or None.
+    Its state is the target, and with factors (target, factors): without them, today's program."""
 
     def act(cstate, obs, gravity):
-        target, scale = cstate
+        target, scale = cstate if isinstance(cstate, tuple) else (cstate, None)  # static: the state's structure
         q, qd = joint_state(layout, obs)
         return clip_to_limits(layout, pd(*scaled(p, d, scale), target - q, qd)), cstate
 
-    return Controller(name="hold", init=lambda obs, params: (joint_state(layout, obs)[0], params), act=act)
+    def init(obs, params):
+        target = joint_state(layout, obs)[0]
+        return target if params is None else (target, params)
+
+    return Controller(name="hold", init=init, act=act)

@@ -340,10 +340,12 @@ def stance_torque(leg: LegGeometry, gains: RaibertConfig, phase, body: Body, spi
     neutral = body.unturn[:2, :2] @ (body.v * speed.stance_time / 2) / gains.leg_length
     lean_ref = gains.tilt_lead * swing_tilt * jnp.stack([neutral[1], -neutral[0]])
     # The damping acts on the whole robot's rotation rate H / I, not the body's.
-    kp, kd = scaled(jnp.stack([gains.roll_kp, gains.pitch_kp]), jnp.stack([gains.roll_kd, gains.pitch_kd]),
-                    None if scale is None else PDScale(scale.kp[:2], scale.kd[:2]))
-    attitude = jnp.stack([lean * kp[0] * (body.roll - lean_ref[0]) + kd[0] * spin[0],
-                          lean * kp[1] * (body.pitch - lean_ref[1]) + kd[1] * spin[1], 0.0])
+    roll_kp, pitch_kp, roll_kd, pitch_kd = gains.roll_kp, gains.pitch_kp, gains.roll_kd, gains.pitch_kd
+    if scale is not None:  # static: without factors, the gains as designed (today's program)
+        roll_kp, roll_kd = scaled(roll_kp, roll_kd, PDScale(scale.kp[0], scale.kd[0]))
+        pitch_kp, pitch_kd = scaled(pitch_kp, pitch_kd, PDScale(scale.kp[1], scale.kd[1]))
+    attitude = jnp.stack([lean * roll_kp * (body.roll - lean_ref[0]) + roll_kd * spin[0],
+                          lean * pitch_kp * (body.pitch - lean_ref[1]) + pitch_kd * spin[1], 0.0])
     # A hip torque τ pushes the foot sideways with τ/L: beyond the floor's grip the foot slides.
     grip = gains.traction * leg_force * body.length
     attitude = attitude * jnp.minimum(1.0, grip / (jnp.linalg.norm(attitude) + 1e-6))
