@@ -207,18 +207,15 @@ def test_gravity_figure_shows_energy_per_hop_in_place_and_cot_with_a_speed_comma
 def test_a_randomized_sweep_records_each_replicates_robot_the_same_at_every_gravity(tmp_path, capsys):
     out = tmp_path / "rough"
     args = ["gravity", "--values", "1.62,9.81", "--num", "3", "--duration", "1", "--chunk", "6", "--seed", "2",
-            "--no-progress", "--randomize", "foot_friction=uniform(0.4,1.0),base_mass=scale(0.9,1.1),"
-            "kp_scale=0.9..1.1,action_delay=0..3"]
+            "--no-progress", "--randomize", "foot_friction=uniform(0.4,1.0),base_mass=scale(0.9,1.1)"]
     assert main([*args, "--out", str(out)]) == 0
     assert "note: engine auto uses mjx (the chain engine cannot vary" in capsys.readouterr().err
     rows = _read(out)
-    drawn = {(float(r["gravity"]), int(r["replicate"])): (float(r["foot_friction"]), float(r["base_mass"]),
-                                                          float(r["kp_scale_hfe"]), float(r["action_delay"]))
+    drawn = {(float(r["gravity"]), int(r["replicate"])): (float(r["foot_friction"]), float(r["base_mass"]))
              for r in rows}
     for k in range(3):  # common random numbers: replicate k is one robot, at both gravities
         assert drawn[(1.62, k)] == drawn[(9.81, k)]
-    friction, mass, kp, delay = np.array([drawn[(1.62, k)] for k in range(3)]).T
-    assert 0.9 <= kp.min() and kp.max() <= 1.1 and set(delay) <= {0, 1, 2, 3}  # whole 1 ms steps
+    friction, mass = np.array([drawn[(1.62, k)] for k in range(3)]).T
     assert len(set(friction)) == 3 and 0.4 <= friction.min() and friction.max() <= 1.0
     assert 4.5 <= mass.min() and mass.max() <= 5.5 and len(set(mass)) == 3  # the URDF's 5 kg base x U(0.9, 1.1)
     # Another variation into the same folder is another experiment.
@@ -234,7 +231,7 @@ def test_a_parameter_sweep_gives_each_value_its_own_robots_and_keeps_the_others_
     from hopper_mjx.sweep.grid import SweepSpec, expand
     from hopper_mjx.sweep.runner import robots
 
-    physics = Physics(variation=Spec.parse("foot_friction=0.4..1.0"))
+    physics = Physics(variation=Spec.parse("foot_friction=0.4..1.0,kp_scale=0.9..1.1"))
     spec = SweepSpec(kind="param", param="action_delay", values=(0.0, 4.0, 10.0), gravity=(1.62, 9.81), num=3,
                      duration=1.0, height=0.1, speed=(0.0, 0.0), seed=7, physics=physics)
     inst = expand(spec, 9)
@@ -244,7 +241,10 @@ def test_a_parameter_sweep_gives_each_value_its_own_robots_and_keeps_the_others_
     friction = drawn["pair_friction"][:, 0, 0]
     np.testing.assert_array_equal(friction[:3], friction[3:6])
     np.testing.assert_array_equal(friction[:3], friction[6:])
-    assert "action_delay" not in columns and "foot_friction" in columns  # the value has its own column
+    assert "action_delay" not in columns  # the value has its own column; every other draw, one per element:
+    assert {"foot_friction", "kp_scale_haa", "kp_scale_hfe", "kp_scale_kfe"} <= set(columns)
+    np.testing.assert_array_equal(columns["kp_scale_hfe"][:3], columns["kp_scale_hfe"][6:])
+    assert 0.9 <= columns["kp_scale_hfe"].min() and columns["kp_scale_hfe"].max() <= 1.1
     assert spec.robot_physics.longest_delay("action_delay") == 10  # the delay line holds the longest value
     with pytest.raises(ValueError, match="drawn by --randomize too"):
         SweepSpec(kind="param", param="foot_friction", values=(0.5,), gravity=(9.81,), num=1, duration=1.0,
