@@ -16,6 +16,7 @@ record per evaluation, wall time) and reward_curve.png.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import functools
 import json
 import math
@@ -142,8 +143,12 @@ def check(args):
     physics = cli.check_physics(args)
     tool = "training (its Brax environments)"
     cli.refuse_terrain(physics.ground, tool)
-    cli.refuse_variation(physics, tool)
     cli.check_ideal_motors(physics, tool)
+    untrained = [n for n in (physics.variation.controls if physics.variation else {})
+                 if n not in envs.monoped.TRAINED_CONTROLS]
+    if untrained:
+        raise ValueError(f"--randomize: training draws {', '.join(envs.monoped.TRAINED_CONTROLS)} of the control "
+                         f"parameters, not {', '.join(untrained)} (yet)")
     _layers(args.policy_layers), _layers(args.value_layers)
     if args.gravity_range is not None:
         lo, hi = _pair(args.gravity_range, "--gravity-range")
@@ -187,6 +192,8 @@ def task_config(args, physics):
     from hopper_mjx import envs
 
     overrides = {"observe_gravity": args.observe_gravity, "engine": physics.engine}
+    if physics.variation:  # the robots episodes run: drawn once, with the run's seed
+        overrides |= {"randomize": str(physics.variation), "randomize_seed": args.seed}
     if args.gravity_range is not None:
         overrides["gravity_range"] = _pair(args.gravity_range, "--gravity-range")
     return envs.make(args.task, physics.mj_model, **overrides)
@@ -389,7 +396,8 @@ def evaluate(policy_path, physics, *, gravities, duration: float, height: float,
     from hopper_mjx.sweep.runner import SENSORS
 
     mj_model = physics.mj_model
-    sim = physics.sim()
+    sim = dataclasses.replace(physics, variation=None).sim()  # the URDF's robot: `sweep compare --randomize` judges
+    # a policy on randomised ones
     g, kick = evaluation_batch(gravities, num, seed, sim.layout.nv)
     sensors = SENSORS  # the sweep's streams and kicks: the numbers compare with a sweep's
     controllers = {"policy": (policy.policy_controller(mj_model, policy_path),

@@ -120,7 +120,9 @@ def add_physics_options(p: argparse.ArgumentParser, *, engine_help: str = "") ->
                    help="robot parameters drawn per instance with --seed, e.g. \"foot_friction=uniform(0.4,1.0),"
                         "body_mass=scale(0.9,1.1),dof_damping=0.02..0.2\"; DIST: a number, a..b, uniform(a,b), "
                         "loguniform(a,b), normal(mu,sigma) or scale(a,b) (times the URDF's value); NAME: "
-                        f"{', '.join(registry.PARAMETERS)} (docs/variation.md)")
+                        f"{', '.join(registry.PARAMETERS)}; the controller's, motors' and sensors': "
+                        f"{', '.join(registry.CONTROL_PARAMETERS)}; or a preset among them: "
+                        f"{', '.join(registry.RANDOMIZE_PRESETS)} (docs/variation.md)")
     p.add_argument("--engine", default=registry.DEFAULT_ENGINE,
                    help=f"physics engine: {registry.listed(registry.ENGINES)}; default {registry.DEFAULT_ENGINE}"
                         + engine_help)
@@ -200,11 +202,38 @@ def check_ideal_motors(physics: Physics, tool: str) -> None:
                          "delay or pushes, only, for now")
 
 
-def check_delay(physics: Physics, duration: float | None) -> None:
-    """An action delay shorter than the run (else no command ever reaches the motors)."""
-    if duration is not None and physics.action_delay >= duration:
+def check_delay(physics: Physics, duration: float | None, n: int = 1, seed: int = 0) -> None:
+    """An action delay shorter than the run (else no command ever reaches the motors), and so every delay
+    the `n` instances draw with `seed` (`--randomize action_delay=...,sensor_delay=...`)."""
+    if duration is None:
+        return
+    if physics.action_delay >= duration:
         raise ValueError(f"--action-delay {physics.action_delay * 1e3:g} ms is not shorter than the run's "
                          f"--duration {duration:g} s: no command would reach the motors")
+    for name in ("action_delay", "sensor_delay"):
+        longest = physics.longest_delay(name) * physics.timestep
+        if longest < duration:  # the distribution cannot draw so long a delay: no draws needed
+            continue
+        from hopper_mjx.model.variation import draw_controls
+
+        drawn = draw_controls(physics.variation, physics.mj_model, n, seed)[name]
+        i = int(np.argmax(drawn))
+        if drawn[i] * 1e-3 >= duration:
+            raise ValueError(f"--randomize: {name} drew {drawn[i]:g} ms for instance {i}, not shorter than the "
+                             f"run's --duration {duration:g} s")
+
+
+def check_controls(physics: Physics, controller: str) -> None:
+    """The drawn control parameters apply: a dc motor's figures need --motor dc, PD factors a controller
+    with joint PD gains."""
+    drawn = physics.variation.controls if physics.variation else {}
+    for name in drawn:
+        needs = registry.CONTROL_PARAMETERS[name].needs
+        if needs == "dc" and physics.motor != "dc":
+            raise ValueError(f"--randomize: {name} is a dc motor's figure; add --motor dc")
+        if needs == "pd" and controller not in registry.PD_CONTROLLERS and not registry.is_policy(controller):
+            raise ValueError(f"--randomize: {name} scales joint PD gains, which --controller {controller} has "
+                             f"not; use {', '.join(registry.PD_CONTROLLERS)} or a policy")
 
 
 def check_physics(args, model_options: dict | None = None, *, engines: list[str] | None = None,
@@ -250,6 +279,7 @@ def check_physics(args, model_options: dict | None = None, *, engines: list[str]
 
         try:
             draws.draw(variation, physics.mj_model, n, seed)
+            draws.draw_controls(variation, physics.mj_model, n, seed)
         except ValueError as err:
             raise ValueError(f"--randomize: {err}") from None
     return physics
@@ -311,7 +341,8 @@ def check_batch(args) -> Scenario:
     options.setdefault("timestep", args.timestep or DEFAULT_TIMESTEP)
     # The ground's memory and the robots' draws, for the N instances.
     physics = check_physics(args, options, n=len(rows) * args.num, seed=args.seed, terrain=terrain)
-    check_delay(physics, args.duration)
+    check_delay(physics, args.duration, len(rows) * args.num, args.seed)
+    check_controls(physics, args.controller)
     check_controller(args.controller, args.height, args.speed, physics)
     gains = check_gains(args)
     if warning:

@@ -115,7 +115,9 @@ class LiveBatch:
     """A batch of the core and its controller, advanced one chunk at a time."""
 
     def __init__(self, sim, controller, params, gravity: np.ndarray, *, seed: int = 0, sensors=None,
-                 variation: dict | None = None):
+                 variation: dict | None = None, instances: dict | None = None):
+        """variation: each instance's robot ({model field: (N, ...)}); instances: its motors and sensors
+        (`Sim.per_instance`), both kept over resets."""
         from hopper_mjx import signals
         from hopper_mjx.sim import steps_for
 
@@ -123,6 +125,7 @@ class LiveBatch:
         self.gravity = np.asarray(gravity, dtype=float)
         self.seed = seed
         self.variation = variation  # each instance's robot, kept over resets
+        self.instances = instances or {}
         self.sensors = sensors or signals.SensorConfig()  # the seed's 50 Hz on every stream, as record
         self.steps = steps_for(CHUNK_TIME, sim.layout.timestep, self.sensors)
         self.epoch = 0
@@ -134,7 +137,8 @@ class LiveBatch:
         """The batch of a `Scenario` (e.g. `cli.check_batch`'s), streams at `sensors`' rates."""
         built = scenario.build()
         return cls(*built, scenario.gravity, seed=scenario.seed, sensors=sensors,
-                   variation=scenario.varied(built.sim.mj_model))
+                   variation=scenario.varied(built.sim.mj_model),
+                   instances=built.sim.per_instance(scenario.controls(built.sim.mj_model)))
 
     @property
     def n(self) -> int:
@@ -143,7 +147,7 @@ class LiveBatch:
     def reset(self) -> None:
         command = self.command() if self.epoch else None
         self.state = self.sim.reset(self.gravity, key=self.seed, controller=self.controller, params=self.params,
-                                    variation=self.variation)
+                                    variation=self.variation, **self.instances)
         if command is not None:  # a reset keeps the commands the user set
             self._set_command(command["speed"], command["height"])
         self.hop_counter = HopCounter(self.n)

@@ -31,6 +31,8 @@ KINDS = {
 _NUMBER = r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?|[-+]?(?:inf|nan)"
 _CALL = re.compile(rf"^(\w+)\(\s*({_NUMBER})\s*,\s*({_NUMBER})\s*\)$", re.IGNORECASE)
 _RANGE = re.compile(rf"^({_NUMBER})\s*\.\.\s*({_NUMBER})$", re.IGNORECASE)
+# Every name --randomize takes: the model fields', then the controller's, motors' and sensors'.
+NAMES = {**registry.PARAMETERS, **registry.CONTROL_PARAMETERS}
 
 
 class Dist(NamedTuple):
@@ -66,6 +68,14 @@ class Dist(NamedTuple):
         if self.kind == "normal":
             return rng.normal(self.a, self.b, shape)
         return np.asarray(nominal, dtype=float) * rng.uniform(self.a, self.b, shape)
+
+    def bound(self, nominal: float = 1.0) -> float:
+        """The largest value it can draw (inf for a normal), for what must be sized before the draws."""
+        if self.kind == "fixed":
+            return self.a
+        if self.kind == "normal":
+            return math.inf if self.b > 0 else self.a
+        return self.b * nominal if self.kind == "scale" else self.b
 
     def __str__(self) -> str:
         return f"{self.a:g}" if self.kind == "fixed" else f"{self.kind}({self.a:g},{self.b:g})"
@@ -117,13 +127,18 @@ class Spec:
 
     @classmethod
     def parse(cls, text: str) -> "Spec":
-        """'name=dist,name=dist'; raises ValueError naming the first bad item."""
+        """'name=dist,name=dist', or a preset's name among them (`registry.RANDOMIZE_PRESETS`); raises
+        ValueError naming the first bad item."""
         items = []
         for item in _items(text):
             name, eq, dist = item.partition("=")
             name = name.strip()
+            if not eq and name in registry.RANDOMIZE_PRESETS:
+                items += [(n, d) for n, _, d in (i.partition("=") for i in _items(registry.RANDOMIZE_PRESETS[name]))]
+                continue
             if not eq:
-                raise ValueError(f"{item.strip()!r} is not NAME=DISTRIBUTION")
+                raise ValueError(f"{item.strip()!r} is not NAME=DISTRIBUTION (nor a preset: "
+                                 f"{', '.join(registry.RANDOMIZE_PRESETS)})")
             items.append((name, dist))
         return cls.of(dict(_unique(items)))
 
@@ -132,7 +147,7 @@ class Spec:
         """From Python or a YAML block: name -> Dist, a number, or a distribution's text."""
         items = []
         for name, value in mapping.items():
-            registry.check("parameter", registry.PARAMETERS, str(name))
+            registry.check("parameter", NAMES, str(name))
             try:
                 if isinstance(value, Dist):
                     value.check()
@@ -145,7 +160,7 @@ class Spec:
                     raise ValueError(f"cannot read {value!r}")
             except ValueError as err:
                 raise ValueError(f"{name}: {err}") from None
-            if dist.kind == "scale" and registry.PARAMETERS[str(name)].offset:
+            if dist.kind == "scale" and NAMES[str(name)].offset:
                 raise ValueError(f"{name} is an offset from the nominal value; scale(a,b) does not apply, "
                                  "give uniform or normal")
             items.append((str(name), dist))
@@ -158,7 +173,17 @@ class Spec:
     @property
     def fields(self) -> frozenset[str]:
         """The model fields the spec sets."""
-        return frozenset(registry.PARAMETERS[name].field for name in self.names)
+        return frozenset(registry.PARAMETERS[name].field for name in self.names if name in registry.PARAMETERS)
+
+    @property
+    def controls(self) -> dict[str, Dist]:
+        """The controller, motor and sensor parameters it draws (`registry.CONTROL_PARAMETERS`), by name."""
+        return {name: dist for name, dist in self.items if name in registry.CONTROL_PARAMETERS}
+
+    @property
+    def model(self) -> "Spec":
+        """The spec of its model fields alone."""
+        return Spec(tuple((name, dist) for name, dist in self.items if name in registry.PARAMETERS))
 
     def rng(self, seed: int, name: str) -> np.random.Generator:
         """Each parameter draws from its own stream of the seed: adding one leaves the others' draws as they were."""

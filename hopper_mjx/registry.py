@@ -20,6 +20,8 @@ CONTROLLERS = {
     "raibert": "hop to --height and --speed",
     "balance": "stand still on the foot: an LQR about the stance (holds it at rest; kicks topple it, docs/control.md)",
 }
+# The controllers with joint PD gains that `--randomize kp_scale=...,kd_scale=...` scales (and `policy:PATH`).
+PD_CONTROLLERS = ("hold", "pid", "raibert")
 # The controllers a gravity sweep runs beside `policy:PATH`: the tasks' references.
 SWEEP_CONTROLLERS = ("raibert", "balance")
 ENGINES = {
@@ -87,8 +89,62 @@ PARAMETERS = {
                                "motor strength: the controllers command the URDF's gear, so this scales the "
                                "applied torque and its limit", open_low=True),
 }
+# `--randomize NAME`: a named set of parameters. `playground`: MuJoCo Playground's locomotion randomisation as
+# docs/variation.md's robustness table runs it (foot friction, link masses, the base's centre of mass, motor
+# strength, action delay).
+RANDOMIZE_PRESETS = {
+    "playground": "foot_friction=0.4..1.0,body_mass=scale(0.9,1.1),base_com=-0.02..0.02,"
+                  "actuator_gear=scale(0.8,1.2),action_delay=0..10",
+}
 # The model fields the chain engine takes as run-time values (every other varied field needs mjx).
 CHAIN_VARIES: frozenset[str] = frozenset({"dof_damping", "pair_friction"})
+
+
+class ControlParameter(NamedTuple):
+    """A parameter of the robot's controller, motors or sensors drawn per instance (`--randomize NAME=...`),
+    not a model field: recorded under its own name (npz key, results.csv column). `nominal` is what
+    `scale(a,b)` multiplies and what an instance gets when the parameter is not drawn: "one" (a factor),
+    "zero", "effort" / "speed" (the URDF's per-joint effort and velocity limits); `joints`: one draw per
+    joint (haa, hfe, kfe), else one per instance; `axes`: one draw per axis (x, y, z)."""
+
+    unit: str
+    what: str
+    nominal: str = "zero"
+    low: float = 0.0
+    high: float = float("inf")
+    open_low: bool = False
+    offset: bool = False  # a drawn value is a bias from zero: scale(a,b) does not apply
+    joints: bool = False
+    axes: bool = False
+    needs: str = ""  # "dc": only with --motor dc; "pd": only with a controller that has joint PD gains
+
+
+CONTROL_PARAMETERS = {
+    "kp_scale": ControlParameter("1", "factor on the controller's joint PD stiffness (raibert's flight PD and "
+                                 "attitude servo, hold, pid, a policy's PD), per joint", "one", joints=True,
+                                 needs="pd"),
+    "kd_scale": ControlParameter("1", "factor on the controller's joint PD damping, per joint", "one", joints=True,
+                                 needs="pd"),
+    "motor_stall_torque": ControlParameter("N·m", "a dc motor's stall torque at the joint, per joint", "effort",
+                                           open_low=True, joints=True, needs="dc"),
+    "motor_no_load_speed": ControlParameter("rad/s", "a dc motor's no-load speed at the joint, per joint", "speed",
+                                            open_low=True, joints=True, needs="dc"),
+    "motor_torque_limit": ControlParameter("N·m", "a dc motor's current limit as the joint torque it allows, per "
+                                           "joint", "effort", open_low=True, joints=True, needs="dc"),
+    "action_delay": ControlParameter("ms", "from a command to the motors' torque, whole physics steps "
+                                     "(rounded)", high=1000.0),
+    "sensor_delay": ControlParameter("ms", "the controller reads its observation this late, whole physics "
+                                     "steps (rounded)", high=1000.0),
+    "gyro_noise": ControlParameter("rad/s", "std of the IMU's angular-rate noise, per axis, each step the "
+                                   "controller reads it and in the recorded IMU"),
+    "gyro_bias": ControlParameter("rad/s", "constant offset of the IMU's angular rate, per axis (x, y, z)",
+                                  low=-1.0, high=1.0, offset=True, axes=True),
+    "accel_noise": ControlParameter("m/s²", "std of the recorded IMU's specific-force noise (no controller "
+                                    "reads it)"),
+    "odom_pos_noise": ControlParameter("m", "std of the odometry's position noise, each step the controller "
+                                       "reads it and in the recorded odometry"),
+    "odom_vel_noise": ControlParameter("m/s", "std of the odometry's linear-velocity noise, as the position's"),
+}
 
 
 def listed(registry: dict[str, str]) -> str:

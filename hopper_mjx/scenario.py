@@ -75,15 +75,34 @@ class Physics:
 
         return model.build_spec(self.urdf, terrain=self.ground.terrain(), **self.model_options)
 
-    def sim(self, *, chunk: int = 256, devices=None):
-        """The batched core (hopper_mjx.sim.Sim) on this physics' model and engine."""
+    def sim(self, *, chunk: int = 256, devices=None, controls: dict | None = None):
+        """The batched core (hopper_mjx.sim.Sim) on this physics' model and engine; `controls`: the drawn
+        control parameters of the batch it will run (`Scenario.controls`), whose longest delays size its
+        delay lines (without them, the distributions' largest values)."""
         from hopper_mjx.pushes import Pushes
+        from hopper_mjx.sensing import FIGURES, Sensing
         from hopper_mjx.sim import Sim
 
         pushes = None if self.push is None else Pushes.of(*self.push, self.timestep)
         varies = self.variation.fields if self.variation else frozenset()
+        drawn = self.variation.controls if self.variation else {}
+        noisy = any(name in drawn for name in FIGURES)
         return Sim(self.mj_model, engine=self.engine, chunk=chunk, devices=devices, motor=self.motor,
-                   delay_steps=self.delay_steps, pushes=pushes, varies=varies)
+                   delay_steps=self.delay_steps, pushes=pushes, varies=varies,
+                   max_delay=self.longest_delay("action_delay", controls),
+                   sensing=Sensing(self.longest_delay("sensor_delay", controls), noisy))
+
+    def longest_delay(self, name: str, controls: dict | None = None) -> int:
+        """Physics steps of the longest `name` (action_delay, sensor_delay) an instance may draw: the drawn
+        values' largest, else the distribution's (within the parameter's range); 0 when not drawn."""
+        dist = (self.variation.controls if self.variation else {}).get(name)
+        if dist is None:
+            return 0
+        if controls is not None and name in controls:
+            ms = float(controls[name].max())
+        else:
+            ms = min(dist.bound(), registry.CONTROL_PARAMETERS[name].high)
+        return round(ms / (self.timestep * 1e3))
 
     def to_json(self) -> dict:
         """The fields as a run's manifest or config records them (the ground and the variation as their specs)."""
@@ -125,9 +144,11 @@ class Scenario:
         return self.physics.timestep
 
     def build(self) -> Built:
-        """The batched core on the physics' model (compiled once), and the controller."""
-        sim = self.physics.sim(chunk=self.chunk)
-        return Built(sim, *self._controller(sim))
+        """The batched core on the physics' model (compiled once), and the controller (with each instance's
+        PD factors, when drawn)."""
+        controls = self.controls(self.physics.mj_model)
+        sim = self.physics.sim(chunk=self.chunk, controls=controls)
+        return Built(sim, *self._controller(sim, controls))
 
     def draws(self, mj_model) -> dict[str, np.ndarray]:
         """{model field: (N, ...)} float64 of each instance's robot, drawn with the scenario's seed (empty
@@ -138,25 +159,38 @@ class Scenario:
 
         return variation.draw(self.physics.variation, mj_model, self.n, self.seed)
 
+    def controls(self, mj_model) -> dict[str, np.ndarray]:
+        """{control parameter: (N,) or (N, 3)} of each instance's controller, motors and sensors, drawn with
+        the scenario's seed (`model.variation.draw_controls`; empty without any)."""
+        if not self.physics.variation:
+            return {}
+        from hopper_mjx.model import variation
+
+        return variation.draw_controls(self.physics.variation, mj_model, self.n, self.seed)
+
     def varied(self, mj_model) -> dict[str, np.ndarray]:
         """`draws` and the constants MuJoCo derives from them, per instance: what `Sim.reset` takes."""
         from hopper_mjx.model.variation import with_constants
 
         return with_constants(mj_model, self.draws(mj_model))
 
-    def _controller(self, sim):
+    def _controller(self, sim, controls: dict):
         """(controller, params): the registry's `control.make`, or a trained policy."""
+        from hopper_mjx.control.base import pd_scale
+
+        pd = pd_scale(self.n, controls.get("kp_scale"), controls.get("kd_scale"))
         if registry.is_policy(self.controller):
             from hopper_mjx.envs import policy
 
             path = registry.policy_path(self.controller)
             config = policy.read(path)[3]
-            params = policy.policy_params(sim.robot, self.n, height=self.height, speed=self.speed, config=config)
+            params = policy.policy_params(sim.robot, self.n, height=self.height, speed=self.speed, config=config,
+                                          pd=pd)
             return policy.policy_controller(sim.mj_model, path), params
         from hopper_mjx import control
 
         return control.make(self.controller, sim.robot, self.n, height=self.height, speed=self.speed, gains=self.gains,
-                            mj_model=sim.mj_model)
+                            mj_model=sim.mj_model, pd=pd)
 
     def run(self, duration: float, sensors):
         """(Sim, final state, trajectory as NumPy) of the whole batch for `duration` s; prints the rate."""
@@ -165,7 +199,7 @@ class Scenario:
         sim, controller, params = self.build()
         start = time.perf_counter()
         final, traj = sim.run(self.gravity, controller, params, duration=duration, sensors=sensors, key=self.seed,
-                              variation=self.varied(sim.mj_model))
+                              variation=self.varied(sim.mj_model), **sim.per_instance(self.controls(sim.mj_model)))
         jax.block_until_ready(traj)
         wall = time.perf_counter() - start
         steps = len(traj.time["state"]) * sensors.periods(sim.layout.timestep)["state"]

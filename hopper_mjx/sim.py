@@ -31,6 +31,8 @@ from hopper_mjx.control.base import Controller, CState, zero_torque
 from hopper_mjx.model import world
 from hopper_mjx.model.robot import Robot
 from hopper_mjx.pushes import Pushes, push
+from hopper_mjx.sensing import FIGURES, Sensing, SensorState
+from hopper_mjx.sensing import add_noise as sensor_noise
 
 gravity_vectors = world.gravity_vectors  # the gravity convention lives beside the world files
 
@@ -47,7 +49,8 @@ class State(NamedTuple):
     cstate: CState  # the controller's state (with its per-instance parameters)
     diverged: jax.Array  # (N,) bool, the instance's state went non-finite
     drive: Drive | tuple = ()  # the motors' figures and state (hopper_mjx.actuators); () for ideal motors
-    step: jax.Array | tuple = ()  # (N,) int32 physics steps taken, for the pushes' schedule; () without pushes
+    step: jax.Array | tuple = ()  # (N,) int32 physics steps taken, for the pushes and sensor noise; () without
+    sense: SensorState | tuple = ()  # the sensors' figures and delay line (hopper_mjx.sensing); () for exact ones
     # Model field -> (N, ...) values of each instance's robot (`model.variation`); empty: every instance is
     # the nominal robot, and the compiled step is the one without variation.
     variation: dict = {}
@@ -95,20 +98,23 @@ class Sim:
 
     def __init__(self, mj_model: mujoco.MjModel, *, engine: str = "auto", chunk: int = 256, devices=None,
                  motor: str = registry.DEFAULT_MOTOR, delay_steps: int = 0, pushes: Pushes | None = None,
-                 varies: frozenset[str] = frozenset()):
-        """motor: a registry.MOTORS name; delay_steps: every instance's action delay by default, and
-        the longest one a batch may be given (`reset(motor=...)`); pushes: random pushes during runs;
-        varies: the model fields a variation may set per instance (`reset(..., variation=)`), so that
-        the engine is one that takes them at run time."""
+                 varies: frozenset[str] = frozenset(), max_delay: int | None = None,
+                 sensing: Sensing | None = None):
+        """motor: a registry.MOTORS name; delay_steps: every instance's action delay by default;
+        max_delay: the longest one a batch may be given (`reset(motor=...)`; default delay_steps);
+        pushes: random pushes during runs; varies: the model fields a variation may set per instance
+        (`reset(..., variation=)`), so that the engine is one that takes them at run time; sensing: the
+        sensors' delay line and noise (`reset(..., sensing=)`; default exact and prompt)."""
         if chunk < 1:
             raise ValueError("chunk must be >= 1")
         self.mj_model = mj_model
         self.robot = Robot.of(mj_model)  # the robot facts, measured once and passed down
         self.layout = self.robot.layout
         self.engine = engines.make(engine, mj_model, frozenset(varies))
-        self.actuation = Actuation(self.layout, motor, delay_steps)
+        self.actuation = Actuation(self.layout, motor, max(delay_steps, max_delay or 0))
         self.delay_steps = delay_steps
         self.pushes = pushes
+        self.sensing = sensing or Sensing()
         self.devices = tuple(devices or jax.local_devices())
         self.mesh = Mesh(np.array(self.devices), (AXIS,))
         self.model = jax.device_put(self.engine.model, NamedSharding(self.mesh, PartitionSpec()))
@@ -128,6 +134,7 @@ class Sim:
         qvel=None,
         motor: Motor | None = None,
         variation: dict | None = None,
+        sensing: dict | None = None,
     ) -> State:
         """Initial state for N = len(gravity) instances.
 
@@ -136,7 +143,8 @@ class Sim:
         above the floor); params: per-instance controller parameters (leading axis N) or None;
         motor: per-instance motor figures (`self.actuation.motor(N, ...)`), default the URDF's
         with the Sim's delay; variation: {model field: (N, ...)} of each instance's robot
-        (`model.variation.with_constants`).
+        (`model.variation.with_constants`); sensing: {"delay": (N,) steps, and `sensing.FIGURES`}
+        of each instance's sensors (default prompt and exact).
         """
         g = _check_gravity(gravity)
         n = g.shape[0]
@@ -155,6 +163,10 @@ class Sim:
         cstate = jax.vmap(controller.init, in_axes=(0, None if params is None else 0))(obs, params)
         if motor is None and not self.actuation.passthrough:
             motor = self.actuation.motor(n, delay_steps=self.delay_steps)
+        sensing = dict(sensing or {})
+        if sensing and self.sensing.passthrough:
+            raise ValueError("per-instance sensors need a Sim made with sensing=Sensing(...)")
+        sense = () if self.sensing.passthrough else self.sensing.init(obs, sensing.pop("delay", 0), sensing)
         return State(
             data=data,
             gravity=jnp.asarray(g, dtype=jnp.float32),
@@ -162,9 +174,35 @@ class Sim:
             cstate=cstate,
             diverged=jnp.zeros(n, dtype=bool),
             drive=() if motor is None else self.actuation.init(motor),
-            step=() if self.pushes is None else jnp.zeros(n, jnp.int32),
+            step=jnp.zeros(n, jnp.int32) if self.counts_steps else (),
             variation=variation,
+            sense=sense,
         )
+
+    @property
+    def counts_steps(self) -> bool:
+        """The state counts its steps: the pushes' schedule and the sensors' noise are keyed by them."""
+        return self.pushes is not None or self.sensing.noisy
+
+    def per_instance(self, controls: dict) -> dict:
+        """`reset`'s motor= and sensing= for each instance's drawn control parameters ({name: (N, ...)},
+        `model.variation.draw_controls`; delays in ms): {} when none of them is drawn. The PD factors go to
+        the controller (`control.base.pd_scale`)."""
+        step_ms = self.layout.timestep * 1e3
+        steps = lambda name: np.round(np.asarray(controls[name]) / step_ms).astype(np.int32)
+        out = {}
+        figures = {k: controls[f"motor_{k}"] for k in ("stall_torque", "no_load_speed", "torque_limit")
+                   if f"motor_{k}" in controls}
+        if (figures or "action_delay" in controls) and not self.actuation.passthrough:  # else all ideal, prompt
+            n = len(next(iter(controls.values())))
+            delay = steps("action_delay") if "action_delay" in controls else self.delay_steps
+            out["motor"] = self.actuation.motor(n, delay_steps=delay, **figures)
+        sensing = {k: controls[k] for k in FIGURES if k in controls}
+        if "sensor_delay" in controls:
+            sensing["delay"] = steps("sensor_delay")
+        if sensing and not self.sensing.passthrough:  # else every drawn delay is 0 and no noise is drawn
+            out["sensing"] = sensing
+        return out
 
     def _check_variation(self, variation: dict, n: int) -> dict:
         """The per-instance fields checked, as float32 arrays (like the rest of the state), each (n, *field shape)."""
@@ -226,21 +264,22 @@ class Sim:
         qvel=None,
         motor: Motor | None = None,
         variation: dict | None = None,
+        sensing: dict | None = None,
     ) -> tuple[State, Trajectory]:
         """The batch-run path of every tool: N = len(gravity) instances from `reset` for
         `duration` s, rounded to whole periods of every stream (`steps_for`)."""
         if not (math.isfinite(duration) and duration > 0):
             raise ValueError(f"duration must be > 0 s, got {duration}")
         state = self.reset(gravity, key=key, controller=controller, params=params, qpos=qpos, qvel=qvel,
-                           motor=motor, variation=variation)
+                           motor=motor, variation=variation, sensing=sensing)
         steps = steps_for(duration, self.layout.timestep, sensors)
         return self.rollout(state, controller, steps=steps, sensors=sensors)
 
     def _compiled_rollout(self, controller, steps, tick, periods, sensors, chunk):
         cache_key = (controller, steps, sensors, chunk)  # tick and periods follow from sensors
         if cache_key not in self._compiled:
-            one = _instance_rollout(self.engine, self.actuation, self.pushes, controller, steps, tick, periods,
-                                    sensors)
+            one = _instance_rollout(self.engine, self.actuation, self.pushes, self.sensing, controller, steps, tick,
+                                    periods, sensors)
 
             def per_device(model, state):
                 n_local = state.gravity.shape[0]
@@ -271,18 +310,24 @@ def _pad(state: State, size: int) -> State:
     )
 
 
-def _instance_rollout(engine, actuation: Actuation, pushes: Pushes | None, controller, steps, tick, periods, sensors):
+def _instance_rollout(engine, actuation: Actuation, pushes: Pushes | None, sensing: Sensing, controller, steps, tick,
+                      periods, sensors):
     """One instance's rollout: `steps` physics steps, a record every `tick` steps."""
     dt = actuation.layout.timestep
+    counts = pushes is not None or sensing.noisy
 
     def physics_step(model, state, record, previous):
         """One step; `record` is a traced, batch-wide flag: the signals are measured
         (after forward, before integrate) where it is true, else `previous` is passed on."""
-        d, step = state.data, state.step
+        d, step, sense = state.data, state.step, state.sense
         if pushes is not None:  # static: without pushes the step is today's
             d = d.replace(qvel=push(pushes, state.key, step, d.qvel))  # `step` steps done: the time is step·dt
+        obs = signals.observe(engine, model, d)
+        if not sensing.passthrough:  # static: exact, prompt sensors add nothing
+            obs, sense = sensing.apply(sense, obs, state.key, step)
+        if counts:
             step = step + 1
-        ctrl, cstate = controller.act(state.cstate, signals.observe(engine, model, d), state.gravity)
+        ctrl, cstate = controller.act(state.cstate, obs, state.gravity)
         drive = state.drive
         if not actuation.passthrough:  # what the motors make of the command (static: ideal adds nothing)
             ctrl, drive = actuation.apply(drive, ctrl, d.qvel, dt)
@@ -301,7 +346,7 @@ def _instance_rollout(engine, actuation: Actuation, pushes: Pushes | None, contr
         keep = lambda new, old: jnp.where(bad, old, new)
         d1 = d1.replace(**{f: keep(getattr(d1, f), getattr(d, f)) for f in engine.freeze_fields})
         cstate, drive = jax.tree_util.tree_map(keep, (cstate, drive), (state.cstate, state.drive))
-        return state._replace(data=d1, cstate=cstate, drive=drive, step=step, diverged=bad), sig
+        return state._replace(data=d1, cstate=cstate, drive=drive, step=step, sense=sense, diverged=bad), sig
 
     def one_tick(carry, _):
         # The step is traced once, in one loop, so XLA compiles the engine once (not
@@ -322,6 +367,8 @@ def _instance_rollout(engine, actuation: Actuation, pushes: Pushes | None, contr
         decimate = lambda tree, stream: jax.tree_util.tree_map(lambda x: x[:: every[stream]], tree)
         noise_key, next_key = split_rollout_key(state.key)
         imu, odom = signals.add_noise(sensors, noise_key, decimate(sig.imu, "imu"), decimate(sig.odom, "odom"))
+        if sensing.noisy:  # each instance's own sensors, on a stream of their own
+            imu, odom = sensor_noise(state.sense, jax.random.fold_in(noise_key, 1), imu, odom)
         contact = decimate(sig.contact, "contact")
         traj = (imu, odom, contact, sig.qpos[:: every["state"]], sig.qvel[:: every["state"]])
         return state._replace(key=next_key), traj

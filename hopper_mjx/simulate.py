@@ -27,11 +27,13 @@ def sensor_config(args):
     return signals.SensorConfig.uniform(args.rate, gyro_noise=args.gyro_noise, accel_noise=args.accel_noise)
 
 
-def arrays(traj, gravity, diverged, drive=(), push=None, drawn: dict | None = None) -> dict[str, np.ndarray]:
+def arrays(traj, gravity, diverged, drive=(), push=None, drawn: dict | None = None,
+           controls: dict | None = None) -> dict[str, np.ndarray]:
     """The arrays saved to the .npz file, from a trajectory of the batch (and the final motors' `drive`,
     `hopper_mjx.actuators.Drive`: each instance's motor figures and the energy drawn; the pushes'
     (interval s, speed m/s); `drawn`: each instance's robot ({model field: (N, ...)}, `Scenario.draws`),
-    saved as `model_<field>`)."""
+    saved as `model_<field>`; `controls`: its controller's, motors' and sensors' drawn parameters
+    (`Scenario.controls`), saved under their names: `kp_scale`, `action_delay` (ms), ...)."""
     out = {
         "time": traj.time["state"],
         "gravity": gravity,
@@ -49,6 +51,7 @@ def arrays(traj, gravity, diverged, drive=(), push=None, drawn: dict | None = No
         "contact_pos": traj.contact.pos,
         "diverged": diverged,
         **{f"model_{field}": values for field, values in (drawn or {}).items()},
+        **(controls or {}),  # a dc motor's drawn figures are the drive's, below: one key each
     }
     if drive:
         motor = drive.motor
@@ -64,7 +67,8 @@ def run(args, batch: Scenario | None = None) -> dict[str, np.ndarray]:
     """Simulates as the arguments say (`batch`: already checked) and returns the arrays saved to the .npz file."""
     batch = batch or cli.check_batch(args)
     sim, final, traj = batch.run(args.duration, sensor_config(args))
-    return arrays(traj, batch.gravity, final.diverged, final.drive, batch.physics.push, batch.draws(sim.mj_model))
+    return arrays(traj, batch.gravity, final.diverged, final.drive, batch.physics.push, batch.draws(sim.mj_model),
+                  batch.controls(sim.mj_model))
 
 
 def run_live(args, batch: Scenario, stream) -> dict[str, np.ndarray]:

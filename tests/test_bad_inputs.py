@@ -104,6 +104,21 @@ CASES = [
     ("simulate", ["--push", "0,0.3"], "--push interval must be finite and > 0, got 0"),
     ("simulate", ["--push", "0.0005,0.3"], "--push: the push interval must be a whole number (>= 1) of physics"),
     ("sweep", ["gravity", "--push", "1,-0.2", "--out", "s"], "--push speed must be finite and >= 0, got -0.2"),
+    # Per-instance controller, motor, delay and sensor parameters, and the parameter sweep.
+    ("simulate", ["--randomize", "kp=1"], "--randomize: unknown parameter 'kp'; choose from: body_mass,"),
+    ("simulate", ["--randomize", "motor_stall_torque=scale(0.8,1.2)"], "motor_stall_torque is a dc motor's figure; "
+                                                                        "add --motor dc"),
+    ("simulate", ["--controller", "balance", "--randomize", "kp_scale=0.5..1"], "kp_scale scales joint PD gains, "
+                                                                                  "which --controller balance has not"),
+    ("simulate", ["--randomize", "sensor_delay=normal(0,5)"], "--randomize: sensor_delay drew a value of -"),
+    ("sweep", ["gravity", "--randomize", "action_delay=5..900", "--duration", "0.5", "--out", "s"],
+     "--randomize: action_delay drew"),
+    ("sweep", ["param", "--param", "bogus", "--values", "1", "--out", "s"], "unknown --param 'bogus'; choose a "
+                                                                              "Raibert gain"),
+    ("sweep", ["param", "--param", "kp_scale", "--values=-1,1", "--out", "s"], "--values: kp_scale drew a value "
+                                                                                    "of -1 for instance 0"),
+    ("sweep", ["param", "--param", "base_mass", "--values", "5,6", "--engine", "chain", "--out", "s"],
+     "--param base_mass: the chain engine cannot vary body_mass per instance yet"),
     # Terrain specs: a name, its keys and their values, the heightmap's file, the grid's memory at N.
     ("simulate", ["--terrain", "hills"], "--terrain: unknown terrain 'hills'; choose from: flat, rough, steps,"),
     ("simulate", ["--terrain", "rough:amp=0.03,bumps=2"], "--terrain: rough has no key 'bumps'; it takes amp,"),

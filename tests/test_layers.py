@@ -21,7 +21,8 @@ LAYERS = (
     ("model",),
     ("engine",),
     ("signals",),
-    ("control", "actuators", "pushes"),  # what the controllers command; what the motors make of it; shoves
+    ("control", "actuators", "pushes", "sensing"),  # what the controllers command; what the motors make of it;
+    # shoves; what the sensors make of the state
     ("metrics", "thresholds"),  # thresholds: each task's bar on the metrics, and the ranking of checkpoints
     ("sim",),
     ("envs",),

@@ -221,3 +221,31 @@ def test_a_randomized_sweep_records_each_replicates_robot_the_same_at_every_grav
     # Another variation into the same folder is another experiment.
     assert main([*args[:-1], "foot_friction=0.5", "--out", str(out)]) == 2
     assert "holds a different sweep (differs in variation" in capsys.readouterr().err
+
+
+def test_a_parameter_sweep_gives_each_value_its_own_robots_and_keeps_the_others_draws(mj_model):
+    """`sweep param`: value x gravity x replicate; a swept parameter is fixed at its value after the other
+    parameters' draws, which stay the replicate's at every value (common random numbers)."""
+    from hopper_mjx.randomize import Spec
+    from hopper_mjx.scenario import Physics
+    from hopper_mjx.sweep.grid import SweepSpec, expand
+    from hopper_mjx.sweep.runner import robots
+
+    physics = Physics(variation=Spec.parse("foot_friction=0.4..1.0,kp_scale=0.9..1.1"))
+    spec = SweepSpec(kind="param", param="action_delay", values=(0.0, 4.0, 10.0), gravity=(1.62, 9.81), num=3,
+                     duration=1.0, height=0.1, speed=(0.0, 0.0), seed=7, physics=physics)
+    inst = expand(spec, 9)
+    assert len(inst) == 18 and list(inst.robot_row[:6]) == [0, 1, 2, 0, 1, 2] and inst.robot_row[-1] == 8
+    drawn, controls, columns = robots(spec, mj_model)
+    np.testing.assert_array_equal(controls["action_delay"], np.repeat([0.0, 4.0, 10.0], 3))
+    friction = drawn["pair_friction"][:, 0, 0]
+    np.testing.assert_array_equal(friction[:3], friction[3:6])
+    np.testing.assert_array_equal(friction[:3], friction[6:])
+    assert "action_delay" not in columns  # the value has its own column; every other draw, one per element:
+    assert {"foot_friction", "kp_scale_haa", "kp_scale_hfe", "kp_scale_kfe"} <= set(columns)
+    np.testing.assert_array_equal(columns["kp_scale_hfe"][:3], columns["kp_scale_hfe"][6:])
+    assert 0.9 <= columns["kp_scale_hfe"].min() and columns["kp_scale_hfe"].max() <= 1.1
+    assert spec.robot_physics.longest_delay("action_delay") == 10  # the delay line holds the longest value
+    with pytest.raises(ValueError, match="drawn by --randomize too"):
+        SweepSpec(kind="param", param="foot_friction", values=(0.5,), gravity=(9.81,), num=1, duration=1.0,
+                  height=0.1, speed=(0.0, 0.0), seed=0, physics=physics)

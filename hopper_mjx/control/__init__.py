@@ -4,36 +4,40 @@ from __future__ import annotations
 
 from hopper_mjx import registry
 from hopper_mjx.control import balance, pid, raibert
-from hopper_mjx.control.base import Controller, hold, zero_torque
+from hopper_mjx.control.base import Controller, PDScale, hold, zero_torque
 from hopper_mjx.model.robot import Robot
 
 NAMES = tuple(registry.CONTROLLERS)
 
 
 def make(name: str, robot: Robot, n: int, *, height: float = raibert.DEFAULT_HEIGHT,
-         speed=(0.0, 0.0), gains=None, mj_model=None) -> tuple[Controller, object]:
+         speed=(0.0, 0.0), gains=None, mj_model=None, pd: PDScale | None = None) -> tuple[Controller, object]:
     """(controller, per-instance params or None) for n instances of `robot`.
 
     none: limp; hold: PD to the initial joint angles; pid: the seed's joint position
     controllers holding them, with `gains` (`pid.load_gains`; default the shipped
     monoped.yaml); raibert: hop at `height` m of apex rise over the standing height
     and `speed` (vx, vy) m/s; balance: stand on the foot, an LQR designed on `mj_model`
-    (required) about its stance.
+    (required) about its stance. pd: each instance's factors on the joint PD gains
+    (`base.pd_scale`), for the controllers that have them (`registry.PD_CONTROLLERS`).
     """
     registry.check("controller", registry.CONTROLLERS, name)
+    if pd is not None and name not in registry.PD_CONTROLLERS:
+        raise ValueError(f"{name} has no joint PD gains to scale; kp_scale and kd_scale take "
+                         f"{', '.join(registry.PD_CONTROLLERS)} or a policy")
     if name == "none":
         return zero_torque(robot.layout), None
     if name == "hold":
-        return hold(robot.layout), None
+        return hold(robot.layout), pd
     if name == "pid":
-        return pid.pid(robot.layout, gains), None
+        return pid.pid(robot.layout, gains), pd
     if name == "balance":
         if mj_model is None:
             raise ValueError("balance is designed on the compiled model: pass mj_model=")
         return balance.balance(robot, mj_model), None
     if len(speed) != 2:  # raibert
         raise ValueError(f"speed needs two values VX,VY in m/s, got {list(speed)}")
-    return raibert.raibert(robot), raibert.raibert_params(n, height=height, speed=speed)
+    return raibert.raibert(robot), raibert.raibert_params(n, height=height, speed=speed, pd=pd)
 
 
 __all__ = ["NAMES", "Controller", "make"]

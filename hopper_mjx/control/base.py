@@ -15,10 +15,11 @@ controller reuses one compiled rollout.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, Callable
+from typing import Any, Callable, NamedTuple
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from hopper_mjx.model.layout import Layout
 from hopper_mjx.signals import Observation
@@ -56,6 +57,29 @@ def pd(kp, kd, error: jax.Array, rate: jax.Array, bias: jax.Array | None = None)
     return torque - kd * rate
 
 
+class PDScale(NamedTuple):
+    """One instance's factors on a controller's joint PD gains, (3,) each, joint order (haa, hfe, kfe):
+    a robot whose servo loops are tuned otherwise (`--randomize kp_scale=...,kd_scale=...`). A controller
+    that takes one keeps it in its state; None (no leaves): its gains as designed, today's program."""
+
+    kp: jax.Array
+    kd: jax.Array
+
+
+def scaled(kp, kd, scale: PDScale | None) -> tuple:
+    """(kp, kd) times an instance's factors, or as given without them (static: nothing added)."""
+    return (kp, kd) if scale is None else (kp * scale.kp, kd * scale.kd)
+
+
+def pd_scale(n: int, kp=None, kd=None) -> PDScale | None:
+    """(n, 3) factors of n instances, 1 where not given (kp, kd: a scalar, (3,) or (n, 3)); None without either."""
+    if kp is None and kd is None:
+        return None
+    batch = lambda v: jnp.asarray(np.broadcast_to(1.0 if v is None else np.asarray(v, dtype=float), (n, 3)),
+                                  jnp.float32)
+    return PDScale(batch(kp), batch(kd))
+
+
 def joint_state(layout: Layout, obs: Observation) -> tuple[jax.Array, jax.Array]:
     """(angles rad, rates rad/s) of haa, hfe, kfe."""
     return obs.qpos[jnp.asarray(layout.joint_qpos)], obs.qvel[jnp.asarray(layout.joint_dof)]
@@ -91,10 +115,16 @@ HOLD_GAINS = {"p": 400.0, "d": 8.0}  # N·m/rad and N·m·s/rad; stiff enough to
 
 
 def hold(layout: Layout, p: float = HOLD_GAINS["p"], d: float = HOLD_GAINS["d"]) -> Controller:
-    """`hold`: PD back to the joint angles the instance started with."""
+    """`hold`: PD back to the joint angles the instance started with; params: a `PDScale` or None.
+    Its state is the target, and with factors (target, factors): without them, today's program."""
 
-    def act(target, obs, gravity):
+    def act(cstate, obs, gravity):
+        target, scale = cstate if isinstance(cstate, tuple) else (cstate, None)  # static: the state's structure
         q, qd = joint_state(layout, obs)
-        return clip_to_limits(layout, pd(p, d, target - q, qd)), target
+        return clip_to_limits(layout, pd(*scaled(p, d, scale), target - q, qd)), cstate
 
-    return Controller(name="hold", init=lambda obs, params: joint_state(layout, obs)[0], act=act)
+    def init(obs, params):
+        target = joint_state(layout, obs)[0]
+        return target if params is None else (target, params)
+
+    return Controller(name="hold", init=init, act=act)

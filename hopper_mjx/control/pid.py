@@ -24,7 +24,7 @@ import numpy as np
 import yaml
 
 from hopper_mjx.checks import load_yaml
-from hopper_mjx.control.base import Controller, clip_to_limits, joint_state, pd
+from hopper_mjx.control.base import Controller, PDScale, clip_to_limits, joint_state, pd
 from hopper_mjx.model.layout import Layout
 from hopper_mjx.model.loader import JOINTS, read_text
 
@@ -168,14 +168,16 @@ def pid(layout: Layout, gains: dict[str, dict[str, float]] | None = None) -> Con
     """`pid`: the three joint position controllers.
 
     params: None (hold the joint angles each instance starts with, `gains` for
-    all) or `pid_params(...)` (per-instance targets and gains).
+    all), a `PDScale` (the same, p and d times the instance's factors) or `pid_params(...)`
+    (per-instance targets and gains).
     """
     lower, upper = (jnp.asarray(r) for r in zip(*layout.joint_range))
     shared = gains_of(gains)
 
-    def init(obs, params: PidParams | None):
-        if params is None:
-            return PidState(target=joint_state(layout, obs)[0], gains=shared, i_term=jnp.zeros(len(JOINTS)))
+    def init(obs, params: PidParams | PDScale | None):
+        if params is None or isinstance(params, PDScale):
+            gains = shared if params is None else shared._replace(p=shared.p * params.kp, d=shared.d * params.kd)
+            return PidState(target=joint_state(layout, obs)[0], gains=gains, i_term=jnp.zeros(len(JOINTS)))
         return PidState(target=params.target, gains=params.gains, i_term=jnp.zeros(len(JOINTS)))
 
     def act(state, obs, gravity):

@@ -71,7 +71,7 @@ import numpy as np
 from brax import math as bmath
 
 from hopper_mjx.control import kinematics
-from hopper_mjx.control.base import Commands, Controller, joint_state, pd, saturate, to_ctrl
+from hopper_mjx.control.base import Commands, Controller, PDScale, joint_state, pd, saturate, scaled, to_ctrl
 from hopper_mjx.model.robot import LegGeometry, Robot
 from hopper_mjx.model.world import EARTH_GRAVITY  # where the attitude stiffness holds as given
 from hopper_mjx.signals import Observation
@@ -125,6 +125,8 @@ class RaibertParams:
     height: jax.Array  # m, commanded apex rise over the standing height
     speed: jax.Array  # (2,) m/s, commanded (vx, vy)
     gains: RaibertConfig  # every gain, one value per instance
+    # Factors on the joint PD gains (the flight PD, the attitude servo, the brake); None: as designed.
+    pd: PDScale | None = None
 
 
 def _read_commands(s: "RaibertState"):
@@ -173,12 +175,13 @@ def _check_gains(gains: RaibertConfig) -> None:
 
 
 def raibert_params(n: int, *, height, speed=(0.0, 0.0), config: RaibertConfig | None = None,
-                   **gain_overrides) -> RaibertParams:
+                   pd: PDScale | None = None, **gain_overrides) -> RaibertParams:
     """Per-instance commands and gains, every leaf with leading axis n.
 
     height: apex rise over the standing height, m, scalar or (n,);
     speed: (vx, vy) m/s, (2,) or (n, 2); gain_overrides: any RaibertConfig field,
-    scalar or (n,) (a sweep over a gain is just an array here).
+    scalar or (n,) (a sweep over a gain is just an array here); pd: (n, 3) factors on the joint
+    PD gains (`base.pd_scale`).
     """
     if n < 1:
         raise ValueError(f"n must be >= 1, got {n}")
@@ -191,7 +194,7 @@ def raibert_params(n: int, *, height, speed=(0.0, 0.0), config: RaibertConfig | 
         raise ValueError("height (apex rise) must be >= 0 m")
     gains = RaibertConfig(**{k: _batch(n, k, gain_overrides.get(k, getattr(config, k)), ()) for k in GAINS})
     _check_gains(gains)
-    return RaibertParams(height=heights, speed=_batch(n, "speed", speed, (2,)), gains=gains)
+    return RaibertParams(height=heights, speed=_batch(n, "speed", speed, (2,)), gains=gains, pd=pd)
 
 
 def _tilt(rot: jax.Array) -> tuple[jax.Array, jax.Array]:
@@ -317,9 +320,10 @@ def inertia_facts(leg: LegGeometry) -> Inertia:
 
 
 def stance_torque(leg: LegGeometry, gains: RaibertConfig, phase, body: Body, spin, speed: Speed, thrust_force,
-                  g, stiffness, mass: float, swing_tilt) -> jax.Array:
+                  g, stiffness, mass: float, swing_tilt, scale: PDScale | None = None) -> jax.Array:
     """Joint torques (3,) N·m in compression, thrust and unloading: the leg force through J^T
-    plus the hip attitude servo; in unloading only a brake."""
+    plus the hip attitude servo; in unloading only a brake. `scale`: factors on the servo's and
+    the brake's gains (haa: roll, hfe: pitch)."""
     # The floor's push is aimed at the COM (not the hip), so that it does not
     # spin the robot; the spring acts on the virtual leg length.
     spring = stiffness * (gains.leg_length - body.length)
@@ -336,18 +340,22 @@ def stance_torque(leg: LegGeometry, gains: RaibertConfig, phase, body: Body, spi
     neutral = body.unturn[:2, :2] @ (body.v * speed.stance_time / 2) / gains.leg_length
     lean_ref = gains.tilt_lead * swing_tilt * jnp.stack([neutral[1], -neutral[0]])
     # The damping acts on the whole robot's rotation rate H / I, not the body's.
-    attitude = jnp.stack([lean * gains.roll_kp * (body.roll - lean_ref[0]) + gains.roll_kd * spin[0],
-                          lean * gains.pitch_kp * (body.pitch - lean_ref[1]) + gains.pitch_kd * spin[1], 0.0])
+    roll_kp, pitch_kp, roll_kd, pitch_kd = gains.roll_kp, gains.pitch_kp, gains.roll_kd, gains.pitch_kd
+    if scale is not None:  # static: without factors, the gains as designed (today's program)
+        roll_kp, roll_kd = scaled(roll_kp, roll_kd, PDScale(scale.kp[0], scale.kd[0]))
+        pitch_kp, pitch_kd = scaled(pitch_kp, pitch_kd, PDScale(scale.kp[1], scale.kd[1]))
+    attitude = jnp.stack([lean * roll_kp * (body.roll - lean_ref[0]) + roll_kd * spin[0],
+                          lean * pitch_kp * (body.pitch - lean_ref[1]) + pitch_kd * spin[1], 0.0])
     # A hip torque τ pushes the foot sideways with τ/L: beyond the floor's grip the foot slides.
     grip = gains.traction * leg_force * body.length
     attitude = attitude * jnp.minimum(1.0, grip / (jnp.linalg.norm(attitude) + 1e-6))
-    brake = -jnp.asarray(FLIGHT_KD) * body.qd  # unloading: let the joints coast to rest, no push
+    brake = -scaled(0.0, jnp.asarray(FLIGHT_KD), scale)[1] * body.qd  # unloading: coast to rest, no push
     push = -kinematics.jacobian(leg, body.q).T @ floor_push
     return jnp.where(phase == UNLOADING, brake, push + jnp.where(servo, attitude, 0.0))
 
 
 def flight_torque(leg: LegGeometry, gains: RaibertConfig, body: Body, spin, speed: Speed, g,
-                  inertia: Inertia) -> jax.Array:
+                  inertia: Inertia, scale: PDScale | None = None) -> jax.Array:
     """Joint torques (3,) N·m in flight: PD to the joint angles that place the foot (part 2)."""
     placement = body.v * speed.stance_time / 2 + speed.gain * speed.error + speed.offset
     placement = body.unturn[:2, :2] @ jnp.clip(placement, -MAX_PLACEMENT, MAX_PLACEMENT)
@@ -359,7 +367,7 @@ def flight_torque(leg: LegGeometry, gains: RaibertConfig, body: Body, spin, spee
     flight_length = gains.leg_length - jnp.where(body.zdot > 0, gains.retract, 0.0)
     target = _placement_angles(leg, body.level, placement, flight_length, body.com)
     leg_rate = body.qd + jnp.concatenate([body.gyro[:2], jnp.zeros(1)])  # the leg's rate in the world
-    return pd(jnp.asarray(FLIGHT_KP), jnp.asarray(FLIGHT_KD), target - body.q, leg_rate)
+    return pd(*scaled(jnp.asarray(FLIGHT_KP), jnp.asarray(FLIGHT_KD), scale), target - body.q, leg_rate)
 
 
 def initial_state(params: RaibertParams, obs: Observation) -> RaibertState:
@@ -407,8 +415,8 @@ def raibert(robot: Robot, config: RaibertConfig | None = None) -> Controller:
         apex = jnp.where(ev.liftoff, body.z, jnp.where(phase == FLIGHT, jnp.maximum(s.apex, body.z), s.apex))
         spin = kinematics.angular_momentum(leg, body.q, body.qd, body.gyro) / inertia.robot
         stance = stance_torque(leg, gains, phase, body, spin, speed, thrust_force, g, stiffness, mass,
-                               inertia.swing_tilt)
-        flight = flight_torque(leg, gains, body, spin, speed, g, inertia)
+                               inertia.swing_tilt, s.params.pd)
+        flight = flight_torque(leg, gains, body, spin, speed, g, inertia, s.params.pd)
         torque = saturate(layout, jnp.where(phase == FLIGHT, flight, stance))
         ctrl = to_ctrl(layout, torque)
         state = RaibertState(

@@ -17,6 +17,9 @@ A task (`hopper_mjx.envs.tasks`) is a `MonopedEnv` that says what it commands
 - **Gravity** is drawn per episode at `reset`, log-uniformly over `gravity_range`, and kept
   in `State.info["gravity"]`; `wrappers.wrap_for_training` makes Brax's auto-reset draw a
   fresh episode (gravity, command, initial state) instead of replaying the first one.
+- **Robots** (`randomize`, a `--randomize` spec): a pool of `ROBOT_POOL` robots is drawn once with
+  `randomize_seed` (the model fields with MuJoCo's constants, the PD factors, the action delay), and
+  each episode runs one of them (`State.info["robot"]`), its commands through its own delay line.
 
 Everything is one instance; Brax's wrappers vmap it.
 """
@@ -36,15 +39,20 @@ from brax.envs.base import Env, State
 from hopper_mjx import engine as engines
 from hopper_mjx import metrics, signals
 from hopper_mjx import model as hopper_model
-from hopper_mjx.control.base import joint_state, pd, saturate, to_ctrl
+from hopper_mjx.control.base import PDScale, joint_state, pd, saturate, scaled, to_ctrl
 from hopper_mjx.model import robot
 from hopper_mjx.model.layout import Layout
 from hopper_mjx.model.world import EARTH_GRAVITY
+from hopper_mjx.randomize import Spec
 from hopper_mjx.signals import Observation
 
 MAX_TILT_FROM_VERTICAL = 0.8  # rad between the base's z axis and the vertical that ends an episode
 # State.info keys a task owns; the resampling auto-reset replaces exactly these (wrappers.py).
 TASK_INFO = ("command", "gravity", "last_action", "rng")
+ROBOT_INFO = ("robot", "line")  # a randomised task's too: the episode's robot and its motors' delay line
+ROBOT_POOL = 256  # robots a randomised task draws once; an episode runs one of them
+# The control parameters a task draws (the others, sensor noise and delay and dc motors, not in training yet).
+TRAINED_CONTROLS = ("kp_scale", "kd_scale", "action_delay")
 RANGES = ("gravity_range", "apex_range", "speed_range", "lateral_speed_range", "initial_clearance")
 
 
@@ -95,6 +103,9 @@ class MonopedConfig:
     ls_iterations: int = 4
     engine: str = "auto"  # hopper_mjx.engine name: auto (chain for the monoped), chain or mjx
     robot: str = ""  # `model.robot.fingerprint` of the robot (set by the env); "" in policies saved before it
+    # The robots episodes run: a --randomize spec ("" the URDF's robot), drawn once with randomize_seed.
+    randomize: str = ""
+    randomize_seed: int = 0
 
 
     def __post_init__(self):
@@ -111,6 +122,16 @@ class MonopedConfig:
         if not (self.policy_rate > 0 and self.timestep > 0):
             raise ValueError(f"policy_rate and timestep must be positive, got {self.policy_rate}, {self.timestep}")
         engines.check_name(self.engine)
+        spec = self.variation
+        untrained = [name for name in spec.controls if name not in TRAINED_CONTROLS]
+        if untrained:
+            raise ValueError(f"randomize: the tasks draw {', '.join(TRAINED_CONTROLS)} of the control parameters, "
+                             f"not {', '.join(untrained)} (yet)")
+
+    @property
+    def variation(self) -> Spec:
+        """The robots' spec (empty: the URDF's robot); raises ValueError for a bad one."""
+        return Spec.parse(self.randomize) if self.randomize else Spec()
 
     @property
     def vy_range(self) -> tuple[float, float]:
@@ -165,10 +186,11 @@ def joint_targets(layout: Layout, cfg: MonopedConfig, stance: jax.Array, action:
     return jnp.clip(target, rng[:, 0], rng[:, 1])
 
 
-def pd_torque(layout: Layout, cfg: MonopedConfig, target: jax.Array, obs) -> jax.Array:
-    """The PD law on joint angles -> joint torques (haa, hfe, kfe), saturated at the effort limits."""
+def pd_torque(layout: Layout, cfg: MonopedConfig, target: jax.Array, obs, scale: PDScale | None = None) -> jax.Array:
+    """The PD law on joint angles -> joint torques (haa, hfe, kfe), saturated at the effort limits;
+    `scale`: an instance's factors on kp and kd."""
     q, qd = joint_state(layout, obs)
-    return saturate(layout, pd(jnp.asarray(cfg.kp), jnp.asarray(cfg.kd), target - q, qd))
+    return saturate(layout, pd(*scaled(jnp.asarray(cfg.kp), jnp.asarray(cfg.kd), scale), target - q, qd))
 
 
 # The robot's own signals in the observation, in order, with their sizes (`observe` checks them).
@@ -248,6 +270,22 @@ def speed_term(cfg: MonopedConfig, d, command_speed: jax.Array) -> jax.Array:
     return cfg.w_speed * jnp.exp(-jnp.sum((d.qvel[0:2] - command_speed) ** 2) / cfg.speed_scale**2)
 
 
+def robot_pool(cfg: MonopedConfig, mj_model: mujoco.MjModel, layout: Layout) -> dict[str, jax.Array]:
+    """{model field or control parameter: (ROBOT_POOL, ...)} of the robots a randomised task's episodes run
+    (the model fields with the constants MuJoCo derives from them; delays in physics steps); {} without."""
+    spec = cfg.variation
+    if not spec:
+        return {}
+    from hopper_mjx.model import variation
+
+    fields = variation.with_constants(mj_model, variation.draw(spec, mj_model, ROBOT_POOL, cfg.randomize_seed))
+    controls = variation.draw_controls(spec, mj_model, ROBOT_POOL, cfg.randomize_seed)
+    if "action_delay" in controls:  # ms -> steps of the task's own timestep
+        controls["action_delay"] = np.round(controls["action_delay"] / (layout.timestep * 1e3)).astype(np.int32)
+    return {k: jnp.asarray(v, jnp.int32 if k == "action_delay" else jnp.float32)
+            for k, v in (fields | controls).items()}
+
+
 def training_model(mj_model: mujoco.MjModel, cfg: MonopedConfig) -> mujoco.MjModel:
     """The model the environment steps: the configured timestep, MuJoCo's sensor stage off
     (signals come from the state), the constraint solver capped at the configured iterations."""
@@ -275,7 +313,10 @@ class MonopedEnv(Env):
         self.config = config
         self.layout = Layout.of(trained)
         self.n_frames = decimation(self.layout, config)
-        self.engine = engines.make(config.engine, trained)
+        self.robots = robot_pool(config, mj_model, self.layout)  # {} for the URDF's robot
+        delays = np.asarray(self.robots.get("action_delay", 0))
+        self.line_depth = int(delays.max()) + 1  # the motors' delay line: the longest delay in the pool
+        self.engine = engines.make(config.engine, trained, config.variation.fields)
         self.standing_qpos = robot.standing_qpos(mj_model).astype(np.float32)  # as the policy controller
         self.stance = self.standing_qpos[list(self.layout.joint_qpos)]
         self.standing_height = float(self.standing_qpos[2])
@@ -307,6 +348,11 @@ class MonopedEnv(Env):
     def dt(self) -> float:
         return self.layout.timestep * self.n_frames
 
+    @property
+    def task_info(self) -> tuple[str, ...]:
+        """The `State.info` keys a fresh episode replaces (`wrappers.ResampleAutoReset`)."""
+        return TASK_INFO + (ROBOT_INFO if self.robots else ())
+
     def reward_terms(self, d, g, command, action, last_action, effort, fell) -> dict[str, jax.Array]:
         """Per-step reward terms (already weighted); their sum is the reward."""
         return {**self.task_terms(d, g, command),
@@ -329,22 +375,31 @@ class MonopedEnv(Env):
         zero = jnp.zeros(())
         terms = self.reward_terms(data, -gravity[2], command, last_action, last_action, zero, zero > 0)
         info = {"command": command, "gravity": gravity, "last_action": last_action, "rng": rng}
+        if self.robots:  # this episode's robot, its motors' delay line empty
+            info |= {"robot": jax.random.randint(jax.random.fold_in(rng, 1), (), 0, ROBOT_POOL),
+                     "line": jnp.zeros((self.line_depth, 3))}
         return State(data, obs, zero, zero, {k: zero for k in terms}, info)
 
-    def physics(self, model, data, gravity: jax.Array, target: jax.Array):
+    def physics(self, model, data, gravity: jax.Array, target: jax.Array, robot=None):
         """`n_frames` physics steps of one instance under its own gravity, the PD law tracking
-        `target`: (data, mean of (torque / limit)²). The engine's step is traced once, in the loop."""
+        `target`: (data, mean of (torque / limit)², the motors' delay line). The engine's step is
+        traced once, in the loop. `robot`: (PD factors or None, action delay steps, delay line) of a
+        randomised episode's robot (`model` already its own); None: the URDF's, prompt."""
         cfg, lay, engine = self.config, self.layout, self.engine
         limit = jnp.asarray(lay.effort_limit)
+        scale, delay, line = robot if robot is not None else (None, None, None)
 
         def one_physics_step(carry, _):
-            d, effort = carry
-            torque = pd_torque(lay, cfg, target, d)
+            d, effort, line = carry
+            torque = pd_torque(lay, cfg, target, d, scale)
+            if line is not None:  # each torque applied `delay` physics steps after it was commanded
+                line = jnp.concatenate([torque[None], line[:-1]])
+                torque = line[delay]
             d = engine.forward(model, d.replace(ctrl=to_ctrl(lay, torque)), gravity)
-            return (engine.integrate(model, d, gravity), effort + jnp.mean((torque / limit) ** 2)), None
+            return (engine.integrate(model, d, gravity), effort + jnp.mean((torque / limit) ** 2), line), None
 
-        (data, effort), _ = jax.lax.scan(one_physics_step, (data, jnp.zeros(())), None, self.n_frames)
-        return data, effort / self.n_frames
+        (data, effort, line), _ = jax.lax.scan(one_physics_step, (data, jnp.zeros(()), line), None, self.n_frames)
+        return data, effort / self.n_frames, line
 
     def run_time_model(self, gravity: jax.Array):
         """The engine's model as a value known only at run time, as the core passes it (an argument
@@ -367,7 +422,19 @@ class MonopedEnv(Env):
 
     def step_with(self, model, state: State, action: jax.Array) -> State:
         """`step` with the engine's model pytree given: the physics, then `after_physics`."""
-        data, effort = self.physics(model, state.pipeline_state, state.info["gravity"], self.targets(action))
+        robot = None
+        if self.robots:  # the episode's robot: its model, PD factors and delay line
+            k = state.info["robot"]
+            model = self.engine.vary(model, {f: v[k] for f, v in self.robots.items() if f in self.engine.varies})
+            pick = lambda name: self.robots[name][k] if name in self.robots else None
+            scale = None if pick("kp_scale") is None and pick("kd_scale") is None else PDScale(
+                *(jnp.ones(3) if v is None else v for v in (pick("kp_scale"), pick("kd_scale"))))
+            delay = pick("action_delay")
+            robot = (scale, 0 if delay is None else delay, state.info["line"])
+        data, effort, line = self.physics(model, state.pipeline_state, state.info["gravity"], self.targets(action),
+                                          robot)
+        if line is not None:
+            state = state.replace(info={**state.info, "line": line})
         return self.after_physics(model, state, action, data, effort)
 
     def targets(self, action: jax.Array) -> jax.Array:

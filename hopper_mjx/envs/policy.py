@@ -31,7 +31,7 @@ from brax.training.agents.ppo import networks as ppo_networks
 from brax.training.agents.sac import networks as sac_networks
 
 from hopper_mjx import registry
-from hopper_mjx.control.base import Commands, Controller, joint_state, to_ctrl
+from hopper_mjx.control.base import Commands, Controller, PDScale, joint_state, to_ctrl
 from hopper_mjx.envs import monoped, tasks
 from hopper_mjx.model.layout import Layout
 from hopper_mjx.model.robot import Robot, standing_height, standing_qpos
@@ -48,6 +48,7 @@ class PolicyState(NamedTuple):
     last_action: jax.Array  # (3,)
     tick: jax.Array  # () physics steps since the start
     work: jax.Array  # J, ∫ Σ|τ·q̇| dt of the three motors (for the cost of transport)
+    pd: PDScale | None = None  # factors on the PD law's gains; None: as trained
 
 
 def write_env_config(path, env_config: monoped.MonopedConfig) -> Path:
@@ -165,6 +166,7 @@ class PolicyParams:
     (apex height of the base m above the floor, vx, vy m/s) for the hopping tasks, 0 for stand."""
 
     command: jax.Array
+    pd: PDScale | None = None  # (n, 3) factors on the PD law's kp and kd (`base.pd_scale`); None: as trained
 
 
 def default_command(config: monoped.MonopedConfig) -> jnp.ndarray:
@@ -187,7 +189,8 @@ def check_command(config: monoped.MonopedConfig, standing_height: float, height:
                              f"[{lo - offset:g}, {hi - offset:g}]")
 
 
-def policy_params(robot: Robot, n: int, *, height: float, speed=(0.0, 0.0), config=None) -> PolicyParams:
+def policy_params(robot: Robot, n: int, *, height: float, speed=(0.0, 0.0), config=None,
+                  pd: PDScale | None = None) -> PolicyParams:
     """Commands from the Raibert controller's terms: `height` m of apex rise above the
     standing height (`Robot.standing_height`), `speed` (vx, vy) m/s; none for a stand policy."""
     if len(speed) != 2:
@@ -195,8 +198,8 @@ def policy_params(robot: Robot, n: int, *, height: float, speed=(0.0, 0.0), conf
     if not (math.isfinite(height) and height >= 0):
         raise ValueError(f"height must be a finite apex rise >= 0 m, got {height}")
     if config is not None and tasks.task_class(config.task).command_size == 0:
-        return PolicyParams(jnp.zeros((n, 0), jnp.float32))
-    return PolicyParams(jnp.tile(jnp.array([robot.standing_height + height, *speed], dtype=jnp.float32), (n, 1)))
+        return PolicyParams(jnp.zeros((n, 0), jnp.float32), pd)
+    return PolicyParams(jnp.tile(jnp.array([robot.standing_height + height, *speed], dtype=jnp.float32), (n, 1)), pd)
 
 
 def policy_controller(mj_model: mujoco.MjModel, path) -> Controller:
@@ -209,17 +212,18 @@ def policy_controller(mj_model: mujoco.MjModel, path) -> Controller:
 
     def init(obs, params: PolicyParams | None):
         command = default_command(cfg) if params is None else jnp.asarray(params.command, dtype=jnp.float32)
-        return PolicyState(command, stance, jnp.zeros(3), jnp.zeros((), jnp.int32), jnp.zeros(()))
+        return PolicyState(command, stance, jnp.zeros(3), jnp.zeros((), jnp.int32), jnp.zeros(()),
+                           None if params is None else params.pd)
 
     def act(cs: PolicyState, obs: Observation, gravity):
         features = monoped.observe(layout, cfg, obs, gravity, cs.command, cs.last_action)
         decide = cs.tick % every == 0
         action = jnp.where(decide, policy(features), cs.last_action)
         target = jnp.where(decide, monoped.joint_targets(layout, cfg, stance, action), cs.target)
-        torque = monoped.pd_torque(layout, cfg, target, obs)
+        torque = monoped.pd_torque(layout, cfg, target, obs, cs.pd)
         power = jnp.abs(torque * joint_state(layout, obs)[1]).sum()
         work = cs.work + power * layout.timestep
-        return to_ctrl(layout, torque), PolicyState(cs.command, target, action, cs.tick + 1, work)
+        return to_ctrl(layout, torque), PolicyState(cs.command, target, action, cs.tick + 1, work, cs.pd)
 
     commands = None
     if tasks.task_class(cfg.task).command_size:  # the hopping tasks: (apex height above the floor, vx, vy)

@@ -14,8 +14,6 @@ import jax.numpy as jnp
 from brax.envs.base import State, Wrapper
 from brax.envs.wrappers.training import EpisodeWrapper
 
-from hopper_mjx.envs.monoped import TASK_INFO
-
 
 def where_done(done: jax.Array, fresh, old):
     """`fresh` where `done` (a mask over the leading axes), else `old`, leaf by leaf."""
@@ -45,7 +43,7 @@ class ResampleAutoReset(Wrapper):
         state = self.env.step(state.replace(done=jnp.zeros_like(state.done)), action)
         fresh = self.env.reset(jax.vmap(lambda k: jax.random.split(k)[1])(state.info["rng"]))
         done = state.done > 0
-        info = {**state.info, **{k: where_done(done, fresh.info[k], state.info[k]) for k in TASK_INFO}}
+        info = {**state.info, **{k: where_done(done, fresh.info[k], state.info[k]) for k in self.env.task_info}}
         return state.replace(pipeline_state=where_done(done, fresh.pipeline_state, state.pipeline_state),
                              obs=where_done(done, fresh.obs, state.obs), info=info)
 

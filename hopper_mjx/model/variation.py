@@ -1,6 +1,7 @@
 """A variation spec drawn per instance into MuJoCo model fields, and the constants those fields imply.
 
     values = draw(spec, mj_model, n=64, seed=0)     # {"body_mass": (64, nbody), "pair_friction": (64, npair, 5)}
+    controls = draw_controls(spec, mj_model, 64, 0) # {"kp_scale": (64, 3), "action_delay": (64,), ...}
     values = with_constants(mj_model, values)       # + body_invweight0, dof_invweight0, ... per instance
     m_i = instance_model(mj_model, values, i)       # instance i as a MuJoCo C model (mj_setConst called)
 
@@ -57,7 +58,7 @@ def draw(spec: Spec, mj_model: mujoco.MjModel, n: int, seed: int) -> dict[str, n
     """{field: (n, *field shape)} float64 of every field the spec varies; raises ValueError naming a
     parameter whose drawn value lies outside its valid range (`registry.PARAMETERS`)."""
     values = {}
-    for name, dist in spec.items:
+    for name, dist in spec.model.items:  # the controller's, motors' and sensors' parameters: `draw_controls`
         par = registry.PARAMETERS[name]
         nominal = np.asarray(getattr(mj_model, par.field), dtype=float)
         field = values.setdefault(par.field, np.broadcast_to(nominal, (n, *nominal.shape)).copy())
@@ -77,7 +78,7 @@ def columns(spec: Spec, mj_model: mujoco.MjModel, values: dict[str, np.ndarray])
     """{column name: (N,)} of each drawn parameter, one column per element it draws: `base_mass`,
     `body_mass_upperleg`, `dof_damping_kfe`, `base_com_z` (for a table such as a sweep's results.csv)."""
     out = {}
-    for name, _ in spec.items:
+    for name, _ in spec.model.items:
         par = registry.PARAMETERS[name]
         field = values[par.field]
         at = rows(mj_model, par.elements)
@@ -92,6 +93,45 @@ def columns(spec: Spec, mj_model: mujoco.MjModel, values: dict[str, np.ndarray])
     return out
 
 
+def nominal_control(name: str, layout: Layout) -> np.ndarray:
+    """A control parameter's value when it is not drawn: (3,) per joint, (3,) per axis, or ()."""
+    par = registry.CONTROL_PARAMETERS[name]
+    value = {"one": 1.0, "zero": 0.0, "effort": np.asarray(layout.effort_limit),
+             "speed": np.asarray(layout.speed_limit)}[par.nominal]
+    return np.broadcast_to(np.asarray(value, dtype=float), (3,) if par.joints or par.axes else ())
+
+
+def draw_controls(spec: Spec, mj_model: mujoco.MjModel, n: int, seed: int) -> dict[str, np.ndarray]:
+    """{name: (n,) or (n, 3)} float64 of each controller, motor and sensor parameter the spec draws
+    (`registry.CONTROL_PARAMETERS`), from the same seed and per-parameter streams as the model fields;
+    delays (ms) rounded to whole physics steps. Raises ValueError for a value outside its range."""
+    lay = Layout.of(mj_model)
+    out = {}
+    for name, dist in spec.controls.items():
+        par = registry.CONTROL_PARAMETERS[name]
+        nominal = nominal_control(name, lay)
+        drawn = dist.draw(spec.rng(seed, name), np.ones(nominal.shape), n)
+        drawn = nominal * drawn if dist.kind == "scale" else drawn
+        _check_range(name, par, drawn)
+        if par.unit == "ms":  # at the physics' resolution
+            step = lay.timestep * 1e3
+            drawn = np.round(drawn / step) * step
+        out[name] = drawn
+    return out
+
+
+def control_columns(controls: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """{column: (N,)} of `draw_controls`' values: `action_delay`, `kp_scale_hfe`, `gyro_bias_x`, ..."""
+    out = {}
+    for name, values in controls.items():
+        if values.ndim == 1:
+            out[name] = values
+            continue
+        labels = "xyz" if registry.CONTROL_PARAMETERS[name].axes else [j.removesuffix("_joint") for j in JOINTS]
+        out.update({f"{name}_{label}": values[:, k] for k, label in enumerate(labels)})
+    return out
+
+
 def _labels(m: mujoco.MjModel, elements: str, at: list[int]) -> list[str]:
     if elements in ("joints", "actuators"):
         return [j.removesuffix("_joint") for j in JOINTS]
@@ -100,7 +140,7 @@ def _labels(m: mujoco.MjModel, elements: str, at: list[int]) -> list[str]:
     return [elements] * len(at)
 
 
-def _check_range(name: str, par: registry.Parameter, drawn: np.ndarray) -> None:
+def _check_range(name: str, par: registry.Parameter | registry.ControlParameter, drawn: np.ndarray) -> None:
     low_bad = drawn <= par.low if par.open_low else drawn < par.low
     bad = low_bad | (drawn > par.high) | ~np.isfinite(drawn)
     if bad.any():
@@ -109,7 +149,8 @@ def _check_range(name: str, par: registry.Parameter, drawn: np.ndarray) -> None:
         lower = f"{'>' if par.open_low else '>='} {par.low:g}"
         upper = "" if par.high == float("inf") else f" and <= {par.high:g}"
         kind = "an offset" if par.offset else "a value"
-        raise ValueError(f"{name} drew {kind} of {value:g} {par.unit} for instance {i}; it must be {lower}{upper}")
+        unit = "" if par.unit == "1" else f" {par.unit}"  # a factor or a friction coefficient has none
+        raise ValueError(f"{name} drew {kind} of {value:g}{unit} for instance {i}; it must be {lower}{upper}")
 
 
 def instance_model(mj_model: mujoco.MjModel, values: dict[str, np.ndarray], i: int) -> mujoco.MjModel:

@@ -1,9 +1,10 @@
-"""python -m hopper_mjx.sweep gravity | gains | compare — hopping across gravity (and a gain).
+"""python -m hopper_mjx.sweep gravity | gains | param | compare — hopping across gravity (and a gain or parameter).
 
     python -m hopper_mjx.sweep gravity                          # the main job, ~1000 monopeds
     python -m hopper_mjx.sweep gravity --controller policy:runs/hop-ppo     # a trained policy, same kicks
     python -m hopper_mjx.sweep compare --controllers raibert,policy:runs/hop-ppo   # side by side
     python -m hopper_mjx.sweep gains --param speed_gain --values 0.1,0.3,0.6 --gravity 1.62,3.71,9.81
+    python -m hopper_mjx.sweep param --param action_delay --values 0,5,10,20 --gravity 1.62,3.71,9.81
 
 Rerunning with the same --out resumes an interrupted sweep; finished chunks are not recomputed.
 Several processes (hosts) share one sweep with --coordinator HOST:PORT --num-processes P --process-id I.
@@ -27,11 +28,12 @@ def parser() -> argparse.ArgumentParser:
     p = cli.parser("python -m hopper_mjx.sweep", __doc__)
     sub = p.add_subparsers(dest="kind", required=True)
     kinds = (("gravity", DEFAULT_GRAVITY, 112, 10.0), ("gains", (1.62, 3.71, 9.81), 32, 10.0),
-             ("compare", DEFAULT_GRAVITY, 112, 10.0))
+             ("param", (1.62, 3.71, 9.81), 32, 10.0), ("compare", DEFAULT_GRAVITY, 112, 10.0))
+    helps = {"compare": "gravity sweeps of several controllers, one table and plot",
+             "param": "any Raibert gain or --randomize parameter (model field or not) against gravity"}
     for kind, gravity, num, duration in kinds:
-        s = sub.add_parser(kind, help=f"sweep {kind}" if kind != "compare" else "gravity sweeps of several "
-                           "controllers, one table and plot")
-        flag = "--gravity" if kind == "gains" else "--values"
+        s = sub.add_parser(kind, help=helps.get(kind, f"sweep {kind}"))
+        flag = "--gravity" if kind in ("gains", "param") else "--values"
         s.add_argument(flag, dest="gravity", type=cli.floats(flag), default=None,
                        help=f"gravity values in m/s² (default: {','.join(map(str, gravity))})")
         s.add_argument("--world", type=Path, nargs="+", default=None, metavar="FILE.world",
@@ -40,7 +42,14 @@ def parser() -> argparse.ArgumentParser:
         if kind == "gains":
             s.add_argument("--param", required=True, help="Raibert gain to sweep (a RaibertConfig field)")
             s.add_argument("--values", type=cli.floats("--values"), required=True, help="its values")
-        if kind == "gravity":
+        if kind == "param":
+            s.add_argument("--param", required=True,
+                           help="a Raibert gain (RaibertConfig field) or a --randomize parameter: "
+                                f"{', '.join(registry.PARAMETERS)}, {', '.join(registry.CONTROL_PARAMETERS)}")
+            s.add_argument("--values", type=cli.floats("--values"), required=True,
+                           help="its values, in the parameter's unit (docs/variation.md); every instance of a "
+                                "value gets it")
+        if kind in ("gravity", "param"):
             s.add_argument("--controller", default="raibert",
                            help="raibert, balance (the stand reference) or policy:PATH (experiments/train.py)")
         if kind == "compare":
@@ -94,18 +103,20 @@ def check(args):
     gravity = gravity_from_worlds(args) if args.world is not None else tuple(args.gravity or args.default_gravity)
     physics = cli.check_physics(args, n=args.num, seed=args.seed)  # one robot per replicate, drawn now
     cli.refuse_terrain(physics.ground, "a sweep")
-    cli.check_delay(physics, args.duration)
+    cli.check_delay(physics, args.duration, args.num, args.seed)
     names = args.controllers.split(",") if args.kind == "compare" else [getattr(args, "controller", "raibert")]
     if len(set(names)) != len(names):
         raise ValueError(f"--controllers lists one twice: {args.controllers}")
     chunk = check_size(args, len(gravity))
     specs = []
+    swept = args.kind in ("gains", "param")
     for name in names:
-        specs.append(SweepSpec(kind="gains" if args.kind == "gains" else "gravity", gravity=gravity, num=args.num,
-                               duration=args.duration, height=args.height, speed=tuple(args.speed), seed=args.seed,
-                               kick=args.kick, chunk=chunk, physics=physics,
-                               param=getattr(args, "param", None), controller=name,
-                               values=tuple(args.values) if args.kind == "gains" else ()))
+        spec = SweepSpec(kind=args.kind if swept else "gravity", gravity=gravity, num=args.num,
+                         duration=args.duration, height=args.height, speed=tuple(args.speed), seed=args.seed,
+                         kick=args.kick, chunk=chunk, physics=physics, param=getattr(args, "param", None),
+                         controller=name, values=tuple(args.values) if swept else ())
+        check_robots(spec, args.duration)
+        specs.append(spec)
         cli.check_controller(name, args.height, args.speed, physics)  # a policy: its folder and trained range
     out = args.out or Path("runs") / f"{args.kind}-{datetime.now(timezone.utc):%Y%m%d-%H%M%S}"
     cli.check_writable("--out", out, folder=True, make_parents=True)
@@ -122,6 +133,33 @@ def check(args):
     return specs, out
 
 
+def check_robots(spec, duration: float) -> None:
+    """A swept parameter's robots: an engine that takes it, each value within the parameter's range (drawn
+    now, no JAX), delays shorter than the run, a controller and motors it applies to."""
+    if not spec.sweeps_robot:
+        cli.check_controls(spec.physics, spec.controller)
+        return
+    from hopper_mjx.model import variation
+    from hopper_mjx.randomize import check_engine_varies
+
+    physics = spec.robot_physics
+    try:
+        check_engine_varies(physics.engine, physics.variation.fields)
+    except ValueError as err:
+        raise ValueError(f"--param {spec.param}: {err}; use --engine mjx or auto") from None
+    cli.check_controls(physics, spec.controller)
+    for robots in spec.robot_specs():
+        try:
+            variation.draw(robots, physics.mj_model, spec.num, spec.seed)
+            drawn = variation.draw_controls(robots, physics.mj_model, spec.num, spec.seed)
+        except ValueError as err:
+            raise ValueError(f"--values: {err}") from None
+        for name in ("action_delay", "sensor_delay"):
+            if name in drawn and drawn[name].max() * 1e-3 >= duration:
+                raise ValueError(f"--values: {name} {drawn[name].max():g} ms is not shorter than the run's "
+                                 f"--duration {duration:g} s")
+
+
 # Values a swept instance records per simulated second at the sweep's rates (contact and state at 1 kHz,
 # IMU and odometry at 100 Hz: runner.SENSORS), and keeps per instance (its row of metrics, its kick).
 RECORDED_PER_S = 1000 * (19 + 7) + 100 * (10 + 13)
@@ -133,7 +171,7 @@ def check_size(args, gravities: int) -> int:
     cannot run here, before the grid is even expanded."""
     if args.num < 1 or args.chunk < 1:
         return args.chunk  # SweepSpec names the bad one
-    n = gravities * args.num * (len(args.values) if args.kind == "gains" else 1)
+    n = gravities * args.num * (len(args.values) if args.kind in ("gains", "param") else 1)
     budget.check_steps("--duration", args.duration, DEFAULT_TIMESTEP)
     budget.check_memory("--num", n, KEPT)
     chunk = min(args.chunk, n)  # a chunk is padded to its size: never beyond the grid

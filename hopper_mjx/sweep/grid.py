@@ -2,9 +2,10 @@
 
 A `SweepSpec` holds every argument that changes results; it is saved as the
 run's manifest, so a rerun into the same folder can tell a resume from a
-different experiment. Instances are ordered gain-major, then gravity, then
-replicate, and chunked in that order. Replicate r has the same kick, and the same robot under
---randomize, at every grid point (common random numbers).
+different experiment. Instances are ordered value-major (a swept gain or parameter),
+then gravity, then replicate, and chunked in that order. Replicate r has the same kick,
+and the same robot under --randomize, at every grid point (common random numbers): a
+swept parameter replaces its own draw only, the others' stay as they were.
 """
 
 from __future__ import annotations
@@ -16,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from hopper_mjx import checks, registry
-from hopper_mjx.randomize import Spec
+from hopper_mjx.randomize import NAMES, Dist, Spec
 from hopper_mjx.scenario import Physics
 
 PLANETS = {1.62: "Moon", 3.71: "Mars", 9.81: "Earth"}
@@ -30,7 +31,7 @@ KICK = 0.03
 
 @dataclass(frozen=True)
 class SweepSpec:
-    kind: str  # "gravity" or "gains"
+    kind: str  # "gravity", "gains" (a Raibert gain) or "param" (a gain or a --randomize parameter)
     gravity: tuple[float, ...]  # m/s², pointing down
     num: int  # replicates per grid point
     duration: float  # s of simulated time
@@ -39,14 +40,14 @@ class SweepSpec:
     seed: int
     kick: float = KICK
     chunk: int = 256  # instances per compiled call; fixed so every chunk reuses one compile
-    param: str | None = None  # Raibert gain swept by `gains`
+    param: str | None = None  # the Raibert gain or --randomize parameter swept by `gains` / `param`
     values: tuple[float, ...] = ()
     controller: str = "raibert"  # or policy:PATH, a policy trained by experiments/train.py
     physics: Physics = Physics()  # the robot, its engine (and what else compiles), the same for every grid point
 
     def __post_init__(self):
-        if self.kind not in ("gravity", "gains"):
-            raise ValueError(f"unknown sweep kind {self.kind!r}; use gravity or gains")
+        if self.kind not in ("gravity", "gains", "param"):
+            raise ValueError(f"unknown sweep kind {self.kind!r}; use gravity, gains or param")
         if not self.gravity:
             raise ValueError("no gravity values given")
         bad = [g for g in self.gravity if not (math.isfinite(g) and g > 0)]
@@ -71,13 +72,18 @@ class SweepSpec:
         if self.controller not in registry.SWEEP_CONTROLLERS and not registry.is_policy(self.controller):
             raise ValueError(f"--controller {self.controller!r}: a sweep runs "
                              f"{', '.join(registry.SWEEP_CONTROLLERS)} or policy:PATH")
-        if self.kind == "gains" and self.controller != "raibert":
-            raise ValueError("a gains sweep varies Raibert's gains: use --controller raibert")
-        if self.kind == "gains":
+        if self.kind != "gravity":
             from hopper_mjx.control.raibert import GAINS
 
-            if self.param not in GAINS:
+            if self.kind == "gains" and self.param not in GAINS:
                 raise ValueError(f"unknown gain {self.param!r}; choose from {', '.join(GAINS)}")
+            if self.param not in (*GAINS, *NAMES):
+                raise ValueError(f"unknown --param {self.param!r}; choose a Raibert gain ({', '.join(GAINS)}) or a "
+                                 f"--randomize parameter ({', '.join(NAMES)})")
+            if self.param in GAINS and self.controller != "raibert":
+                raise ValueError(f"{self.param} is a Raibert gain: use --controller raibert")
+            if self.param in self.variation.names:
+                raise ValueError(f"--param {self.param} is drawn by --randomize too; leave it out of one")
             if not self.values or not all(math.isfinite(v) for v in self.values):
                 raise ValueError("--values must be one or more finite numbers")
             if len(set(self.values)) != len(self.values):  # as gravity: a grid point twice is counted twice
@@ -93,6 +99,32 @@ class SweepSpec:
         """Which robot parameters each replicate draws (empty: the URDF's robot)."""
         return self.physics.variation or Spec()
 
+    @property
+    def swept(self) -> bool:
+        """The grid has a value axis (a gain or a parameter), beside gravity."""
+        return self.kind != "gravity"
+
+    @property
+    def sweeps_robot(self) -> bool:
+        """The swept value is a --randomize parameter: each value is a robot of its own."""
+        return self.swept and self.param in NAMES
+
+    def robot_specs(self) -> list[Spec]:
+        """The variation of each value's robots (one spec; a swept parameter's: one per value, the
+        parameter fixed at it after the others, whose draws stay as they were)."""
+        if not self.sweeps_robot:
+            return [self.variation]
+        return [Spec((*self.variation.items, (self.param, Dist("fixed", v)))) for v in self.values]
+
+    @property
+    def robot_physics(self) -> Physics:
+        """The physics the sweep compiles: with the swept parameter among its variation, so that the engine
+        and the delay lines take it."""
+        if not self.sweeps_robot:
+            return self.physics
+        items = (*self.variation.items, (self.param, Dist("uniform", min(self.values), max(self.values))))
+        return dataclasses.replace(self.physics, variation=Spec(items))
+
 
 @dataclass(frozen=True)
 class Instances:
@@ -103,19 +135,25 @@ class Instances:
     value: np.ndarray  # (n,) swept gain value (NaN for a gravity sweep)
     qvel: np.ndarray  # (n, nv) initial velocity: the random kick
     robot: dict = dataclasses.field(default_factory=dict)  # column name -> (n,) drawn robot parameter
+    # (n,) row of the drawn robots each instance runs (`runner.robots`): its replicate, or with a swept
+    # parameter value index x num + replicate.
+    robot_row: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.gravity)
 
 
 def expand(spec: SweepSpec, nv: int) -> Instances:
-    values = spec.values if spec.kind == "gains" else (math.nan,)
-    value, gravity, replicate = (
-        a.ravel() for a in np.meshgrid(values, spec.gravity, np.arange(spec.num), indexing="ij")
+    values = spec.values if spec.swept else (math.nan,)
+    index, gravity, replicate = (
+        a.ravel() for a in np.meshgrid(np.arange(len(values)), spec.gravity, np.arange(spec.num), indexing="ij")
     )
+    value = np.asarray(values, dtype=float)[index]
     # Common random numbers: replicate r gets the same kick at every gravity and gain value,
     # so differences along the grid are not sampling noise; nor do they depend on chunking.
     kicks = np.array([np.random.default_rng([spec.seed, r]).normal(0.0, spec.kick, 4) for r in range(spec.num)])
     qvel = np.zeros((len(gravity), nv))
     qvel[:, [0, 1, 3, 4]] = kicks[replicate.astype(int)]  # vx, vy, roll rate, pitch rate
-    return Instances(gravity=gravity, replicate=replicate.astype(int), value=value, qvel=qvel)
+    row = index * spec.num + replicate if spec.sweeps_robot else replicate
+    return Instances(gravity=gravity, replicate=replicate.astype(int), value=value, qvel=qvel,
+                     robot_row=row.astype(int))

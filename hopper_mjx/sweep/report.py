@@ -18,12 +18,12 @@ INTEGER_COLUMNS = {"replicate", "seed", "hops", "fell", "diverged"}
 
 
 def rows(spec: SweepSpec, inst: Instances, table: np.ndarray, columns: tuple[str, ...]) -> tuple[list[str], list[list]]:
-    header = ["gravity", "replicate", "seed"] + ([spec.param] if spec.kind == "gains" else []) + list(inst.robot)
+    header = ["gravity", "replicate", "seed"] + ([spec.param] if spec.swept else []) + list(inst.robot)
     header += list(columns)
     out = []
     for i in range(len(inst)):
         row = [inst.gravity[i], inst.replicate[i], spec.seed]
-        row += [inst.value[i]] if spec.kind == "gains" else []
+        row += [inst.value[i]] if spec.swept else []
         row += [v[i] for v in inst.robot.values()]
         out.append(row + list(table[i]))
     return header, out
@@ -50,19 +50,21 @@ def survived(table: np.ndarray, columns: tuple[str, ...]) -> np.ndarray:
 
 def group_summary(spec: SweepSpec, inst: Instances, table: np.ndarray, columns: tuple[str, ...]) -> list[dict]:
     """One record per grid point (gravity, or gain value x gravity), averaged over replicates."""
-    values = spec.values if spec.kind == "gains" else (math.nan,)
+    values = spec.values if spec.swept else (math.nan,)
     alive = survived(table, columns)
     groups = []
     for value in values:
         for g in spec.gravity:
             sel = (inst.gravity == g) & ((inst.value == value) | (np.isnan(inst.value) & math.isnan(value)))
             record = {"gravity": g, "label": PLANETS.get(g, "")}
-            if spec.kind == "gains":
+            if spec.swept:
                 record[spec.param] = value
             record.update(n=int(sel.sum()), survival=float(alive[sel].mean()),
                           diverged=int(table[sel, columns.index("diverged")].sum()))
             # Hop metrics describe steady hopping: the survivors' (a fallen run's last hops are its collapse).
             steady = sel & alive
+            error = np.abs(table[steady, columns.index("apex_height")] - spec.height)
+            record["apex_error"] = float(error[np.isfinite(error)].mean()) if np.isfinite(error).any() else None
             for c, name in enumerate(columns):
                 if name in ("fell", "diverged"):
                     continue
@@ -79,11 +81,12 @@ def versions() -> dict:
 
 def table_text(spec: SweepSpec, groups: list[dict], label: str | None = None) -> str:
     cols = [("g m/s²", "gravity", "{:.2f}"), ("", "label", "{}"), ("n", "n", "{}"), ("alive", "survival", "{:.0%}"),
-            ("hops", "hops", "{:.1f}"), ("apex m", "apex_height", "{:.3f}"), ("arc m", "flight_rise", "{:.3f}"),
+            ("hops", "hops", "{:.1f}"), ("apex m", "apex_height", "{:.3f}"), ("|apex err|", "apex_error", "{:.3f}"),
+            ("arc m", "flight_rise", "{:.3f}"),
             ("flight s", "flight_time", "{:.3f}"), ("stance s", "stance_time", "{:.3f}"),
             ("period s", "hop_period", "{:.3f}"), ("duty", "duty_factor", "{:.2f}"), ("v m/s", "mean_speed", "{:+.2f}"),
             ("|v err|", "tracking_error", "{:.2f}"), ("CoT", "cost_of_transport", "{:.2f}")]
-    if spec.kind == "gains":
+    if spec.swept:
         cols.insert(0, (spec.param, spec.param, "{:g}"))
     if label:
         cols.insert(0, ("controller", "controller", "{}"))
@@ -191,7 +194,7 @@ def write(out: Path, spec: SweepSpec, inst: Instances, table: np.ndarray, column
     summary = {"groups": groups, "note": "survival over all replicates; every other aggregate over the survivors",
                "arguments": spec.to_json(), "versions": versions(), "run": facts}
     atomic_write_text(out / "summary.json", json.dumps(summary, indent=1))
-    figure = gravity_figure if spec.kind == "gravity" else gains_figure
+    figure = gains_figure if spec.swept else gravity_figure
     save(figure(spec, groups), out / f"{spec.kind}.png")
     text = table_text(spec, groups)
     atomic_write_text(out / "table.txt", text + "\n")

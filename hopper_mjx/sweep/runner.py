@@ -20,7 +20,8 @@ from tqdm import tqdm
 
 from hopper_mjx import metrics, registry, signals
 from hopper_mjx.control.balance import balance
-from hopper_mjx.control.raibert import raibert, raibert_params
+from hopper_mjx.control.base import pd_scale
+from hopper_mjx.control.raibert import GAINS, raibert, raibert_params
 from hopper_mjx.files import atomic_write
 from hopper_mjx.model import variation
 from hopper_mjx.sim import Sim, gravity_vectors, steps_for
@@ -38,9 +39,11 @@ SENSORS = signals.SensorConfig(imu_rate=100, odom_rate=100, contact_rate=1000, s
 class ChunkRunner:
     """One compiled rollout + metrics, applied to chunks of the grid."""
 
-    def __init__(self, spec: SweepSpec, instances: Instances, sim: Sim, robots: dict):
-        """`robots`: {model field: (num, ...)} each replicate's robot (`variation.with_constants`), or {}."""
-        self.spec, self.instances, self.sim, self.robots = spec, instances, sim, robots
+    def __init__(self, spec: SweepSpec, instances: Instances, sim: Sim, robots: dict, controls: dict):
+        """`robots`: {model field: (rows, ...)} each robot row's model (`variation.with_constants`), or {};
+        `controls`: {control parameter: (rows, ...)} its controller's, motors' and sensors' (`Instances.robot_row`
+        says which row an instance runs)."""
+        self.spec, self.instances, self.sim, self.robots, self.controls = spec, instances, sim, robots, controls
         self.policy = registry.policy_path(spec.controller) if registry.is_policy(spec.controller) else None
         if spec.controller == "balance":  # commands nothing: it stands
             self.controller = balance(sim.robot, sim.mj_model)
@@ -54,33 +57,37 @@ class ChunkRunner:
         self.steps = steps_for(spec.duration, sim.layout.timestep, SENSORS)
 
     def params(self, full: np.ndarray):
-        """Every instance's command (and swept gain): the same for Raibert and a policy."""
+        """Every instance's command (and swept gain, and PD factors): the same for Raibert and a policy."""
         spec = self.spec
+        row = self.instances.robot_row[full]
+        pick = lambda name: self.controls[name][row] if name in self.controls else None
+        pd = pd_scale(len(full), pick("kp_scale"), pick("kd_scale"))
         if spec.controller == "balance":
             return None
         if self.policy is not None:
             from hopper_mjx.envs.policy import policy_params
 
             return policy_params(self.sim.robot, len(full), height=spec.height, speed=spec.speed,
-                                 config=self.policy_config)
-        gains = {spec.param: self.instances.value[full]} if spec.kind == "gains" else {}
-        return raibert_params(len(full), height=spec.height, speed=spec.speed, **gains)
+                                 config=self.policy_config, pd=pd)
+        gains = {spec.param: self.instances.value[full]} if spec.param in GAINS else {}
+        return raibert_params(len(full), height=spec.height, speed=spec.speed, pd=pd, **gains)
 
     def mass(self, full: np.ndarray):
         """kg of each instance's robot (its drawn link masses), for the cost of transport and power."""
         if "body_mass" not in self.robots:
             return self.sim.layout.total_mass
-        return self.robots["body_mass"][self.instances.replicate[full]].sum(axis=1)
+        return self.robots["body_mass"][self.instances.robot_row[full]].sum(axis=1)
 
     def __call__(self, index: np.ndarray) -> np.ndarray:
         """Metrics (len(index), len(COLUMNS)) of the given instances."""
         n = len(index)
         full = np.concatenate([index, np.full(self.spec.chunk - n, index[0])])  # one shape, one compile
         inst = self.instances
+        row = inst.robot_row[full]
         final, traj = self.sim.run(gravity_vectors(inst.gravity[full]), self.controller, self.params(full),
                                    duration=self.spec.duration, sensors=SENSORS, key=self.spec.seed,
-                                   qvel=inst.qvel[full],
-                                   variation={f: v[inst.replicate[full]] for f, v in self.robots.items()})
+                                   qvel=inst.qvel[full], variation={f: v[row] for f, v in self.robots.items()},
+                                   **self.sim.per_instance({k: v[row] for k, v in self.controls.items()}))
         result = metrics.hop_metrics(traj, inst.gravity[full], command_speed=self.spec.speed,
                                      standing_height=self.sim.robot.standing_height,
                                      work=np.asarray(motor_energy(final)), mass=self.mass(full))
@@ -94,22 +101,39 @@ def motor_energy(final):
     return final.drive.energy if final.drive else final.cstate.work
 
 
+def robots(spec: SweepSpec, mj_model) -> tuple[dict, dict, dict]:
+    """(model fields, control parameters, results.csv columns), each {name: (rows, ...)}: one robot per
+    replicate, and with a swept parameter one per value and replicate (`Instances.robot_row`); raises
+    ValueError for a value outside its parameter's range."""
+    parts = [(variation.draw(s, mj_model, spec.num, spec.seed), variation.draw_controls(s, mj_model, spec.num,
+                                                                                         spec.seed))
+             for s in spec.robot_specs()]
+    stack = lambda dicts: {k: np.concatenate([d[k] for d in dicts]) for k in dicts[0]}
+    drawn, controls = stack([p[0] for p in parts]), stack([p[1] for p in parts])
+    both = spec.robot_specs()[0]
+    columns = variation.columns(both, mj_model, drawn) | variation.control_columns(controls)
+    if spec.sweeps_robot:  # the swept value has its own column already
+        columns = {k: v for k, v in columns.items() if k != spec.param}
+    return drawn, controls, columns
+
+
 def run(spec: SweepSpec, out: Path, *, progress: bool = True) -> tuple[Instances, np.ndarray, dict]:
     """Runs (or resumes) the sweep; returns the grid, its metrics (n, len(COLUMNS)) and run facts."""
     out = Path(out)
     claim(out, spec)
     (out / "chunks").mkdir(exist_ok=True)
-    sim = spec.physics.sim()
+    physics = spec.robot_physics
+    drawn, controls, robot = robots(spec, physics.mj_model)
+    sim = physics.sim(controls=controls)
     instances = expand(spec, sim.layout.nv)
-    drawn = variation.draw(spec.variation, sim.mj_model, spec.num, spec.seed)  # one robot per replicate
-    robot = variation.columns(spec.variation, sim.mj_model, drawn)
-    instances = dataclasses.replace(instances, robot={k: v[instances.replicate] for k, v in robot.items()})
+    instances = dataclasses.replace(instances, robot={k: v[instances.robot_row] for k, v in robot.items()})
     chunks = [np.arange(i, min(i + spec.chunk, len(instances))) for i in range(0, len(instances), spec.chunk)]
     me, procs = jax.process_index(), jax.process_count()
     mine = list(range(me, len(chunks), procs))
     saved = {k: read_chunk(out, k, len(chunks[k]), len(COLUMNS)) for k in mine}
     todo = [k for k in mine if saved[k] is None]  # missing, or damaged by a kill mid-write: (re)computed
-    runner = ChunkRunner(spec, instances, sim, variation.with_constants(sim.mj_model, drawn)) if todo else None
+    runner = ChunkRunner(spec, instances, sim, variation.with_constants(sim.mj_model, drawn), controls) \
+        if todo else None
 
     start, simulated = time.perf_counter(), 0
     bar = tqdm(total=sum(len(chunks[k]) for k in todo) * spec.duration, unit="inst·s", disable=not progress,
