@@ -42,7 +42,7 @@ def parser() -> argparse.ArgumentParser:
             s.add_argument("--values", type=cli.floats("--values"), required=True, help="its values")
         if kind == "gravity":
             s.add_argument("--controller", default="raibert",
-                           help="raibert, balance (the stand reference) or policy:PATH (experiments/train.py)")
+                           help="raibert (the tasks' reference), balance (an LQR stance) or policy:PATH")
         if kind == "compare":
             s.add_argument("--controllers", required=True,
                            help="comma-separated: raibert, balance and/or policy:PATH, each swept with the "
