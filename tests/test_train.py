@@ -288,6 +288,34 @@ def test_the_results_table_is_read_from_the_run_folders(seeded, tmp_path):
     assert cells[5:] == ["n/a"] * 3
     assert out.with_suffix(".png").stat().st_size > 10_000
 
+def test_the_results_table_puts_each_tasks_registered_reference_beside_it(tmp_path):
+    """results.py takes each task's reference from the registry: Raibert at the runs' evaluation command for the
+    hopping tasks, at stand's own small apex for stand (whose runs command none). Run folders as train.py writes
+    their metrics.json (arguments and an empty history); no sweep, so no measures."""
+    import json
+
+    from hopper_mjx import registry
+
+    results = _load_script("results")
+    runs = []
+    for task in registry.TASKS:
+        run = tmp_path / task
+        run.mkdir()
+        args = {"task": task, "algo": "sac", "seed": 0, "eval_height": 0.12, "eval_speed": [0.0, 0.0]}
+        (run / "metrics.json").write_text(json.dumps({"args": args, "history": []}))
+        runs.append(str(run))
+    out = tmp_path / "results.md"
+    assert results.main([*runs, "--out", str(out)]) == 0
+    references = json.loads(out.with_suffix(".json").read_text())["references"]
+    assert set(references) == set(registry.TASKS)
+    for task, ref in registry.TASK_REFERENCES.items():
+        height = 0.12 if ref.height is None else ref.height
+        assert references[task]["controller"] == f"{ref.controller} at {height:g} m"
+        assert references[task]["survival"] is None  # not swept
+    assert references["stand"]["height"] == 0.05 and references["hop"]["height"] == 0.12
+    assert "| stand × raibert at 0.05 m (reference) |" in out.read_text()
+
+
 def test_train_rejects_an_out_it_cannot_make_in_one_line(tmp_path, capsys):
     (tmp_path / "a_file").write_text("")
     for out, message in ((tmp_path / "a_file" / "run", "its folder " + str(tmp_path / "a_file") + " is not a folder"),
