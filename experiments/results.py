@@ -8,11 +8,12 @@ over its seeds, the median and [min-max] of: minutes of training to the task's t
 of --scan-checkpoints; `hopper_mjx.thresholds`), env steps/s (Brax's, the median over the run's
 evaluations), and on the kicked gravity sweep of the run's policy (RUN/sweep/: `python -m hopper_mjx.sweep
 gravity --controller policy:RUN`, nine default gravities, the default kick) the worst gravity's survival,
-apex error |rise/command - 1| and speed error. Each task's reference controller (raibert for the hopping
-tasks, balance for stand) is swept the same way (OUT's folder, reference-<task>/). With --sweep the
-missing sweeps are run (each resumable); without it a run without a sweep shows n/a; ∞ marks an error
-with no survivor or no hop to measure it on. One plot beside
-the table (OUT with .png): every seed's evaluation reward against training minutes.
+apex error |rise/command - 1| and speed error. Each task's reference controller (`registry.TASK_REFERENCES`:
+Raibert at the runs' command for the hopping tasks, Raibert at a 5 cm apex for stand) is swept the same way
+(OUT's folder, reference-<task>/); stand's apex column is its reference's error against its own command.
+With --sweep the missing sweeps are run (each resumable); without it a run without a sweep shows n/a; ∞ marks
+an error with no survivor or no hop to measure it on. One plot beside the table (OUT with .png): every seed's
+evaluation reward against training minutes.
 """
 
 from __future__ import annotations
@@ -24,9 +25,8 @@ import statistics
 import sys
 from pathlib import Path
 
-from hopper_mjx import cli
+from hopper_mjx import cli, registry
 
-REFERENCE = {"stand": "balance", "hop": "raibert", "hop_velocity": "raibert"}
 SWEEP = "sweep"
 
 
@@ -68,8 +68,9 @@ def command(args: dict) -> tuple[float, tuple[float, float]]:
     return float(args["eval_height"]), tuple(float(v) for v in args["eval_speed"])
 
 
-def sweep_measures(folder: Path, task: str, height: float) -> dict:
-    """The worst gravity's survival, apex error and speed error of a finished sweep (None: no sweep)."""
+def sweep_measures(folder: Path, height: float) -> dict:
+    """The worst gravity's survival, apex error (None without a commanded rise) and speed error of a finished
+    sweep (None: no sweep)."""
     if not (folder / "summary.json").is_file():
         return {"survival": None, "apex_error": None, "speed_error": None}
     groups = _json(folder / "summary.json")["groups"]
@@ -77,8 +78,8 @@ def sweep_measures(folder: Path, task: str, height: float) -> dict:
     speed = [g.get("tracking_error") for g in groups]
     return {
         "survival": min(g["survival"] for g in groups),
-        "apex_error": None if task == "stand" else (max(abs(a / height - 1) for a in apex)
-                                                     if all(a is not None for a in apex) else float("inf")),
+        "apex_error": None if not height > 0 else (max(abs(a / height - 1) for a in apex)
+                                                   if all(a is not None for a in apex) else float("inf")),
         "speed_error": max(speed) if all(s is not None for s in speed) else float("inf"),
     }
 
@@ -109,7 +110,7 @@ def run_record(run: Path, do_sweep: bool, num: int, duration: float) -> dict:
             "steps_per_s": statistics.median(rates) if rates else None,
             "curve": [(r["wall_time"] / 60, r["eval/episode_reward"]) for r in record["history"]
                       if "eval/episode_reward" in r],
-            **sweep_measures(run / SWEEP, args["task"], height), "height": height, "speed": list(speed)}
+            **sweep_measures(run / SWEEP, height), "height": height, "speed": list(speed)}
 
 
 def spread(values, fmt: str) -> str:
@@ -174,10 +175,13 @@ def build(paths: list[Path], out: Path, *, do_sweep: bool, num: int, duration: f
     references = {}
     for task in sorted({r["task"] for r in records}):
         first = next(r for r in records if r["task"] == task)
+        ref = registry.TASK_REFERENCES[task]
+        height = first["height"] if ref.height is None else ref.height  # stand's runs command no apex
         folder = out.parent / f"reference-{task}"
         if do_sweep and not (folder / "summary.json").is_file():
-            run_sweep(REFERENCE[task], folder, first["height"], first["speed"], num, duration)
-        references[task] = {"controller": REFERENCE[task], **sweep_measures(folder, task, first["height"])}
+            run_sweep(ref.controller, folder, height, first["speed"], num, duration)
+        references[task] = {"controller": f"{ref.controller} at {height:g} m", "height": height,
+                            **sweep_measures(folder, height)}
     text = table(records, references)
     out.write_text(f"{text}\n")
     out.with_suffix(".json").write_text(json.dumps({"runs": records, "references": references}, indent=1))

@@ -250,7 +250,10 @@ def run_sac(args, env, factory, remaining: int, start_step: int, resume, progres
     from brax.training import checkpoint as brax_checkpoint
     from brax.training.agents.sac import train as sac
 
-    with tempfile.TemporaryDirectory(dir=Path(args.out).resolve()) as scratch:
+    from hopper_mjx.envs.replay import ring_replay_in_sac
+
+    # The ring replay: Brax's own copies the whole replay on every insert once full (hopper_mjx.envs.replay).
+    with tempfile.TemporaryDirectory(dir=Path(args.out).resolve()) as scratch, ring_replay_in_sac():
         def progress_and_file(step, metrics):
             if step > 0:
                 save_checkpoint(step, brax_checkpoint.load(Path(scratch) / f"{int(step):012d}"))
@@ -381,7 +384,8 @@ def evaluation_batch(gravities, num: int, seed: int, nv: int):
 
 def evaluate(policy_path, physics, *, gravities, duration: float, height: float, num: int, seed: int = 0,
              speed=(0.0, 0.0), raibert_too: bool = True) -> dict:
-    """Hop metrics of the policy and (`raibert_too`) of the Raibert controller, same batch, same commands.
+    """Hop metrics of the policy and (`raibert_too`) of the Raibert controller, same batch, same commands
+    (Raibert at the policy task's reference apex when the task names one: stand's, `registry.TASK_REFERENCES`).
 
     Each controller runs `num` instances per gravity for `duration` s in the core,
     from the standing pose with small random initial base velocities (the sweep's kicks).
@@ -400,12 +404,13 @@ def evaluate(policy_path, physics, *, gravities, duration: float, height: float,
     # a policy on randomised ones
     g, kick = evaluation_batch(gravities, num, seed, sim.layout.nv)
     sensors = SENSORS  # the sweep's streams and kicks: the numbers compare with a sweep's
+    config = policy.read(policy_path)[3]
     controllers = {"policy": (policy.policy_controller(mj_model, policy_path),
-                              policy.policy_params(sim.robot, len(g), height=height, speed=speed,
-                                                   config=policy.read(policy_path)[3]))}
+                              policy.policy_params(sim.robot, len(g), height=height, speed=speed, config=config))}
     if raibert_too:
-        controllers["raibert"] = (raibert.raibert(sim.robot),
-                                  raibert.raibert_params(len(g), height=height, speed=speed))
+        reference = registry.TASK_REFERENCES[config.task].height
+        controllers["raibert"] = (raibert.raibert(sim.robot), raibert.raibert_params(
+            len(g), height=height if reference is None else reference, speed=speed))
     out = {}
     for name, (controller, params) in controllers.items():
         final, traj = sim.run(gravity_vectors(g), controller, params, duration=duration, sensors=sensors,

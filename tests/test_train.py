@@ -167,13 +167,16 @@ def test_evaluation_kicks_are_the_sweeps():
 
 
 def test_each_task_has_its_threshold():
-    """--scan-checkpoints' bar: stand survives; hop and hop_velocity also hop to the apex, without drift
-    (hop) or at the commanded speed (hop_velocity)."""
+    """--scan-checkpoints' bar: stand survives in place, hopping low if at all; hop and hop_velocity also hop
+    to the apex, without drift (hop) or at the commanded speed (hop_velocity)."""
     row = {"survival": 1.0, "min_hops": 5, "apex_height": 0.086, "tracking_error": 0.1}
     meets = lambda task, **change: train_script.meets_threshold(task, {**row, **change}, height=0.10)
     assert all(meets(task) for task in ("stand", "hop", "hop_velocity"))
     assert not any(meets(task, survival=63 / 64) for task in ("stand", "hop", "hop_velocity"))
     assert meets("stand", min_hops=0) and not meets("hop", min_hops=4) and not meets("hop_velocity", min_hops=4)
+    # stand: up in place (drift within the bound), its hops (if any) small
+    assert meets("stand", apex_height=None) and meets("stand", apex_height=0.10)
+    assert not meets("stand", apex_height=0.11) and not meets("stand", tracking_error=0.11)
     for task in ("hop", "hop_velocity"):  # 5 lift-offs of a 2 cm buzz are not hops to a 10 cm apex
         assert not meets(task, apex_height=0.02) and not meets(task, apex_height=0.084)  # -16 %
         assert meets(task, apex_height=0.114) and not meets(task, apex_height=0.116)
@@ -284,6 +287,34 @@ def test_the_results_table_is_read_from_the_run_folders(seeded, tmp_path):
     assert cells[4] == f"{statistics.median(rates):,.0f} [{min(rates):,.0f}–{max(rates):,.0f}]"
     assert cells[5:] == ["n/a"] * 3
     assert out.with_suffix(".png").stat().st_size > 10_000
+
+def test_the_results_table_puts_each_tasks_registered_reference_beside_it(tmp_path):
+    """results.py takes each task's reference from the registry: Raibert at the runs' evaluation command for the
+    hopping tasks, at stand's own small apex for stand (whose runs command none). Run folders as train.py writes
+    their metrics.json (arguments and an empty history); no sweep, so no measures."""
+    import json
+
+    from hopper_mjx import registry
+
+    results = _load_script("results")
+    runs = []
+    for task in registry.TASKS:
+        run = tmp_path / task
+        run.mkdir()
+        args = {"task": task, "algo": "sac", "seed": 0, "eval_height": 0.12, "eval_speed": [0.0, 0.0]}
+        (run / "metrics.json").write_text(json.dumps({"args": args, "history": []}))
+        runs.append(str(run))
+    out = tmp_path / "results.md"
+    assert results.main([*runs, "--out", str(out)]) == 0
+    references = json.loads(out.with_suffix(".json").read_text())["references"]
+    assert set(references) == set(registry.TASKS)
+    for task, ref in registry.TASK_REFERENCES.items():
+        height = 0.12 if ref.height is None else ref.height
+        assert references[task]["controller"] == f"{ref.controller} at {height:g} m"
+        assert references[task]["survival"] is None  # not swept
+    assert references["stand"]["height"] == 0.05 and references["hop"]["height"] == 0.12
+    assert "| stand × raibert at 0.05 m (reference) |" in out.read_text()
+
 
 def test_train_rejects_an_out_it_cannot_make_in_one_line(tmp_path, capsys):
     (tmp_path / "a_file").write_text("")

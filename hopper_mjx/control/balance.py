@@ -1,4 +1,4 @@
-"""`balance`: an LQR about the monoped standing on its sphere foot (a reference for the `stand` task).
+"""`balance`: an LQR about the monoped standing on its sphere foot (why `stand` allows small hops: docs/control.md).
 
 The robot standing still is an inverted pendulum on a 3 cm ball with an actuated hip
 (haa, hfe) and knee (kfe): underactuated, like the acrobot. The controller is linear

@@ -53,7 +53,10 @@ ROBOT_INFO = ("robot", "line")  # a randomised task's too: the episode's robot a
 ROBOT_POOL = 256  # robots a randomised task draws once; an episode runs one of them
 # The control parameters a task draws (the others, sensor noise and delay and dc motors, not in training yet).
 TRAINED_CONTROLS = ("kp_scale", "kd_scale", "action_delay")
-RANGES = ("gravity_range", "apex_range", "speed_range", "lateral_speed_range", "initial_clearance")
+RANGES = ("gravity_range", "apex_range", "speed_range", "lateral_speed_range", "initial_clearance", "height_band")
+# Fields of configs saved before stand was redefined (its foot-support term); a policy's hopper_env.json with
+# them still loads (they only shaped the reward it was trained on).
+RETIRED = ("w_support", "support_scale")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -75,10 +78,10 @@ class MonopedConfig:
     kd: tuple[float, float, float] = (6.0, 6.0, 6.0)  # N·m·s/rad
     # Reward weights (per policy step) and kernel widths.
     w_alive: float = 0.0  # per step upright (stand)
-    w_height: float = 0.0  # stand: exp(-|z - standing height| / height_scale)
+    w_height: float = 0.0  # stand: exp(-(distance of z outside height_band) / height_scale)
+    # m about the standing height, stand: the base anywhere from a crouch to a small hop's apex is "up".
+    height_band: tuple[float, float] = (0.0, 0.0)
     height_scale: float = 0.05  # m
-    w_support: float = 0.0  # stand: exp(-|F_z / (m g) - 1| / support_scale): the foot carries the weight
-    support_scale: float = 0.25
     w_apex: float = 1.0
     apex_scale: float = 0.1  # m; exp(-|error| / scale)
     w_speed: float = 0.5
@@ -143,6 +146,7 @@ class MonopedConfig:
     @classmethod
     def from_dict(cls, values: dict) -> "MonopedConfig":
         known = {f.name for f in dataclasses.fields(cls)}
+        values = {k: v for k, v in values.items() if k not in RETIRED}
         unknown = set(values) - known
         if unknown:
             raise ValueError(f"unknown MonopedConfig field(s): {sorted(unknown)}")
@@ -233,6 +237,11 @@ def observe(layout: Layout, cfg: MonopedConfig, obs: Observation, gravity: jax.A
 def closeness(error: jax.Array, scale: float) -> jax.Array:
     """1 at zero error, 1/e at `scale`: a tracking reward with a gradient everywhere."""
     return jnp.exp(-jnp.abs(error) / scale)
+
+
+def outside(value: jax.Array, band: tuple[float, float]) -> jax.Array:
+    """Distance of `value` outside the interval `band` (0 inside it)."""
+    return jnp.maximum(band[0] - value, 0.0) + jnp.maximum(value - band[1], 0.0)
 
 
 def predicted_apex(d, g: jax.Array) -> jax.Array:

@@ -51,7 +51,7 @@ def parser() -> argparse.ArgumentParser:
                                 "value gets it")
         if kind in ("gravity", "param"):
             s.add_argument("--controller", default="raibert",
-                           help="raibert, balance (the stand reference) or policy:PATH (experiments/train.py)")
+                           help="raibert (the tasks' reference), balance (an LQR stance) or policy:PATH")
         if kind == "compare":
             s.add_argument("--controllers", required=True,
                            help="comma-separated: raibert, balance and/or policy:PATH, each swept with the "
