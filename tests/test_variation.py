@@ -171,15 +171,15 @@ def test_same_seed_same_draws_and_results(recorded, tmp_path):
 def test_auto_takes_mjx_for_a_variation_the_chain_cannot_take(mj_model, capsys):
     from hopper_mjx.sim import Sim
 
-    batch = cli.check_batch(simulate.parser().parse_args(["--randomize", "foot_friction=0.5,base_mass=5"]))
+    batch = cli.check_batch(simulate.parser().parse_args(["--randomize", "foot_friction=0.5,dof_frictionloss=0.1"]))
     sim = Sim(mj_model, engine=batch.physics.engine, varies=batch.physics.variation.fields)
     assert sim.engine.name == "mjx"
-    assert "note: engine auto uses mjx (the chain engine cannot vary body_mass per instance yet)" in \
+    assert "note: engine auto uses mjx (the chain engine cannot vary dof_frictionloss per instance yet)" in \
         capsys.readouterr().err
-    with pytest.raises(ValueError, match="the chain engine cannot vary body_mass"):
+    with pytest.raises(ValueError, match="the chain engine cannot vary dof_frictionloss"):
         Sim(sim.mj_model, engine="chain", varies=batch.physics.variation.fields)
-    # Friction and damping it takes at run time: auto keeps the chain.
-    assert Sim(mj_model, varies=frozenset({"pair_friction", "dof_damping"})).engine.name == "chain"
+    # The robot's masses, geometry, friction, damping, armature and gear it takes at run time: auto keeps the chain.
+    assert Sim(mj_model, varies=registry.CHAIN_VARIES).engine.name == "chain"
 
 
 def test_friction_and_damping_leave_mujocos_constants_as_they_are(mj_model):

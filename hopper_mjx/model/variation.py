@@ -26,10 +26,12 @@ from hopper_mjx.randomize import Spec
 # Fields `mj_setConst` derives from masses, inertias, armature and gear that MJX's step reads (MJX reads
 # body_sameframe, which changes with a moved centre of mass, nowhere).
 CONSTANTS = ("body_subtreemass", "body_invweight0", "dof_invweight0", "dof_M0", "actuator_acc0")
-FEEDS_CONSTANTS = {"body_mass", "body_inertia", "body_ipos", "dof_armature", "actuator_gear"}  # the rest do not
+# (A body's offset moves the others' lever arms; a foot's radius feeds none of them.)
+FEEDS_CONSTANTS = {"body_mass", "body_inertia", "body_ipos", "dof_armature", "actuator_gear", "body_pos"}
 # Columns of a row a parameter sets: None, the whole row; a list, those columns (one draw shared by them
 # unless the parameter draws per axis).
-_COLUMNS = {"body_inertia": None, "body_ipos": [0, 1, 2], "pair_friction": [0, 1], "actuator_gear": [0]}
+_COLUMNS = {"body_inertia": None, "body_ipos": [0, 1, 2], "pair_friction": [0, 1], "actuator_gear": [0],
+            "body_pos": [0, 1, 2], "geom_size": [0]}
 _PER_AXIS = {"body_ipos"}  # one draw per column (x, y, z), not one per row
 
 
@@ -48,6 +50,8 @@ def rows(mj_model: mujoco.MjModel, elements: str) -> list[int]:
         return list(lay.joint_dof)
     if elements == "actuators":
         return list(lay.actuator_of_joint)
+    if elements == "foot_geom":
+        return [lay.foot_geom]
     if elements == "foot_pair":
         return [int(p) for p in np.flatnonzero((m.pair_geom1 == lay.foot_geom) | (m.pair_geom2 == lay.foot_geom))]
     raise ValueError(f"unknown elements {elements!r}")
@@ -67,10 +71,44 @@ def draw(spec: Spec, mj_model: mujoco.MjModel, n: int, seed: int) -> dict[str, n
         # One draw per element (per row; per row and axis for the centre of mass), spread over its columns.
         shape = at.shape[:1] + (1,) if nominal.ndim == 2 and par.field not in _PER_AXIS else at.shape
         drawn = dist.draw(spec.rng(seed, name), np.ones(shape), n)
+        if par.length:  # the row's length: drawn (or scaled from the nominal length), the direction kept
+            length = np.linalg.norm(at, axis=-1, keepdims=True)
+            _check_link(mj_model, name, par)
+            drawn = length * drawn if dist.kind == "scale" else drawn
+            _check_range(name, par, drawn)
+            field[(slice(None), *index)] = at / length * drawn
+            continue
         drawn = at * drawn if dist.kind == "scale" else np.broadcast_to(drawn, (n, *at.shape))
         _check_range(name, par, drawn)
         field[(slice(None), *index)] = at + drawn if par.offset else drawn
     return values
+
+
+def _check_link(m: mujoco.MjModel, name: str, par: registry.Parameter) -> None:
+    """A length parameter's body must be its own link, below the joint before it, at a distance from it."""
+    kfe_body = int(m.joint(JOINTS[2]).bodyid[0])
+    body = rows(m, par.elements)[0]
+    if par.elements == "foot" and body == kfe_body:
+        raise ValueError(f"{name}: the foot sphere sits on the shank link itself; {name} needs a foot link")
+    if not np.any(m.body_pos[body]):
+        raise ValueError(f"{name}: the {par.elements} link sits at its parent's origin; no length to draw")
+
+
+def settable(mj_model: mujoco.MjModel, field: str) -> np.ndarray:
+    """Bool mask, the shape of `field`: the entries some `registry.PARAMETERS` entry can set (a length keeps
+    a zero component zero). The chain engine takes these as run-time values and folds the rest."""
+    nominal = np.asarray(getattr(mj_model, field))
+    mask = np.zeros(nominal.shape, bool)
+    for par in registry.PARAMETERS.values():
+        if par.field != field:
+            continue
+        at = rows(mj_model, par.elements)
+        if nominal.ndim == 1:
+            mask[at] = True
+            continue
+        cols = _COLUMNS.get(field) or range(nominal.shape[-1])
+        mask[np.ix_(at, cols)] = nominal[np.ix_(at, cols)] != 0 if par.length else True
+    return mask
 
 
 def columns(spec: Spec, mj_model: mujoco.MjModel, values: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
@@ -88,6 +126,7 @@ def columns(spec: Spec, mj_model: mujoco.MjModel, values: dict[str, np.ndarray])
         labels = _labels(mj_model, par.elements, at)
         for r, label in zip(at, labels):
             value = field[:, r] if field.ndim == 2 else field[:, r, 0]
+            value = np.linalg.norm(field[:, r], axis=-1) if par.length else value
             out[name if len(at) == 1 else f"{name}_{label}"] = value
     return out
 
