@@ -28,6 +28,7 @@ from hopper_mjx import engine as engines
 from hopper_mjx import registry, signals
 from hopper_mjx.actuators import Actuation, Drive, Motor
 from hopper_mjx.control.base import Controller, CState, zero_torque
+from hopper_mjx.model import variation as model_variation
 from hopper_mjx.model import world
 from hopper_mjx.model.robot import Robot
 from hopper_mjx.pushes import Pushes, push
@@ -133,15 +134,17 @@ class Sim:
 
         gravity: (N, 3) m/s²; qpos/qvel: (nq,) or (N, nq) / (nv,) or (N, nv),
         default the robot's stance (upright at rest, the foot `model.robot.CLEARANCE`
-        above the floor); params: per-instance controller parameters (leading axis N) or None;
+        above the floor; each instance's own when the variation moves the leg's geometry);
+        params: per-instance controller parameters (leading axis N) or None;
         motor: per-instance motor figures (`self.actuation.motor(N, ...)`), default the URDF's
         with the Sim's delay; variation: {model field: (N, ...)} of each instance's robot
         (`model.variation.with_constants`).
         """
         g = _check_gravity(gravity)
         n = g.shape[0]
+        own = None if qpos is not None or not variation else model_variation.stances(self.mj_model, variation)
         variation = self._check_variation(variation or {}, n)
-        qpos = self.robot.stance_qpos if qpos is None else qpos
+        qpos = (self.robot.stance_qpos if own is None else own) if qpos is None else qpos
         qvel = np.zeros(self.layout.nv) if qvel is None else qvel
         qpos = np.broadcast_to(np.asarray(qpos, dtype=np.float32), (n, self.layout.nq))
         qvel = np.broadcast_to(np.asarray(qvel, dtype=np.float32), (n, self.layout.nv))

@@ -21,6 +21,7 @@ import numpy as np
 from hopper_mjx import registry
 from hopper_mjx.model.layout import Layout
 from hopper_mjx.model.loader import JOINTS
+from hopper_mjx.model.robot import stance_qpos
 from hopper_mjx.randomize import Spec
 
 # Fields `mj_setConst` derives from masses, inertias, armature and gear that MJX's step reads (MJX reads
@@ -33,6 +34,8 @@ FEEDS_CONSTANTS = {"body_mass", "body_inertia", "body_ipos", "dof_armature", "ac
 _COLUMNS = {"body_inertia": None, "body_ipos": [0, 1, 2], "pair_friction": [0, 1], "actuator_gear": [0],
             "body_pos": [0, 1, 2], "geom_size": [0]}
 _PER_AXIS = {"body_ipos"}  # one draw per column (x, y, z), not one per row
+# Fields that move the leg's geometry: an instance then starts from its own stance (`stances`).
+GEOMETRY = frozenset({"body_pos", "geom_size"})
 
 
 def rows(mj_model: mujoco.MjModel, elements: str) -> list[int]:
@@ -176,3 +179,41 @@ def with_constants(mj_model: mujoco.MjModel, values: dict[str, np.ndarray]) -> d
         for c in CONSTANTS:
             out[c][i] = getattr(m, c)
     return {**values, **out}
+
+
+def stances(mj_model: mujoco.MjModel, values: dict[str, np.ndarray]) -> np.ndarray | None:
+    """(N, nq) each instance's own stance (`robot.stance_qpos` on its model: the knee that puts its centre
+    of mass above its foot, the foot `CLEARANCE` above the floor) when `values` move the leg's geometry,
+    else None (every instance starts from the URDF's stance). Raises ValueError naming the first instance
+    whose leg cannot reach the floor: no such knee angle, or a robot geom lower than the foot in its stance."""
+    if not GEOMETRY & set(values):
+        return None
+    m, n = copy.deepcopy(mj_model), len(next(iter(values.values())))
+    lay, d = Layout.of(m), mujoco.MjData(m)
+    others = [int(g) for g in m.pair_geom2 if g != lay.foot_geom]  # the robot's other geoms that touch the floor
+    out = np.empty((n, m.nq))
+    for i in range(n):
+        for field, v in values.items():
+            if field not in CONSTANTS:
+                getattr(m, field)[:] = v[i]
+        try:
+            out[i] = stance_qpos(m)
+            d.qpos[:] = out[i]
+            mujoco.mj_kinematics(m, d)
+            foot = d.geom_xpos[lay.foot_geom, 2] - m.geom_size[lay.foot_geom, 0]
+            low, g = min(((_lowest(m, d, g), g) for g in others), default=(np.inf, -1))
+            if low <= foot:
+                raise ValueError(f"in its stance, geom {m.geom(g).name!r} reaches {foot - low:.3f} m below the foot")
+        except ValueError as err:
+            thigh, shank = (np.linalg.norm(m.body_pos[rows(m, part)[0]]) for part in ("shank", "foot"))
+            raise ValueError(f"the leg of instance {i} (thigh {thigh:.3g} m, shank {shank:.3g} m, foot radius "
+                             f"{m.geom_size[lay.foot_geom, 0]:.3g} m) cannot reach the floor: {err}") from None
+    return out
+
+
+def _lowest(m: mujoco.MjModel, d: mujoco.MjData, g: int) -> float:
+    """Lowest z (m) of geom g after kinematics: a sphere's or a box's (the robot's floor geoms)."""
+    if m.geom_type[g] == mujoco.mjtGeom.mjGEOM_SPHERE:
+        return float(d.geom_xpos[g, 2] - m.geom_size[g, 0])
+    corners = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)]) * m.geom_size[g]
+    return float((d.geom_xpos[g] + corners @ d.geom_xmat[g].reshape(3, 3).T)[:, 2].min())
