@@ -29,7 +29,7 @@ from hopper_mjx import registry
 from hopper_mjx.engine import chain_algebra as al
 from hopper_mjx.engine import chain_constraint, chain_smooth, chain_solver
 from hopper_mjx.engine.chain_hfield import TerrainParams
-from hopper_mjx.engine.chain_model import ChainModel, NotChain, describe, instance, terrain_heights
+from hopper_mjx.engine.chain_model import ChainModel, NotChain, describe, entries, instance, terrain_heights
 from hopper_mjx.engine.chain_stage import stored
 from hopper_mjx.model import variation
 
@@ -44,7 +44,7 @@ class ChainParams(NamedTuple):
 
     gate: jax.Array
     terrain: TerrainParams | None = None
-    robot: dict | None = None  # {model field: this instance's array of it}, see chain_model.instance
+    robot: dict | None = None  # this instance's numbers in place of the constants: chain_model.entries
 
 
 @jax.tree_util.register_dataclass
@@ -141,13 +141,13 @@ class ChainEngine:
         other = set(values) - self.varies
         if other:
             raise ValueError(f"the chain engine cannot take {', '.join(sorted(other))} at run time")
-        return model._replace(robot=dict(values)) if values else model
+        return model._replace(robot=entries(self.chain, values, self.settable)) if values else model
 
     def instance(self, model: ChainParams) -> ChainModel:
         """The chain model of this instance: the folded constants, or its robot's values in their place."""
         if not model.robot:
             return self.chain
-        return instance(self.chain, self.source, model.robot, self.settable)
+        return instance(self.chain, self.source, model.robot)
 
     def make_data(self, qpos, qvel) -> ChainData:
         qpos = jnp.asarray(qpos)

@@ -351,31 +351,45 @@ def describe(m: mujoco.MjModel) -> ChainModel:
     )
 
 
-def instance(cm: ChainModel, m: mujoco.MjModel, values: dict, settable: dict) -> ChainModel:
-    """`cm` as one instance's robot: each entry of `values` ({model field: that field's array, traced}) that
-    `settable[field]` marks replaces the constant folded from `m`, the nominal model; every other number,
-    zeros among them, stays a constant (so the algebra still folds it). `values` may hold MuJoCo's derived
-    `body_invweight0` and `dof_invweight0` (model.variation.with_constants), the constraint rows' weights."""
+def _key(field: str, index: tuple) -> str:
+    return f"{field}{list(index)}"
+
+
+def entries(cm: ChainModel, values: dict, settable: dict) -> dict:
+    """One instance's numbers the chain reads from `values` ({model field: that field's array}): {"field[i, j]":
+    scalar} of each entry `settable[field]` marks, and MuJoCo's derived constraint weights (`body_invweight0` of
+    the bodies with a contact pair, `dof_invweight0` of the limited hinges: model.variation.with_constants).
+    Sliced once per rollout, so that the step reads scalars, not arrays."""
+    out = {_key(f, tuple(int(i) for i in index)): values[f][index]
+           for f, mask in settable.items() if f in values for index in zip(*np.nonzero(mask))}
+    if "body_invweight0" in values:
+        out |= {_key("body_invweight0", (p.body + 1, 0)): values["body_invweight0"][p.body + 1, 0] for p in cm.pairs}
+    if "dof_invweight0" in values:
+        out |= {_key("dof_invweight0", (link.hinge.dof,)): values["dof_invweight0"][link.hinge.dof]
+                for link in cm.links if link.hinge is not None and link.hinge.limit is not None}
+    return out
+
+
+def instance(cm: ChainModel, m: mujoco.MjModel, robot: dict) -> ChainModel:
+    """`cm` as one instance's robot: each number of `robot` (`entries`) replaces the constant folded from `m`,
+    the nominal model; every other number, zeros among them, stays a constant (so the algebra still folds it)."""
 
     def pick(field: str, index: tuple, constant):
-        varied = field in values and settable[field][index]
-        return values[field][index] if varied else constant
+        return robot.get(_key(field, index), constant)
 
     def vec(field: str, row: int, constant) -> tuple:
         return tuple(pick(field, (row, k), c) for k, c in enumerate(constant))
 
     def inertia(b: int, constant: Sym6) -> Sym6:
-        if "body_inertia" not in values:
+        diag = vec("body_inertia", b, m.body_inertia[b])
+        if all(map(al.is_const, diag)):
             return constant
         r = _quat_mat(m.body_iquat[b]).reshape(3, 3)
-        diag = vec("body_inertia", b, m.body_inertia[b])
         return tuple(al.total(al.mul(float(r[i, a] * r[j, a]), diag[a]) for a in range(3))
                      for i, j in ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2)))
 
     def hinge(h: Hinge | None) -> Hinge | None:
-        if h is None or "dof_invweight0" not in values:
-            return h
-        return dataclasses.replace(h, invweight=values["dof_invweight0"][h.dof])
+        return h if h is None else dataclasses.replace(h, invweight=pick("dof_invweight0", (h.dof,), h.invweight))
 
     links = tuple(dataclasses.replace(
         link, pos=vec("body_pos", b, link.pos), hinge=hinge(link.hinge), mass=pick("body_mass", (b,), link.mass),
@@ -385,9 +399,7 @@ def instance(cm: ChainModel, m: mujoco.MjModel, values: dict, settable: dict) ->
         g = int(m.pair_geom2[p])
         size = (pick("geom_size", (g, 0), pair.size[0]),) + pair.size[1:]
         friction = (pick("pair_friction", (p, 0), pair.friction[0]), pick("pair_friction", (p, 1), pair.friction[1]))
-        body_invweight = pair.body_invweight
-        if "body_invweight0" in values:
-            body_invweight = values["body_invweight0"][pair.body + 1, 0]
+        body_invweight = pick("body_invweight0", (pair.body + 1, 0), pair.body_invweight)
         invweight = pair.invweight
         if not all(map(al.is_const, friction)) or body_invweight is not pair.body_invweight:
             invweight = body_invweight if pair.condim == 1 else pyramid_invweight(body_invweight, friction[0],
