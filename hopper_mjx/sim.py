@@ -319,8 +319,11 @@ def _instance_rollout(engine, actuation: Actuation, pushes: Pushes | None, contr
         return (model, state), sig
 
     def run(model, state):
-        model = engine.vary(model, state.variation)  # this instance's robot: per instance only where varied
-        (_, state), sig = jax.lax.scan(one_tick, (model, state), None, length=steps // tick)
+        variation = state.variation
+        model = engine.vary(model, variation)  # this instance's robot: per instance only where varied
+        # The loop carries the robot once, in `model`, not its drawn fields again in the state.
+        (_, state), sig = jax.lax.scan(one_tick, (model, state._replace(variation={})), None, length=steps // tick)
+        state = state._replace(variation=variation)
         every = {k: p // tick for k, p in periods.items()}
         decimate = lambda tree, stream: jax.tree_util.tree_map(lambda x: x[:: every[stream]], tree)
         noise_key, next_key = split_rollout_key(state.key)

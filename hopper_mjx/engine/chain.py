@@ -116,7 +116,6 @@ class ChainEngine:
             self.chain = dataclasses.replace(
                 self.chain, terrain=dataclasses.replace(self.chain.terrain, max_contacts=int(max_foot_contacts)))
         self.nu = int(mj_model.nu)
-        self.foot_pair = next(p for p, pair in enumerate(self.chain.pairs) if pair.is_foot)
         self.model = ChainParams(gate=jnp.array(True))
         if self.chain.terrain is not None:
             t = self.chain.terrain
@@ -183,7 +182,7 @@ class ChainEngine:
         """Semi-implicit Euler; joint damping implicit as MuJoCo's: (M + h B) a = qfrc_smooth + qfrc_constraint."""
         cm = self.instance(model)
         h, qacc, damping = cm.timestep, data.qacc, cm.damping
-        if cm.eulerdamp and any(not al.is_const(d) or d for d in damping):  # run-time damping, or some
+        if cm.eulerdamp and any(not al.is_const(d) or d for d in damping):  # run-time or nonzero damping
             upper = iter(data.mass[k] for k in range(data.mass.shape[0]))
             damped = {(i, j): next(upper) + (h * damping[i] if i == j else 0.0)
                       for i in range(cm.nv) for j in range(i, cm.nv)}
