@@ -78,6 +78,19 @@ def test_draws_are_the_seeds_and_land_where_the_parameter_says(mj_model):
     assert (a["dof_damping"][:, :6] == 0).all()  # the free base is not a joint
     gear = a["actuator_gear"]
     assert (gear[:, :, 1:] == 0).all() and 0.8 <= (gear[:, :, 0] / m.actuator_gear[:, 0]).min()
+    # A length keeps the offset's direction: the shank link 0.3..0.4 below the knee's parent, the foot link the
+    # URDF's shank times U(0.8, 1.2); the foot radius is the sphere's size, nothing else moves.
+    shank, foot = int(m.joint("kfe_joint").bodyid[0]), int(m.geom_bodyid[lay.foot_geom])
+    pos = a["body_pos"]
+    assert (pos[:, [shank, foot], :2] == 0).all() and -0.4 <= pos[:, shank, 2].min() and pos[:, shank, 2].max() <= -0.3
+    ratio = pos[:, foot, 2] / m.body_pos[foot, 2]
+    assert 0.8 <= ratio.min() and ratio.max() <= 1.2 and ratio.std() > 0.05
+    others = [b for b in range(m.nbody) if b not in (shank, foot)]
+    np.testing.assert_array_equal(pos[:, others], np.broadcast_to(m.body_pos[others], (64, len(others), 3)))
+    radius = a["geom_size"][:, lay.foot_geom]
+    assert 0.02 <= radius[:, 0].min() and radius[:, 0].max() <= 0.04
+    assert (radius[:, 1:] == m.geom_size[lay.foot_geom, 1:]).all()
+    assert variation.columns(spec, m, a)["shank_length"] == pytest.approx(-pos[:, foot, 2])
 
 
 def test_adding_a_parameter_leaves_the_others_draws_as_they_were(mj_model):

@@ -3,6 +3,7 @@
     values = draw(spec, mj_model, n=64, seed=0)     # {"body_mass": (64, nbody), "pair_friction": (64, npair, 5)}
     values = with_constants(mj_model, values)       # + body_invweight0, dof_invweight0, ... per instance
     m_i = instance_model(mj_model, values, i)       # instance i as a MuJoCo C model (mj_setConst called)
+    qpos0 = stances(mj_model, values)               # (64, nq) each drawn leg's own stance (None: leg not drawn)
 
 Each varied field is drawn whole, (N, *field shape): the nominal model's values where the spec
 leaves them, so instance i is re-created by setting the fields into a copy of the model. MuJoCo
