@@ -277,8 +277,8 @@ def check_physics(args, model_options: dict | None = None, *, engines: list[str]
     if variation is not None:  # drawn once now (MuJoCo's compile, no JAX): a value out of its range is refused
         from hopper_mjx.model import variation as draws
 
-        try:
-            draws.draw(variation, physics.mj_model, n, seed)
+        try:  # and a leg that cannot reach the floor
+            draws.stances(physics.mj_model, draws.draw(variation, physics.mj_model, n, seed))
             draws.draw_controls(variation, physics.mj_model, n, seed)
         except ValueError as err:
             raise ValueError(f"--randomize: {err}") from None

@@ -75,13 +75,14 @@ class Parameter(NamedTuple):
     on which elements (model.variation resolves them), its unit and the range a drawn value must lie in."""
 
     field: str
-    elements: str  # bodies (every robot link), base, hip, thigh, shank, foot, joints, actuators, foot_pair
+    elements: str  # bodies (every robot link), base, hip, thigh, shank, foot, joints, actuators, foot_pair, foot_geom
     unit: str
     what: str
     low: float = 0.0
     high: float = float("inf")
     open_low: bool = False  # low itself excluded (a mass of 0 is no body)
     offset: bool = False  # a drawn value is added to the nominal one, not put in its place
+    length: bool = False  # a drawn value is the length of the field's row (an offset vector), its direction kept
 
 
 _MASS = "mass of the {} link"
@@ -105,6 +106,14 @@ PARAMETERS = {
                                "motor strength: the controllers command the URDF's gear, so this scales the "
                                "applied torque and its limit", open_low=True),
 }
+# Morphology: the leg's lengths and the foot's size, each the model field it sets (docs/variation.md).
+PARAMETERS |= {
+    "thigh_length": Parameter("body_pos", "shank", "m", "thigh length, hfe to kfe: the shank link's offset on the "
+                              "thigh, its direction kept", open_low=True, high=1.0, length=True),
+    "shank_length": Parameter("body_pos", "foot", "m", "shank length, kfe to the foot: the foot link's offset on "
+                              "the shank, its direction kept", open_low=True, high=1.0, length=True),
+    "foot_radius": Parameter("geom_size", "foot_geom", "m", "radius of the foot sphere", open_low=True, high=0.1),
+}
 # `--randomize NAME`: a named set of parameters. `playground`: MuJoCo Playground's locomotion randomisation as
 # docs/variation.md's robustness table runs it (foot friction, link masses, the base's centre of mass, motor
 # strength, action delay).
@@ -113,7 +122,8 @@ RANDOMIZE_PRESETS = {
                   "actuator_gear=scale(0.8,1.2),action_delay=0..10",
 }
 # The model fields the chain engine takes as run-time values (every other varied field needs mjx).
-CHAIN_VARIES: frozenset[str] = frozenset({"dof_damping", "pair_friction"})
+CHAIN_VARIES: frozenset[str] = frozenset({"dof_damping", "pair_friction", "body_mass", "body_inertia", "body_ipos",
+                                          "dof_armature", "actuator_gear", "body_pos", "geom_size"})
 
 
 class ControlParameter(NamedTuple):

@@ -28,6 +28,7 @@ from hopper_mjx import engine as engines
 from hopper_mjx import registry, signals
 from hopper_mjx.actuators import Actuation, Drive, Motor
 from hopper_mjx.control.base import Controller, CState, zero_torque
+from hopper_mjx.model import variation as model_variation
 from hopper_mjx.model import world
 from hopper_mjx.model.robot import Robot
 from hopper_mjx.pushes import Pushes, push
@@ -140,7 +141,8 @@ class Sim:
 
         gravity: (N, 3) m/s²; qpos/qvel: (nq,) or (N, nq) / (nv,) or (N, nv),
         default the robot's stance (upright at rest, the foot `model.robot.CLEARANCE`
-        above the floor); params: per-instance controller parameters (leading axis N) or None;
+        above the floor; each instance's own when the variation moves the leg's geometry);
+        params: per-instance controller parameters (leading axis N) or None;
         motor: per-instance motor figures (`self.actuation.motor(N, ...)`), default the URDF's
         with the Sim's delay; variation: {model field: (N, ...)} of each instance's robot
         (`model.variation.with_constants`); sensing: {"delay": (N,) steps, and `sensing.FIGURES`}
@@ -148,8 +150,9 @@ class Sim:
         """
         g = _check_gravity(gravity)
         n = g.shape[0]
+        own = None if qpos is not None or not variation else model_variation.stances(self.mj_model, variation)
         variation = self._check_variation(variation or {}, n)
-        qpos = self.robot.stance_qpos if qpos is None else qpos
+        qpos = (self.robot.stance_qpos if own is None else own) if qpos is None else qpos
         qvel = np.zeros(self.layout.nv) if qvel is None else qvel
         qpos = np.broadcast_to(np.asarray(qpos, dtype=np.float32), (n, self.layout.nq))
         qvel = np.broadcast_to(np.asarray(qvel, dtype=np.float32), (n, self.layout.nv))
@@ -361,8 +364,11 @@ def _instance_rollout(engine, actuation: Actuation, pushes: Pushes | None, sensi
         return (model, state), sig
 
     def run(model, state):
-        model = engine.vary(model, state.variation)  # this instance's robot: per instance only where varied
-        (_, state), sig = jax.lax.scan(one_tick, (model, state), None, length=steps // tick)
+        variation = state.variation
+        model = engine.vary(model, variation)  # this instance's robot: per instance only where varied
+        # The loop carries the robot once, in `model`, not its drawn fields again in the state.
+        (_, state), sig = jax.lax.scan(one_tick, (model, state._replace(variation={})), None, length=steps // tick)
+        state = state._replace(variation=variation)
         every = {k: p // tick for k, p in periods.items()}
         decimate = lambda tree, stream: jax.tree_util.tree_map(lambda x: x[:: every[stream]], tree)
         noise_key, next_key = split_rollout_key(state.key)

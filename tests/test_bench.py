@@ -8,11 +8,16 @@ import pytest
 
 from hopper_mjx.perf import bench
 
+# A robot per instance on both sides (the core's run-time values, native's model per instance), with a
+# drawn gear, masses and leg: the two agree only if each native model is its instance's robot.
+ROBOTS = "body_mass=scale(0.8,1.2),actuator_gear=scale(0.8,1.2),shank_length=scale(0.8,1.2),foot_friction=0.4..1"
+
 
 @pytest.fixture(scope="module")
 def record(tmp_path_factory):
     path = tmp_path_factory.mktemp("bench") / "bench.json"
-    assert bench.main(["--num", "4", "--steps", "20", "--repeat", "1", "--json", str(path)]) == 0
+    argv = ["--num", "4", "--steps", "200", "--repeat", "1", "--randomize", ROBOTS, "--json", str(path)]
+    assert bench.main(argv) == 0
     return json.loads(path.read_text())
 
 
@@ -20,7 +25,7 @@ def test_json_has_finite_positive_rates(record):
     for key in ("core_steps_per_s", "native_steps_per_s", "ratio", "compile_s", "peak_rss_mb",
                 "core_cpu_us_per_step", "native_cpu_us_per_step", "cpu_ratio"):
         assert math.isfinite(record[key]) and record[key] > 0, key
-    assert record["num"] == 4 and record["steps"] == 20
+    assert record["num"] == 4 and record["steps"] == 200 and record["randomize"]
     assert record["ratio"] == pytest.approx(record["core_steps_per_s"] / record["native_steps_per_s"])
     assert record["devices"] >= 1 and record["native_threads"] >= 1
     assert record["diverged"] == 0
@@ -28,7 +33,8 @@ def test_json_has_finite_positive_rates(record):
 
 
 def test_mjx_and_native_step_the_same_physics(record):
-    # 20 ms of free fall from 5 cm: both sides must agree to float32 precision (MJX runs float32).
+    # 0.2 s from 5 cm, through touchdown under the stronger gravities, each instance its own robot: both sides
+    # must agree to float32 precision (the core runs float32).
     assert record["max_final_qpos_gap"] < 1e-4
     assert record["native_final_base_height_m"] == pytest.approx(record["core_final_base_height_m"], abs=1e-5)
 
@@ -78,4 +84,7 @@ def test_bad_arguments_exit_with_a_message(capsys):
     assert "--engine: unknown engine 'warp'" in capsys.readouterr().err
     assert bench.main(["--num", "4", "--steps", "20", "--engine", "chain,mjx"]) == 2
     assert "--engine: several engines are compared with --scaling only" in capsys.readouterr().err
+    assert bench.main(["--num", "4", "--steps", "20", "--randomize", "shank_length=0.05"]) == 2
+    assert "--randomize: the leg of instance 0 (thigh 0.35 m, shank 0.05 m, foot radius 0.03 m) cannot reach the " \
+           "floor" in capsys.readouterr().err
 

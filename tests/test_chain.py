@@ -117,7 +117,7 @@ def chain_stages(engine: chain.ChainEngine):
     upper = [(i, j) for i in range(cm.nv) for j in range(i, cm.nv)]
 
     def one(params, qpos, qvel, ctrl, gravity, warmstart):
-        pose = chain_smooth.kinematics(cm, params.gate, tuple(qpos[i] for i in range(cm.nq)))
+        pose = chain_smooth.kinematics(engine.instance(params), params.gate, tuple(qpos[i] for i in range(cm.nq)))
         data = engine.make_data(qpos, qvel).replace(ctrl=ctrl, qacc_warmstart=warmstart)
         data = engine.forward(params, data, gravity)
         after = engine.integrate(params, data, gravity)
@@ -318,28 +318,36 @@ def test_models_outside_the_topology_are_refused_with_one_line(seed_model):
         describe(spec.compile())
 
 
-@pytest.mark.parametrize("mu, damping", [(0.3, 0.02), (0.9, 1.5)])
-def test_float64_stages_with_run_time_damping_and_foot_friction_match_mujoco_c(seed_model, seed_states, mu, damping):
-    """The chain takes an instance's joint damping and foot friction as run-time values (per-instance robots,
-    hopper_mjx.model.variation): every stage agrees with MuJoCo C given a model holding those values."""
-    from hopper_mjx.model.variation import draw
+# Every parameter the chain takes at run time: masses, inertias, centre of mass, armature, gear, friction,
+# damping, and the leg's morphology (thigh, shank, foot radius).
+CHAIN_ROBOT = ("body_mass=scale(0.7,1.3),body_inertia=scale(0.7,1.3),base_com=-0.03..0.03,dof_armature=0.001..0.02,"
+               "actuator_gear=scale(0.7,1.3),foot_friction=0.3..1,dof_damping=0..1,thigh_length=0.3..0.4,"
+               "shank_length=0.3..0.42,foot_radius=0.02..0.045")
+
+
+@pytest.mark.parametrize("text", ["foot_friction=0.3,dof_damping=0.02", CHAIN_ROBOT])
+def test_float64_stages_with_a_run_time_robot_match_mujoco_c(seed_model, text):
+    """The chain takes an instance's robot as run-time values (per-instance robots, hopper_mjx.model.variation):
+    every stage agrees with MuJoCo C given a model holding those values, with mj_setConst's constants."""
+    from hopper_mjx.model import variation
     from hopper_mjx.randomize import Spec
 
-    values = draw(Spec.parse(f"foot_friction={mu},dof_damping={damping}"), seed_model, 1, seed=0)
-    varied = copy.deepcopy(seed_model)
-    varied.pair_friction[:], varied.dof_damping[:] = values["pair_friction"][0], values["dof_damping"][0]
-    c = mujoco_c(converged(varied, 50), *seed_states)
+    spec = Spec.parse(text)
+    values = variation.with_constants(seed_model, variation.draw(spec, seed_model, 1, seed=2))
+    varied = variation.instance_model(seed_model, values, 0)
+    states = random_states(varied, N_STATES, seed=7)  # contacts and limits of this robot
+    c = mujoco_c(converged(varied, 50), *states)
     jax.config.update("jax_enable_x64", True)
     try:
-        engine = chain.make(converged(seed_model, 20))  # the nominal model: the values come at run time
-        instance = {k: jnp.asarray(v[0], jnp.float64) for k, v in values.items()}
-        params = engine.vary(engine.model, instance)
-        args = [jnp.asarray(x, jnp.float64) for x in seed_states]
+        engine = chain.make(converged(seed_model, 20), varies=spec.fields)  # nominal: the values come at run time
+        params = engine.vary(engine.model, {k: jnp.asarray(v[0], jnp.float64) for k, v in values.items()})
+        args = [jnp.asarray(x, jnp.float64) for x in states]
         out = chain_stages(engine)(params, *args, jnp.zeros_like(args[1]))
     finally:
         jax.config.update("jax_enable_x64", False)
+    assert (c["ncon"] >= 1).all()
     for stage in STAGES:
         err = np.abs(np.asarray(out[stage]) - c[stage]).max()
         assert err <= 1e-9, f"{stage}: chain and MuJoCo C differ by {err:.2e}"
-    nominal = mujoco_c(converged(seed_model, 50), *seed_states)
+    nominal = mujoco_c(converged(seed_model, 50), *states)
     assert np.abs(nominal["qacc"] - c["qacc"]).max() > 1e-2  # the values change the answer

@@ -13,10 +13,12 @@ from hopper_mjx.model import variation
 from hopper_mjx.model.layout import Layout
 from hopper_mjx.randomize import Dist, Spec
 
-# Masses, inertias, centre of mass, friction, damping, armature, dry friction and motor strength at once.
-EVERYTHING = ("body_mass=scale(0.8,1.2),body_inertia=scale(0.8,1.2),base_com=uniform(-0.02,0.02),"
-              "foot_friction=uniform(0.4,1.0),dof_damping=uniform(0.02,0.5),dof_armature=0..0.01,"
-              "dof_frictionloss=uniform(0,0.2),actuator_gear=scale(0.8,1.2)")
+# Masses, inertias, centre of mass, friction, damping, armature, motor strength and the leg's morphology at
+# once: what the chain takes at run time; with dry friction, what mjx takes.
+ON_CHAIN = ("body_mass=scale(0.8,1.2),body_inertia=scale(0.8,1.2),base_com=uniform(-0.02,0.02),"
+            "foot_friction=uniform(0.4,1.0),dof_damping=uniform(0.02,0.5),dof_armature=0..0.01,"
+            "actuator_gear=scale(0.8,1.2),shank_length=scale(0.8,1.2),thigh_length=0.3..0.4,foot_radius=0.02..0.04")
+EVERYTHING = ON_CHAIN + ",dof_frictionloss=uniform(0,0.2)"
 
 
 def test_a_spec_reads_every_distribution_and_prints_back_the_same():
@@ -76,6 +78,19 @@ def test_draws_are_the_seeds_and_land_where_the_parameter_says(mj_model):
     assert (a["dof_damping"][:, :6] == 0).all()  # the free base is not a joint
     gear = a["actuator_gear"]
     assert (gear[:, :, 1:] == 0).all() and 0.8 <= (gear[:, :, 0] / m.actuator_gear[:, 0]).min()
+    # A length keeps the offset's direction: the shank link 0.3..0.4 below the knee's parent, the foot link the
+    # URDF's shank times U(0.8, 1.2); the foot radius is the sphere's size, nothing else moves.
+    shank, foot = int(m.joint("kfe_joint").bodyid[0]), int(m.geom_bodyid[lay.foot_geom])
+    pos = a["body_pos"]
+    assert (pos[:, [shank, foot], :2] == 0).all() and -0.4 <= pos[:, shank, 2].min() and pos[:, shank, 2].max() <= -0.3
+    ratio = pos[:, foot, 2] / m.body_pos[foot, 2]
+    assert 0.8 <= ratio.min() and ratio.max() <= 1.2 and ratio.std() > 0.05
+    others = [b for b in range(m.nbody) if b not in (shank, foot)]
+    np.testing.assert_array_equal(pos[:, others], np.broadcast_to(m.body_pos[others], (64, len(others), 3)))
+    radius = a["geom_size"][:, lay.foot_geom]
+    assert 0.02 <= radius[:, 0].min() and radius[:, 0].max() <= 0.04
+    assert (radius[:, 1:] == m.geom_size[lay.foot_geom, 1:]).all()
+    assert variation.columns(spec, m, a)["shank_length"] == pytest.approx(-pos[:, foot, 2])
 
 
 def test_adding_a_parameter_leaves_the_others_draws_as_they_were(mj_model):
@@ -171,15 +186,15 @@ def test_same_seed_same_draws_and_results(recorded, tmp_path):
 def test_auto_takes_mjx_for_a_variation_the_chain_cannot_take(mj_model, capsys):
     from hopper_mjx.sim import Sim
 
-    batch = cli.check_batch(simulate.parser().parse_args(["--randomize", "foot_friction=0.5,base_mass=5"]))
+    batch = cli.check_batch(simulate.parser().parse_args(["--randomize", "foot_friction=0.5,dof_frictionloss=0.1"]))
     sim = Sim(mj_model, engine=batch.physics.engine, varies=batch.physics.variation.fields)
     assert sim.engine.name == "mjx"
-    assert "note: engine auto uses mjx (the chain engine cannot vary body_mass per instance yet)" in \
+    assert "note: engine auto uses mjx (the chain engine cannot vary dof_frictionloss per instance yet)" in \
         capsys.readouterr().err
-    with pytest.raises(ValueError, match="the chain engine cannot vary body_mass"):
+    with pytest.raises(ValueError, match="the chain engine cannot vary dof_frictionloss"):
         Sim(sim.mj_model, engine="chain", varies=batch.physics.variation.fields)
-    # Friction and damping it takes at run time: auto keeps the chain.
-    assert Sim(mj_model, varies=frozenset({"pair_friction", "dof_damping"})).engine.name == "chain"
+    # The robot's masses, geometry, friction, damping, armature and gear it takes at run time: auto keeps the chain.
+    assert Sim(mj_model, varies=registry.CHAIN_VARIES).engine.name == "chain"
 
 
 def test_friction_and_damping_leave_mujocos_constants_as_they_are(mj_model):
@@ -193,28 +208,28 @@ def test_friction_and_damping_leave_mujocos_constants_as_they_are(mj_model):
 
 
 @pytest.fixture(scope="module")
-def damped_on_chain(tmp_path_factory):
-    """`simulate --randomize` of joint damping and foot friction on the chain, which takes both as run-time
-    values: a limp drop, whose joints fold at touchdown as their damping lets them."""
+def on_chain(tmp_path_factory):
+    """`simulate --randomize` of every parameter the chain takes at run time, on the chain: 8 instances at 9.81
+    and 1.62 holding their own stance through touchdown."""
     out = tmp_path_factory.mktemp("vary") / "chain.npz"
-    argv = ["--gravity", "9.81,1.62", "--num", "4", "--duration", "0.4", "--controller", "none", "--rate", "1000",
-            "--engine", "chain", "--seed", "5", "--randomize", "dof_damping=uniform(0.02,2.0),foot_friction=0.4..1",
-            "--out", str(out)]
+    argv = ["--gravity", "9.81,1.62", "--num", "4", "--duration", "0.4", "--controller", "hold", "--rate", "1000",
+            "--engine", "chain", "--seed", "5", "--randomize", ON_CHAIN, "--out", str(out)]
     assert simulate.main(argv) == 0
     return dict(np.load(out))
 
 
-def test_the_chain_takes_damping_and_friction_per_instance_as_mujoco_c_does(mj_model, damped_on_chain):
-    f = damped_on_chain
-    drawn = {"dof_damping": f["model_dof_damping"], "pair_friction": f["model_pair_friction"]}
+def test_the_chain_takes_each_instances_robot_as_mujoco_c_does(mj_model, on_chain):
+    f = on_chain
+    drawn = {k.removeprefix("model_"): v for k, v in f.items() if k.startswith("model_")}
+    assert set(drawn) == Spec.parse(ON_CHAIN).fields
     steps, lay = f["qpos"].shape[1], Layout.of(mj_model)
     apart = []
     for i in range(len(f["gravity"])):
         assert f["contact"][i].any() and np.argmax(f["contact"][i]) < steps - 100
         m_i = variation.instance_model(mj_model, drawn, i)
-        path = _c_path(m_i, f["gravity"][i], f["qpos"][i, 0], steps, lay, limp=True)
+        path = _c_path(m_i, f["gravity"][i], f["qpos"][i, 0], steps, lay)
         err = np.abs(path - f["qpos"][i, :, :3]).max()
         assert err < 1e-3, f"instance {i}: chain and MuJoCo C differ by {err:.2e} m"
-        nominal = _c_path(copy.deepcopy(mj_model), f["gravity"][i], f["qpos"][i, 0], steps, lay, limp=True)
+        nominal = _c_path(copy.deepcopy(mj_model), f["gravity"][i], f["qpos"][i, 0], steps, lay)
         apart.append(np.abs(nominal - f["qpos"][i, :, :3]).max())
     assert max(apart) > 5e-3, apart

@@ -78,7 +78,7 @@ def make(name: str, mj_model: mujoco.MjModel, varies: frozenset[str] = frozenset
 
         try:
             check_engine_varies("chain", varies)
-            return chain.make(mj_model)
+            return chain.make(mj_model, varies=varies)
         except ValueError as err:  # NotChain, or a varied field
             if name == "chain":
                 raise

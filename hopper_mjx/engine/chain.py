@@ -11,8 +11,9 @@ every quantity into one contiguous vector over instances:
 
 Each stage's outputs are stored once (`chain_stage.stored`); the engine's `model` pytree
 carries the run-time true predicate that makes that work, a heightfield's heights, and, for a
-batch of per-instance robots (`vary`), the instance's joint damping and foot friction in place of
-their constants.
+batch of per-instance robots (`vary`), the instance's masses, inertias, centres of mass, link
+offsets, foot radius and friction, joint damping and armature, motor gears and MuJoCo's constraint
+weights derived from them in place of their constants (`chain_model.instance`).
 """
 
 from __future__ import annotations
@@ -28,8 +29,9 @@ from hopper_mjx import registry
 from hopper_mjx.engine import chain_algebra as al
 from hopper_mjx.engine import chain_constraint, chain_smooth, chain_solver
 from hopper_mjx.engine.chain_hfield import TerrainParams
-from hopper_mjx.engine.chain_model import ChainModel, NotChain, describe, terrain_heights
+from hopper_mjx.engine.chain_model import ChainModel, NotChain, describe, entries, instance, terrain_heights
 from hopper_mjx.engine.chain_stage import stored
+from hopper_mjx.model import variation
 
 __all__ = ["ChainData", "ChainEngine", "ChainParams", "NotChain", "TerrainParams", "make", "terrain_heights"]
 
@@ -37,13 +39,12 @@ __all__ = ["ChainData", "ChainEngine", "ChainParams", "NotChain", "TerrainParams
 class ChainParams(NamedTuple):
     """The compiled function's model argument: a run-time true gate for `stored`; on a heightfield
     floor its heights (a run-time input: a new terrain of the same grid does not recompile, and
-    vmapping this leaf gives each instance its own); and the instance's values of the fields it takes
-    at run time (None: the model's own, folded in as constants)."""
+    vmapping this leaf gives each instance its own); and the instance's values of the model fields it
+    takes at run time (`vary`; None: the model's own, folded in as constants)."""
 
     gate: jax.Array
     terrain: TerrainParams | None = None
-    damping: jax.Array | None = None  # (nv,) N·m·s/rad, dof_damping; its hinge entries are used
-    foot_friction: jax.Array | None = None  # (2,) the foot pair's sliding friction (pair_friction)
+    robot: dict | None = None  # this instance's numbers in place of the constants: chain_model.entries
 
 
 @jax.tree_util.register_dataclass
@@ -72,12 +73,12 @@ def _vector(values, dtype) -> jax.Array:
     return jnp.stack([jnp.asarray(v, dtype) for v in values])
 
 
-def _smooth(cm: ChainModel, gate, pose, qpos, qvel, ctrl, gravity, damping):
+def _smooth(cm: ChainModel, gate, pose, qpos, qvel, ctrl, gravity):
     """Mass matrix, qfrc_smooth and the unconstrained acceleration."""
     mass = chain_smooth.mass_matrix(cm, gate, pose)
     bias = chain_smooth.bias(cm, gate, pose, qvel, gravity)
     qfrc_smooth = stored(gate, lambda *a: tuple(
-        al.sub(f, b) for f, b in zip(chain_smooth.applied_forces(cm, *a), bias)), qpos, qvel, ctrl, damping)
+        al.sub(f, b) for f, b in zip(chain_smooth.applied_forces(cm, *a), bias)), qpos, qvel, ctrl)
     return mass, qfrc_smooth, chain_solver.solve_spd(gate, mass, qfrc_smooth)
 
 
@@ -94,20 +95,27 @@ class ChainEngine:
     name = "chain"
     # A diverged instance keeps these from its last finite state (the rest is recomputed).
     freeze_fields = ("qpos", "qvel", "qacc_warmstart")
-    varies = registry.CHAIN_VARIES  # the model's numbers are folded into the step at trace time
+    # The model's numbers are folded into the step at trace time, but for these and the constants MuJoCo
+    # derives from them (of which the step reads the constraint weights), which `vary` makes run-time values.
+    varies = registry.CHAIN_VARIES | frozenset(variation.CONSTANTS)
 
-    def __init__(self, mj_model: mujoco.MjModel, max_foot_contacts: int | None = None):
+    def __init__(self, mj_model: mujoco.MjModel, max_foot_contacts: int | None = None,
+                 varies: frozenset[str] = frozenset()):
         """`max_foot_contacts` (heightfield floors): keep only the foot's deepest this many
         contacts, fewer constraint rows than the block's 2 x rows x cols prisms; C's answer
-        whenever at most that many exist, the shallowest dropped otherwise. None: all."""
+        whenever at most that many exist, the shallowest dropped otherwise. None: all.
+        `varies`: the model fields a batch will vary per instance (NotChain for one it cannot)."""
         self.chain = describe(mj_model)
+        if "geom_size" in varies and self.chain.terrain is not None:  # the cell block is sized for one radius
+            raise NotChain("not a chain model: a drawn foot radius on a heightfield floor is not written yet")
+        self.source = mj_model  # the nominal model: `chain_model.instance` reads its frames and indices
+        self.settable = {f: variation.settable(mj_model, f) for f in registry.CHAIN_VARIES}
         if max_foot_contacts is not None:
             if self.chain.terrain is None or max_foot_contacts < 1:
                 raise ValueError("max_foot_contacts needs a heightfield floor and must be >= 1")
             self.chain = dataclasses.replace(
                 self.chain, terrain=dataclasses.replace(self.chain.terrain, max_contacts=int(max_foot_contacts)))
         self.nu = int(mj_model.nu)
-        self.foot_pair = next(p for p, pair in enumerate(self.chain.pairs) if pair.is_foot)
         self.model = ChainParams(gate=jnp.array(True))
         if self.chain.terrain is not None:
             t = self.chain.terrain
@@ -127,24 +135,18 @@ class ChainEngine:
         return ChainParams(gate=jnp.array(True), terrain=TerrainParams(heights, bottom))
 
     def vary(self, model: ChainParams, values: dict) -> ChainParams:
-        """One instance's model: its joint damping and foot friction as run-time values (`varies`;
-        `engine.make` sends any other varied field to mjx); no values, the model's constants stay folded
-        (the same program)."""
+        """One instance's model: its values of the varied fields as run-time values (`varies`; `engine.make`
+        sends any other varied field to mjx); no values, the model's constants stay folded (the same program)."""
         other = set(values) - self.varies
         if other:
             raise ValueError(f"the chain engine cannot take {', '.join(sorted(other))} at run time")
-        if "dof_damping" in values:
-            model = model._replace(damping=values["dof_damping"])
-        if "pair_friction" in values:  # the foot pair's row; registry's parameters vary no other pair
-            model = model._replace(foot_friction=values["pair_friction"][self.foot_pair, :2])
-        return model
+        return model._replace(robot=entries(self.chain, values, self.settable)) if values else model
 
-    def _damping(self, model: ChainParams) -> tuple:
-        """Each dof's damping: the folded constants, or the instance's values on the hinges."""
-        cm = self.chain
-        if model.damping is None:
-            return cm.damping
-        return cm.damping[:6] + tuple(model.damping[i] for i in range(6, cm.nv))  # the free base keeps its own
+    def instance(self, model: ChainParams) -> ChainModel:
+        """The chain model of this instance: the folded constants, or its robot's values in their place."""
+        if not model.robot:
+            return self.chain
+        return instance(self.chain, self.source, model.robot)
 
     def make_data(self, qpos, qvel) -> ChainData:
         qpos = jnp.asarray(qpos)
@@ -157,14 +159,14 @@ class ChainEngine:
         )
 
     def forward(self, model: ChainParams, data: ChainData, gravity) -> ChainData:
-        cm, gate, dtype = self.chain, model.gate, data.qpos.dtype
+        cm, gate, dtype = self.instance(model), model.gate, data.qpos.dtype
         qpos = tuple(data.qpos[i] for i in range(cm.nq))
         qvel = tuple(data.qvel[i] for i in range(cm.nv))
         ctrl = tuple(data.ctrl[i] for i in range(self.nu))
         gravity = tuple(jnp.asarray(gravity, dtype)[i] for i in range(3))
         pose = chain_smooth.kinematics(cm, gate, qpos)
-        mass, qfrc_smooth, qacc_smooth = _smooth(cm, gate, pose, qpos, qvel, ctrl, gravity, self._damping(model))
-        rows, foot = chain_constraint.rows(cm, gate, pose, qpos, qvel, model.terrain, model.foot_friction)
+        mass, qfrc_smooth, qacc_smooth = _smooth(cm, gate, pose, qpos, qvel, ctrl, gravity)
+        rows, foot = chain_constraint.rows(cm, gate, pose, qpos, qvel, model.terrain)
         warm = tuple(data.qacc_warmstart[i] for i in range(cm.nv))
         sol = chain_solver.solve(gate, mass, qfrc_smooth, qacc_smooth, warm, rows, iterations=cm.iterations,
                                  ls_iterations=cm.ls_iterations, tolerance=cm.tolerance,
@@ -178,9 +180,9 @@ class ChainEngine:
 
     def integrate(self, model: ChainParams, data: ChainData, gravity) -> ChainData:
         """Semi-implicit Euler; joint damping implicit as MuJoCo's: (M + h B) a = qfrc_smooth + qfrc_constraint."""
-        cm, h = self.chain, self.chain.timestep
-        qacc, damping = data.qacc, self._damping(model)
-        if cm.eulerdamp and (model.damping is not None or any(cm.damping)):
+        cm = self.instance(model)
+        h, qacc, damping = cm.timestep, data.qacc, cm.damping
+        if cm.eulerdamp and any(not al.is_const(d) or d for d in damping):  # run-time or nonzero damping
             upper = iter(data.mass[k] for k in range(data.mass.shape[0]))
             damped = {(i, j): next(upper) + (h * damping[i] if i == j else 0.0)
                       for i in range(cm.nv) for j in range(i, cm.nv)}
@@ -211,6 +213,8 @@ def _advance_qpos(cm: ChainModel, qpos: jax.Array, qvel: jax.Array) -> jax.Array
     return jnp.concatenate([qpos[:3] + h * qvel[:3], quat, hinges])
 
 
-def make(mj_model: mujoco.MjModel, max_foot_contacts: int | None = None) -> ChainEngine:
-    """The chain engine of `mj_model`; `NotChain` (one line why) when the model is outside it."""
-    return ChainEngine(mj_model, max_foot_contacts)
+def make(mj_model: mujoco.MjModel, max_foot_contacts: int | None = None,
+         varies: frozenset[str] = frozenset()) -> ChainEngine:
+    """The chain engine of `mj_model` for a batch varying `varies` per instance; `NotChain` (one line why)
+    when the model is outside it."""
+    return ChainEngine(mj_model, max_foot_contacts, varies)

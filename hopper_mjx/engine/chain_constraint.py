@@ -19,7 +19,7 @@ import jax.numpy as jnp
 
 from hopper_mjx.engine import chain_algebra as al
 from hopper_mjx.engine import chain_hfield
-from hopper_mjx.engine.chain_model import ChainModel, ContactPair, SolParams, pyramid_invweight
+from hopper_mjx.engine.chain_model import ChainModel, ContactPair, SolParams
 from hopper_mjx.engine.chain_smooth import Pose, dof_body
 from hopper_mjx.engine.chain_stage import stored
 
@@ -170,14 +170,11 @@ def _foot(pose: Pose, slots, rows, directions) -> FootContact:
     return FootContact(count > 0, pos, rows, directions)
 
 
-def _assemble(cm: ChainModel, pose: Pose, qpos, qvel, slots, foot_friction) -> tuple[Rows, FootContact]:
+def _assemble(cm: ChainModel, pose: Pose, qpos, qvel, slots) -> tuple[Rows, FootContact]:
     jac, weight, aref = _limit_rows(cm, qpos, qvel)
     foot = None
     for pair, pair_slots in zip(cm.pairs, slots):
-        friction, invweight = pair.friction, pair.invweight
-        if pair.is_foot and foot_friction is not None and pair.condim == 3:  # this instance's friction
-            friction = (foot_friction[0], foot_friction[1])
-            invweight = pyramid_invweight(pair.body_invweight, friction[0], cm.impratio)
+        friction, invweight = pair.friction, pair.invweight  # constants, or an instance's (chain_model.instance)
         first, pair_directions = len(jac), ()
         for exists, dist, point, frame in pair_slots:
             directions = _directions(cm, pair, friction, frame)
@@ -191,9 +188,8 @@ def _assemble(cm: ChainModel, pose: Pose, qpos, qvel, slots, foot_friction) -> t
     return Rows(tuple(jac), tuple(weight), tuple(aref)), foot
 
 
-def rows(cm: ChainModel, gate, pose: Pose, qpos, qvel, terrain=None, foot_friction=None) -> tuple[Rows, FootContact]:
+def rows(cm: ChainModel, gate, pose: Pose, qpos, qvel, terrain=None) -> tuple[Rows, FootContact]:
     """All constraint rows (MuJoCo's order: limits, then contacts by pair) and the foot's; `terrain`
-    (chain_hfield.TerrainParams) for a heightfield floor; `foot_friction`: (2,) the foot pair's sliding
-    friction as run-time values (None: the model's, folded in)."""
+    (chain_hfield.TerrainParams) for a heightfield floor."""
     slots = stored(gate, lambda p, t: _all_slots(cm, p, t), pose, terrain)
-    return stored(gate, lambda *a: _assemble(cm, *a), pose, qpos, qvel, slots, foot_friction)
+    return stored(gate, lambda *a: _assemble(cm, *a), pose, qpos, qvel, slots)

@@ -6,16 +6,19 @@ with a plane floor, or the sphere foot alone with a heightfield floor, Euler wit
 joint damping, Newton on a pyramidal cone) and raises `NotChain` with one line saying why
 when the model is outside it. The result is a frozen dataclass of floats and tuples: the
 step reads it at trace time, so every axis, offset, inertia and solver parameter is a
-constant of the compiled function (a heightfield's heights are not: `terrain_heights`).
+constant of the compiled function (a heightfield's heights are not: `terrain_heights`), and
+`instance` puts one instance's varied numbers (a per-instance robot) in place of the constants.
 """
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import mujoco
 import numpy as np
 
+from hopper_mjx.engine import chain_algebra as al
 from hopper_mjx.engine.chain_algebra import const_mat
 from hopper_mjx.model.loader import FOOT_GEOM
 
@@ -345,4 +348,68 @@ def describe(m: mujoco.MjModel) -> ChainModel:
         cost_scale=1.0 / (float(m.stat.meaninertia) * max(1, int(m.nv))), impratio=float(opt.impratio),
         warmstart=not opt.disableflags & dis.mjDSBL_WARMSTART,
         refsafe=not opt.disableflags & dis.mjDSBL_REFSAFE, eulerdamp=not opt.disableflags & dis.mjDSBL_EULERDAMP,
+    )
+
+
+def _key(field: str, index: tuple) -> str:
+    return f"{field}{list(index)}"
+
+
+def entries(cm: ChainModel, values: dict, settable: dict) -> dict:
+    """One instance's numbers the chain reads from `values` ({model field: that field's array}): {"field[i, j]":
+    scalar} of each entry `settable[field]` marks, and MuJoCo's derived constraint weights (`body_invweight0` of
+    the bodies with a contact pair, `dof_invweight0` of the limited hinges: model.variation.with_constants).
+    Sliced once per rollout, so that the step reads scalars, not arrays."""
+    out = {_key(f, tuple(int(i) for i in index)): values[f][index]
+           for f, mask in settable.items() if f in values for index in zip(*np.nonzero(mask))}
+    if "body_invweight0" in values:
+        out |= {_key("body_invweight0", (p.body + 1, 0)): values["body_invweight0"][p.body + 1, 0] for p in cm.pairs}
+    if "dof_invweight0" in values:
+        out |= {_key("dof_invweight0", (link.hinge.dof,)): values["dof_invweight0"][link.hinge.dof]
+                for link in cm.links if link.hinge is not None and link.hinge.limit is not None}
+    return out
+
+
+def instance(cm: ChainModel, m: mujoco.MjModel, robot: dict) -> ChainModel:
+    """`cm` as one instance's robot: each number of `robot` (`entries`) replaces the constant folded from `m`,
+    the nominal model; every other number, zeros among them, stays a constant (so the algebra still folds it)."""
+
+    def pick(field: str, index: tuple, constant):
+        return robot.get(_key(field, index), constant)
+
+    def vec(field: str, row: int, constant) -> tuple:
+        return tuple(pick(field, (row, k), c) for k, c in enumerate(constant))
+
+    def inertia(b: int, constant: Sym6) -> Sym6:
+        diag = vec("body_inertia", b, m.body_inertia[b])
+        if all(map(al.is_const, diag)):
+            return constant
+        r = _quat_mat(m.body_iquat[b]).reshape(3, 3)
+        return tuple(al.total(al.mul(float(r[i, a] * r[j, a]), diag[a]) for a in range(3))
+                     for i, j in ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2)))
+
+    def hinge(h: Hinge | None) -> Hinge | None:
+        return h if h is None else dataclasses.replace(h, invweight=pick("dof_invweight0", (h.dof,), h.invweight))
+
+    links = tuple(dataclasses.replace(
+        link, pos=vec("body_pos", b, link.pos), hinge=hinge(link.hinge), mass=pick("body_mass", (b,), link.mass),
+        com=vec("body_ipos", b, link.com), inertia=inertia(b, link.inertia)) for b, link in enumerate(cm.links, 2))
+    pairs = []
+    for p, pair in enumerate(cm.pairs):
+        g = int(m.pair_geom2[p])
+        size = (pick("geom_size", (g, 0), pair.size[0]),) + pair.size[1:]
+        friction = (pick("pair_friction", (p, 0), pair.friction[0]), pick("pair_friction", (p, 1), pair.friction[1]))
+        body_invweight = pick("body_invweight0", (pair.body + 1, 0), pair.body_invweight)
+        invweight = pair.invweight
+        if not all(map(al.is_const, friction)) or body_invweight is not pair.body_invweight:
+            invweight = body_invweight if pair.condim == 1 else pyramid_invweight(body_invweight, friction[0],
+                                                                                  cm.impratio)
+        pairs.append(dataclasses.replace(pair, size=size, friction=friction, invweight=invweight,
+                                         body_invweight=body_invweight))
+    acts = tuple((a[0], pick("actuator_gear", (k, 0), a[1])) + a[2:] for k, a in enumerate(cm.actuators))
+    return dataclasses.replace(
+        cm, base_mass=pick("body_mass", (1,), cm.base_mass), base_com=vec("body_ipos", 1, cm.base_com),
+        base_inertia=inertia(1, cm.base_inertia), links=links, pairs=tuple(pairs), actuators=acts,
+        damping=tuple(pick("dof_damping", (i,), d) for i, d in enumerate(cm.damping)),
+        armature=tuple(pick("dof_armature", (i,), a) for i, a in enumerate(cm.armature)),
     )

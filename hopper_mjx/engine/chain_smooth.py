@@ -194,15 +194,15 @@ def _point_acc(acc, alpha, omega, r):
     return al.vadd(acc, al.vadd(al.cross(alpha, r), al.cross(omega, al.cross(omega, r))))
 
 
-def applied_forces(cm: ChainModel, qpos, qvel, ctrl, damping=None) -> tuple:
-    """Actuator forces (clamped like MuJoCo: ctrl, actuator force, joint force range) minus damping
-    (`damping`: each dof's, constants or run-time values; default the model's)."""
-    qfrc = [al.mul(-d, v) for d, v in zip(damping or cm.damping, qvel)]
+def applied_forces(cm: ChainModel, qpos, qvel, ctrl) -> tuple:
+    """Actuator forces (clamped like MuJoCo: ctrl, actuator force, joint force range) minus damping."""
+    qfrc = [al.mul(al.neg(d), v) for d, v in zip(cm.damping, qvel)]
     act = [0.0] * cm.nv
     for (dof, gear, gain, b0, b1, b2, ctrl_range, force_range), qadr, u in zip(cm.actuators, cm.actuator_qpos, ctrl):
         if ctrl_range is not None:
             u = jnp.clip(u, *ctrl_range)
-        force = al.total((al.mul(gain, u), b0, al.mul(b1 * gear, qpos[qadr]), al.mul(b2 * gear, qvel[dof])))
+        force = al.total((al.mul(gain, u), b0, al.mul(al.mul(b1, gear), qpos[qadr]),
+                          al.mul(al.mul(b2, gear), qvel[dof])))
         if force_range is not None:
             force = jnp.clip(force, *force_range)
         act[dof] = al.add(act[dof], al.mul(gear, force))

@@ -4,6 +4,7 @@
     controls = draw_controls(spec, mj_model, 64, 0) # {"kp_scale": (64, 3), "action_delay": (64,), ...}
     values = with_constants(mj_model, values)       # + body_invweight0, dof_invweight0, ... per instance
     m_i = instance_model(mj_model, values, i)       # instance i as a MuJoCo C model (mj_setConst called)
+    qpos0 = stances(mj_model, values)               # (64, nq) each drawn leg's own stance (None: leg not drawn)
 
 Each varied field is drawn whole, (N, *field shape): the nominal model's values where the spec
 leaves them, so instance i is re-created by setting the fields into a copy of the model. MuJoCo
@@ -22,16 +23,21 @@ import numpy as np
 from hopper_mjx import registry
 from hopper_mjx.model.layout import Layout
 from hopper_mjx.model.loader import JOINTS
+from hopper_mjx.model.robot import stance_qpos
 from hopper_mjx.randomize import Spec
 
 # Fields `mj_setConst` derives from masses, inertias, armature and gear that MJX's step reads (MJX reads
 # body_sameframe, which changes with a moved centre of mass, nowhere).
 CONSTANTS = ("body_subtreemass", "body_invweight0", "dof_invweight0", "dof_M0", "actuator_acc0")
-FEEDS_CONSTANTS = {"body_mass", "body_inertia", "body_ipos", "dof_armature", "actuator_gear"}  # the rest do not
+# (A body's offset moves the others' lever arms; a foot's radius feeds none of them.)
+FEEDS_CONSTANTS = {"body_mass", "body_inertia", "body_ipos", "dof_armature", "actuator_gear", "body_pos"}
 # Columns of a row a parameter sets: None, the whole row; a list, those columns (one draw shared by them
 # unless the parameter draws per axis).
-_COLUMNS = {"body_inertia": None, "body_ipos": [0, 1, 2], "pair_friction": [0, 1], "actuator_gear": [0]}
+_COLUMNS = {"body_inertia": None, "body_ipos": [0, 1, 2], "pair_friction": [0, 1], "actuator_gear": [0],
+            "body_pos": [0, 1, 2], "geom_size": [0]}
 _PER_AXIS = {"body_ipos"}  # one draw per column (x, y, z), not one per row
+# Fields that move the leg's geometry: an instance then starts from its own stance (`stances`).
+GEOMETRY = frozenset({"body_pos", "geom_size"})
 
 
 def rows(mj_model: mujoco.MjModel, elements: str) -> list[int]:
@@ -49,6 +55,8 @@ def rows(mj_model: mujoco.MjModel, elements: str) -> list[int]:
         return list(lay.joint_dof)
     if elements == "actuators":
         return list(lay.actuator_of_joint)
+    if elements == "foot_geom":
+        return [lay.foot_geom]
     if elements == "foot_pair":
         return [int(p) for p in np.flatnonzero((m.pair_geom1 == lay.foot_geom) | (m.pair_geom2 == lay.foot_geom))]
     raise ValueError(f"unknown elements {elements!r}")
@@ -68,10 +76,44 @@ def draw(spec: Spec, mj_model: mujoco.MjModel, n: int, seed: int) -> dict[str, n
         # One draw per element (per row; per row and axis for the centre of mass), spread over its columns.
         shape = at.shape[:1] + (1,) if nominal.ndim == 2 and par.field not in _PER_AXIS else at.shape
         drawn = dist.draw(spec.rng(seed, name), np.ones(shape), n)
+        if par.length:  # the row's length: drawn (or scaled from the nominal length), the direction kept
+            length = np.linalg.norm(at, axis=-1, keepdims=True)
+            _check_link(mj_model, name, par)
+            drawn = length * drawn if dist.kind == "scale" else drawn
+            _check_range(name, par, drawn)
+            field[(slice(None), *index)] = at / length * drawn
+            continue
         drawn = at * drawn if dist.kind == "scale" else np.broadcast_to(drawn, (n, *at.shape))
         _check_range(name, par, drawn)
         field[(slice(None), *index)] = at + drawn if par.offset else drawn
     return values
+
+
+def _check_link(m: mujoco.MjModel, name: str, par: registry.Parameter) -> None:
+    """A length parameter's body must be its own link, below the joint before it, at a distance from it."""
+    kfe_body = int(m.joint(JOINTS[2]).bodyid[0])
+    body = rows(m, par.elements)[0]
+    if par.elements == "foot" and body == kfe_body:
+        raise ValueError(f"{name}: the foot sphere sits on the shank link itself; {name} needs a foot link")
+    if not np.any(m.body_pos[body]):
+        raise ValueError(f"{name}: the {par.elements} link sits at its parent's origin; no length to draw")
+
+
+def settable(mj_model: mujoco.MjModel, field: str) -> np.ndarray:
+    """Bool mask, the shape of `field`: the entries some `registry.PARAMETERS` entry can set (a length keeps
+    a zero component zero). The chain engine takes these as run-time values and folds the rest."""
+    nominal = np.asarray(getattr(mj_model, field))
+    mask = np.zeros(nominal.shape, bool)
+    for par in registry.PARAMETERS.values():
+        if par.field != field:
+            continue
+        at = rows(mj_model, par.elements)
+        if nominal.ndim == 1:
+            mask[at] = True
+            continue
+        cols = _COLUMNS.get(field) or range(nominal.shape[-1])
+        mask[np.ix_(at, cols)] = nominal[np.ix_(at, cols)] != 0 if par.length else True
+    return mask
 
 
 def columns(spec: Spec, mj_model: mujoco.MjModel, values: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
@@ -89,6 +131,7 @@ def columns(spec: Spec, mj_model: mujoco.MjModel, values: dict[str, np.ndarray])
         labels = _labels(mj_model, par.elements, at)
         for r, label in zip(at, labels):
             value = field[:, r] if field.ndim == 2 else field[:, r, 0]
+            value = np.linalg.norm(field[:, r], axis=-1) if par.length else value
             out[name if len(at) == 1 else f"{name}_{label}"] = value
     return out
 
@@ -178,3 +221,41 @@ def with_constants(mj_model: mujoco.MjModel, values: dict[str, np.ndarray]) -> d
         for c in CONSTANTS:
             out[c][i] = getattr(m, c)
     return {**values, **out}
+
+
+def stances(mj_model: mujoco.MjModel, values: dict[str, np.ndarray]) -> np.ndarray | None:
+    """(N, nq) each instance's own stance (`robot.stance_qpos` on its model: the knee that puts its centre
+    of mass above its foot, the foot `CLEARANCE` above the floor) when `values` move the leg's geometry,
+    else None (every instance starts from the URDF's stance). Raises ValueError naming the first instance
+    whose leg cannot reach the floor: no such knee angle, or a robot geom lower than the foot in its stance."""
+    if not GEOMETRY & set(values):
+        return None
+    m, n = copy.deepcopy(mj_model), len(next(iter(values.values())))
+    lay, d = Layout.of(m), mujoco.MjData(m)
+    others = [int(g) for g in m.pair_geom2 if g != lay.foot_geom]  # the robot's other geoms that touch the floor
+    out = np.empty((n, m.nq))
+    for i in range(n):
+        for field, v in values.items():
+            if field not in CONSTANTS:
+                getattr(m, field)[:] = v[i]
+        try:
+            out[i] = stance_qpos(m)
+            d.qpos[:] = out[i]
+            mujoco.mj_kinematics(m, d)
+            foot = d.geom_xpos[lay.foot_geom, 2] - m.geom_size[lay.foot_geom, 0]
+            low, g = min(((_lowest(m, d, g), g) for g in others), default=(np.inf, -1))
+            if low <= foot:
+                raise ValueError(f"in its stance, geom {m.geom(g).name!r} reaches {foot - low:.3f} m below the foot")
+        except ValueError as err:
+            thigh, shank = (np.linalg.norm(m.body_pos[rows(m, part)[0]]) for part in ("shank", "foot"))
+            raise ValueError(f"the leg of instance {i} (thigh {thigh:.3g} m, shank {shank:.3g} m, foot radius "
+                             f"{m.geom_size[lay.foot_geom, 0]:.3g} m) cannot reach the floor: {err}") from None
+    return out
+
+
+def _lowest(m: mujoco.MjModel, d: mujoco.MjData, g: int) -> float:
+    """Lowest z (m) of geom g after kinematics: a sphere's or a box's (the robot's floor geoms)."""
+    if m.geom_type[g] == mujoco.mjtGeom.mjGEOM_SPHERE:
+        return float(d.geom_xpos[g, 2] - m.geom_size[g, 0])
+    corners = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)]) * m.geom_size[g]
+    return float((d.geom_xpos[g] + corners @ d.geom_xmat[g].reshape(3, 3).T)[:, 2].min())

@@ -11,7 +11,8 @@ steps from the same initial state, instance i under the same gravity:
   controller, signals, divergence guard), sharded over every local device. Its
   JSON keys start with `core_`; `engine` names the engine that ran.
 - native: `mujoco.rollout` with one thread per device, per-instance gravity
-  given as a list of `MjModel`s. The `hold` law (PD to the initial joint angles,
+  given as a list of `MjModel`s (with `--randomize`, one model per instance: its
+  drawn fields set and `mj_setConst` called, as the core's robot). The `hold` law (PD to the initial joint angles,
   saturated at the effort limits) runs inside MuJoCo's C step as affine-bias
   servo actuators with a constant target, so native pays for the same
   closed-loop control law without a Python callback. Native also computes its
@@ -89,26 +90,40 @@ def native_hold_model(mj_model, layout, p: float, d: float):
 
 
 class NativeRollout:
-    """`mujoco.rollout` of the batch with one thread per core and a model per gravity."""
+    """`mujoco.rollout` of the batch with one thread per core and a model per gravity, or per instance
+    for per-instance robots (`robots`: {field: (N, ...)}, `model.variation.with_constants`)."""
 
-    def __init__(self, mj_model, gravity: np.ndarray, qpos0: np.ndarray, ctrl: np.ndarray, threads: int):
+    def __init__(self, mj_model, gravity: np.ndarray, qpos0: np.ndarray, ctrl: np.ndarray, threads: int,
+                 robots: dict | None = None):
         import mujoco
         from mujoco import rollout
 
-        models = {}
-        for g in map(tuple, gravity):
-            if g not in models:
-                models[g] = copy.deepcopy(mj_model)
-                models[g].opt.gravity[:] = g
-        self.models = [models[g] for g in map(tuple, gravity)]
+        from hopper_mjx.model.variation import instance_model
+
+        if robots:  # MuJoCo's rollout takes a sequence of models, one per initial state
+            self.models = [instance_model(mj_model, robots, i) for i in range(len(gravity))]
+            for m, g in zip(self.models, gravity):
+                m.opt.gravity[:] = g
+                # A servo's bias reads the joint through the gear (actuator_length = gear q): rescaled, the hold
+                # law stays the one a controller computes with the URDF's gear, as on the core's side.
+                m.actuator_biasprm[:, 1:3] *= mj_model.actuator_gear[:, :1] / m.actuator_gear[:, :1]
+        else:
+            models = {}
+            for g in map(tuple, gravity):
+                if g not in models:
+                    models[g] = copy.deepcopy(mj_model)
+                    models[g].opt.gravity[:] = g
+            self.models = [models[g] for g in map(tuple, gravity)]
         self.datas = [mujoco.MjData(mj_model) for _ in range(threads)]
         d = mujoco.MjData(mj_model)
-        d.qpos[:] = qpos0
         spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
-        state = np.empty(mujoco.mj_stateSize(mj_model, spec))
-        mujoco.mj_getState(mj_model, d, state, spec)
-        self.initial_state = state
-        self.ctrl = np.asarray(ctrl, dtype=float)
+        states = []
+        for q in np.atleast_2d(qpos0):  # one initial state, or one per instance
+            d.qpos[:] = q
+            states.append(np.empty(mujoco.mj_stateSize(mj_model, spec)))
+            mujoco.mj_getState(mj_model, d, states[-1], spec)
+        self.initial_state = np.broadcast_to(np.array(states), (len(gravity), states[0].size))
+        self.ctrl = np.broadcast_to(np.asarray(ctrl, dtype=float), (len(gravity), mj_model.nu))
         self.threads = threads
         self.pool = rollout.Rollout(nthread=threads if threads > 1 else 0)
 
@@ -122,8 +137,8 @@ class NativeRollout:
             state, _ = self.pool.rollout(
                 self.models[lo:hi],
                 self.datas,
-                initial_state=np.broadcast_to(self.initial_state, (hi - lo, self.initial_state.size)),
-                control=np.broadcast_to(self.ctrl, (hi - lo, 1, self.ctrl.size)),
+                initial_state=self.initial_state[lo:hi],
+                control=self.ctrl[lo:hi, None],
                 nstep=steps,
             )
             final.append(state[:, -1].copy())
@@ -157,8 +172,9 @@ class CompileClock:
             self.cache_hits += 1
 
 
-def controller_pair(name: str, sim, gravity):
-    """(MJX controller, params, native MjModel, native ctrl (nu,)) for a --controller value."""
+def controller_pair(name: str, sim, gravity, stance: np.ndarray | None = None):
+    """(MJX controller, params, native MjModel, native ctrl (nu,) or (N, nu)) for a --controller value;
+    `stance`: (N, nq) each instance's own start (the hold law's targets), None the robot's."""
     from hopper_mjx import control
     from hopper_mjx.control.base import HOLD_GAINS
 
@@ -168,8 +184,9 @@ def controller_pair(name: str, sim, gravity):
     if name == "none":
         return controller, params, sim.mj_model, np.zeros(layout.nu)
     # raibert has no C twin: native keeps the (cheaper) hold law, see the module doc.
-    ctrl = np.zeros(layout.nu)
-    ctrl[list(layout.actuator_of_joint)] = sim.robot.stance_joints
+    joints = sim.robot.stance_joints if stance is None else stance[:, list(layout.joint_qpos)]
+    ctrl = np.zeros(np.shape(joints)[:-1] + (layout.nu,))
+    ctrl[..., list(layout.actuator_of_joint)] = joints
     return controller, params, native_hold_model(sim.mj_model, layout, **HOLD_GAINS), ctrl
 
 
@@ -189,6 +206,7 @@ def run(num: int, steps: int, *, controller: str = "hold", chunk: int = 256, rep
     """One side-by-side measurement of `physics` (its robot, engine and timestep); returns the JSON record."""
     import jax
 
+    from hopper_mjx.model import variation
     from hopper_mjx.sim import gravity_vectors
 
     if steps < 1 or repeat < 1:
@@ -198,8 +216,13 @@ def run(num: int, steps: int, *, controller: str = "hold", chunk: int = 256, rep
     sim = physics.sim(chunk=chunk)
     threads = threads or len(sim.devices)
     gravity = gravity_vectors(bench_gravities(num))
-    core_controller, params, native_model, native_ctrl = controller_pair(controller, sim, gravity)
-    state0 = sim.reset(gravity, key=0, controller=core_controller, params=params)
+    robots = {}
+    if physics.variation:  # each instance's robot, the same on both sides
+        robots = variation.with_constants(sim.mj_model, variation.draw(physics.variation, sim.mj_model, num, seed=0))
+    stance = variation.stances(sim.mj_model, robots)
+    core_controller, params, native_model, native_ctrl = controller_pair(controller, sim, gravity, stance)
+    qpos0 = np.asarray(sim.robot.stance_qpos) if stance is None else stance
+    state0 = sim.reset(gravity, key=0, controller=core_controller, params=params, qpos=qpos0, variation=robots)
     jax.block_until_ready(state0)
 
     def run_mjx():
@@ -209,7 +232,7 @@ def run(num: int, steps: int, *, controller: str = "hold", chunk: int = 256, rep
 
     first_s = timed(run_mjx)[0]
     compile_s = clock.seconds
-    pool = NativeRollout(native_model, gravity, np.asarray(sim.robot.stance_qpos), native_ctrl, threads)
+    pool = NativeRollout(native_model, gravity, qpos0, native_ctrl, threads, robots)
     core_runs, native_runs = [], []
     for _ in range(repeat):  # interleaved, so that both sides see the same background load
         wall, cpu, final = timed(run_mjx)
@@ -229,6 +252,7 @@ def run(num: int, steps: int, *, controller: str = "hold", chunk: int = 256, rep
         "controller": controller,
         "engine": sim.engine.name,
         "terrain": str(physics.ground),
+        "randomize": str(physics.variation) if physics.variation else None,
         "native_controller": "none" if controller == "none" else "hold",
         "timestep": physics.timestep,
         "core_steps_per_s": core_rate,
@@ -265,6 +289,7 @@ def run(num: int, steps: int, *, controller: str = "hold", chunk: int = 256, rep
 def format_table(record: dict) -> str:
     rows = [
         ("instances x steps", f"{record['num']} x {record['steps']}  (controller {record['controller']})"),
+        *([("randomize", record["randomize"])] if record.get("randomize") else []),
         ("core steps/s", f"{record['core_steps_per_s']:,.0f}  engine {record['engine']}, on {record['devices']} "
                          f"{record['device_kind']} device(s)"),
         ("native steps/s",
@@ -388,7 +413,6 @@ def check(args) -> tuple[list[int] | None, Physics]:
     physics = cli.check_physics(argparse.Namespace(**vars(args) | {"engine": engines[0]}),
                                 {"timestep": args.timestep}, engines=engines, n=2 * max(sizes))  # both sides' heights
     cli.check_ideal_motors(physics, "perf.bench (native MuJoCo has no twin of them)")
-    cli.refuse_variation(physics, "perf.bench (native MuJoCo's models are per gravity, not per robot, for now)")
     if args.plot and not args.scaling:
         raise ValueError("--plot draws the --scaling records: give --scaling N1,N2,... too")
     if args.plot:
