@@ -57,7 +57,9 @@ class Stepper:
         self.reset = jax.jit(jax.vmap(env.reset))
         after = jax.jit(jax.vmap(env.after_physics, in_axes=(None, 0, 0, 0, 0)))
         targets = jax.vmap(env.targets)
-        self.step = lambda s, a: after(model, s, a, *physics(model, s.pipeline_state, s.info["gravity"], targets(a)))
+        # physics gives (data, effort, delay line); the URDF's prompt robot has no line
+        self.step = lambda s, a: after(model, s, a,
+                                       *physics(model, s.pipeline_state, s.info["gravity"], targets(a))[:2])
 
     def __call__(self, keys, actions):
         """(reset state, the states after each action, stacked)."""
