@@ -169,3 +169,27 @@ def test_auto_steps_a_terrain_with_mjx_and_says_why(capsys):
     assert notice.startswith("note: engine auto uses mjx") and "heightfield" in notice and notice.count("\n") == 1
     with pytest.raises(ValueError, match="not a chain model"):
         engine.make("chain", m)
+
+
+def test_seed_each_draws_every_instance_its_own_ground():
+    each = terrain.parse("rough:amp=0.02,seed=each,size=1x1,cell=0.1")
+    assert str(each) == "rough:amp=0.02,wavelength=0.4,seed=each,size=1x1,cell=0.1"
+    assert terrain.parse(str(each)) == each
+    grids = each.grids(7, range(3))
+    assert grids.shape == (3, 11, 11)
+    assert np.abs(grids[0] - grids[1]).max() > 1e-3  # their own draws
+    np.testing.assert_array_equal(grids, each.grids(7, range(3)))  # deterministic
+    np.testing.assert_allclose(np.abs(grids).max(axis=(1, 2)), 0.02)  # each scaled to the amplitude
+    np.testing.assert_array_equal(each.terrain().heights, each.grids(0, [0])[0])  # the model: seed 0, instance 0
+    fixed = terrain.parse("rough:amp=0.02,seed=3,size=1x1,cell=0.1")
+    assert fixed.grids(7, range(3)) is None and fixed.instance(7, 2) is fixed  # one ground for all
+
+
+def test_obstacles_are_the_bands_to_get_over():
+    np.testing.assert_allclose(terrain.parse("obstacle:height=0.1,x=0.6,length=0.2").obstacles(), [[0.6, 0.8, 0.1]])
+    np.testing.assert_allclose(terrain.parse("steps:height=0.05,depth=1,x=1").obstacles(), [[1, 2, 0.05]])
+    np.testing.assert_allclose(terrain.parse("stairs:height=0.05,depth=0.3,n=2,x=0.5").obstacles(),
+                               [[0.5, 2.0, 0.1]])
+    np.testing.assert_allclose(terrain.parse("gaps:width=0.1,spacing=0.5,depth=0.2,x=0.5,size=3").obstacles(),
+                               [[0.5, 0.6, -0.2], [1.0, 1.1, -0.2]])
+    assert terrain.parse("rough").obstacles().shape == (0, 3)
