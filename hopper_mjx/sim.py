@@ -163,8 +163,7 @@ class Sim:
         if not isinstance(key, jax.Array):
             key = jax.random.PRNGKey(key)
         controller = controller or self.limp
-        obs = jax.vmap(lambda d: signals.observe(self.engine, self.engine.model, d))(data)  # the controller's
-        # init reads no ground
+        obs = self._first_observation(data, ground)
         cstate = jax.vmap(controller.init, in_axes=(0, None if params is None else 0))(obs, params)
         if motor is None and not self.actuation.passthrough:
             motor = self.actuation.motor(n, delay_steps=self.delay_steps)
@@ -179,6 +178,16 @@ class Sim:
             variation=variation,
             ground=ground,
         )
+
+    def _first_observation(self, data, ground):
+        """What each controller's `init` reads: the observation at the start, on the instance's ground."""
+        observe = lambda d, sensed: signals.observe(self.engine, self.engine.model, d, sensed)
+        if self.terrain is None:
+            return jax.vmap(lambda d: observe(d, ()))(data)
+        points = jnp.asarray(signals.SensorConfig().scan_points(), jnp.float32)  # init reads the heights, not a scan
+        heights = ground if isinstance(ground, jax.Array) else self.heights
+        axis = 0 if isinstance(ground, jax.Array) else None
+        return jax.vmap(lambda d, h: observe(d, (h, self.terrain.size, points)), in_axes=(0, axis))(data, heights)
 
     def _check_ground(self, heights, n: int) -> jax.Array:
         if self.terrain is None:
