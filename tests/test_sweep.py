@@ -221,3 +221,24 @@ def test_a_randomized_sweep_records_each_replicates_robot_the_same_at_every_grav
     # Another variation into the same folder is another experiment.
     assert main([*args[:-1], "foot_friction=0.5", "--out", str(out)]) == 2
     assert "holds a different sweep (differs in variation" in capsys.readouterr().err
+
+
+def test_an_obstacle_sweeps_figure_shows_the_share_cleared_and_each_ground():
+    from hopper_mjx import terrain
+    from hopper_mjx.scenario import Physics
+    from hopper_mjx.sweep import report
+
+    grounds = tuple(str(terrain.parse(f"obstacle:height={h},x=0.6,size=2x1")) for h in (0.05, 0.2))
+    spec = _spec(kind="obstacle", param="obstacle_height", values=(0.05, 0.2), speed=(0.3, 0.0), grounds=grounds,
+                 physics=Physics(ground=terrain.parse(grounds[0])))
+    assert spec.to_json()["grounds"] == grounds and "grounds" not in _spec().to_json()
+    groups = [{"obstacle_height": v, "gravity": g, "survival": 1.0, "cleared": 0.5} for v in spec.values
+              for g in spec.gravity]
+    fig = report.terrain_figure(spec, groups)
+    cleared, ground = fig.axes[1], fig.axes[2]
+    assert cleared.get_title() == "share that cleared the obstacle" and cleared.images[0].get_clim() == (0.0, 1.0)
+    profiles = [line.get_ydata() for line in ground.lines]
+    assert [p.max() for p in profiles] == pytest.approx([0.05, 0.2])  # each value's block, at y = 0
+    x = ground.lines[1].get_xdata()
+    assert x[profiles[1] > 0].min() == pytest.approx(0.6, abs=0.04)  # where the block starts
+    report.save(fig, "/dev/null")
