@@ -193,3 +193,17 @@ def test_obstacles_are_the_bands_to_get_over():
     np.testing.assert_allclose(terrain.parse("gaps:width=0.1,spacing=0.5,depth=0.2,x=0.5,size=3").obstacles(),
                                [[0.5, 0.6, -0.2], [1.0, 1.1, -0.2]])
     assert terrain.parse("rough").obstacles().shape == (0, 3)
+
+
+def test_an_instances_own_ground_goes_into_mjxs_height_field_as_mujoco_reads_it():
+    """`sim.on_ground` for MJX: the data it writes, put back into the compiled model, is the instance's
+    heights as MuJoCo C's own hfield reads them (rows along +y, in the model's elevation range)."""
+    from hopper_mjx.engine.mjx import MjxEngine
+    from hopper_mjx.sim import on_ground
+
+    m = model.load(terrain=terrain.parse("rough:amp=0.02,seed=1,size=1x0.6,cell=0.1").terrain())
+    other = terrain.parse("obstacle:height=0.05,x=0.2,size=1x0.6,cell=0.1").terrain().heights  # another ground
+    engine = MjxEngine(m)
+    data = np.asarray(on_ground(engine, m, engine.model, other).hfield_data)
+    m.hfield_data[:] = data
+    np.testing.assert_allclose(terrain.from_model(m).heights, other, atol=1e-7)
