@@ -206,7 +206,7 @@ def test_the_landing_floor_is_the_step_ahead(robot):
     ground = _ground(_step(x0=0.2))
     obs = lambda vx: _obs(robot, qvel=np.r_[vx, np.zeros(8)])
     speed = raibert.speed_update(_state(), _events(), jnp.zeros(2), jnp.float32(0.3), 9.81)
-    floor = lambda vx: float(raibert.landing_floor(robot.leg, raibert.sense(robot, obs(vx)), None, ground,
+    floor = lambda vx: float(raibert.landing_floor(robot.leg, raibert.sense(robot, obs(vx)), ground,
                                                    jnp.zeros(2), speed, jnp.float32(0.1), 9.81))
     assert floor(0.6) == pytest.approx(0.05)  # ahead by v·(T_s + T_f) ≈ 0.6·0.43 m: on the step
     assert floor(0.0) == pytest.approx(0.0)

@@ -378,7 +378,7 @@ def foothold(leg: LegGeometry, body: Body, base_xy, placement) -> tuple[jax.Arra
     return there[0], there[1]
 
 
-def landing_floor(leg: LegGeometry, body: Body, gains: RaibertConfig, ground, base_xy, speed: Speed, height, g):
+def landing_floor(leg: LegGeometry, body: Body, ground, base_xy, speed: Speed, height, g):
     """m: the ground the next hop is aimed above: the higher of the ground under the foot now and where
     the foot lands a hop ahead (the COM travels about v·(T_s + T_f) by then, T_f the commanded flight),
     so that a hop up a step is given the energy to climb it."""
@@ -434,8 +434,8 @@ def raibert(robot: Robot, config: RaibertConfig | None = None) -> Controller:
         speed = speed_update(s, ev, body.v, obs.time, g)
         ground, base_xy, floor = obs.ground, obs.qpos[:2], s.floor
         if ground is not None:  # static: on a terrain, the ground under the next hop (the plane: z = 0)
-            floor = jnp.where(ev.bottom, landing_floor(leg, body, gains, ground, base_xy, speed, s.params.height,
-                                                       g), s.floor)
+            floor = jnp.where(ev.bottom, landing_floor(leg, body, ground, base_xy, speed, s.params.height, g),
+                              s.floor)
         height_bias, thrust_force = height_update(s, ev, body, g, stiffness, mass, robot.standing_height,
                                                   None if ground is None else floor)
         apex = jnp.where(ev.liftoff, body.z, jnp.where(phase == FLIGHT, jnp.maximum(s.apex, body.z), s.apex))
