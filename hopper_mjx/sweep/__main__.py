@@ -15,6 +15,7 @@ Several processes (hosts) share one sweep with --coordinator HOST:PORT --num-pro
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 import time
 from datetime import datetime, timezone
@@ -57,6 +58,9 @@ def parser() -> argparse.ArgumentParser:
             s.add_argument("--amps", dest="values", type=cli.floats("--amps"), default=[0.0, 0.01, 0.02, 0.03],
                            help="rough ground's peak |height|, m (default 0,0.01,0.02,0.03)")
             s.add_argument("--wavelength", type=float, default=0.4, help="rough ground's wavelength, m")
+        if kind in TERRAIN_KINDS:
+            s.add_argument("--size", default=None, help="the ground's extents LxW, m (default: 4 m wide, and long "
+                           "enough for --speed over --duration and back: the ground ends at its edge)")
         if kind == "gravity":
             s.add_argument("--controller", default="raibert",
                            help="raibert, balance (the stand reference) or policy:PATH (experiments/train.py)")
@@ -173,12 +177,15 @@ def terrain_grounds(args) -> list[str]:
     if not args.values or len(set(args.values)) != len(args.values):
         raise ValueError(f"--{'heights' if args.kind == 'obstacle' else 'amps'} must be one or more different "
                          "values")
+    cli.check_range("--duration", args.duration, low=0, open_low=True)
+    reach = math.hypot(*args.speed) * args.duration + 1.0  # m the robot may travel, and a margin
+    size = args.size or f"{max(4.0, 2 * math.ceil(reach * 2) / 2):g}x4"
     if args.kind == "obstacle":
         cli.check_range("--length", args.length, low=0, open_low=True)
         cli.check_range("--x", args.x)
-        return [f"obstacle:height={h!r},x={args.x!r},length={args.length!r}" for h in args.values]
+        return [f"obstacle:height={h!r},x={args.x!r},length={args.length!r},size={size}" for h in args.values]
     cli.check_range("--wavelength", args.wavelength, low=0, open_low=True)
-    return [f"rough:amp={a!r},wavelength={args.wavelength!r},seed=each" for a in args.values]
+    return [f"rough:amp={a!r},wavelength={args.wavelength!r},seed=each,size={size}" for a in args.values]
 
 
 def folder_of(args, out: Path, spec) -> Path:
