@@ -226,3 +226,17 @@ def test_a_level_ground_at_zero_acts_as_the_plane(robot):
         ground, _ = ctrl.act(s, obs._replace(contact=touch, ground=level), jnp.array([0.0, 0.0, -9.81]))
         np.testing.assert_allclose(ground, plane, atol=1e-5)
         assert np.abs(np.asarray(plane)).max() > 1.0  # a real command, not zeros on both sides
+
+
+def test_rising_towards_a_step_the_leg_is_drawn_up_by_its_rise(robot):
+    """In a rising flight whose foothold is on a step 5 cm above the ground under the foot, the PD's target
+    leg is 5 cm shorter (read back from the torque as above)."""
+    cfg, leg = raibert.RaibertConfig(), robot.leg
+    inertia = raibert.inertia_facts(leg)
+    step = _ground(_step(x0=0.1))  # the foot is near x = 0, the foothold v·T_s/2 = 0.15 ahead of the COM
+    for vz, shorter in ((0.5, 0.05),):
+        body = raibert.sense(robot, _obs(robot, qvel=np.r_[0.5, 0, vz, np.zeros(6)]))
+        torque = raibert.flight_torque(leg, cfg, body, jnp.zeros(3), _speed(0.6), 9.81, inertia, step,
+                                       jnp.zeros(2))
+        target = body.q + torque / jnp.asarray(raibert.FLIGHT_KP)
+        assert float(kinematics.leg_length(leg, target[2])) == pytest.approx(cfg.leg_length - shorter, abs=1e-4)

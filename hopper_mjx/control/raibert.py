@@ -85,6 +85,7 @@ INERTIA_POSE = (0.0, 0.5, -0.95)
 MAX_PLACEMENT = 0.25  # m, bound on the foot placement from the COM
 MAX_HEIGHT_BIAS = 0.3  # m, bound on the adapted apex-target bias
 MAX_SPEED_OFFSET = 0.1  # m, bound on the integral part of the foot placement
+MAX_RETRACT = 0.15  # m, bound on the leg's shortening in a rising flight towards higher ground
 MIN_SQUEEZE = 0.02  # m, floor under the remaining thrust stroke the extra force is spread over
 # The flight PD: the shipped position controllers' p and d (hopper_mjx/control/monoped.yaml), no i.
 FLIGHT_KP = (400.0, 400.0, 200.0)  # N·m/rad, haa, hfe, kfe
@@ -358,14 +359,21 @@ def flight_torque(leg: LegGeometry, gains: RaibertConfig, body: Body, spin, spee
     touchdown is the foot's fall to the ground where it will land."""
     placement = body.v * speed.stance_time / 2 + speed.gain * speed.error + speed.offset
     placement = body.unturn[:2, :2] @ jnp.clip(placement, -MAX_PLACEMENT, MAX_PLACEMENT)
-    foot_height = body.z + (body.rot @ (body.foot - jnp.array([0.0, 0.0, leg.haa_below_base])))[2] - leg.foot_radius
+    foot = body.rot @ (body.foot - jnp.array([0.0, 0.0, leg.haa_below_base]))  # from the base, world axes
+    foot_height = body.z + foot[2] - leg.foot_radius
+    retract = gains.retract
     if ground is not None:  # static: the plane's foot height is above z = 0
-        foot_height = foot_height - ground.height(*foothold(leg, body, base_xy, placement))
+        landing = ground.height(*foothold(leg, body, base_xy, placement))
+        foot_height = foot_height - landing
+        # Rising towards higher ground (a step's riser just ahead), the foot is drawn up by the rise so that
+        # its swing does not catch the edge; it reaches out again from the apex on.
+        retract = retract + jnp.clip(landing - ground.height(base_xy[0] + foot[0], base_xy[1] + foot[1]), 0.0,
+                                     MAX_RETRACT)
     time_left = (body.zdot + jnp.sqrt(body.zdot**2 + 2.0 * g * jnp.maximum(foot_height, 0.0))) / g  # to touchdown
     drift = jnp.stack([body.roll, body.pitch]) + spin[:2] * time_left / (1.0 - inertia.alpha)  # tilt at touchdown
     placement = _within_tilt_budget(placement, (body.level @ (body.foot - body.com))[:2], drift,
                                     inertia.swing_tilt, gains.tilt_budget, gains.leg_length)
-    flight_length = gains.leg_length - jnp.where(body.zdot > 0, gains.retract, 0.0)
+    flight_length = gains.leg_length - jnp.where(body.zdot > 0, retract, 0.0)
     target = _placement_angles(leg, body.level, placement, flight_length, body.com)
     leg_rate = body.qd + jnp.concatenate([body.gyro[:2], jnp.zeros(1)])  # the leg's rate in the world
     return pd(jnp.asarray(FLIGHT_KP), jnp.asarray(FLIGHT_KD), target - body.q, leg_rate)
