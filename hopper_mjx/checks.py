@@ -148,6 +148,22 @@ def floats(what: str):
     return lambda text: parse_floats(text, what)
 
 
+def parse_scan(text: str) -> tuple[tuple[int, int], tuple[float, float]]:
+    """--scan NXxNY,SPACING (or ,DXxDY): the height scan's point counts (ahead, left) and spacing, m."""
+    counts, _, spacing = text.partition(",")
+    try:
+        n = tuple(int(c) for c in counts.lower().split("x"))
+        d = tuple(float(v) for v in spacing.lower().split("x"))
+    except ValueError:
+        raise ValueError(f"--scan {text!r} must be NXxNY,SPACING (e.g. 5x5,0.1 or 7x3,0.1x0.05)") from None
+    d = d * 2 if len(d) == 1 else d
+    if len(n) != 2 or len(d) != 2 or not all(1 <= c <= 64 for c in n):
+        raise ValueError(f"--scan {text!r} must be NXxNY,SPACING with 1..64 points per axis")
+    if not all(math.isfinite(v) and v > 0 for v in d):
+        raise ValueError(f"--scan {text!r}: the spacing must be > 0 m")
+    return n, d
+
+
 def parse_indices(text: str, what: str = "--instances") -> list[int]:
     try:
         return [int(v) for v in text.split(",") if v.strip()]

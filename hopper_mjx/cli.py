@@ -30,6 +30,7 @@ from hopper_mjx.checks import (  # noqa: F401  re-exported: the tools use them b
     floats,
     parse_floats,
     parse_indices,
+    parse_scan,
     parser,
     warn_diverged,
 )
@@ -151,6 +152,12 @@ def refuse_terrain(ground, tool: str) -> None:
     one line."""
     if not ground.is_flat:
         raise ValueError(f"--terrain: {tool} runs on the flat ground only, for now; drop --terrain {ground}")
+
+
+def refuse_each(ground, tool: str) -> None:
+    """For a tool that puts every instance on the model's one ground: seed=each refused in one line."""
+    if ground.each:
+        raise ValueError(f"--terrain {ground}: {tool} puts every instance on one ground; give a fixed seed")
 
 
 def check_ground(text: str, engines, n: int = 1):

@@ -71,7 +71,8 @@ def spread(n: int, count: int) -> list[int]:
     return sorted(set(np.linspace(0, n - 1, min(count, n)).round().astype(int).tolist()))
 
 
-STREAM_OF_FIELD = {"imu": "imu", "odom": "odom", "contact": "contact", "qpos": "state", "qvel": "state"}
+STREAM_OF_FIELD = {"imu": "imu", "odom": "odom", "contact": "contact", "qpos": "state", "qvel": "state",
+                   "ground": "contact"}
 
 
 def joined(chunks: list[Chunk], end: float):

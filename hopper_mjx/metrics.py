@@ -175,6 +175,44 @@ def hop_metrics(
     }
 
 
+def terrain_metrics(traj, *, command_speed=(0.0, 0.0), obstacles=None) -> dict[str, np.ndarray]:
+    """Per-instance metrics of a run over ground, each (N,) (the fall test is `hop_metrics`'):
+
+    - distance_made_good: m, the base's net horizontal travel from the start to the end of the record (or its
+      fall), along the commanded direction when a speed is commanded, else in whichever direction;
+    - obstacles_cleared: how many of `obstacles` the base passed beyond (their far end) before any fall;
+    - highest_cleared: m, the highest of those (NaN when none; a trench counts as its negative depth);
+    - fall_x, fall_y: m, where the base was at its fall (NaN without one).
+
+    obstacles: (B, 3) or (N, B, 3) rows (x start, x end, height) m of bands across the ground along +x
+    (`terrain.Ground.obstacles`), NaN rows ignored; None: no obstacles.
+    """
+    qpos = np.asarray(traj.qpos, dtype=float)
+    t_state = np.asarray(traj.time["state"], dtype=float)
+    n = qpos.shape[0]
+    fall = _falls(qpos, t_state)
+    rows = np.arange(n)
+    travel = qpos[rows, fall.index, :2] - qpos[:, 0, :2]
+    command = np.broadcast_to(np.asarray(command_speed, dtype=float), (n, 2))
+    speed = np.linalg.norm(command, axis=1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        along = (travel * command).sum(axis=1) / speed
+    made_good = np.where(speed > 0, along, np.linalg.norm(travel, axis=1))
+    given = np.zeros((0, 3)) if obstacles is None else np.asarray(obstacles, dtype=float)
+    bands = np.broadcast_to(given, (n, *given.shape[-2:]))
+    farthest = np.where(fall.upright, qpos[:, :, 0], -np.inf).max(axis=1)  # the base's reach before any fall
+    with np.errstate(invalid="ignore"):
+        cleared = np.isfinite(bands[:, :, 1]) & (farthest[:, None] > bands[:, :, 1])
+    highest = np.where(cleared, bands[:, :, 2], -np.inf).max(axis=1, initial=-np.inf)
+    return {
+        "distance_made_good": made_good,
+        "obstacles_cleared": cleared.sum(axis=1),
+        "highest_cleared": np.where(np.isfinite(highest), highest, np.nan),
+        "fall_x": np.where(fall.fell, qpos[rows, fall.index, 0], np.nan),
+        "fall_y": np.where(fall.fell, qpos[rows, fall.index, 1], np.nan),
+    }
+
+
 class _Falls(NamedTuple):
     roll: np.ndarray  # (N, T) rad
     pitch: np.ndarray  # (N, T) rad

@@ -118,6 +118,7 @@ def check_video(args) -> Scenario:
 def check_batch(args) -> Scenario:
     """The batch's options, checked even for a still alone (a bad --world is refused, not ignored)."""
     batch = cli.check_batch(args)
+    cli.refuse_each(batch.physics.ground, "render (it draws the model's ground)")
     if args.video is None:
         return batch
     cli.check_indices("--instance", [args.instance], len(batch.gravity))

@@ -45,7 +45,7 @@ class Physics:
 
     urdf: str | None = None  # the robot (None: the shipped seed monoped)
     model_options: dict = field(default_factory=dict)  # keywords of model.load a world sets: timestep, friction
-    ground: Ground = FLAT  # every instance on this ground (`terrain.parse` of a --terrain spec)
+    ground: Ground = FLAT  # `terrain.parse` of a --terrain spec; under seed=each the model holds instance 0's
     variation: Spec | None = None  # per-instance robot parameters, drawn per instance (None: the URDF's robot)
     engine: str = registry.DEFAULT_ENGINE
     motor: str = registry.DEFAULT_MOTOR  # a registry.MOTORS name: what the joints' motors are (hopper_mjx.actuators)
@@ -168,6 +168,11 @@ class Scenario:
 
         return variation.draw_controls(self.physics.variation, mj_model, self.n, self.seed)
 
+    def grounds(self) -> np.ndarray | None:
+        """(N, nrow, ncol) m: each instance's own ground under a --terrain with seed=each (drawn with the
+        scenario's seed); None: every instance on the model's ground."""
+        return self.physics.ground.grids(self.seed, range(self.n))
+
     def varied(self, mj_model) -> dict[str, np.ndarray]:
         """`draws` and the constants MuJoCo derives from them, per instance: what `Sim.reset` takes."""
         from hopper_mjx.model.variation import with_constants
@@ -199,7 +204,8 @@ class Scenario:
         sim, controller, params = self.build()
         start = time.perf_counter()
         final, traj = sim.run(self.gravity, controller, params, duration=duration, sensors=sensors, key=self.seed,
-                              variation=self.varied(sim.mj_model), **sim.per_instance(self.controls(sim.mj_model)))
+                              variation=self.varied(sim.mj_model), ground=self.grounds(),
+                              **sim.per_instance(self.controls(sim.mj_model)))
         jax.block_until_ready(traj)
         wall = time.perf_counter() - start
         steps = len(traj.time["state"]) * sensors.periods(sim.layout.timestep)["state"]

@@ -19,6 +19,8 @@ import jax
 import jax.numpy as jnp
 from brax import math as bmath
 
+from hopper_mjx.terrain import scan as terrain_scan
+
 
 class Imu(NamedTuple):
     """Like gazebo_ros_imu on the base: orientation in the world, rates in the body."""
@@ -45,12 +47,35 @@ class Contact(NamedTuple):
     pos: jax.Array  # (3,) m, contact point, world frame (zeros when not in contact)
 
 
+@jax.tree_util.register_dataclass
+@dataclasses.dataclass(frozen=True)
+class Ground:
+    """The terrain as one instance senses it (on a height field; the flat plane has none)."""
+
+    heights: jax.Array  # (nrow, ncol) m, world z: the instance's grid, as its engine collides with it
+    scan: jax.Array  # (K,) m, world z of the ground under the scan points (`SensorConfig.scan_points`)
+    normal: jax.Array  # (3,) the ground's unit normal under the foot's contact point, world (zeros off contact)
+    size: tuple[float, float] = dataclasses.field(metadata={"static": True})  # the grid's (hx, hy), m
+
+    def height(self, x, y):
+        """Ground height (m) at world (x, y), on the triangles the engine collides with."""
+        return terrain_scan.height_at(self.heights, self.size, x, y)
+
+
+class GroundTrace(NamedTuple):
+    """The recorded terrain signals (on a height field)."""
+
+    scan: jax.Array  # (K,) m, world z under the scan points
+    normal: jax.Array  # (3,) the ground's normal under the foot's contact (zeros off contact)
+
+
 class Signals(NamedTuple):
     imu: Imu
     odom: Odometry
     contact: Contact
     qpos: jax.Array
     qvel: jax.Array
+    ground: GroundTrace | tuple = ()  # on a height field; () on the plane
 
 
 class Observation(NamedTuple):
@@ -64,6 +89,7 @@ class Observation(NamedTuple):
     qpos: jax.Array  # (nq,)
     qvel: jax.Array  # (nv,)
     contact: Contact
+    ground: Ground | None = None  # on a height field; None on the flat plane (a controller's static branch)
 
 
 def imu(d: Any, gravity: jax.Array) -> Imu:
@@ -83,18 +109,33 @@ def contact(engine, model, d) -> Contact:
     return Contact(*engine.foot_contact(model, d))
 
 
-def measure(engine, model, d, gravity: jax.Array) -> Signals:
+def ground(heights, size, points, d, touch: Contact) -> Ground:
+    """The height scan around the base (its yaw frame) and the ground's normal under the foot's contact,
+    read from the grid `heights` the engine steps on (half-extents `size`, scan `points` (K, 2))."""
+    scan = terrain_scan.measured_heights(heights, size, d.qpos[:3], d.qpos[3:7], points)
+    normal = terrain_scan.normal_at(heights, size, touch.pos[0], touch.pos[1])
+    return Ground(heights, scan, jnp.where(touch.flag, normal, 0.0), size)
+
+
+def measure(engine, model, d, gravity: jax.Array, terrain: tuple = ()) -> Signals:
+    """The signals; `terrain` (heights, size, points) adds the scan and the contact normal."""
+    touch = contact(engine, model, d)
+    sensed = ground(*terrain, d, touch) if terrain else None
     return Signals(
         imu=imu(d, gravity),
         odom=odometry(d),
-        contact=contact(engine, model, d),
+        contact=touch,
         qpos=d.qpos,
         qvel=d.qvel,
+        ground=GroundTrace(sensed.scan, sensed.normal) if sensed else (),
     )
 
 
-def observe(engine, model, d) -> Observation:
-    return Observation(time=d.time, qpos=d.qpos, qvel=d.qvel, contact=contact(engine, model, d))
+def observe(engine, model, d, terrain: tuple = ()) -> Observation:
+    """What a controller reads; `terrain` (heights, size, points) adds the `Ground`."""
+    touch = contact(engine, model, d)
+    return Observation(time=d.time, qpos=d.qpos, qvel=d.qvel, contact=touch,
+                       ground=ground(*terrain, d, touch) if terrain else None)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -114,6 +155,14 @@ class SensorConfig:
     odom_vel_noise: float = 0.0  # m/s and rad/s
     contact_rate: float = 50.0
     state_rate: float = 50.0  # qpos/qvel
+    # The height scan on a terrain (legged_gym's measured_heights): a grid of counts (ahead, left) at
+    # spacing (m) centred under the base in its yaw frame; recorded at the contact rate with the normal.
+    scan_counts: tuple[int, int] = (5, 5)
+    scan_spacing: tuple[float, float] = (0.1, 0.1)
+
+    def scan_points(self):
+        """(K, 2) m, the scan's points in the base's yaw frame (x ahead, y left)."""
+        return terrain_scan.scan_points(tuple(int(c) for c in self.scan_counts), self.scan_spacing)
 
     @classmethod
     def uniform(cls, rate: float, **noise) -> "SensorConfig":
@@ -130,6 +179,10 @@ class SensorConfig:
                     f"{name}_rate={rate} Hz must divide the physics rate {1 / timestep:g} Hz"
                 )
             out[name] = int(round(steps))
+        if not (len(self.scan_counts) == 2 and all(int(c) == c and 1 <= c <= 64 for c in self.scan_counts)):
+            raise ValueError(f"scan_counts must be two whole numbers in 1..64, got {self.scan_counts}")
+        if not (len(self.scan_spacing) == 2 and all(s > 0 for s in self.scan_spacing)):
+            raise ValueError(f"scan_spacing must be two lengths > 0 m, got {self.scan_spacing}")
         for field in dataclasses.fields(self):
             if field.name.endswith("noise") and not getattr(self, field.name) >= 0:
                 raise ValueError(f"{field.name} must be a non-negative standard deviation")

@@ -34,6 +34,7 @@ from hopper_mjx.model.robot import Robot
 from hopper_mjx.pushes import Pushes, push
 from hopper_mjx.sensing import FIGURES, Sensing, SensorState
 from hopper_mjx.sensing import add_noise as sensor_noise
+from hopper_mjx.terrain import HFIELD, from_model
 
 gravity_vectors = world.gravity_vectors  # the gravity convention lives beside the world files
 
@@ -55,6 +56,9 @@ class State(NamedTuple):
     # Model field -> (N, ...) values of each instance's robot (`model.variation`); empty: every instance is
     # the nominal robot, and the compiled step is the one without variation.
     variation: dict = {}
+    # (N, nrow, ncol) m: each instance's own ground on the model's height-field grid; (): every instance on
+    # the model's own ground (the plane, or its height field).
+    ground: jax.Array | tuple = ()
 
 
 class Trajectory(NamedTuple):
@@ -66,6 +70,7 @@ class Trajectory(NamedTuple):
     qpos: jax.Array
     qvel: jax.Array
     time: dict  # stream name -> (T_stream,) seconds
+    ground: signals.GroundTrace | tuple = ()  # on a height field, at the contact stream's rate; () on the plane
 
 
 def split_rollout_key(key: jax.Array) -> tuple[jax.Array, jax.Array]:
@@ -119,6 +124,10 @@ class Sim:
         self.devices = tuple(devices or jax.local_devices())
         self.mesh = Mesh(np.array(self.devices), (AXIS,))
         self.model = jax.device_put(self.engine.model, NamedSharding(self.mesh, PartitionSpec()))
+        self.terrain = from_model(mj_model)  # the height field's grid, or None on the plane
+        # The model's own heights as the engine holds them (float32), what the scan reads by default.
+        self.heights = () if self.terrain is None else jax.device_put(
+            jnp.asarray(self.terrain.heights, jnp.float32), NamedSharding(self.mesh, PartitionSpec()))
         self.chunk = chunk
         self._compiled = {}
         self.limp = zero_torque(self.layout)  # the default controller, one object so one compile
@@ -136,6 +145,7 @@ class Sim:
         motor: Motor | None = None,
         variation: dict | None = None,
         sensing: dict | None = None,
+        ground=None,
     ) -> State:
         """Initial state for N = len(gravity) instances.
 
@@ -146,12 +156,14 @@ class Sim:
         motor: per-instance motor figures (`self.actuation.motor(N, ...)`), default the URDF's
         with the Sim's delay; variation: {model field: (N, ...)} of each instance's robot
         (`model.variation.with_constants`); sensing: {"delay": (N,) steps, and `sensing.FIGURES`}
-        of each instance's sensors (default prompt and exact).
+        of each instance's sensors (default prompt and exact); ground: (N, nrow, ncol) m, each instance's
+        heights on the model's height-field grid (default: the model's own ground for every instance).
         """
         g = _check_gravity(gravity)
         n = g.shape[0]
         own = None if qpos is not None or not variation else model_variation.stances(self.mj_model, variation)
         variation = self._check_variation(variation or {}, n)
+        ground = () if ground is None else self._check_ground(ground, n)
         qpos = (self.robot.stance_qpos if own is None else own) if qpos is None else qpos
         qvel = np.zeros(self.layout.nv) if qvel is None else qvel
         qpos = np.broadcast_to(np.asarray(qpos, dtype=np.float32), (n, self.layout.nq))
@@ -162,7 +174,7 @@ class Sim:
         if not isinstance(key, jax.Array):
             key = jax.random.PRNGKey(key)
         controller = controller or self.limp
-        obs = jax.vmap(lambda d: signals.observe(self.engine, self.engine.model, d))(data)
+        obs = self._first_observation(data, ground)
         cstate = jax.vmap(controller.init, in_axes=(0, None if params is None else 0))(obs, params)
         if motor is None and not self.actuation.passthrough:
             motor = self.actuation.motor(n, delay_steps=self.delay_steps)
@@ -180,6 +192,7 @@ class Sim:
             step=jnp.zeros(n, jnp.int32) if self.counts_steps else (),
             variation=variation,
             sense=sense,
+            ground=ground,
         )
 
     @property
@@ -206,6 +219,26 @@ class Sim:
         if sensing and not self.sensing.passthrough:  # else every drawn delay is 0 and no noise is drawn
             out["sensing"] = sensing
         return out
+
+    def _first_observation(self, data, ground):
+        """What each controller's `init` reads: the observation at the start, on the instance's ground."""
+        observe = lambda d, sensed: signals.observe(self.engine, self.engine.model, d, sensed)
+        if self.terrain is None:
+            return jax.vmap(lambda d: observe(d, ()))(data)
+        points = jnp.asarray(signals.SensorConfig().scan_points(), jnp.float32)  # init reads the heights, not a scan
+        heights = ground if isinstance(ground, jax.Array) else self.heights
+        axis = 0 if isinstance(ground, jax.Array) else None
+        return jax.vmap(lambda d, h: observe(d, (h, self.terrain.size, points)), in_axes=(0, axis))(data, heights)
+
+    def _check_ground(self, heights, n: int) -> jax.Array:
+        if self.terrain is None:
+            raise ValueError("a per-instance ground needs a model on a height field (a --terrain other than flat)")
+        heights = np.asarray(heights, dtype=np.float32)
+        if heights.shape != (n, *self.terrain.shape):
+            raise ValueError(f"ground must be {(n, *self.terrain.shape)} heights, got {heights.shape}")
+        if not np.isfinite(heights).all():
+            raise ValueError("ground heights must be finite")
+        return jnp.asarray(heights)
 
     def _check_variation(self, variation: dict, n: int) -> dict:
         """The per-instance fields checked, as float32 arrays (like the rest of the state), each (n, *field shape)."""
@@ -247,12 +280,12 @@ class Sim:
         padded = -(-per_device // chunk) * chunk * len(self.devices)
         fn = self._compiled_rollout(controller, steps, tick, periods, sensors, chunk)
         padded_state = jax.device_put(_pad(state, padded), NamedSharding(self.mesh, PartitionSpec(AXIS)))
-        final, traj = fn(self.model, padded_state)
+        final, traj = fn(self.model, self.heights, padded_state)
         final, traj = jax.tree_util.tree_map(lambda x: x[:n], (final, traj))
         t0 = float(state.data.time[0])
         dt = self.layout.timestep
         times = {k: t0 + dt * np.arange(0, steps, p) for k, p in periods.items()}
-        return final, Trajectory(*traj, time=times)
+        return final, Trajectory(*traj[:5], time=times, ground=traj[5])
 
     def run(
         self,
@@ -268,13 +301,14 @@ class Sim:
         motor: Motor | None = None,
         variation: dict | None = None,
         sensing: dict | None = None,
+        ground=None,
     ) -> tuple[State, Trajectory]:
         """The batch-run path of every tool: N = len(gravity) instances from `reset` for
         `duration` s, rounded to whole periods of every stream (`steps_for`)."""
         if not (math.isfinite(duration) and duration > 0):
             raise ValueError(f"duration must be > 0 s, got {duration}")
         state = self.reset(gravity, key=key, controller=controller, params=params, qpos=qpos, qvel=qvel,
-                           motor=motor, variation=variation, sensing=sensing)
+                           motor=motor, variation=variation, sensing=sensing, ground=ground)
         steps = steps_for(duration, self.layout.timestep, sensors)
         return self.rollout(state, controller, steps=steps, sensors=sensors)
 
@@ -282,20 +316,20 @@ class Sim:
         cache_key = (controller, steps, sensors, chunk)  # tick and periods follow from sensors
         if cache_key not in self._compiled:
             one = _instance_rollout(self.engine, self.actuation, self.pushes, self.sensing, controller, steps, tick,
-                                    periods, sensors)
+                                    periods, sensors, self.terrain, self.mj_model)
 
-            def per_device(model, state):
+            def per_device(model, heights, state):
                 n_local = state.gravity.shape[0]
                 chunks = jax.tree_util.tree_map(
                     lambda x: x.reshape((n_local // chunk, chunk) + x.shape[1:]), state
                 )
-                out = jax.lax.map(jax.vmap(lambda s: one(model, s)), chunks)
+                out = jax.lax.map(jax.vmap(lambda s: one(model, heights, s)), chunks)
                 return jax.tree_util.tree_map(lambda x: x.reshape((n_local,) + x.shape[2:]), out)
 
             sharded = jax.shard_map(
                 per_device,
                 mesh=self.mesh,
-                in_specs=(PartitionSpec(), PartitionSpec(AXIS)),
+                in_specs=(PartitionSpec(), PartitionSpec(), PartitionSpec(AXIS)),
                 out_specs=PartitionSpec(AXIS),
                 check_vma=False,
             )
@@ -313,19 +347,34 @@ def _pad(state: State, size: int) -> State:
     )
 
 
+def on_ground(engine, mj_model: mujoco.MjModel, model, heights):
+    """The engine's model (one instance's) on the ground `heights` (nrow, ncol) m, on the grid of
+    `mj_model`'s height field."""
+    if engine.name == "chain":
+        return model._replace(terrain=engine.with_heights(heights).terrain)
+    # MJX: vertex height = floor geom's z + data · elevation range (static), whatever the data's range.
+    k = mujoco.mj_name2id(mj_model, mujoco.mjtObj.mjOBJ_HFIELD, HFIELD)
+    geom = int(np.flatnonzero((mj_model.geom_type == mujoco.mjtGeom.mjGEOM_HFIELD) & (mj_model.geom_dataid == k))[0])
+    data = (heights - mj_model.geom_pos[geom, 2]) / mj_model.hfield_size[k, 2]
+    return model.replace(hfield_data=data.ravel().astype(model.hfield_data.dtype))
+
+
 def _instance_rollout(engine, actuation: Actuation, pushes: Pushes | None, sensing: Sensing, controller, steps, tick,
-                      periods, sensors):
-    """One instance's rollout: `steps` physics steps, a record every `tick` steps."""
+                      periods, sensors, terrain=None, mj_model=None):
+    """One instance's rollout: `steps` physics steps, a record every `tick` steps; on a height field
+    (`terrain`, the model's grid) the observation and the record carry the ground."""
     dt = actuation.layout.timestep
     counts = pushes is not None or sensing.noisy
+    points = None if terrain is None else jnp.asarray(sensors.scan_points(), jnp.float32)
 
-    def physics_step(model, state, record, previous):
+    def physics_step(model, sensed, state, record, previous):
         """One step; `record` is a traced, batch-wide flag: the signals are measured
-        (after forward, before integrate) where it is true, else `previous` is passed on."""
+        (after forward, before integrate) where it is true, else `previous` is passed on.
+        `sensed`: (heights, size, scan points) of the instance's ground, or () on the plane."""
         d, step, sense = state.data, state.step, state.sense
         if pushes is not None:  # static: without pushes the step is today's
             d = d.replace(qvel=push(pushes, state.key, step, d.qvel))  # `step` steps done: the time is step·dt
-        obs = signals.observe(engine, model, d)
+        obs = signals.observe(engine, model, d, sensed)
         if not sensing.passthrough:  # static: exact, prompt sensors add nothing
             obs, sense = sensing.apply(sense, obs, state.key, step)
         if counts:
@@ -335,7 +384,7 @@ def _instance_rollout(engine, actuation: Actuation, pushes: Pushes | None, sensi
         if not actuation.passthrough:  # what the motors make of the command (static: ideal adds nothing)
             ctrl, drive = actuation.apply(drive, ctrl, d.qvel, dt)
         d1 = engine.forward(model, d.replace(ctrl=ctrl), state.gravity)
-        measure = lambda: signals.measure(engine, model, d1, state.gravity)
+        measure = lambda: signals.measure(engine, model, d1, state.gravity, sensed)
         # An unbatched predicate stays a real conditional under vmap: off-tick steps skip the signals.
         sig = jax.lax.cond(record, measure, lambda: previous)
         d1 = engine.integrate(model, d1, state.gravity)
@@ -354,20 +403,26 @@ def _instance_rollout(engine, actuation: Actuation, pushes: Pushes | None, sensi
     def one_tick(carry, _):
         # The step is traced once, in one loop, so XLA compiles the engine once (not
         # once for the recorded step and again for the others).
-        model, state = carry
+        model, heights, state = carry
+        sensed = () if terrain is None else (heights, terrain.size, points)
 
         def body(k, state_sig):
-            return physics_step(model, state_sig[0], record=k == 0, previous=state_sig[1])
+            return physics_step(model, sensed, state_sig[0], record=k == 0, previous=state_sig[1])
 
-        measure = lambda: signals.measure(engine, model, state.data, state.gravity)
+        measure = lambda: signals.measure(engine, model, state.data, state.gravity, sensed)
         state, sig = jax.lax.fori_loop(0, tick, body, (state, _zeros_like(jax.eval_shape(measure))))
-        return (model, state), sig
+        return (model, heights, state), sig
 
-    def run(model, state):
+    def run(model, heights, state):
+        """`heights`: the model's own ground, unless the state gives the instance its own."""
         variation = state.variation
         model = engine.vary(model, variation)  # this instance's robot: per instance only where varied
+        if isinstance(state.ground, jax.Array):  # static: this instance's own ground, into its engine's model
+            heights = state.ground
+            model = on_ground(engine, mj_model, model, heights)
         # The loop carries the robot once, in `model`, not its drawn fields again in the state.
-        (_, state), sig = jax.lax.scan(one_tick, (model, state._replace(variation={})), None, length=steps // tick)
+        (_, _, state), sig = jax.lax.scan(one_tick, (model, heights, state._replace(variation={})), None,
+                                          length=steps // tick)
         state = state._replace(variation=variation)
         every = {k: p // tick for k, p in periods.items()}
         decimate = lambda tree, stream: jax.tree_util.tree_map(lambda x: x[:: every[stream]], tree)
@@ -376,7 +431,8 @@ def _instance_rollout(engine, actuation: Actuation, pushes: Pushes | None, sensi
         if sensing.noisy:  # each instance's own sensors, on a stream of their own
             imu, odom = sensor_noise(state.sense, jax.random.fold_in(noise_key, 1), imu, odom)
         contact = decimate(sig.contact, "contact")
-        traj = (imu, odom, contact, sig.qpos[:: every["state"]], sig.qvel[:: every["state"]])
+        traj = (imu, odom, contact, sig.qpos[:: every["state"]], sig.qvel[:: every["state"]],
+                decimate(sig.ground, "contact"))
         return state._replace(key=next_key), traj
 
     return run

@@ -12,6 +12,7 @@ its instances stream the ROS topics of `ros.record` at --rate; the .npz holds th
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import sys
 
 import numpy as np
@@ -24,16 +25,20 @@ from hopper_mjx.scenario import Scenario
 def sensor_config(args):
     from hopper_mjx import signals
 
-    return signals.SensorConfig.uniform(args.rate, gyro_noise=args.gyro_noise, accel_noise=args.accel_noise)
+    counts, spacing = cli.parse_scan(args.scan)
+    return dataclasses.replace(signals.SensorConfig.uniform(args.rate, gyro_noise=args.gyro_noise,
+                                                            accel_noise=args.accel_noise),
+                               scan_counts=counts, scan_spacing=spacing)
 
 
 def arrays(traj, gravity, diverged, drive=(), push=None, drawn: dict | None = None,
-           controls: dict | None = None) -> dict[str, np.ndarray]:
+           controls: dict | None = None, sensors=None) -> dict[str, np.ndarray]:
     """The arrays saved to the .npz file, from a trajectory of the batch (and the final motors' `drive`,
     `hopper_mjx.actuators.Drive`: each instance's motor figures and the energy drawn; the pushes'
     (interval s, speed m/s); `drawn`: each instance's robot ({model field: (N, ...)}, `Scenario.draws`),
     saved as `model_<field>`; `controls`: its controller's, motors' and sensors' drawn parameters
-    (`Scenario.controls`), saved under their names: `kp_scale`, `action_delay` (ms), ...)."""
+    (`Scenario.controls`), saved under their names: `kp_scale`, `action_delay` (ms), ...); on a terrain,
+    the height scan and the contact normal (at the contact stream's rate) and the scan's points (`sensors`' scan)."""
     out = {
         "time": traj.time["state"],
         "gravity": gravity,
@@ -60,15 +65,19 @@ def arrays(traj, gravity, diverged, drive=(), push=None, drawn: dict | None = No
                 "motor_energy": drive.energy}
     if push is not None:
         out |= {"push_interval": push[0], "push_speed": push[1]}
+    if traj.ground:
+        out |= {"scan": traj.ground.scan, "contact_normal": traj.ground.normal, "scan_time": traj.time["contact"],
+                "scan_points": sensors.scan_points()}
     return {k: np.asarray(v) for k, v in out.items()}
 
 
 def run(args, batch: Scenario | None = None) -> dict[str, np.ndarray]:
     """Simulates as the arguments say (`batch`: already checked) and returns the arrays saved to the .npz file."""
     batch = batch or cli.check_batch(args)
-    sim, final, traj = batch.run(args.duration, sensor_config(args))
+    sensors = sensor_config(args)
+    sim, final, traj = batch.run(args.duration, sensors)
     return arrays(traj, batch.gravity, final.diverged, final.drive, batch.physics.push, batch.draws(sim.mj_model),
-                  batch.controls(sim.mj_model))
+                  batch.controls(sim.mj_model), sensors)
 
 
 def run_live(args, batch: Scenario, stream) -> dict[str, np.ndarray]:
@@ -94,7 +103,7 @@ def run_live(args, batch: Scenario, stream) -> dict[str, np.ndarray]:
             run_.poll()
             time.sleep(run_.seconds_to_next())
     return arrays(live.joined(played, end), playing.gravity, played[-1].diverged, playing.state.drive,
-                  batch.physics.push, batch.draws(playing.sim.mj_model))
+                  batch.physics.push, batch.draws(playing.sim.mj_model), sensors=playing.sensors)
 
 
 def parser() -> argparse.ArgumentParser:
@@ -104,6 +113,8 @@ def parser() -> argparse.ArgumentParser:
     cli.add_batch_options(p)
     p.add_argument("--rate", type=float, default=100.0, help="Hz of the saved signals")
     p.add_argument("--out", default="simulation.npz", help="output .npz file")
+    p.add_argument("--scan", default="5x5,0.1", help="on a --terrain, the height scan saved: NXxNY points (ahead, "
+                   "left) at SPACING m (or DXxDY), centred under the base in its yaw frame (default 5x5,0.1)")
     cli.add_live_options(p, foxglove_help=f"run live and stream up to {SHOWN} instances' ROS topics "
                                           "(spread over the batch) at --rate")
     return p

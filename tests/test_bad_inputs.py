@@ -135,7 +135,18 @@ CASES = [
     ("simulate", ["--terrain", "rough:cell=0.0001"], "--terrain: a 40001 x 40001 grid has 1,600,080,001 vertices"),
     ("simulate", ["--terrain", "steps", "--engine", "chain"], "--engine chain runs on the flat floor only, for now"),
     ("perf.bench", ["--terrain", "steps", "--engine", "chain"], "--engine chain runs on the flat floor only"),
-    ("sweep", ["gravity", "--terrain", "rough", "--out", "s"], "--terrain: a sweep runs on the flat ground only"),
+    ("sweep", ["gravity", "--terrain", "rough", "--out", "s"], "--terrain: a gravity sweep (an obstacle or terrain "
+     "sweep takes terrain) runs on the flat ground only"),
+    ("sweep", ["obstacle", "--heights", "0.1,-0.05", "--out", "s"], "--terrain: height=-0.05 must be >= 0 m"),
+    ("sweep", ["obstacle", "--heights", "0.3", "--x", "0", "--out", "s"], "the ground within 0.1 m of the start "
+     "rises to 0.300 m"),
+    ("sweep", ["terrain", "--terrain", "rough", "--out", "s"], "--terrain: a terrain sweep makes its own ground per "
+     "value; drop --terrain"),
+    ("sweep", ["terrain", "--amps", "0.01,0.01", "--out", "s"], "--amps must be one or more different values"),
+    ("perf.bench", ["--terrain", "rough:seed=each"], "--terrain rough:amp=0.03,wavelength=0.4,seed=each,size=4x4,"
+     "cell=0.04: perf.bench puts every instance on one ground; give a fixed seed"),
+    ("simulate", ["--terrain", "rough:seed=every"], "--terrain: seed=every is not a number"),
+    ("simulate", ["--scan", "5x0,0.1"], "--scan '5x0,0.1' must be NXxNY,SPACING with 1..64 points per axis"),
     ("perf.profile", ["--terrain", "crater:rim=-1", "--engine", "mjx"], "--terrain: rim=-1 must be >= 0 m"),
     ("simulate", ["--terrain", "obstacle:height=0.2,x=-0.05"], "--terrain obstacle:height=0.2,x=-0.05: the ground "
                                                                "within 0.1 m of the start rises to 0.200 m"),

@@ -128,3 +128,26 @@ def test_standing_height_is_the_stance_with_the_foot_down(mj_model):
     from hopper_mjx.model.robot import standing_height
 
     assert standing_height(mj_model) == pytest.approx(0.8823, abs=1e-3)
+
+
+def test_terrain_metrics_distance_obstacles_and_where_the_falls_happened():
+    """Instance 0 travels 3 m along +x; 2 falls at 5 s, having reached x = 1.5 m; 1 stands still."""
+    traj, t = _trajectory()
+    blocks = np.array([[0.6, 0.7, 0.15], [1.2, 1.3, 0.05], [2.5, 2.6, 0.3], [np.nan] * 3])
+    out = metrics.terrain_metrics(traj, command_speed=(SPEED, 0.0), obstacles=blocks)
+    end = SPEED * t[-1]
+    assert out["distance_made_good"][0] == pytest.approx(end)
+    assert out["distance_made_good"][1] == 0.0
+    assert out["distance_made_good"][2] == pytest.approx(SPEED * 5.0)  # up to its fall
+    assert out["obstacles_cleared"].tolist() == [3, 0, 2, 2]  # x = 2.97 m passes 2.6; the fallen stop at 1.5
+    assert out["highest_cleared"][0] == pytest.approx(0.3)
+    assert out["highest_cleared"][2] == pytest.approx(0.15)
+    assert np.isnan(out["highest_cleared"][1])
+    np.testing.assert_allclose(out["fall_x"], [np.nan, np.nan, SPEED * 5.0, SPEED * 5.0])
+    np.testing.assert_allclose(out["fall_y"], [np.nan, np.nan, 0.0, 0.0])
+    sideways = metrics.terrain_metrics(traj, command_speed=(0.0, SPEED))  # commanded +y, it went +x
+    assert sideways["distance_made_good"][0] == pytest.approx(0.0)
+    still = metrics.terrain_metrics(traj)  # no command: the straight-line distance
+    assert still["distance_made_good"][0] == pytest.approx(end)
+    per_instance = metrics.terrain_metrics(traj, obstacles=np.broadcast_to(blocks[:1], (4, 1, 3)))
+    assert per_instance["obstacles_cleared"].tolist() == [1, 0, 1, 1]

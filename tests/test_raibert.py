@@ -162,3 +162,81 @@ def test_flight_gains_are_the_shipped_position_controllers(robot):
     gains = pid.load_gains()
     assert raibert.FLIGHT_KP == tuple(gains[j]["p"] for j in ("haa_joint", "hfe_joint", "kfe_joint"))
     assert raibert.FLIGHT_KD == tuple(gains[j]["d"] for j in ("haa_joint", "hfe_joint", "kfe_joint"))
+
+
+# -- on a terrain ---------------------------------------------------------------------
+def _ground(heights, size=(1.0, 1.0)):
+    from hopper_mjx.signals import Ground
+
+    heights = jnp.asarray(heights, jnp.float32)
+    return Ground(heights, jnp.zeros(25), jnp.zeros(3), size)
+
+
+def _step(x0=0.2, rise=0.05):
+    """A 2 m x 2 m grid (cell 0.05 m) whose ground rises by `rise` beyond x = x0."""
+    xs = np.linspace(-1.0, 1.0, 41)
+    return np.broadcast_to(np.where(xs >= x0, rise, 0.0), (41, 41))
+
+
+def test_thrust_aims_above_the_ground_it_lands_on(robot):
+    """The same bottom of a stance, on the plane and aimed above a floor 5 cm up: the thrust adds m·g·0.05."""
+    mass, g, stiffness = robot.layout.total_mass, 9.81, 200.0
+    s = _state(height_bias=0.02)
+    body = raibert.sense(robot, _obs(robot, z=0.8, joints=(0.0, 0.6, -1.4), qvel=np.r_[0, 0, -0.3, np.zeros(6)]))
+    _, plane = raibert.height_update(s, _events(bottom=True), body, g, stiffness, mass, robot.standing_height)
+    _, up = raibert.height_update(s, _events(bottom=True), body, g, stiffness, mass, robot.standing_height,
+                                  jnp.float32(0.05))
+    squeeze = L0 - float(body.length)
+    assert (float(up) - float(plane)) * squeeze == pytest.approx(mass * g * 0.05, rel=1e-4)
+
+
+def test_the_apex_is_measured_above_the_floor_it_was_aimed_over(robot):
+    """At touchdown the apex counts from the floor of the hop: 8 cm over a floor 5 cm up is 2 cm short."""
+    body = raibert.sense(robot, _obs(robot))
+    adapt = raibert.RaibertConfig().height_adapt
+    s = _state(apex=robot.standing_height + 0.13, height_bias=0.01, floor=0.05)
+    bias, _ = raibert.height_update(s, _events(touchdown=True), body, 9.81, 2000.0, 6.8, robot.standing_height,
+                                    jnp.float32(0.05))
+    assert float(bias) == pytest.approx(0.01 + adapt * 0.02, abs=1e-6)
+
+
+def test_the_landing_floor_is_the_step_ahead(robot):
+    """Standing before a step and moving towards it, the next hop is aimed above the step; moving away,
+    or hopping in place, above the ground under the foot."""
+    ground = _ground(_step(x0=0.2))
+    obs = lambda vx: _obs(robot, qvel=np.r_[vx, np.zeros(8)])
+    speed = raibert.speed_update(_state(), _events(), jnp.zeros(2), jnp.float32(0.3), 9.81)
+    floor = lambda vx: float(raibert.landing_floor(robot.leg, raibert.sense(robot, obs(vx)), ground,
+                                                   jnp.zeros(2), speed, jnp.float32(0.1), 9.81))
+    assert floor(0.6) == pytest.approx(0.05)  # ahead by v·(T_s + T_f) ≈ 0.6·0.43 m: on the step
+    assert floor(0.0) == pytest.approx(0.0)
+    assert floor(-0.6) == pytest.approx(0.0)
+
+
+def test_a_level_ground_at_zero_acts_as_the_plane(robot):
+    """A whole hop cycle of `act` on a level grid at z = 0 commands what it commands on the plane."""
+    ctrl = raibert.raibert(robot)
+    params = jax.tree_util.tree_map(lambda v: v[0], raibert.raibert_params(1, height=0.1, speed=(0.3, 0.0)))
+    level = _ground(np.zeros((41, 41)))
+    for phase, touching, z, vz in ((FLIGHT, False, 1.0, -0.5), (THRUST, True, 0.85, 0.1)):
+        obs = _obs(robot, z=z, joints=(0.05, 0.55, -1.2), qvel=np.r_[0.3, 0, vz, np.zeros(6)])
+        touch = Contact(jnp.bool_(touching), jnp.zeros(3), jnp.zeros(3))
+        s = raibert.initial_state(params, obs)._replace(phase=jnp.int32(phase))
+        plane, _ = ctrl.act(s, obs._replace(contact=touch), jnp.array([0.0, 0.0, -9.81]))
+        ground, _ = ctrl.act(s, obs._replace(contact=touch, ground=level), jnp.array([0.0, 0.0, -9.81]))
+        np.testing.assert_allclose(ground, plane, atol=1e-5)
+        assert np.abs(np.asarray(plane)).max() > 1.0  # a real command, not zeros on both sides
+
+
+def test_rising_towards_a_step_the_leg_is_drawn_up_by_its_rise(robot):
+    """In a rising flight whose foothold is on a step 5 cm above the ground under the foot, the PD's target
+    leg is 5 cm shorter (read back from the torque as above)."""
+    cfg, leg = raibert.RaibertConfig(), robot.leg
+    inertia = raibert.inertia_facts(leg)
+    step = _ground(_step(x0=0.1))  # the foot is near x = 0, the foothold v·T_s/2 = 0.15 ahead of the COM
+    for vz, shorter in ((0.5, 0.05),):
+        body = raibert.sense(robot, _obs(robot, qvel=np.r_[0.5, 0, vz, np.zeros(6)]))
+        torque = raibert.flight_torque(leg, cfg, body, jnp.zeros(3), _speed(0.6), 9.81, inertia, step,
+                                       jnp.zeros(2))
+        target = body.q + torque / jnp.asarray(raibert.FLIGHT_KP)
+        assert float(kinematics.leg_length(leg, target[2])) == pytest.approx(cfg.leg_length - shorter, abs=1e-4)

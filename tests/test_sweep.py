@@ -249,3 +249,24 @@ def test_a_parameter_sweep_gives_each_value_its_own_robots_and_keeps_the_others_
     with pytest.raises(ValueError, match="drawn by --randomize too"):
         SweepSpec(kind="param", param="foot_friction", values=(0.5,), gravity=(9.81,), num=1, duration=1.0,
                   height=0.1, speed=(0.0, 0.0), seed=0, physics=physics)
+
+
+def test_an_obstacle_sweeps_figure_shows_the_share_cleared_and_each_ground():
+    from hopper_mjx import terrain
+    from hopper_mjx.scenario import Physics
+    from hopper_mjx.sweep import report
+
+    grounds = tuple(str(terrain.parse(f"obstacle:height={h},x=0.6,size=2x1")) for h in (0.05, 0.2))
+    spec = _spec(kind="obstacle", param="obstacle_height", values=(0.05, 0.2), speed=(0.3, 0.0), grounds=grounds,
+                 physics=Physics(ground=terrain.parse(grounds[0])))
+    assert spec.to_json()["grounds"] == grounds and "grounds" not in _spec().to_json()
+    groups = [{"obstacle_height": v, "gravity": g, "survival": 1.0, "cleared": 0.5} for v in spec.values
+              for g in spec.gravity]
+    fig = report.terrain_figure(spec, groups)
+    cleared, ground = fig.axes[1], fig.axes[2]
+    assert cleared.get_title() == "share that cleared the obstacle" and cleared.images[0].get_clim() == (0.0, 1.0)
+    profiles = [line.get_ydata() for line in ground.lines]
+    assert [p.max() for p in profiles] == pytest.approx([0.05, 0.2])  # each value's block, at y = 0
+    x = ground.lines[1].get_xdata()
+    assert x[profiles[1] > 0].min() == pytest.approx(0.6, abs=0.04)  # where the block starts
+    report.save(fig, "/dev/null")

@@ -169,3 +169,41 @@ def test_auto_steps_a_terrain_with_mjx_and_says_why(capsys):
     assert notice.startswith("note: engine auto uses mjx") and "heightfield" in notice and notice.count("\n") == 1
     with pytest.raises(ValueError, match="not a chain model"):
         engine.make("chain", m)
+
+
+def test_seed_each_draws_every_instance_its_own_ground():
+    each = terrain.parse("rough:amp=0.02,seed=each,size=1x1,cell=0.1")
+    assert str(each) == "rough:amp=0.02,wavelength=0.4,seed=each,size=1x1,cell=0.1"
+    assert terrain.parse(str(each)) == each
+    grids = each.grids(7, range(3))
+    assert grids.shape == (3, 11, 11)
+    assert np.abs(grids[0] - grids[1]).max() > 1e-3  # their own draws
+    np.testing.assert_array_equal(grids, each.grids(7, range(3)))  # deterministic
+    np.testing.assert_allclose(np.abs(grids).max(axis=(1, 2)), 0.02)  # each scaled to the amplitude
+    np.testing.assert_array_equal(each.terrain().heights, each.grids(0, [0])[0])  # the model: seed 0, instance 0
+    fixed = terrain.parse("rough:amp=0.02,seed=3,size=1x1,cell=0.1")
+    assert fixed.grids(7, range(3)) is None and fixed.instance(7, 2) is fixed  # one ground for all
+
+
+def test_obstacles_are_the_bands_to_get_over():
+    np.testing.assert_allclose(terrain.parse("obstacle:height=0.1,x=0.6,length=0.2").obstacles(), [[0.6, 0.8, 0.1]])
+    np.testing.assert_allclose(terrain.parse("steps:height=0.05,depth=1,x=1").obstacles(), [[1, 2, 0.05]])
+    np.testing.assert_allclose(terrain.parse("stairs:height=0.05,depth=0.3,n=2,x=0.5").obstacles(),
+                               [[0.5, 2.0, 0.1]])
+    np.testing.assert_allclose(terrain.parse("gaps:width=0.1,spacing=0.5,depth=0.2,x=0.5,size=3").obstacles(),
+                               [[0.5, 0.6, -0.2], [1.0, 1.1, -0.2]])
+    assert terrain.parse("rough").obstacles().shape == (0, 3)
+
+
+def test_an_instances_own_ground_goes_into_mjxs_height_field_as_mujoco_reads_it():
+    """`sim.on_ground` for MJX: the data it writes, put back into the compiled model, is the instance's
+    heights as MuJoCo C's own hfield reads them (rows along +y, in the model's elevation range)."""
+    from hopper_mjx.engine.mjx import MjxEngine
+    from hopper_mjx.sim import on_ground
+
+    m = model.load(terrain=terrain.parse("rough:amp=0.02,seed=1,size=1x0.6,cell=0.1").terrain())
+    other = terrain.parse("obstacle:height=0.05,x=0.2,size=1x0.6,cell=0.1").terrain().heights  # another ground
+    engine = MjxEngine(m)
+    data = np.asarray(on_ground(engine, m, engine.model, other).hfield_data)
+    m.hfield_data[:] = data
+    np.testing.assert_allclose(terrain.from_model(m).heights, other, atol=1e-7)

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from hopper_mjx import model, terrain
-from hopper_mjx.terrain.scan import height_at, measured_heights, scan_points, yaw
+from hopper_mjx.terrain.scan import height_at, measured_heights, normal_at, scan_points, yaw
 
 
 def test_planes_are_exact_off_the_vertices():
@@ -73,3 +73,53 @@ def test_a_scan_batches_over_instances_each_on_its_own_grid():
     assert out.shape == (2, 25)
     np.testing.assert_allclose(out[0], 0.1 * (0.1 + points[:, 0]), atol=1e-6)
     np.testing.assert_allclose(out[1], -0.2 * (0.2 + points[:, 1]), atol=1e-6)
+
+
+def test_the_normal_is_mujoco_cs_contact_normal_on_a_face():
+    """A small sphere pressed into rough ground inside a triangle: MuJoCo C's contact normal is the
+    triangle's, and `normal_at` gives it (float64)."""
+    t = terrain.parse("rough:amp=0.05,wavelength=0.3,seed=4,size=2x2,cell=0.1").terrain()
+    spec = mujoco.MjSpec()
+    floor = spec.worldbody.add_geom(type=mujoco.mjtGeom.mjGEOM_PLANE, size=[1, 1, 0.1])
+    terrain.to_spec(spec, floor, t)
+    ball = spec.worldbody.add_body(pos=[0, 0, 1])
+    ball.add_freejoint()
+    ball.add_geom(type=mujoco.mjtGeom.mjGEOM_SPHERE, size=[0.005, 0, 0])
+    m = spec.compile()
+    d = mujoco.MjData(m)
+    heights = terrain.from_model(m).heights
+    rng = np.random.default_rng(2)
+    # Points well inside a triangle (its own u, v > 0.2 from the edges), so the sphere touches the face alone.
+    cells = rng.integers(2, 17, (40, 2))
+    u, v = rng.uniform(0.25, 0.75, (2, 40))
+    upper = rng.random(40) < 0.5
+    u, v = np.where(upper, np.minimum(u, v) * 0.6, u), np.where(upper, v, np.minimum(u, v) * 0.6)
+    x, y = -1.0 + 0.1 * (cells[:, 0] + u), -1.0 + 0.1 * (cells[:, 1] + v)
+    with jax.enable_x64(True):
+        h = np.asarray(height_at(jnp.asarray(heights), t.size, jnp.asarray(x), jnp.asarray(y)))
+        ours = np.asarray(normal_at(jnp.asarray(heights), t.size, jnp.asarray(x), jnp.asarray(y)))
+    for k in range(40):
+        d.qpos[:3] = [x[k], y[k], h[k]] + ours[k] * 0.004  # 1 mm into the face along its normal
+        d.qpos[3:] = [1, 0, 0, 0]
+        mujoco.mj_forward(m, d)
+        assert d.ncon == 1
+        np.testing.assert_allclose(d.contact[0].frame[:3], ours[k], atol=1e-9)
+
+
+def test_the_observed_ground_is_the_scan_and_the_normal_under_the_contact():
+    from types import SimpleNamespace
+
+    from hopper_mjx import signals
+
+    x, y = terrain.vertices((1.0, 1.0), (21, 21))
+    heights = jnp.asarray(0.2 * x)  # a slope rising along +x: normal (-0.2, 0, 1) / |.|
+    sensors = signals.SensorConfig(scan_counts=(3, 1), scan_spacing=(0.2, 0.1))
+    d = SimpleNamespace(qpos=jnp.array([0.1, 0.0, 0.9, 1.0, 0, 0, 0, 0, 0, 0]))
+    touching = signals.Contact(jnp.bool_(True), jnp.zeros(3), jnp.array([0.3, 0.1, 0.06]))
+    sensed = signals.ground(heights, (1.0, 1.0), jnp.asarray(sensors.scan_points()), d, touching)
+    np.testing.assert_allclose(sensed.scan, 0.2 * np.array([-0.1, 0.1, 0.3]), atol=1e-6)
+    np.testing.assert_allclose(sensed.normal, np.array([-0.2, 0, 1]) / np.sqrt(1.04), atol=1e-6)
+    np.testing.assert_allclose(sensed.height(0.3, 0.0), 0.06, atol=1e-6)
+    off = signals.ground(heights, (1.0, 1.0), jnp.asarray(sensors.scan_points()), d,
+                         touching._replace(flag=jnp.bool_(False)))
+    np.testing.assert_array_equal(off.normal, 0.0)  # like the contact point: zeros off contact

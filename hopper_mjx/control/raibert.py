@@ -85,6 +85,7 @@ INERTIA_POSE = (0.0, 0.5, -0.95)
 MAX_PLACEMENT = 0.25  # m, bound on the foot placement from the COM
 MAX_HEIGHT_BIAS = 0.3  # m, bound on the adapted apex-target bias
 MAX_SPEED_OFFSET = 0.1  # m, bound on the integral part of the foot placement
+MAX_RETRACT = 0.15  # m, bound on the leg's shortening in a rising flight towards higher ground
 MIN_SQUEEZE = 0.02  # m, floor under the remaining thrust stroke the extra force is spread over
 # The flight PD: the shipped position controllers' p and d (hopper_mjx/control/monoped.yaml), no i.
 FLIGHT_KP = (400.0, 400.0, 200.0)  # N·m/rad, haa, hfe, kfe
@@ -151,6 +152,7 @@ class RaibertState(NamedTuple):
     speed_reference: jax.Array  # (2,) m/s, ramping towards the commanded speed
     thrust_force: jax.Array  # N, the extra leg force of this thrust
     work: jax.Array  # J, ∫ Σ|τ·q̇| dt of the three motors (for the cost of transport)
+    floor: jax.Array  # m, world z of the ground the apex is aimed above (0 on the flat plane)
 
 
 def _batch(n: int, name: str, value, shape: tuple) -> np.ndarray:
@@ -263,14 +265,18 @@ def next_phase(phase: jax.Array, touching: jax.Array, elapsed: jax.Array, length
 
 
 def height_update(s: RaibertState, ev: Events, body: Body, g, stiffness, mass: float,
-                  standing_height: float) -> tuple[jax.Array, jax.Array]:
-    """Part 1: (apex-target bias adapted at touchdown, extra thrust force sized at the bottom, N)."""
+                  standing_height: float, floor=None) -> tuple[jax.Array, jax.Array]:
+    """Part 1: (apex-target bias adapted at touchdown, extra thrust force sized at the bottom, N).
+    On a terrain the rise is measured above `s.floor`, and the thrust aims above `floor` (the ground
+    the next hop takes off from and lands on); None: the flat plane at z = 0."""
     p = s.params
-    rise = s.apex - standing_height
+    rise = s.apex - standing_height if floor is None else s.apex - s.floor - standing_height
     adapted = jnp.clip(s.height_bias + p.gains.height_adapt * (p.height - rise), -MAX_HEIGHT_BIAS, MAX_HEIGHT_BIAS)
     height_bias = jnp.where(ev.touchdown, adapted, s.height_bias)
     squeeze = jnp.maximum(p.gains.leg_length - body.length, 0.0)
     target_z = standing_height + p.height + height_bias
+    if floor is not None:  # static: the flat plane's arithmetic stays today's
+        target_z = target_z + floor
     needed = mass * g * (target_z - body.z) - 0.5 * mass * body.zdot**2 - 0.5 * stiffness * squeeze**2
     thrust = jnp.maximum(needed, 0.0) / jnp.maximum(squeeze, MIN_SQUEEZE)
     return height_bias, jnp.where(ev.bottom, thrust, s.thrust_force)
@@ -355,24 +361,54 @@ def stance_torque(leg: LegGeometry, gains: RaibertConfig, phase, body: Body, spi
 
 
 def flight_torque(leg: LegGeometry, gains: RaibertConfig, body: Body, spin, speed: Speed, g,
-                  inertia: Inertia, scale: PDScale | None = None) -> jax.Array:
-    """Joint torques (3,) N·m in flight: PD to the joint angles that place the foot (part 2)."""
+                 inertia: Inertia, scale: PDScale | None = None, ground=None, base_xy=None) -> jax.Array:
+    """Joint torques (3,) N·m in flight: PD to the joint angles that place the foot (part 2). On a
+    terrain (`ground`, `signals.Ground`; `base_xy` the base's world position) the time left to
+    touchdown is the foot's fall to the ground where it will land."""
     placement = body.v * speed.stance_time / 2 + speed.gain * speed.error + speed.offset
     placement = body.unturn[:2, :2] @ jnp.clip(placement, -MAX_PLACEMENT, MAX_PLACEMENT)
-    foot_height = body.z + (body.rot @ (body.foot - jnp.array([0.0, 0.0, leg.haa_below_base])))[2] - leg.foot_radius
+    foot = body.rot @ (body.foot - jnp.array([0.0, 0.0, leg.haa_below_base]))  # from the base, world axes
+    foot_height = body.z + foot[2] - leg.foot_radius
+    retract = gains.retract
+    if ground is not None:  # static: the plane's foot height is above z = 0
+        landing = ground.height(*foothold(leg, body, base_xy, placement))
+        foot_height = foot_height - landing
+        # Rising towards higher ground (a step's riser just ahead), the foot is drawn up by the rise so that
+        # its swing does not catch the edge; it reaches out again from the apex on.
+        retract = retract + jnp.clip(landing - ground.height(base_xy[0] + foot[0], base_xy[1] + foot[1]), 0.0,
+                                     MAX_RETRACT)
     time_left = (body.zdot + jnp.sqrt(body.zdot**2 + 2.0 * g * jnp.maximum(foot_height, 0.0))) / g  # to touchdown
     drift = jnp.stack([body.roll, body.pitch]) + spin[:2] * time_left / (1.0 - inertia.alpha)  # tilt at touchdown
     placement = _within_tilt_budget(placement, (body.level @ (body.foot - body.com))[:2], drift,
                                     inertia.swing_tilt, gains.tilt_budget, gains.leg_length)
-    flight_length = gains.leg_length - jnp.where(body.zdot > 0, gains.retract, 0.0)
+    flight_length = gains.leg_length - jnp.where(body.zdot > 0, retract, 0.0)
     target = _placement_angles(leg, body.level, placement, flight_length, body.com)
     leg_rate = body.qd + jnp.concatenate([body.gyro[:2], jnp.zeros(1)])  # the leg's rate in the world
     return pd(*scaled(jnp.asarray(FLIGHT_KP), jnp.asarray(FLIGHT_KD), scale), target - body.q, leg_rate)
 
 
+def foothold(leg: LegGeometry, body: Body, base_xy, placement) -> tuple[jax.Array, jax.Array]:
+    """World (x, y) where the foot lands if placed `placement` (heading frame, m) from the COM."""
+    com = base_xy + (body.rot @ (body.com - jnp.array([0.0, 0.0, leg.haa_below_base])))[:2]
+    there = com + body.unturn[:2, :2].T @ placement
+    return there[0], there[1]
+
+
+def landing_floor(leg: LegGeometry, body: Body, ground, base_xy, speed: Speed, height, g):
+    """m: the ground the next hop is aimed above: the higher of the ground under the foot now and where
+    the foot lands a hop ahead (the COM travels about v·(T_s + T_f) by then, T_f the commanded flight),
+    so that a hop up a step is given the energy to climb it."""
+    foot = base_xy + (body.rot @ (body.foot - jnp.array([0.0, 0.0, leg.haa_below_base])))[:2]
+    flight = 2.0 * jnp.sqrt(2.0 * jnp.maximum(height, 0.0) / g)
+    ahead = foothold(leg, body, base_xy, body.unturn[:2, :2] @ (body.v * (speed.stance_time + flight)))
+    return jnp.maximum(ground.height(foot[0], foot[1]), ground.height(*ahead))
+
+
 def initial_state(params: RaibertParams, obs: Observation) -> RaibertState:
     params = jax.tree_util.tree_map(lambda v: jnp.asarray(v, dtype=jnp.float32), params)
     now = jnp.asarray(obs.time, dtype=jnp.float32)
+    floor = (jnp.float32(0.0) if obs.ground is None
+             else jnp.asarray(obs.ground.height(obs.qpos[0], obs.qpos[1]), jnp.float32))
     return RaibertState(
         params=params,
         phase=jnp.int32(FLIGHT),
@@ -385,6 +421,7 @@ def initial_state(params: RaibertParams, obs: Observation) -> RaibertState:
         speed_reference=jnp.zeros(2, dtype=jnp.float32),
         thrust_force=jnp.float32(0.0),
         work=jnp.float32(0.0),
+        floor=floor,
     )
 
 
@@ -410,20 +447,25 @@ def raibert(robot: Robot, config: RaibertConfig | None = None) -> Controller:
         stiffness = mass * EARTH_GRAVITY / gains.sag
         phase, ev = next_phase(s.phase, obs.contact.flag, obs.time - s.phase_start, body.length,
                                body.length_rate, gains.leg_length)
-        height_bias, thrust_force = height_update(s, ev, body, g, stiffness, mass, robot.standing_height)
         speed = speed_update(s, ev, body.v, obs.time, g)
+        ground, base_xy, floor = obs.ground, obs.qpos[:2], s.floor
+        if ground is not None:  # static: on a terrain, the ground under the next hop (the plane: z = 0)
+            floor = jnp.where(ev.bottom, landing_floor(leg, body, ground, base_xy, speed, s.params.height, g),
+                              s.floor)
+        height_bias, thrust_force = height_update(s, ev, body, g, stiffness, mass, robot.standing_height,
+                                                  None if ground is None else floor)
         apex = jnp.where(ev.liftoff, body.z, jnp.where(phase == FLIGHT, jnp.maximum(s.apex, body.z), s.apex))
         spin = kinematics.angular_momentum(leg, body.q, body.qd, body.gyro) / inertia.robot
         stance = stance_torque(leg, gains, phase, body, spin, speed, thrust_force, g, stiffness, mass,
                                inertia.swing_tilt, s.params.pd)
-        flight = flight_torque(leg, gains, body, spin, speed, g, inertia, s.params.pd)
+        flight = flight_torque(leg, gains, body, spin, speed, g, inertia, s.params.pd, ground, base_xy)
         torque = saturate(layout, jnp.where(phase == FLIGHT, flight, stance))
         ctrl = to_ctrl(layout, torque)
         state = RaibertState(
             params=s.params, phase=phase, phase_start=jnp.where(phase != s.phase, obs.time, s.phase_start),
             touchdown_time=speed.touchdown_time, stance_time=speed.stance_time, apex=apex,
             height_bias=height_bias, speed_offset=speed.offset, speed_reference=speed.reference,
-            thrust_force=thrust_force, work=s.work + jnp.abs(torque * body.qd).sum() * dt,
+            thrust_force=thrust_force, work=s.work + jnp.abs(torque * body.qd).sum() * dt, floor=floor,
         )
         return ctrl, state
 

@@ -413,6 +413,7 @@ def check(args) -> tuple[list[int] | None, Physics]:
     physics = cli.check_physics(argparse.Namespace(**vars(args) | {"engine": engines[0]}),
                                 {"timestep": args.timestep}, engines=engines, n=2 * max(sizes))  # both sides' heights
     cli.check_ideal_motors(physics, "perf.bench (native MuJoCo has no twin of them)")
+    cli.refuse_each(physics.ground, "perf.bench")
     if args.plot and not args.scaling:
         raise ValueError("--plot draws the --scaling records: give --scaling N1,N2,... too")
     if args.plot:

@@ -173,6 +173,7 @@ def main(argv=None) -> int:
             return cli.fail(ValueError(f"--{name} must be >= 1, got {getattr(args, name)}"))
     try:
         physics = cli.check_physics(args, n=args.num)
+        cli.refuse_each(physics.ground, "perf.profile")
     except ValueError as err:
         return cli.fail(err)
     runtime.configure()

@@ -1,10 +1,13 @@
-"""python -m hopper_mjx.sweep gravity | gains | param | compare — hopping across gravity (and a gain or parameter).
+"""python -m hopper_mjx.sweep gravity | gains | param | compare | obstacle | terrain — hopping across gravity (and
+a gain, a parameter, or a terrain).
 
     python -m hopper_mjx.sweep gravity                          # the main job, ~1000 monopeds
     python -m hopper_mjx.sweep gravity --controller policy:runs/hop-ppo     # a trained policy, same kicks
     python -m hopper_mjx.sweep compare --controllers raibert,policy:runs/hop-ppo   # side by side
     python -m hopper_mjx.sweep gains --param speed_gain --values 0.1,0.3,0.6 --gravity 1.62,3.71,9.81
     python -m hopper_mjx.sweep param --param action_delay --values 0,5,10,20 --gravity 1.62,3.71,9.81
+    python -m hopper_mjx.sweep obstacle --heights 0.05,0.1,0.15 --x 0.6 --speed 0.3,0    # the highest block cleared
+    python -m hopper_mjx.sweep terrain --amps 0,0.01,0.02,0.03                   # survival and speed vs roughness
 
 Rerunning with the same --out resumes an interrupted sweep; finished chunks are not recomputed.
 Several processes (hosts) share one sweep with --coordinator HOST:PORT --num-processes P --process-id I.
@@ -13,6 +16,7 @@ Several processes (hosts) share one sweep with --coordinator HOST:PORT --num-pro
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 import time
 from datetime import datetime, timezone
@@ -21,19 +25,24 @@ from pathlib import Path
 from hopper_mjx import budget, cli, command, registry, runtime
 from hopper_mjx.checks import DEFAULT_TIMESTEP
 from hopper_mjx.sweep import folder
-from hopper_mjx.sweep.grid import DEFAULT_GRAVITY, KICK
+from hopper_mjx.sweep.grid import DEFAULT_GRAVITY, KICK, TERRAIN_KINDS
+
+PARAM = {"obstacle": "obstacle_height", "terrain": "roughness"}  # the value column of a terrain sweep
 
 
 def parser() -> argparse.ArgumentParser:
     p = cli.parser("python -m hopper_mjx.sweep", __doc__)
     sub = p.add_subparsers(dest="kind", required=True)
     kinds = (("gravity", DEFAULT_GRAVITY, 112, 10.0), ("gains", (1.62, 3.71, 9.81), 32, 10.0),
-             ("param", (1.62, 3.71, 9.81), 32, 10.0), ("compare", DEFAULT_GRAVITY, 112, 10.0))
+             ("param", (1.62, 3.71, 9.81), 32, 10.0), ("compare", DEFAULT_GRAVITY, 112, 10.0),
+             ("obstacle", (1.62, 3.71, 9.81), 32, 10.0), ("terrain", (1.62, 3.71, 9.81), 32, 10.0))
     helps = {"compare": "gravity sweeps of several controllers, one table and plot",
-             "param": "any Raibert gain or --randomize parameter (model field or not) against gravity"}
+             "param": "any Raibert gain or --randomize parameter (model field or not) against gravity",
+             "obstacle": "the highest block cleared: obstacle height x gravity at an approach --speed",
+             "terrain": "survival and speed tracking: rough ground's amplitude x gravity, each replicate its own draw"}
     for kind, gravity, num, duration in kinds:
         s = sub.add_parser(kind, help=helps.get(kind, f"sweep {kind}"))
-        flag = "--gravity" if kind in ("gains", "param") else "--values"
+        flag = "--gravity" if kind in ("gains", "param", *TERRAIN_KINDS) else "--values"
         s.add_argument(flag, dest="gravity", type=cli.floats(flag), default=None,
                        help=f"gravity values in m/s² (default: {','.join(map(str, gravity))})")
         s.add_argument("--world", type=Path, nargs="+", default=None, metavar="FILE.world",
@@ -49,6 +58,18 @@ def parser() -> argparse.ArgumentParser:
             s.add_argument("--values", type=cli.floats("--values"), required=True,
                            help="its values, in the parameter's unit (docs/variation.md); every instance of a "
                                 "value gets it")
+        if kind == "obstacle":
+            s.add_argument("--heights", dest="values", type=cli.floats("--heights"), default=[0.05, 0.1, 0.15, 0.2],
+                           help="block heights, m (default 0.05,0.1,0.15,0.2)")
+            s.add_argument("--x", type=float, default=0.6, help="the block's near edge, m ahead of the start")
+            s.add_argument("--length", type=float, default=0.1, help="the block's length along +x, m")
+        if kind == "terrain":
+            s.add_argument("--amps", dest="values", type=cli.floats("--amps"), default=[0.0, 0.01, 0.02, 0.03],
+                           help="rough ground's peak |height|, m (default 0,0.01,0.02,0.03)")
+            s.add_argument("--wavelength", type=float, default=0.4, help="rough ground's wavelength, m")
+        if kind in TERRAIN_KINDS:
+            s.add_argument("--size", default=None, help="the ground's extents LxW, m (default: 4 m wide, and long "
+                           "enough for --speed over --duration and back: the ground ends at its edge)")
         if kind in ("gravity", "param"):
             s.add_argument("--controller", default="raibert",
                            help="raibert (the tasks' reference), balance (an LQR stance) or policy:PATH")
@@ -59,7 +80,8 @@ def parser() -> argparse.ArgumentParser:
         s.add_argument("--num", type=int, default=num, help=f"replicates per grid point (default {num})")
         s.add_argument("--duration", type=float, default=duration, help="simulated seconds per instance")
         s.add_argument("--height", type=float, default=0.10, help="commanded apex rise over standing height, m")
-        s.add_argument("--speed", type=cli.floats("--speed"), default=[0.0, 0.0], help="VX,VY m/s")
+        s.add_argument("--speed", type=cli.floats("--speed"), default=[0.3 if kind == "obstacle" else 0.0, 0.0],
+                       help="VX,VY m/s" + (" (default 0.3,0: the approach)" if kind == "obstacle" else ""))
         s.add_argument("--kick", type=float, default=KICK, help="std of the random initial velocity, m/s and rad/s")
         s.add_argument("--seed", type=int, default=0)
         s.add_argument("--chunk", type=int, default=256, help="instances per compiled call")
@@ -101,20 +123,27 @@ def check(args):
     from hopper_mjx.sweep.grid import SweepSpec
 
     gravity = gravity_from_worlds(args) if args.world is not None else tuple(args.gravity or args.default_gravity)
+    grounds = terrain_grounds(args)
+    if grounds:  # the model compiles the first; every grid point's ground is checked as --terrain is
+        n = min(args.chunk, args.num * len(gravity) * len(grounds))
+        grounds = [str(cli.check_ground(g, [args.engine], n=n)) for g in grounds]  # as the manifest keeps them
+        args.terrain = grounds[0]
     physics = cli.check_physics(args, n=args.num, seed=args.seed)  # one robot per replicate, drawn now
-    cli.refuse_terrain(physics.ground, "a sweep")
+    if not grounds:
+        cli.refuse_terrain(physics.ground, f"a {args.kind} sweep (an obstacle or terrain sweep takes terrain)")
     cli.check_delay(physics, args.duration, args.num, args.seed)
     names = args.controllers.split(",") if args.kind == "compare" else [getattr(args, "controller", "raibert")]
     if len(set(names)) != len(names):
         raise ValueError(f"--controllers lists one twice: {args.controllers}")
     chunk = check_size(args, len(gravity))
     specs = []
-    swept = args.kind in ("gains", "param")
     for name in names:
-        spec = SweepSpec(kind=args.kind if swept else "gravity", gravity=gravity, num=args.num,
-                         duration=args.duration, height=args.height, speed=tuple(args.speed), seed=args.seed,
-                         kick=args.kick, chunk=chunk, physics=physics, param=getattr(args, "param", None),
-                         controller=name, values=tuple(args.values) if swept else ())
+        kind = args.kind if args.kind != "compare" else "gravity"
+        spec = SweepSpec(kind=kind, gravity=gravity, num=args.num, duration=args.duration, height=args.height,
+                         speed=tuple(args.speed), seed=args.seed, kick=args.kick, chunk=chunk, physics=physics,
+                         param=PARAM.get(kind, getattr(args, "param", None)), controller=name,
+                         values=tuple(args.values) if kind in ("gains", "param", *TERRAIN_KINDS) else (),
+                         grounds=tuple(grounds))
         check_robots(spec, args.duration)
         specs.append(spec)
         cli.check_controller(name, args.height, args.speed, physics)  # a policy: its folder and trained range
@@ -171,12 +200,32 @@ def check_size(args, gravities: int) -> int:
     cannot run here, before the grid is even expanded."""
     if args.num < 1 or args.chunk < 1:
         return args.chunk  # SweepSpec names the bad one
-    n = gravities * args.num * (len(args.values) if args.kind in ("gains", "param") else 1)
+    n = gravities * args.num * (len(args.values) if args.kind in ("gains", "param", *TERRAIN_KINDS) else 1)
     budget.check_steps("--duration", args.duration, DEFAULT_TIMESTEP)
     budget.check_memory("--num", n, KEPT)
     chunk = min(args.chunk, n)  # a chunk is padded to its size: never beyond the grid
     budget.check_memory("--chunk, --duration", chunk, RECORDED_PER_S * args.duration)
     return chunk
+
+
+def terrain_grounds(args) -> list[str]:
+    """An obstacle or terrain sweep's --terrain spec per value (checked with the rest), else []."""
+    if args.kind not in TERRAIN_KINDS:
+        return []
+    if args.terrain != "flat":
+        raise ValueError(f"--terrain: a {args.kind} sweep makes its own ground per value; drop --terrain")
+    if not args.values or len(set(args.values)) != len(args.values):
+        raise ValueError(f"--{'heights' if args.kind == 'obstacle' else 'amps'} must be one or more different "
+                         "values")
+    cli.check_range("--duration", args.duration, low=0, open_low=True)
+    reach = math.hypot(*args.speed) * args.duration + 1.0  # m the robot may travel, and a margin
+    size = args.size or f"{max(4.0, 2 * math.ceil(reach * 2) / 2):g}x4"
+    if args.kind == "obstacle":
+        cli.check_range("--length", args.length, low=0, open_low=True)
+        cli.check_range("--x", args.x)
+        return [f"obstacle:height={h!r},x={args.x!r},length={args.length!r},size={size}" for h in args.values]
+    cli.check_range("--wavelength", args.wavelength, low=0, open_low=True)
+    return [f"rough:amp={a!r},wavelength={args.wavelength!r},seed=each,size={size}" for a in args.values]
 
 
 def folder_of(args, out: Path, spec) -> Path:
@@ -205,12 +254,12 @@ def run_one(args, spec, folder: Path):
     facts["total_wall_s"] = time.perf_counter() - start
     if facts["processes"] > 1 and args.process_id != 0:
         return None
-    text = report.write(folder, spec, instances, table, runner.COLUMNS, facts)
+    text = report.write(folder, spec, instances, table, runner.columns(spec), facts)
     print(text if args.kind != "compare" else f"{label(spec.controller)}: outputs in {folder}/")
     rate = f", {facts['steps_per_s']:,.0f} steps/s" if facts["steps_per_s"] else " (all chunks were already done)"
     print(f"\n{len(instances)} instances x {spec.duration:g} s in {facts['total_wall_s']:.0f} s{rate}; "
           f"outputs in {folder}/")
-    return label(spec.controller), report.group_summary(spec, instances, table, runner.COLUMNS)
+    return label(spec.controller), report.group_summary(spec, instances, table, runner.columns(spec))
 
 
 def main(argv=None) -> int:

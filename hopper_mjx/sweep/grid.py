@@ -2,10 +2,11 @@
 
 A `SweepSpec` holds every argument that changes results; it is saved as the
 run's manifest, so a rerun into the same folder can tell a resume from a
-different experiment. Instances are ordered value-major (a swept gain or parameter),
-then gravity, then replicate, and chunked in that order. Replicate r has the same kick,
-and the same robot under --randomize, at every grid point (common random numbers): a
-swept parameter replaces its own draw only, the others' stay as they were.
+different experiment. A gains or param sweep's values are a Raibert gain's or a --randomize parameter's; an
+obstacle or terrain sweep's are a terrain's (an obstacle's height, rough ground's amplitude), each with its own
+ground (`grounds`, one --terrain spec per value, all on one grid). Instances are ordered value-major, then gravity,
+then replicate, and chunked in that order. Replicate r has the same kick, and the same robot under --randomize, at
+every grid point (common random numbers): a swept parameter replaces its own draw only, the others' stay as they were.
 """
 
 from __future__ import annotations
@@ -27,11 +28,13 @@ DEFAULT_GRAVITY = (0.5, 1.0, 1.62, 2.5, 3.71, 5.0, 7.5, 9.81, 12.0)  # m/s²
 # every gravity (README). Robustness is measured with --kick 0.3: 96.0 % survive over 1-12 m/s²
 # (docs/control.md).
 KICK = 0.03
+TERRAIN_KINDS = ("obstacle", "terrain")  # sweeps over a terrain's parameter: one ground per value
+KINDS = ("gravity", "gains", "param", *TERRAIN_KINDS)
 
 
 @dataclass(frozen=True)
 class SweepSpec:
-    kind: str  # "gravity", "gains" (a Raibert gain) or "param" (a gain or a --randomize parameter)
+    kind: str  # one of KINDS: "gains" (a Raibert gain), "param" (a gain or a --randomize parameter), a terrain's
     gravity: tuple[float, ...]  # m/s², pointing down
     num: int  # replicates per grid point
     duration: float  # s of simulated time
@@ -44,10 +47,11 @@ class SweepSpec:
     values: tuple[float, ...] = ()
     controller: str = "raibert"  # or policy:PATH, a policy trained by experiments/train.py
     physics: Physics = Physics()  # the robot, its engine (and what else compiles), the same for every grid point
+    grounds: tuple[str, ...] = ()  # obstacle / terrain sweeps: the --terrain spec of each of `values`
 
     def __post_init__(self):
-        if self.kind not in ("gravity", "gains", "param"):
-            raise ValueError(f"unknown sweep kind {self.kind!r}; use gravity, gains or param")
+        if self.kind not in KINDS:
+            raise ValueError(f"unknown sweep kind {self.kind!r}; use {', '.join(KINDS)}")
         if not self.gravity:
             raise ValueError("no gravity values given")
         bad = [g for g in self.gravity if not (math.isfinite(g) and g > 0)]
@@ -72,7 +76,7 @@ class SweepSpec:
         if self.controller not in registry.SWEEP_CONTROLLERS and not registry.is_policy(self.controller):
             raise ValueError(f"--controller {self.controller!r}: a sweep runs "
                              f"{', '.join(registry.SWEEP_CONTROLLERS)} or policy:PATH")
-        if self.kind != "gravity":
+        if self.kind in ("gains", "param"):
             from hopper_mjx.control.raibert import GAINS
 
             if self.kind == "gains" and self.param not in GAINS:
@@ -88,10 +92,35 @@ class SweepSpec:
                 raise ValueError("--values must be one or more finite numbers")
             if len(set(self.values)) != len(self.values):  # as gravity: a grid point twice is counted twice
                 raise ValueError(f"--values must differ, got {list(self.values)}")
+        if self.kind in TERRAIN_KINDS:
+            self._check_grounds()
+        elif self.grounds:
+            raise ValueError(f"a {self.kind} sweep runs on the physics' ground; grounds are for "
+                             f"{' and '.join(TERRAIN_KINDS)} sweeps")
+
+    def _check_grounds(self) -> None:
+        from hopper_mjx.terrain import TerrainError, parse
+
+        if self.controller != "raibert":
+            raise ValueError(f"a {self.kind} sweep measures Raibert on terrain: use --controller raibert")
+        if not self.values or len(self.grounds) != len(self.values) or len(set(self.values)) != len(self.values):
+            raise ValueError(f"a {self.kind} sweep needs one ground per value, the values all different")
+        try:
+            shapes = {parse(g).shape for g in self.grounds}
+        except TerrainError as err:
+            raise ValueError(f"--terrain: {err}") from None
+        if len(shapes) != 1 or (0, 0) in shapes:
+            raise ValueError(f"a {self.kind} sweep's grounds must be height fields on one grid (the same size and "
+                             "cell)")
+        if str(self.physics.ground) != self.grounds[0]:
+            raise ValueError(f"a {self.kind} sweep compiles its first ground {self.grounds[0]}; the physics has "
+                             f"{self.physics.ground}")
 
     def to_json(self) -> dict:
         """The manifest: the grid's arguments and the physics' fields, side by side."""
         grid = {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.name != "physics"}
+        if not self.grounds:  # a sweep on the physics' ground keeps the manifest it always had
+            del grid["grounds"]
         return grid | self.physics.to_json()
 
     @property
@@ -101,7 +130,7 @@ class SweepSpec:
 
     @property
     def swept(self) -> bool:
-        """The grid has a value axis (a gain or a parameter), beside gravity."""
+        """The grid has a value axis beside gravity (a gain, a parameter, or a terrain's)."""
         return self.kind != "gravity"
 
     @property

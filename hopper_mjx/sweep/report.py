@@ -14,7 +14,7 @@ import numpy as np
 from hopper_mjx.files import atomic_write, atomic_write_text
 from hopper_mjx.sweep.grid import PLANETS, Instances, SweepSpec
 
-INTEGER_COLUMNS = {"replicate", "seed", "hops", "fell", "diverged"}
+INTEGER_COLUMNS = {"replicate", "seed", "hops", "fell", "diverged", "obstacles_cleared"}
 
 
 def rows(spec: SweepSpec, inst: Instances, table: np.ndarray, columns: tuple[str, ...]) -> tuple[list[str], list[list]]:
@@ -61,6 +61,8 @@ def group_summary(spec: SweepSpec, inst: Instances, table: np.ndarray, columns: 
                 record[spec.param] = value
             record.update(n=int(sel.sum()), survival=float(alive[sel].mean()),
                           diverged=int(table[sel, columns.index("diverged")].sum()))
+            if "obstacles_cleared" in columns:  # over every replicate, as survival: a fall before it is a miss
+                record["cleared"] = float((table[sel, columns.index("obstacles_cleared")] > 0).mean())
             # Hop metrics describe steady hopping: the survivors' (a fallen run's last hops are its collapse).
             steady = sel & alive
             error = np.abs(table[steady, columns.index("apex_height")] - spec.height)
@@ -88,6 +90,9 @@ def table_text(spec: SweepSpec, groups: list[dict], label: str | None = None) ->
             ("|v err|", "tracking_error", "{:.2f}"), ("CoT", "cost_of_transport", "{:.2f}")]
     if spec.swept:
         cols.insert(0, (spec.param, spec.param, "{:g}"))
+    if spec.grounds:  # a terrain sweep's own figures: over all replicates (cleared), and the survivors' travel
+        cols += [("made good m", "distance_made_good", "{:+.2f}")]
+        cols += [("cleared", "cleared", "{:.0%}")] if spec.kind == "obstacle" else []
     if label:
         cols.insert(0, ("controller", "controller", "{}"))
     cells = [[h for h, _, _ in cols]]
@@ -162,15 +167,16 @@ def _label_colour(rgba) -> str:
     return "k" if luminance > 0.18 else "w"  # 0.18: equal contrast against black and white
 
 
-def gains_figure(spec: SweepSpec, groups: list[dict]):
-    """The gains sweep's figure (a matplotlib Figure; `write` saves it as gains.png)."""
+def gains_figure(spec: SweepSpec, groups: list[dict], second=None, panels: int = 2):
+    """The gains sweep's figure (a matplotlib Figure; `write` saves it as gains.png): survival and `second`
+    (key, title, colour map, limits; default the speed tracking error) against the value and gravity."""
     plt = _pyplot()
     gravity, values = sorted(spec.gravity), sorted(spec.values)  # both axes ascend
     at = {(r[spec.param], r["gravity"]): r for r in groups}
-    fig, axes = plt.subplots(1, 2, figsize=(12, 4.5), constrained_layout=True)
+    fig, axes = plt.subplots(1, panels, figsize=(6 * panels, 4.5), constrained_layout=True)
     # Survival is a fraction: a fixed 0-1 scale, so that all-survived reads as the top colour.
-    heatmaps = ((axes[0], "survival", "survival", "viridis", (0.0, 1.0)),
-                (axes[1], "tracking_error", "speed tracking error (m/s)", "magma_r", (None, None)))
+    second = second or ("tracking_error", "speed tracking error (m/s)", "magma_r", (None, None))
+    heatmaps = ((axes[0], "survival", "survival", "viridis", (0.0, 1.0)), (axes[1], *second))
     for ax, key, label, cmap, limits in heatmaps:
         grid = np.array([[np.nan if at[v, g].get(key) is None else at[v, g][key] for g in gravity] for v in values])
         im = ax.imshow(grid, origin="lower", aspect="auto", cmap=cmap, vmin=limits[0], vmax=limits[1])
@@ -186,6 +192,26 @@ def gains_figure(spec: SweepSpec, groups: list[dict]):
     return fig
 
 
+def terrain_figure(spec: SweepSpec, groups: list[dict]):
+    """An obstacle or terrain sweep's figure (saved as obstacle.png or terrain.png): survival, the share that
+    cleared the obstacle (or the speed tracking error), and the ground of every value along +x at y = 0."""
+    from hopper_mjx.terrain import parse
+
+    fig = gains_figure(spec, groups, second=("cleared", "share that cleared the obstacle", "viridis", (0.0, 1.0))
+                       if spec.kind == "obstacle" else None, panels=3)
+    ax = fig.axes[2]
+    for value, text in sorted(zip(spec.values, spec.grounds)):
+        t = parse(text).instance(spec.seed, 0).terrain()  # a seed=each sweep: replicate 0's draw
+        xs, _ = t.axes()
+        ax.plot(xs, t.heights[t.heights.shape[0] // 2], label=f"{spec.param} {value:g}")
+    ax.set_xlabel("x (m), the start at 0" + (", approached at {:g} m/s".format(spec.speed[0]) if spec.speed[0] else ""))
+    ax.set_ylabel("ground height at y = 0 (m)")
+    ax.set_title("the ground" + (" (replicate 0's draw)" if spec.kind == "terrain" else ""))
+    ax.legend(fontsize=7)
+    ax.grid(alpha=0.3)
+    return fig
+
+
 def write(out: Path, spec: SweepSpec, inst: Instances, table: np.ndarray, columns: tuple[str, ...], facts: dict) -> str:
     """Writes every output into OUT and returns the terminal table."""
     header, body = rows(spec, inst, table, columns)
@@ -194,7 +220,7 @@ def write(out: Path, spec: SweepSpec, inst: Instances, table: np.ndarray, column
     summary = {"groups": groups, "note": "survival over all replicates; every other aggregate over the survivors",
                "arguments": spec.to_json(), "versions": versions(), "run": facts}
     atomic_write_text(out / "summary.json", json.dumps(summary, indent=1))
-    figure = gains_figure if spec.swept else gravity_figure
+    figure = {"gravity": gravity_figure, "gains": gains_figure, "param": gains_figure}.get(spec.kind, terrain_figure)
     save(figure(spec, groups), out / f"{spec.kind}.png")
     text = table_text(spec, groups)
     atomic_write_text(out / "table.txt", text + "\n")

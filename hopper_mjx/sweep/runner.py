@@ -18,7 +18,7 @@ import jax
 import numpy as np
 from tqdm import tqdm
 
-from hopper_mjx import metrics, registry, signals
+from hopper_mjx import metrics, registry, signals, terrain
 from hopper_mjx.control.balance import balance
 from hopper_mjx.control.base import pd_scale
 from hopper_mjx.control.raibert import GAINS, raibert, raibert_params
@@ -32,8 +32,15 @@ COLUMNS = ("apex_height", "flight_rise", "flight_time", "ballistic_flight_time",
            "duty_factor", "mean_speed", "tracking_error",
            "max_roll", "max_pitch", "hops", "fell", "diverged", "cost_of_transport",
            "energy_per_hop", "mechanical_power")
+# An obstacle or terrain sweep's extra columns (`metrics.terrain_metrics`).
+TERRAIN_COLUMNS = ("distance_made_good", "obstacles_cleared", "highest_cleared", "fall_x", "fall_y")
 # Contact and state at the physics rate: events, lift-off heights and apexes to the step (short flights too).
 SENSORS = signals.SensorConfig(imu_rate=100, odom_rate=100, contact_rate=1000, state_rate=1000)
+
+
+def columns(spec: SweepSpec) -> tuple[str, ...]:
+    """The metrics a sweep's rows hold."""
+    return COLUMNS + (TERRAIN_COLUMNS if spec.grounds else ())
 
 
 class ChunkRunner:
@@ -55,6 +62,24 @@ class ChunkRunner:
             self.controller = policy_controller(sim.mj_model, self.policy)
             self.policy_config = read(self.policy)[3]  # once, not per chunk
         self.steps = steps_for(spec.duration, sim.layout.timestep, SENSORS)
+        self.columns = columns(spec)
+        self.grounds = [terrain.parse(g) for g in spec.grounds]  # one per value, all on the model's grid
+        self._heights = {}
+
+    def ground(self, full: np.ndarray):
+        """((n, nrow, ncol) m each instance's ground, (n, B, 3) its obstacles) of an obstacle or terrain sweep,
+        or (None, None); replicate r's draw under seed=each is the same at every value and gravity."""
+        if not self.grounds:
+            return None, None
+        inst = self.instances
+        which = [(self.spec.values.index(v), r) for v, r in zip(inst.value[full], inst.replicate[full])]
+        for k, r in set(which) - set(self._heights):
+            grid = self.grounds[k].instance(self.spec.seed, r)
+            self._heights[k, r] = grid.terrain().heights
+        bands = [g.obstacles() for g in self.grounds]
+        width = max(len(b) for b in bands)
+        padded = [np.vstack([b, np.full((width - len(b), 3), np.nan)]) for b in bands]
+        return np.stack([self._heights[w] for w in which]), np.stack([padded[k] for k, _ in which])
 
     def params(self, full: np.ndarray):
         """Every instance's command (and swept gain, and PD factors): the same for Raibert and a policy."""
@@ -84,15 +109,19 @@ class ChunkRunner:
         full = np.concatenate([index, np.full(self.spec.chunk - n, index[0])])  # one shape, one compile
         inst = self.instances
         row = inst.robot_row[full]
+        heights, obstacles = self.ground(full)
         final, traj = self.sim.run(gravity_vectors(inst.gravity[full]), self.controller, self.params(full),
                                    duration=self.spec.duration, sensors=SENSORS, key=self.spec.seed,
                                    qvel=inst.qvel[full], variation={f: v[row] for f, v in self.robots.items()},
+                                   ground=heights,
                                    **self.sim.per_instance({k: v[row] for k, v in self.controls.items()}))
         result = metrics.hop_metrics(traj, inst.gravity[full], command_speed=self.spec.speed,
                                      standing_height=self.sim.robot.standing_height,
                                      work=np.asarray(motor_energy(final)), mass=self.mass(full))
         result["diverged"] = np.asarray(final.diverged)
-        return np.stack([np.asarray(result[c], dtype=np.float64) for c in COLUMNS], axis=1)[:n]
+        if self.grounds:
+            result |= metrics.terrain_metrics(traj, command_speed=self.spec.speed, obstacles=obstacles)
+        return np.stack([np.asarray(result[c], dtype=np.float64) for c in self.columns], axis=1)[:n]
 
 
 def motor_energy(final):
@@ -130,7 +159,7 @@ def run(spec: SweepSpec, out: Path, *, progress: bool = True) -> tuple[Instances
     chunks = [np.arange(i, min(i + spec.chunk, len(instances))) for i in range(0, len(instances), spec.chunk)]
     me, procs = jax.process_index(), jax.process_count()
     mine = list(range(me, len(chunks), procs))
-    saved = {k: read_chunk(out, k, len(chunks[k]), len(COLUMNS)) for k in mine}
+    saved = {k: read_chunk(out, k, len(chunks[k]), len(columns(spec))) for k in mine}
     todo = [k for k in mine if saved[k] is None]  # missing, or damaged by a kill mid-write: (re)computed
     runner = ChunkRunner(spec, instances, sim, variation.with_constants(sim.mj_model, drawn), controls) \
         if todo else None
@@ -150,7 +179,7 @@ def run(spec: SweepSpec, out: Path, *, progress: bool = True) -> tuple[Instances
     # With one process its chunks are all the chunks; with several, gather them in chunk order.
     rows_by_chunk = [saved[k] for k in mine]
     if procs > 1:
-        rows_by_chunk = _gather_to_all(rows_by_chunk, chunks, procs)
+        rows_by_chunk = _gather_to_all(rows_by_chunk, chunks, procs, len(columns(spec)))
         if me == 0:  # keep every chunk on the coordinator, so it can merge and resume
             for k, rows in enumerate(rows_by_chunk):
                 if not chunk_path(out, k).exists():
@@ -166,12 +195,13 @@ def run(spec: SweepSpec, out: Path, *, progress: bool = True) -> tuple[Instances
     return instances, table, facts
 
 
-def _gather_to_all(mine_rows: list[np.ndarray], chunks: list[np.ndarray], procs: int) -> list[np.ndarray]:
+def _gather_to_all(mine_rows: list[np.ndarray], chunks: list[np.ndarray], procs: int,
+                   width: int = len(COLUMNS)) -> list[np.ndarray]:
     """Every process's chunk rows, in chunk order, on every process (bit-exact)."""
     from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
     per_proc = -(-len(chunks) // procs)
-    block = np.full((per_proc, chunks[0].size, len(COLUMNS)), np.nan)
+    block = np.full((per_proc, chunks[0].size, width), np.nan)
     for j, rows in enumerate(mine_rows):
         block[j, : len(rows)] = rows
     # A global array with one slice per process, replicated by a jitted identity: an

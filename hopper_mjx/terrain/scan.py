@@ -14,20 +14,37 @@ import jax.numpy as jnp
 import numpy as np
 
 
-def height_at(heights: jnp.ndarray, size: tuple[float, float], x, y):
-    """Ground height (m) at world (x, y) (any matching shapes) on the grid `heights` (nrow, ncol) of
-    half-extents `size`, on MuJoCo's triangles."""
+def _cell(heights: jnp.ndarray, size: tuple[float, float], x, y):
+    """The cell under world (x, y): its four corner heights h<dc><dr>, the position (u, v) in it along
+    +x and +y (0..1), and its extents (m) along x and y."""
     nrow, ncol = heights.shape
     fc = jnp.clip((x + size[0]) / (2 * size[0]) * (ncol - 1), 0.0, ncol - 1.0)
     fr = jnp.clip((y + size[1]) / (2 * size[1]) * (nrow - 1), 0.0, nrow - 1.0)
     c = jnp.clip(jnp.floor(fc), 0, ncol - 2).astype(jnp.int32)
     r = jnp.clip(jnp.floor(fr), 0, nrow - 2).astype(jnp.int32)
-    u, v = fc - c, fr - r  # within the cell, along +x and +y
-    h00, h10 = heights[r, c], heights[r, c + 1]  # h<dc><dr>
-    h01, h11 = heights[r + 1, c], heights[r + 1, c + 1]
+    corners = (heights[r, c], heights[r, c + 1], heights[r + 1, c], heights[r + 1, c + 1])  # h00 h10 h01 h11
+    return corners, fc - c, fr - r, (2 * size[0] / (ncol - 1), 2 * size[1] / (nrow - 1))
+
+
+def height_at(heights: jnp.ndarray, size: tuple[float, float], x, y):
+    """Ground height (m) at world (x, y) (any matching shapes) on the grid `heights` (nrow, ncol) of
+    half-extents `size`, on MuJoCo's triangles."""
+    (h00, h10, h01, h11), u, v, _ = _cell(heights, size, x, y)
     upper = h00 + v * (h01 - h00) + u * (h11 - h01)  # triangle (0,0) (1,1) (0,1): v >= u
     lower = h00 + u * (h10 - h00) + v * (h11 - h10)  # triangle (0,0) (1,0) (1,1): u > v
     return jnp.where(v >= u, upper, lower)
+
+
+def normal_at(heights: jnp.ndarray, size: tuple[float, float], x, y):
+    """(..., 3) unit upward normal of MuJoCo's triangle under world (x, y): the normal of a contact on
+    the triangle's face (on an edge or a vertex MuJoCo's contact normal may lean towards the foot's
+    centre instead). Off the grid, the edge triangle's."""
+    (h00, h10, h01, h11), u, v, (dx, dy) = _cell(heights, size, x, y)
+    upper = v >= u
+    slope_x = jnp.where(upper, h11 - h01, h10 - h00) / dx
+    slope_y = jnp.where(upper, h01 - h00, h11 - h10) / dy
+    n = jnp.stack([-slope_x, -slope_y, jnp.ones_like(slope_x)], -1)
+    return n / jnp.linalg.norm(n, axis=-1, keepdims=True)
 
 
 def scan_points(counts: tuple[int, int] = (5, 5), spacing: tuple[float, float] = (0.1, 0.1)) -> np.ndarray:

@@ -2,6 +2,7 @@
 before anything is built (NumPy only: no JAX, no MuJoCo).
 
     rough:amp=0.03,wavelength=0.4,seed=1
+    rough:amp=0.03,seed=each          # each instance its own draw (a fixed seed: every instance the same ground)
     obstacle:height=0.15,x=0.6
     heightmap:ground.png,size=4x4,height=0.3
 
@@ -13,7 +14,7 @@ from __future__ import annotations
 
 import math
 import struct
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import NamedTuple
 
@@ -67,10 +68,11 @@ class Ground:
     size: tuple[float, float] = DEFAULT_SIZE  # full extents, m
     cell: float = DEFAULT_CELL
     path: str | None = None
+    each: bool = False  # seed=each: every instance draws its own ground (`instance`); the model holds instance 0's
 
     def __str__(self) -> str:
         items = [self.path] if self.path else []
-        items += [f"{k}={v:g}" for k, v in self.values]
+        items += [f"{k}=each" if k == "seed" and self.each else f"{k}={v:g}" for k, v in self.values]
         if self.name != "flat":
             items.append(f"size={self.size[0]:g}x{self.size[1]:g}")
         if self.name not in ("flat", "heightmap"):
@@ -91,9 +93,26 @@ class Ground:
             return (height, width)
         return (round(self.size[1] / self.cell) + 1, round(self.size[0] / self.cell) + 1)
 
+    def instance(self, seed: int, index: int) -> Ground:
+        """The ground of instance `index` of a batch (or replicate of a sweep) with `seed`: its own draw under
+        seed=each (a seed from both, the same at every grid point), otherwise this very ground."""
+        if not self.each:
+            return self
+        drawn = int(np.random.SeedSequence([int(seed), int(index)]).generate_state(1)[0])
+        return replace(self, values=tuple((k, drawn if k == "seed" else v) for k, v in self.values), each=False)
+
+    def grids(self, seed: int, indices) -> np.ndarray | None:
+        """(len(indices), nrow, ncol) m: the instances' own heights under seed=each; None otherwise (every
+        instance on the model's ground)."""
+        if not self.each:
+            return None
+        return np.stack([self.instance(seed, i).terrain().heights for i in indices])
+
     def start_height(self, reach: float = 0.1) -> float:
         """The highest vertex within `reach` m (in x and y; at least the cell around it) of the origin, where
         every instance starts."""
+        if self.each:  # any draw may peak near the start: the worst case, rough ground's peak |height|
+            return float(dict(self.values)["amp"])
         t = self.terrain()
         if t is None:
             return 0.0
@@ -101,10 +120,31 @@ class Ground:
         near_x, near_y = np.abs(xs) <= max(reach, xs[1] - xs[0]), np.abs(ys) <= max(reach, ys[1] - ys[0])
         return float(t.heights[near_y[:, None] & near_x[None, :]].max())
 
+    def obstacles(self) -> np.ndarray:
+        """(B, 3) rows (x start, x end, height) m: the bands across the ground a robot hopping along +x must
+        get over: a step's platform, a block, a flight of stairs (its top), each trench on the grid (its
+        depth negative). Empty for ground without such bands (flat, rough, crater, heightmap)."""
+        v = dict(self.values)
+        if self.name == "steps":
+            rows = [(v["x"], v["x"] + v["depth"], v["height"])]
+        elif self.name == "obstacle":
+            rows = [(v["x"], v["x"] + v["length"], v["height"])]
+        elif self.name == "stairs":
+            rows = [(v["x"], v["x"] + (2 * v["n"] + 1) * v["depth"], v["n"] * v["height"])]
+        elif self.name == "gaps":
+            starts = np.arange(v["x"], self.size[0] / 2, v["spacing"])
+            rows = [(x, x + v["width"], -v["depth"]) for x in starts]
+        else:
+            rows = []
+        return np.array(rows, dtype=float).reshape(-1, 3)
+
     def terrain(self) -> Terrain | None:
-        """The height grid (None for flat: the ground stays MuJoCo's infinite plane)."""
+        """The height grid (None for flat: the ground stays MuJoCo's infinite plane); under seed=each, instance
+        0's (the compiled model's)."""
         if self.is_flat:
             return None
+        if self.each:
+            return self.instance(0, 0).terrain()
         half = (self.size[0] / 2, self.size[1] / 2)
         values = dict(self.values)
         if self.path:
@@ -159,7 +199,7 @@ def parse(text: str) -> Ground:
     keys = {k.name: k for k in KEYS[name]}
     grid = {} if name in ("flat", "heightmap") else {k.name: k for k in GRID_KEYS}
     known = [*keys, *(k for k in grid if k not in keys)]
-    values, size, cell, path, seen = {}, DEFAULT_SIZE, DEFAULT_CELL, None, set()
+    values, size, cell, path, seen, each = {}, DEFAULT_SIZE, DEFAULT_CELL, None, set(), False
     for item in filter(None, (i.strip() for i in rest.split(","))):
         key, eq, value = item.partition("=")
         key = key.strip()
@@ -178,12 +218,14 @@ def parse(text: str) -> Ground:
             size = _size(value.strip())
         elif key == "cell":
             cell = _number(grid["cell"], value.strip())
+        elif key == "seed" and value.strip() == "each":
+            values[key], each = 0, True
         else:
             values[key] = _number(keys[key], value.strip())
     if name == "heightmap" and path is None:
         raise TerrainError("heightmap needs a PNG file: heightmap:FILE.png,size=4x4,height=0.3")
     filled = tuple((k.name, values.get(k.name, k.default)) for k in KEYS[name] if k.name != "size")
-    ground = Ground(name, filled, size, cell, path)
+    ground = Ground(name, filled, size, cell, path, each)
     if name not in ("flat", "heightmap"):
         for extent in size:
             if cell > extent:
