@@ -117,8 +117,8 @@ CASES = [
                                                                               "Raibert gain"),
     ("sweep", ["param", "--param", "kp_scale", "--values=-1,1", "--out", "s"], "--values: kp_scale drew a value "
                                                                                     "of -1 for instance 0"),
-    ("sweep", ["param", "--param", "base_mass", "--values", "5,6", "--engine", "chain", "--out", "s"],
-     "--param base_mass: the chain engine cannot vary body_mass per instance yet"),
+    ("sweep", ["param", "--param", "dof_frictionloss", "--values", "0.1,0.2", "--engine", "chain", "--out", "s"],
+     "--param dof_frictionloss: the chain engine cannot vary dof_frictionloss per instance yet"),
     # Terrain specs: a name, its keys and their values, the heightmap's file, the grid's memory at N.
     ("simulate", ["--terrain", "hills"], "--terrain: unknown terrain 'hills'; choose from: flat, rough, steps,"),
     ("simulate", ["--terrain", "rough:amp=0.03,bumps=2"], "--terrain: rough has no key 'bumps'; it takes amp,"),
