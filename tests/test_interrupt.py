@@ -19,6 +19,8 @@ from typing import NamedTuple
 import pytest
 from test_bad_inputs import ENV, command_line, listing
 
+pytestmark = pytest.mark.serial  # wall-clock bounds: `make test` runs this file alone
+
 MAX_LATENCY = 1.0  # s from the signal to the process's exit
 TIMEOUT = 240.0  # s a case may take to reach its moment, or a run to finish
 WORKERS = 6

@@ -22,6 +22,8 @@ import pytest
 from hopper_mjx import cli, live, simulate
 from hopper_mjx.ros.foxglove import FoxgloveStream
 
+pytestmark = pytest.mark.serial  # wall-clock bounds: `make test` runs this file alone
+
 GRAVITY = (9.81, 3.71, 1.62)
 ARGS = ["--gravity", ",".join(map(str, GRAVITY)), "--controller", "hold"]
 SETTLED = 1.0  # s: the dropped robots stand still by then (touchdown <= 0.25 s)
