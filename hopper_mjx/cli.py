@@ -196,12 +196,6 @@ def check_randomize(text: str | None, engines):
     return spec
 
 
-def refuse_variation(physics: Physics, tool: str) -> None:
-    """For a tool that cannot run per-instance robots yet: --randomize refused in one line."""
-    if physics.variation is not None:
-        raise ValueError(f"--randomize: {tool} runs the URDF's robot only, for now")
-
-
 def check_ideal_motors(physics: Physics, tool: str) -> None:
     """Refuses a motor model or delay in a tool that does not run them yet (rather than ignore them)."""
     if physics.motor != registry.DEFAULT_MOTOR or physics.action_delay or physics.push:
