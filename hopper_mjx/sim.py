@@ -226,7 +226,8 @@ class Sim:
         if self.terrain is None:
             return jax.vmap(lambda d: observe(d, ()))(data)
         points = jnp.asarray(signals.SensorConfig().scan_points(), jnp.float32)  # init reads the heights, not a scan
-        heights = ground if isinstance(ground, jax.Array) else self.heights
+        # On one device, as `data` is (`self.heights` is laid over the mesh, for the compiled rollout).
+        heights = ground if isinstance(ground, jax.Array) else jnp.asarray(self.terrain.heights, jnp.float32)
         axis = 0 if isinstance(ground, jax.Array) else None
         return jax.vmap(lambda d, h: observe(d, (h, self.terrain.size, points)), in_axes=(0, axis))(data, heights)
 

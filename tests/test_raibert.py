@@ -236,7 +236,7 @@ def test_rising_towards_a_step_the_leg_is_drawn_up_by_its_rise(robot):
     step = _ground(_step(x0=0.1))  # the foot is near x = 0, the foothold v·T_s/2 = 0.15 ahead of the COM
     for vz, shorter in ((0.5, 0.05),):
         body = raibert.sense(robot, _obs(robot, qvel=np.r_[0.5, 0, vz, np.zeros(6)]))
-        torque = raibert.flight_torque(leg, cfg, body, jnp.zeros(3), _speed(0.6), 9.81, inertia, step,
-                                       jnp.zeros(2))
+        torque = raibert.flight_torque(leg, cfg, body, jnp.zeros(3), _speed(0.6), 9.81, inertia, ground=step,
+                                       base_xy=jnp.zeros(2))
         target = body.q + torque / jnp.asarray(raibert.FLIGHT_KP)
         assert float(kinematics.leg_length(leg, target[2])) == pytest.approx(cfg.leg_length - shorter, abs=1e-4)

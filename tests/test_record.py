@@ -358,5 +358,5 @@ def test_simulate_options_reach_the_controller_unchanged():
     ours = vars(record.parser().parse_args([]))
     for name, value in defaults.items():
         # record's own defaults (one robot, 50 Hz, a bag) and simulate's live run
-        if name not in ("gravity", "default_gravity", "rate", "out", "foxglove", "speed_factor"):
+        if name not in ("gravity", "default_gravity", "rate", "out", "scan", "foxglove", "speed_factor"):
             assert ours[name] == value, name

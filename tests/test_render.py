@@ -142,6 +142,6 @@ def test_simulate_options_reach_the_controller_unchanged():
     defaults = vars(simulate.parser().parse_args([]))
     ours = vars(render.parser().parse_args([]))
     for name, value in defaults.items():
-        if name not in ("gravity", "default_gravity", "rate", "out", "foxglove", "speed_factor"):  # not live
+        if name not in ("gravity", "default_gravity", "rate", "out", "scan", "foxglove", "speed_factor"):  # not live
             assert ours[name] == value, name
     assert render.parser().parse_args(["--size", "320x240"]).size == (320, 240)

@@ -205,6 +205,7 @@ def run(num: int, steps: int, *, controller: str = "hold", chunk: int = 256, rep
         threads: int | None = None, physics: Physics = Physics()) -> dict:
     """One side-by-side measurement of `physics` (its robot, engine and timestep); returns the JSON record."""
     import jax
+    import mujoco
 
     from hopper_mjx.model import variation
     from hopper_mjx.sim import gravity_vectors
@@ -216,9 +217,8 @@ def run(num: int, steps: int, *, controller: str = "hold", chunk: int = 256, rep
     sim = physics.sim(chunk=chunk)
     threads = threads or len(sim.devices)
     gravity = gravity_vectors(bench_gravities(num))
-    robots = {}
-    if physics.variation:  # each instance's robot, the same on both sides
-        robots = variation.with_constants(sim.mj_model, variation.draw(physics.variation, sim.mj_model, num, seed=0))
+    robots = {} if not physics.variation else variation.with_constants(  # each instance's robot, on both sides
+        sim.mj_model, variation.draw(physics.variation, sim.mj_model, num, seed=0))
     stance = variation.stances(sim.mj_model, robots)
     core_controller, params, native_model, native_ctrl = controller_pair(controller, sim, gravity, stance)
     qpos0 = np.asarray(sim.robot.stance_qpos) if stance is None else stance
@@ -240,8 +240,7 @@ def run(num: int, steps: int, *, controller: str = "hold", chunk: int = 256, rep
         wall, cpu, native_qpos = timed(lambda: pool.run(steps))
         native_runs.append((wall, cpu))
     pool.close()
-    total = num * steps
-    core_s, native_s = [w for w, _ in core_runs], [w for w, _ in native_runs]
+    total, core_s, native_s = num * steps, [w for w, _ in core_runs], [w for w, _ in native_runs]
     core_rate, native_rate = total / min(core_s), total / min(native_s)
     core_cpu = min(c for _, c in core_runs) / total * 1e6
     native_cpu = min(c for _, c in native_runs) / total * 1e6
@@ -275,14 +274,12 @@ def run(num: int, steps: int, *, controller: str = "hold", chunk: int = 256, rep
         "diverged": int(np.asarray(final.diverged).sum()),
         "core_final_base_height_m": float(np.median(qpos[:, 2])),
         "jax": jax.__version__,
+        "mujoco": mujoco.__version__,
         "python": platform.python_version(),
     }
     if controller != "raibert":  # same law on both sides: same trajectories
         record["native_final_base_height_m"] = float(np.median(native_qpos[:, 2]))
         record["max_final_qpos_gap"] = float(np.abs(native_qpos - qpos).max())
-    import mujoco
-
-    record["mujoco"] = mujoco.__version__
     return record
 
 
