@@ -144,20 +144,19 @@ def _c_path(m: mujoco.MjModel, gravity, qpos0, steps: int, lay: Layout, limp: bo
     return np.array(base)
 
 
-@pytest.fixture(scope="module")
-def recorded(tmp_path_factory):
-    """`simulate --randomize` on mjx: 8 instances at 9.81 and 1.62 holding their stance through touchdown."""
-    out = tmp_path_factory.mktemp("vary") / "run.npz"
+def _simulate(out, engine: str, spec: str) -> dict:
+    """`simulate --randomize spec` on `engine`: 8 instances at 9.81 and 1.62 holding their stance through touchdown."""
     argv = ["--gravity", "9.81,1.62", "--num", "4", "--duration", "0.4", "--controller", "hold", "--rate", "1000",
-            "--engine", "mjx", "--seed", "5", "--randomize", EVERYTHING, "--out", str(out)]
+            "--engine", engine, "--seed", "5", "--randomize", spec, "--out", str(out)]
     assert simulate.main(argv) == 0
     return dict(np.load(out))
 
 
-def test_each_instance_follows_mujoco_c_given_its_recorded_model(mj_model, recorded):
-    f = recorded
+def _follows_mujoco_c(mj_model, f: dict, spec: str, engine: str) -> None:
+    """Each instance of the recording `f`, its recorded model set into MuJoCo C's (mj_setConst): the base path
+    within 1e-3 m through touchdown, where the nominal robot's is over 5e-3 m away."""
     drawn = {k.removeprefix("model_"): v for k, v in f.items() if k.startswith("model_")}
-    assert set(drawn) == Spec.parse(EVERYTHING).fields
+    assert set(drawn) == Spec.parse(spec).fields
     steps, lay = f["qpos"].shape[1], Layout.of(mj_model)
     apart = []
     for i in range(len(f["gravity"])):
@@ -165,19 +164,24 @@ def test_each_instance_follows_mujoco_c_given_its_recorded_model(mj_model, recor
         assert f["contact"][i].any() and touchdown < steps - 100, "the comparison must include touchdown"
         path = _c_path(variation.instance_model(mj_model, drawn, i), f["gravity"][i], f["qpos"][i, 0], steps, lay)
         err = np.abs(path - f["qpos"][i, :, :3]).max()
-        assert err < 1e-3, f"instance {i}: mjx and MuJoCo C differ by {err:.2e} m"
+        assert err < 1e-3, f"instance {i}: {engine} and MuJoCo C differ by {err:.2e} m"
         nominal = _c_path(copy.deepcopy(mj_model), f["gravity"][i], f["qpos"][i, 0], steps, lay)
         apart.append(np.abs(nominal - f["qpos"][i, :, :3]).max())
     # Not the nominal robot: the variation moved the paths well beyond the tolerance.
     assert max(apart) > 5e-3, apart
 
 
+@pytest.fixture(scope="module")
+def recorded(tmp_path_factory):
+    return _simulate(tmp_path_factory.mktemp("vary") / "run.npz", "mjx", EVERYTHING)
+
+
+def test_each_instance_follows_mujoco_c_given_its_recorded_model(mj_model, recorded):
+    _follows_mujoco_c(mj_model, recorded, EVERYTHING, "mjx")
+
+
 def test_same_seed_same_draws_and_results(recorded, tmp_path):
-    out = tmp_path / "again.npz"
-    argv = ["--gravity", "9.81,1.62", "--num", "4", "--duration", "0.4", "--controller", "hold", "--rate", "1000",
-            "--engine", "mjx", "--seed", "5", "--randomize", EVERYTHING, "--out", str(out)]
-    assert simulate.main(argv) == 0
-    again = dict(np.load(out))
+    again = _simulate(tmp_path / "again.npz", "mjx", EVERYTHING)
     assert again.keys() == recorded.keys()
     for k in again:
         np.testing.assert_array_equal(again[k], recorded[k], err_msg=k)
@@ -209,27 +213,9 @@ def test_friction_and_damping_leave_mujocos_constants_as_they_are(mj_model):
 
 @pytest.fixture(scope="module")
 def on_chain(tmp_path_factory):
-    """`simulate --randomize` of every parameter the chain takes at run time, on the chain: 8 instances at 9.81
-    and 1.62 holding their own stance through touchdown."""
-    out = tmp_path_factory.mktemp("vary") / "chain.npz"
-    argv = ["--gravity", "9.81,1.62", "--num", "4", "--duration", "0.4", "--controller", "hold", "--rate", "1000",
-            "--engine", "chain", "--seed", "5", "--randomize", ON_CHAIN, "--out", str(out)]
-    assert simulate.main(argv) == 0
-    return dict(np.load(out))
+    """Every parameter the chain takes at run time, on the chain (each instance from its own stance)."""
+    return _simulate(tmp_path_factory.mktemp("vary") / "chain.npz", "chain", ON_CHAIN)
 
 
 def test_the_chain_takes_each_instances_robot_as_mujoco_c_does(mj_model, on_chain):
-    f = on_chain
-    drawn = {k.removeprefix("model_"): v for k, v in f.items() if k.startswith("model_")}
-    assert set(drawn) == Spec.parse(ON_CHAIN).fields
-    steps, lay = f["qpos"].shape[1], Layout.of(mj_model)
-    apart = []
-    for i in range(len(f["gravity"])):
-        assert f["contact"][i].any() and np.argmax(f["contact"][i]) < steps - 100
-        m_i = variation.instance_model(mj_model, drawn, i)
-        path = _c_path(m_i, f["gravity"][i], f["qpos"][i, 0], steps, lay)
-        err = np.abs(path - f["qpos"][i, :, :3]).max()
-        assert err < 1e-3, f"instance {i}: chain and MuJoCo C differ by {err:.2e} m"
-        nominal = _c_path(copy.deepcopy(mj_model), f["gravity"][i], f["qpos"][i, 0], steps, lay)
-        apart.append(np.abs(nominal - f["qpos"][i, :, :3]).max())
-    assert max(apart) > 5e-3, apart
+    _follows_mujoco_c(mj_model, on_chain, ON_CHAIN, "chain")
