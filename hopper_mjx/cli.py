@@ -247,7 +247,10 @@ def check_physics(args, model_options: dict | None = None, *, engines: list[str]
         check_engine(name)
     if terrain is not None and args.terrain != "flat":
         raise ValueError(f"give --terrain or a world's <heightmap> ({terrain}), not both")
-    ground = check_ground(terrain or args.terrain, engines or [args.engine], n)
+    try:
+        ground = check_ground(terrain or args.terrain, engines or [args.engine], n)
+    except ValueError as err:  # a world's <heightmap> is named as the user gave it, not as --terrain
+        raise ValueError(str(err).replace("--terrain", "--world <heightmap>", 1) if terrain else str(err)) from None
     variation = check_randomize(args.randomize, engines or [args.engine])
     try:
         registry.check("motor", registry.MOTORS, args.motor)
