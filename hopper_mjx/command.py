@@ -45,6 +45,7 @@ _said = ["stopped before its results were written"]  # what the line says was ke
 _stopping = threading.Lock()
 _armed = threading.Event()
 _stderr: list = []  # (the real stderr's descriptor, the forwarding thread) while the filter runs
+_real_stderr: list = []  # a copy of descriptor 2 as the process began, taken when armed
 
 
 def on_stop(kept: str) -> None:
@@ -64,8 +65,11 @@ def stop(signum: int) -> None:
             pass
     _end_filter()
     name = signal.Signals(signum).name
-    start = "\n" if os.isatty(2) else ""  # off the terminal's ^C or progress bar
-    os.write(2, f"{start}interrupted ({name}): {_said[0]}\n".encode())
+    # The copy taken when armed, not descriptor 2: a signal in the instant the filter takes descriptor 2
+    # over, before it is on record in `_stderr`, would send the line into a pipe nobody drains.
+    out = _real_stderr[0] if _real_stderr else 2
+    start = "\n" if os.isatty(out) else ""  # off the terminal's ^C or progress bar
+    os.write(out, f"{start}interrupted ({name}): {_said[0]}\n".encode())
     os._exit(STOP_CODES.get(signum, 128 + signum))
 
 
@@ -83,6 +87,7 @@ def arm() -> None:
     """SIGINT and SIGTERM end the process via `stop`, from any moment on; call from the main thread."""
     if _armed.is_set():
         return
+    _real_stderr.append(os.dup(2))
     read, write = os.pipe()
     os.set_blocking(write, False)  # the C-level handler must never block
     signal.set_wakeup_fd(write, warn_on_full_buffer=False)
@@ -130,11 +135,11 @@ def filter_stderr() -> None:
     sys.stderr.flush()
     real = os.dup(2)
     read, write = os.pipe()
+    thread = threading.Thread(target=_forward, args=(read, real), name="stderr-filter", daemon=True)
+    thread.start()  # before descriptor 2 moves: starting a thread can take a while on a busy machine
+    _stderr.extend([real, thread])
     os.dup2(write, 2)
     os.close(write)
-    thread = threading.Thread(target=_forward, args=(read, real), name="stderr-filter", daemon=True)
-    thread.start()
-    _stderr.extend([real, thread])
 
 
 def _end_filter() -> None:
