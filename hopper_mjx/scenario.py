@@ -193,9 +193,10 @@ class Scenario:
                                           pd=pd)
             return policy.policy_controller(sim.mj_model, path), params
         from hopper_mjx import control
+        from hopper_mjx.model.variation import legs
 
         return control.make(self.controller, sim.robot, self.n, height=self.height, speed=self.speed, gains=self.gains,
-                            mj_model=sim.mj_model, pd=pd)
+                            mj_model=sim.mj_model, pd=pd, legs=legs(sim.mj_model, self.draws(sim.mj_model)))
 
     def run(self, duration: float, sensors):
         """(Sim, final state, trajectory as NumPy) of the whole batch for `duration` s; prints the rate."""
