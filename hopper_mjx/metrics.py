@@ -116,7 +116,7 @@ def hop_metrics(
     gravity,
     *,
     command_speed=(0.0, 0.0),
-    standing_height: float,
+    standing_height,
     work=None,
     mass=None,
     last_hops: int = 5,
@@ -126,7 +126,7 @@ def hop_metrics(
 
     traj: a `hopper_mjx.sim.Trajectory` (uses its state and contact streams);
     gravity: (N, 3) vectors or (N,) magnitudes, m/s²; command_speed: (2,) or (N, 2) m/s;
-    standing_height: m (`Robot.standing_height`); work: (N,) J the motors did
+    standing_height: m (`Robot.standing_height`), or (N,) each instance's own; work: (N,) J the motors did
     (e.g. the Raibert controller state's `work`) and mass: kg (or (N,) kg, each instance's robot), for
     the cost of transport;
     last_hops: hops averaged; speed_window: s of speed averaging before the end or fall.
@@ -262,7 +262,8 @@ def _apexes(z, flag, t_state, t_contact, liftoff, standing_height) -> tuple[np.n
     apex = np.full(n * width + 1, -np.inf)
     np.maximum.at(apex, slot.ravel(), z.ravel())
     apex = apex[:-1].reshape(n, width)
-    rise = np.where(np.isfinite(apex), apex - standing_height, np.nan)
+    standing = standing_height if np.ndim(standing_height) == 0 else np.reshape(standing_height, (n, 1))
+    rise = np.where(np.isfinite(apex), apex - standing, np.nan)
     # Lift-off height, interpolated: the base moves fast there and the state stream may be coarse.
     z_liftoff = np.stack([np.interp(liftoff[i], t_state, z[i]) for i in range(n)])
     return rise, np.where(np.isfinite(apex), apex - z_liftoff, np.nan)

@@ -193,9 +193,12 @@ class Scenario:
                                           pd=pd)
             return policy.policy_controller(sim.mj_model, path), params
         from hopper_mjx import control
+        from hopper_mjx.model.variation import legs
 
+        # Raibert models each drawn leg (the others take none): measured only for it, a few ms per distinct leg.
+        own = legs(sim.mj_model, self.draws(sim.mj_model)) if self.controller == "raibert" else None
         return control.make(self.controller, sim.robot, self.n, height=self.height, speed=self.speed, gains=self.gains,
-                            mj_model=sim.mj_model, pd=pd)
+                            mj_model=sim.mj_model, pd=pd, legs=own)
 
     def run(self, duration: float, sensors):
         """(Sim, final state, trajectory as NumPy) of the whole batch for `duration` s; prints the rate."""

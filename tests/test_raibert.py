@@ -5,12 +5,13 @@ import math
 
 import jax
 import jax.numpy as jnp
+import mujoco
 import numpy as np
 import pytest
 
 from hopper_mjx.control import kinematics, raibert
 from hopper_mjx.control.raibert import COMPRESSION, FLIGHT, THRUST, UNLOADING
-from hopper_mjx.model.robot import Robot
+from hopper_mjx.model.robot import CLEARANCE, Robot
 from hopper_mjx.signals import Contact, Observation
 
 L0 = 0.64  # m, the default touchdown leg length
@@ -240,3 +241,82 @@ def test_rising_towards_a_step_the_leg_is_drawn_up_by_its_rise(robot):
                                        base_xy=jnp.zeros(2))
         target = body.q + torque / jnp.asarray(raibert.FLIGHT_KP)
         assert float(kinematics.leg_length(leg, target[2])) == pytest.approx(cfg.leg_length - shorter, abs=1e-4)
+
+
+# -- each instance's own leg -----------------------------------------------------------------
+SHANKS = (0.30, 0.38, 0.45)  # m: one batch, three legs (the URDF's is 0.35)
+
+
+def test_each_instance_places_its_own_foot_with_its_own_leg(mj_model, robot):
+    """One batch of three shanks, each at its own stance moving at 0.5 m/s: the flight PD's target joint angles,
+    put through MuJoCo C's forward kinematics of that instance's model, put its foot v·T_s/2 ahead of its centre
+    of mass on a virtual leg of its own touchdown length (the URDF's margin over its standing leg), to 1e-6 m in
+    float64; the URDF's leg model would miss by centimetres. Its standing height is MuJoCo's."""
+    from hopper_mjx.model import variation
+    from hopper_mjx.randomize import Spec
+
+    drawn = [variation.draw(Spec.parse(f"shank_length={s}"), mj_model, 1, 0) for s in SHANKS]
+    values = {"body_pos": np.concatenate([d["body_pos"] for d in drawn])}
+    own, stances = variation.legs(mj_model, values), variation.stances(mj_model, values)
+    params = raibert.raibert_params(len(SHANKS), height=0.1, speed=(0.5, 0.0), leg=raibert.legs(robot, own))
+    lay = robot.layout
+    qvel = np.r_[0.5, np.zeros(lay.nv - 1)]
+
+    def target(params, qpos, urdf: bool):
+        obs = Observation(time=jnp.float64(1.0), qpos=qpos, qvel=jnp.asarray(qvel),
+                          contact=Contact(jnp.bool_(False), jnp.zeros(3), jnp.zeros(3)))
+        leg, inertia = (robot.leg, raibert.inertia_facts(robot.leg)) if urdf else (params.leg.geometry,
+                                                                                     params.leg.inertia)
+        body = raibert.sense(robot, obs, leg)
+        torque = raibert.flight_torque(leg, params.gains, body, jnp.zeros(3), _speed(0.2), 9.81, inertia)
+        return body.q + torque / jnp.asarray(raibert.FLIGHT_KP)
+
+    jax.config.update("jax_enable_x64", True)
+    try:
+        params64 = jax.tree_util.tree_map(lambda v: jnp.asarray(v, jnp.float64), params)
+        both = jax.jit(jax.vmap(lambda p, q: (target(p, q, False), target(p, q, True))))(params64, jnp.asarray(stances))
+        targets = dict(zip((False, True), map(np.asarray, both)))
+    finally:
+        jax.config.update("jax_enable_x64", False)
+    hfe_anchor = lambda d: d.xanchor[mj_model.joint("hfe_joint").id]
+    for i, shank in enumerate(SHANKS):
+        m = variation.instance_model(mj_model, values, i)
+        d = mujoco.MjData(m)
+        d.qpos[:] = stances[i]
+        mujoco.mj_kinematics(m, d)
+        mujoco.mj_comPos(m, d)
+        com = d.subtree_com[int(m.jnt_bodyid[0])].copy()  # where the foot is placed from: now, before the swing
+        assert float(params.leg.standing_height[i]) == pytest.approx(stances[i][2] - CLEARANCE, abs=1e-6)
+        miss = {}
+        for urdf, q in targets.items():
+            d.qpos[list(lay.joint_qpos)] = q[i]
+            mujoco.mj_kinematics(m, d)
+            foot = d.geom_xpos[lay.foot_geom]
+            miss[urdf] = max(np.abs(foot[:2] - com[:2] - [0.5 * 0.2 / 2, 0.0]).max(),
+                             abs(np.linalg.norm(foot - hfe_anchor(d)) - float(params.gains.leg_length[i])))
+        assert miss[False] < 1e-6, f"shank {shank} m: its foot lands {miss[False]:.1e} m off"
+        assert miss[True] > 1e-2, f"shank {shank} m: the URDF's leg model misses by only {miss[True]:.1e} m"
+    # The touchdown length keeps the URDF's margin over each standing leg (a longer shank stands taller).
+    np.testing.assert_allclose(params.gains.leg_length - params.leg.length_shift, raibert.RaibertConfig().leg_length,
+                               atol=1e-6)
+    assert np.all(np.diff(params.gains.leg_length) > 0.02) and np.all(np.diff(params.leg.standing_height) > 0.02)
+
+
+def test_a_long_and_a_short_shank_hop_on_the_commanded_apex_of_their_own_legs(tmp_path):
+    """`sweep param --param shank_length` at Earth, 4 s: the 0.45 m shank (every robot fell while Raibert modelled
+    the URDF's 0.35 m leg) and the 0.30 m one hop without a fall, each apex 0.10 m ± 15 % over its own standing
+    height (the sweep measures it there; over the URDF's it would be 11 cm off for the 0.45 m leg)."""
+    import csv
+
+    from hopper_mjx.sweep.__main__ import main
+
+    out = tmp_path / "legs"
+    assert main(["param", "--param", "shank_length", "--values", "0.30,0.45", "--gravity", "9.81", "--num", "1",
+                 "--duration", "4", "--chunk", "2", "--no-progress", "--out", str(out)]) == 0
+    with open(out / "results.csv") as f:
+        rows = {float(r["shank_length"]): r for r in csv.DictReader(f)}
+    assert set(rows) == {0.30, 0.45}
+    for shank, r in rows.items():
+        assert r["fell"] == "0" and r["diverged"] == "0", shank
+        assert int(r["hops"]) >= 6, shank
+        assert abs(float(r["apex_height"]) - 0.10) < 0.015, (shank, r["apex_height"])

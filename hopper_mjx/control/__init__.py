@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import Sequence
+
 from hopper_mjx import registry
 from hopper_mjx.control import balance, pid, raibert
 from hopper_mjx.control.base import Controller, PDScale, hold, zero_torque
@@ -11,7 +13,8 @@ NAMES = tuple(registry.CONTROLLERS)
 
 
 def make(name: str, robot: Robot, n: int, *, height: float = raibert.DEFAULT_HEIGHT,
-         speed=(0.0, 0.0), gains=None, mj_model=None, pd: PDScale | None = None) -> tuple[Controller, object]:
+         speed=(0.0, 0.0), gains=None, mj_model=None, pd: PDScale | None = None,
+         legs: Sequence[Robot] | None = None) -> tuple[Controller, object]:
     """(controller, per-instance params or None) for n instances of `robot`.
 
     none: limp; hold: PD to the initial joint angles; pid: the seed's joint position
@@ -19,7 +22,10 @@ def make(name: str, robot: Robot, n: int, *, height: float = raibert.DEFAULT_HEI
     monoped.yaml); raibert: hop at `height` m of apex rise over the standing height
     and `speed` (vx, vy) m/s; balance: stand on the foot, an LQR designed on `mj_model`
     (required) about its stance. pd: each instance's factors on the joint PD gains
-    (`base.pd_scale`), for the controllers that have them (`registry.PD_CONTROLLERS`).
+    (`base.pd_scale`), for the controllers that have them (`registry.PD_CONTROLLERS`). legs: each
+    instance's robot facts when its leg is drawn (`model.variation.legs`): raibert models each instance's
+    own leg; hold and pid hold each instance's own start (its own stance) anyway; balance keeps the
+    URDF's design.
     """
     registry.check("controller", registry.CONTROLLERS, name)
     if pd is not None and name not in registry.PD_CONTROLLERS:
@@ -37,7 +43,8 @@ def make(name: str, robot: Robot, n: int, *, height: float = raibert.DEFAULT_HEI
         return balance.balance(robot, mj_model), None
     if len(speed) != 2:  # raibert
         raise ValueError(f"speed needs two values VX,VY in m/s, got {list(speed)}")
-    return raibert.raibert(robot), raibert.raibert_params(n, height=height, speed=speed, pd=pd)
+    leg = None if legs is None else raibert.legs(robot, legs)
+    return raibert.raibert(robot), raibert.raibert_params(n, height=height, speed=speed, pd=pd, leg=leg)
 
 
 __all__ = ["NAMES", "Controller", "make"]

@@ -9,14 +9,24 @@ the knee bends with negative kfe.
 The *virtual leg* runs from the hfe axis to the foot centre. Its length depends
 on the knee alone, which is what lets the Raibert controller treat the
 articulated leg as a telescopic one:  L² = thigh² + shank² + 2·thigh·shank·cos(kfe).
+
+Every function takes a `LegGeometry` of floats (the URDF's leg, folded into the program as
+constants) or one whose fields are arrays (an instance's own leg, a run-time value: the
+geometry is a pytree, so a batch of legs is vmapped like any other state).
 """
 
 from __future__ import annotations
+
+import dataclasses
 
 import jax
 import jax.numpy as jnp
 
 from hopper_mjx.model.robot import LegGeometry
+
+# The model layer stays free of JAX; here, where legs become traced values, the geometry is a pytree.
+jax.tree_util.register_dataclass(LegGeometry, data_fields=[f.name for f in dataclasses.fields(LegGeometry)],
+                                 meta_fields=[])
 
 
 def leg_length(leg: LegGeometry, kfe: jax.Array) -> jax.Array:

@@ -48,6 +48,11 @@ torque is capped at `traction`·leg force·L, a share
 of the friction cone: at touchdown the leg force is still small, and a hip
 torque beyond the floor's grip makes the foot slip or bounce.
 
+The leg model (lengths, foot radius, link centres of mass and inertias, standing height)
+is the URDF's, or each instance's own (`RaibertParams.leg`, from `legs`: a drawn thigh,
+shank or foot radius, as run-time values); an instance's touchdown length `leg_length`
+keeps the URDF's margin over its standing virtual leg. Masses stay the URDF's.
+
 Every gravity-dependent quantity uses the instance's own g, its downward (vertical)
 part, floored at `MIN_GRAVITY` so that a weightless robot gets finite commands. Contact is the
 observation's (`signals.Observation.contact`, the engine's one foot-contact test);
@@ -63,7 +68,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass
-from typing import NamedTuple
+from typing import NamedTuple, Sequence
 
 import jax
 import jax.numpy as jnp
@@ -128,6 +133,7 @@ class RaibertParams:
     gains: RaibertConfig  # every gain, one value per instance
     # Factors on the joint PD gains (the flight PD, the attitude servo, the brake); None: as designed.
     pd: PDScale | None = None
+    leg: "Leg | None" = None  # each instance's own leg (`legs`); None: the URDF's, folded as constants
 
 
 def _read_commands(s: "RaibertState"):
@@ -177,13 +183,14 @@ def _check_gains(gains: RaibertConfig) -> None:
 
 
 def raibert_params(n: int, *, height, speed=(0.0, 0.0), config: RaibertConfig | None = None,
-                   pd: PDScale | None = None, **gain_overrides) -> RaibertParams:
+                   pd: PDScale | None = None, leg: "Leg | None" = None, **gain_overrides) -> RaibertParams:
     """Per-instance commands and gains, every leaf with leading axis n.
 
     height: apex rise over the standing height, m, scalar or (n,);
     speed: (vx, vy) m/s, (2,) or (n, 2); gain_overrides: any RaibertConfig field,
     scalar or (n,) (a sweep over a gain is just an array here); pd: (n, 3) factors on the joint
-    PD gains (`base.pd_scale`).
+    PD gains (`base.pd_scale`); leg: each instance's own leg (`legs`), whose `length_shift` moves
+    `leg_length` (given for the URDF's leg) to that leg's.
     """
     if n < 1:
         raise ValueError(f"n must be >= 1, got {n}")
@@ -195,8 +202,12 @@ def raibert_params(n: int, *, height, speed=(0.0, 0.0), config: RaibertConfig | 
     if np.any(heights < 0):
         raise ValueError("height (apex rise) must be >= 0 m")
     gains = RaibertConfig(**{k: _batch(n, k, gain_overrides.get(k, getattr(config, k)), ()) for k in GAINS})
+    if leg is not None:
+        if np.shape(leg.standing_height) != (n,):
+            raise ValueError(f"leg must hold n={n} legs, got {np.shape(leg.standing_height)}")
+        gains = dataclasses.replace(gains, leg_length=gains.leg_length + np.asarray(leg.length_shift, np.float32))
     _check_gains(gains)
-    return RaibertParams(height=heights, speed=_batch(n, "speed", speed, (2,)), gains=gains, pd=pd)
+    return RaibertParams(height=heights, speed=_batch(n, "speed", speed, (2,)), gains=gains, pd=pd, leg=leg)
 
 
 def _tilt(rot: jax.Array) -> tuple[jax.Array, jax.Array]:
@@ -224,9 +235,10 @@ class Body(NamedTuple):
     foot: jax.Array  # (3,) foot centre from the haa axis point, m
 
 
-def sense(robot: Robot, obs: Observation) -> Body:
+def sense(robot: Robot, obs: Observation, leg: LegGeometry | None = None) -> Body:
+    """What the body is doing, seen through `leg` (default the URDF's)."""
     q, qd = joint_state(robot.layout, obs)
-    leg = robot.leg
+    leg = robot.leg if leg is None else leg
     gyro = obs.qvel[3:6]
     com, com_rate = jax.jvp(lambda a: kinematics.com_position(leg, a), (q,), (qd,))
     from_base = com + jnp.array([0.0, 0.0, -leg.haa_below_base])
@@ -314,8 +326,9 @@ class Inertia(NamedTuple):
     swing_tilt: jax.Array  # (2,) α/(1-α)
 
 
-def inertia_facts(leg: LegGeometry) -> Inertia:
-    pose = jnp.array(INERTIA_POSE)
+def inertia_facts(leg: LegGeometry, pose=INERTIA_POSE) -> Inertia:
+    """At `pose` (haa, hfe, kfe), rad: `INERTIA_POSE` for the URDF's leg, an instance's own stance for its own."""
+    pose = jnp.asarray(pose)
     momentum = lambda rates, gyro: kinematics.angular_momentum(leg, pose, rates, gyro)
     robot = jax.vmap(lambda axis: momentum(jnp.zeros(3), axis))(jnp.eye(3)).diagonal()
     # In flight a hip swing of Δ turns the body back by α·Δ (zero angular momentum),
@@ -323,6 +336,36 @@ def inertia_facts(leg: LegGeometry) -> Inertia:
     leg_momentum = jax.vmap(lambda hip: momentum(hip, jnp.zeros(3)))(jnp.eye(3)).diagonal()
     alpha = (leg_momentum / robot)[:2]
     return Inertia(robot=robot, alpha=alpha, swing_tilt=alpha / (1.0 - alpha))
+
+
+class Leg(NamedTuple):
+    """Each instance's own leg as the controller models it (`legs`); every leaf (n, ...) when batched."""
+
+    geometry: LegGeometry  # lengths, foot radius, link centres of mass and inertias (the URDF's masses)
+    standing_height: jax.Array  # m, base height standing in its stance: where the apex rise counts from
+    inertia: Inertia  # the robot's rotational facts at its own stance
+    # m, its standing virtual leg's length minus the URDF's: `raibert_params` adds it to `leg_length`, so that
+    # the touchdown length keeps the URDF's margin over the standing leg (the spring's preload at rest).
+    length_shift: jax.Array
+
+
+def _stance_length(robot: Robot) -> float:
+    return float(kinematics.leg_length(robot.leg, robot.stance_joints[2]))
+
+
+_inertias = jax.jit(jax.vmap(inertia_facts))  # one compile, not hundreds of small eager ops
+
+
+def legs(robot: Robot, own: Sequence[Robot]) -> Leg:
+    """The `Leg`s (n, ...) of n instances whose robot facts are `own` (`model.variation.legs`), `robot`
+    the URDF's."""
+    stack = lambda *v: np.asarray(v, np.float32)
+    geometry = LegGeometry(**{f.name: stack(*(getattr(r.leg, f.name) for r in own))
+                              for f in dataclasses.fields(LegGeometry)})
+    poses = stack(*(r.stance_joints for r in own))
+    return Leg(geometry=geometry, standing_height=stack(*(r.standing_height for r in own)),
+               inertia=jax.tree_util.tree_map(np.asarray, _inertias(geometry, poses)),
+               length_shift=stack(*(_stance_length(r) - _stance_length(robot) for r in own)))
 
 
 def stance_torque(leg: LegGeometry, gains: RaibertConfig, phase, body: Body, spin, speed: Speed, thrust_force,
@@ -433,17 +476,20 @@ def raibert(robot: Robot, config: RaibertConfig | None = None) -> Controller:
 
     params: `raibert_params(...)` or None (`config` gains, DEFAULT_HEIGHT in place).
     """
-    layout, leg = robot.layout, robot.leg
+    layout = robot.layout
     mass, dt = layout.total_mass, layout.timestep
-    inertia = inertia_facts(leg)
+    urdf_inertia = inertia_facts(robot.leg)
     defaults = jax.tree_util.tree_map(lambda v: v[0], raibert_params(1, height=DEFAULT_HEIGHT, config=config))
 
     def act(s: RaibertState, obs: Observation, gravity):
-        gains = s.params.gains
+        gains, own = s.params.gains, s.params.leg
+        # Static: without legs of their own, the URDF's leg folded as constants (today's program).
+        leg, standing, inertia = ((robot.leg, robot.standing_height, urdf_inertia) if own is None
+                                  else (own.geometry, own.standing_height, own.inertia))
         # The floor is level, so hops and flights follow gravity's vertical part; a sideways
         # part only pushes the robot along, which the speed loop sees as an error.
         g = jnp.maximum(-gravity[2], MIN_GRAVITY)
-        body = sense(robot, obs)
+        body = sense(robot, obs, leg)
         stiffness = mass * EARTH_GRAVITY / gains.sag
         phase, ev = next_phase(s.phase, obs.contact.flag, obs.time - s.phase_start, body.length,
                                body.length_rate, gains.leg_length)
@@ -452,7 +498,7 @@ def raibert(robot: Robot, config: RaibertConfig | None = None) -> Controller:
         if ground is not None:  # static: on a terrain, the ground under the next hop (the plane: z = 0)
             floor = jnp.where(ev.bottom, landing_floor(leg, body, ground, base_xy, speed, s.params.height, g),
                               s.floor)
-        height_bias, thrust_force = height_update(s, ev, body, g, stiffness, mass, robot.standing_height,
+        height_bias, thrust_force = height_update(s, ev, body, g, stiffness, mass, standing,
                                                   None if ground is None else floor)
         apex = jnp.where(ev.liftoff, body.z, jnp.where(phase == FLIGHT, jnp.maximum(s.apex, body.z), s.apex))
         spin = kinematics.angular_momentum(leg, body.q, body.qd, body.gyro) / inertia.robot

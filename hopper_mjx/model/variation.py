@@ -5,6 +5,7 @@
     values = with_constants(mj_model, values)       # + body_invweight0, dof_invweight0, ... per instance
     m_i = instance_model(mj_model, values, i)       # instance i as a MuJoCo C model (mj_setConst called)
     qpos0 = stances(mj_model, values)               # (64, nq) each drawn leg's own stance (None: leg not drawn)
+    own = legs(mj_model, values)                    # each drawn leg's robot facts, as its controller knows them
 
 Each varied field is drawn whole, (N, *field shape): the nominal model's values where the spec
 leaves them, so instance i is re-created by setting the fields into a copy of the model. MuJoCo
@@ -23,7 +24,7 @@ import numpy as np
 from hopper_mjx import registry
 from hopper_mjx.model.layout import Layout
 from hopper_mjx.model.loader import JOINTS
-from hopper_mjx.model.robot import stance_qpos
+from hopper_mjx.model.robot import Robot, stance_qpos
 from hopper_mjx.randomize import Spec
 
 # Fields `mj_setConst` derives from masses, inertias, armature and gear that MJX's step reads (MJX reads
@@ -250,6 +251,26 @@ def stances(mj_model: mujoco.MjModel, values: dict[str, np.ndarray]) -> np.ndarr
             thigh, shank = (np.linalg.norm(m.body_pos[rows(m, part)[0]]) for part in ("shank", "foot"))
             raise ValueError(f"the leg of instance {i} (thigh {thigh:.3g} m, shank {shank:.3g} m, foot radius "
                              f"{m.geom_size[lay.foot_geom, 0]:.3g} m) cannot reach the floor: {err}") from None
+    return out
+
+
+def legs(mj_model: mujoco.MjModel, values: dict[str, np.ndarray]) -> list[Robot] | None:
+    """Each instance's robot facts as its controller knows them when `values` move the leg's geometry, else
+    None: `Robot.of` the URDF's model given the instance's lengths and foot radius (its leg geometry, stance and
+    standing height), not its drawn masses, which no controller sees. Instances with the same leg share one."""
+    drawn = sorted(GEOMETRY & set(values))
+    if not drawn:
+        return None
+    m, n = copy.deepcopy(mj_model), len(values[drawn[0]])
+    known: dict[bytes, Robot] = {}
+    out = []
+    for i in range(n):
+        key = b"".join(np.ascontiguousarray(values[f][i]).tobytes() for f in drawn)
+        if key not in known:  # a swept value repeats one leg over every replicate and gravity
+            for f in drawn:
+                getattr(m, f)[:] = values[f][i]
+            known[key] = Robot.of(m)
+        out.append(known[key])
     return out
 
 

@@ -22,6 +22,7 @@ from hopper_mjx import metrics, registry, signals, terrain
 from hopper_mjx.control.balance import balance
 from hopper_mjx.control.base import pd_scale
 from hopper_mjx.control.raibert import GAINS, raibert, raibert_params
+from hopper_mjx.control.raibert import legs as raibert_legs
 from hopper_mjx.files import atomic_write
 from hopper_mjx.model import variation
 from hopper_mjx.sim import Sim, gravity_vectors, steps_for
@@ -51,6 +52,10 @@ class ChunkRunner:
         `controls`: {control parameter: (rows, ...)} its controller's, motors' and sensors' (`Instances.robot_row`
         says which row an instance runs)."""
         self.spec, self.instances, self.sim, self.robots, self.controls = spec, instances, sim, robots, controls
+        # Each robot row's leg, when drawn: what Raibert models and where the apex rise counts from.
+        own = variation.legs(sim.mj_model, robots)
+        self.legs = None if own is None or spec.controller != "raibert" else raibert_legs(sim.robot, own)
+        self.standing = None if own is None else np.array([r.standing_height for r in own])
         self.policy = registry.policy_path(spec.controller) if registry.is_policy(spec.controller) else None
         if spec.controller == "balance":  # commands nothing: it stands
             self.controller = balance(sim.robot, sim.mj_model)
@@ -95,13 +100,18 @@ class ChunkRunner:
             return policy_params(self.sim.robot, len(full), height=spec.height, speed=spec.speed,
                                  config=self.policy_config, pd=pd)
         gains = {spec.param: self.instances.value[full]} if spec.param in GAINS else {}
-        return raibert_params(len(full), height=spec.height, speed=spec.speed, pd=pd, **gains)
+        leg = None if self.legs is None else jax.tree_util.tree_map(lambda v: v[row], self.legs)
+        return raibert_params(len(full), height=spec.height, speed=spec.speed, pd=pd, leg=leg, **gains)
 
     def mass(self, full: np.ndarray):
         """kg of each instance's robot (its drawn link masses), for the cost of transport and power."""
         if "body_mass" not in self.robots:
             return self.sim.layout.total_mass
         return self.robots["body_mass"][self.instances.robot_row[full]].sum(axis=1)
+
+    def standing_height(self, row: np.ndarray):
+        """m: the URDF's standing height, or (n,) each instance's own when its leg is drawn."""
+        return self.sim.robot.standing_height if self.standing is None else self.standing[row]
 
     def __call__(self, index: np.ndarray) -> np.ndarray:
         """Metrics (len(index), len(COLUMNS)) of the given instances."""
@@ -116,7 +126,7 @@ class ChunkRunner:
                                    ground=heights,
                                    **self.sim.per_instance({k: v[row] for k, v in self.controls.items()}))
         result = metrics.hop_metrics(traj, inst.gravity[full], command_speed=self.spec.speed,
-                                     standing_height=self.sim.robot.standing_height,
+                                     standing_height=self.standing_height(row),
                                      work=np.asarray(motor_energy(final)), mass=self.mass(full))
         result["diverged"] = np.asarray(final.diverged)
         if self.grounds:
