@@ -361,7 +361,12 @@ def test_models_outside_the_topology_are_refused_with_one_line(seed_model):
     rk4.opt.integrator = mujoco.mjtIntegrator.mjINT_RK4
     elliptic = copy.deepcopy(seed_model)
     elliptic.opt.cone = mujoco.mjtCone.mjCONE_ELLIPTIC
-    for bad, why in ((rk4, "integrator"), (elliptic, "cone")):
+    rubbing_base = copy.deepcopy(seed_model)
+    rubbing_base.dof_frictionloss[3] = 0.1
+    negative = copy.deepcopy(seed_model)
+    negative.dof_frictionloss[7] = -0.1
+    for bad, why in ((rk4, "integrator"), (elliptic, "cone"), (rubbing_base, "free joint has friction loss"),
+                     (negative, "negative friction loss")):
         with pytest.raises(NotChain, match=why) as err:
             describe(bad)
         assert "\n" not in str(err.value)

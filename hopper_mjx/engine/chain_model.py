@@ -193,6 +193,7 @@ def _check_options(m: mujoco.MjModel) -> None:
     _require(opt.density == 0 and opt.viscosity == 0 and not np.any(opt.wind), "the medium is not empty")
     _require(m.neq == 0 and m.ntendon == 0 and m.nflex == 0, "it has equalities, tendons or flexes")
     _require(not np.any(m.dof_frictionloss[:6]), "its free joint has friction loss")
+    _require(not np.any(m.dof_frictionloss < 0), "a joint has negative friction loss")  # C makes rows of it anyway
     _require(not np.any(m.jnt_stiffness), "it has springs")
     _require(not np.any(m.body_gravcomp) and m.nmocap == 0 and m.na == 0, "it has gravcomp, mocap or actuator state")
 
