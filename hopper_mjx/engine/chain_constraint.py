@@ -1,9 +1,10 @@
 """Constraint rows of the chain: joint dry friction, joint limits and floor contacts, with MuJoCo's equations.
 
-Every row that can ever exist has a fixed slot (a limit per limited hinge; per contact
-pair one slot for a sphere, four for a box's lowest corners; four pyramid edges or one
-frictionless row each). A row that does not exist this step gets D = 0, which takes it
-out of the cost, gradient and Hessian exactly as if MuJoCo had not created it.
+Every row that can ever exist has a fixed slot (a dry-friction row per hinge with friction
+loss; a limit per limited hinge; per contact pair one slot for a sphere, four for a box's
+lowest corners; four pyramid edges or one frictionless row each). A row that does not exist
+this step gets D = 0, which takes it out of the cost, gradient and Hessian exactly as if
+MuJoCo had not created it.
 
 Per row, as MuJoCo's mj_makeImpedance / mj_referenceConstraint:
     imp  = solimp's sigmoid of |pos - margin| / width
@@ -197,8 +198,8 @@ def _foot(pose: Pose, slots, rows, directions) -> FootContact:
 
 def _assemble(cm: ChainModel, pose: Pose, qpos, qvel, slots) -> tuple[Rows, FootContact]:
     jac, weight, aref, loss = friction_rows(cm, qvel)
-    for rows_, of in zip((jac, weight, aref), _limit_rows(cm, qpos, qvel)):
-        rows_ += of
+    limits = _limit_rows(cm, qpos, qvel)
+    jac, weight, aref = jac + limits[0], weight + limits[1], aref + limits[2]
     foot = None
     for pair, pair_slots in zip(cm.pairs, slots):
         friction, invweight = pair.friction, pair.invweight  # constants, or an instance's (chain_model.instance)

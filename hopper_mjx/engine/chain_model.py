@@ -1,13 +1,14 @@
 """The chain engine's view of a compiled model: every number it needs, as Python constants.
 
 `describe(mj_model)` reads the topology the chain engine is written for (a free base, a
-serial chain of bodies each with at most one hinge, explicit sphere / box contact pairs
-with a plane floor, or the sphere foot alone with a heightfield floor, Euler with implicit
-joint damping and dry friction on the hinges, Newton on a pyramidal cone) and raises `NotChain` with one line saying why
-when the model is outside it. The result is a frozen dataclass of floats and tuples: the
-step reads it at trace time, so every axis, offset, inertia and solver parameter is a
-constant of the compiled function (a heightfield's heights are not: `terrain_heights`), and
-`instance` puts one instance's varied numbers (a per-instance robot) in place of the constants.
+serial chain of bodies each with at most one hinge, explicit sphere / box contact pairs with
+a plane floor, or the sphere foot alone with a heightfield floor, Euler with implicit joint
+damping, dry friction on the hinges only, Newton on a pyramidal cone) and raises `NotChain`
+with one line saying why when the model is outside it. The result is a frozen dataclass of
+floats and tuples: the step reads it at trace time, so every axis, offset, inertia and
+solver parameter is a constant of the compiled function (a heightfield's heights are not:
+`terrain_heights`), and `instance` puts one instance's varied numbers (a per-instance robot)
+in place of the constants.
 """
 
 from __future__ import annotations
