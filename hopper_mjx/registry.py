@@ -121,9 +121,11 @@ RANDOMIZE_PRESETS = {
     "playground": "foot_friction=0.4..1.0,body_mass=scale(0.9,1.1),base_com=-0.02..0.02,"
                   "actuator_gear=scale(0.8,1.2),action_delay=0..10",
 }
-# The model fields the chain engine takes as run-time values (every other varied field needs mjx).
-CHAIN_VARIES: frozenset[str] = frozenset({"dof_damping", "pair_friction", "body_mass", "body_inertia", "body_ipos",
-                                          "dof_armature", "actuator_gear", "body_pos", "geom_size"})
+# The model fields the chain engine takes as run-time values (every other varied field needs mjx): today every
+# parameter's.
+CHAIN_VARIES: frozenset[str] = frozenset({"dof_damping", "dof_frictionloss", "pair_friction", "body_mass",
+                                          "body_inertia", "body_ipos", "dof_armature", "actuator_gear", "body_pos",
+                                          "geom_size"})
 
 
 class ControlParameter(NamedTuple):

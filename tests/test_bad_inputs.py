@@ -117,8 +117,6 @@ CASES = [
                                                                               "Raibert gain"),
     ("sweep", ["param", "--param", "kp_scale", "--values=-1,1", "--out", "s"], "--values: kp_scale drew a value "
                                                                                     "of -1 for instance 0"),
-    ("sweep", ["param", "--param", "dof_frictionloss", "--values", "0.1,0.2", "--engine", "chain", "--out", "s"],
-     "--param dof_frictionloss: the chain engine cannot vary dof_frictionloss per instance yet"),
     # Terrain specs: a name, its keys and their values, the heightmap's file, the grid's memory at N.
     ("simulate", ["--terrain", "hills"], "--terrain: unknown terrain 'hills'; choose from: flat, rough, steps,"),
     ("simulate", ["--terrain", "rough:amp=0.03,bumps=2"], "--terrain: rough has no key 'bumps'; it takes amp,"),
@@ -160,8 +158,6 @@ CASES = [
      "--randomize: base_mass drew a value of -"),
     ("simulate", ["--randomize", "foot_friction=-0.2..0.5", "--num", "16"],
      "--randomize: foot_friction drew a value of -0."),
-    ("simulate", ["--randomize", "dof_damping=0.1,dof_frictionloss=0.1", "--engine", "chain"],
-     "--randomize: the chain engine cannot vary dof_frictionloss per instance yet; use --engine mjx or auto"),
     ("render", ["--video", "h.gif", "--randomize", "base_mass=0"], "--randomize: base_mass drew a value of 0 kg"),
     ("simulate", ["--randomize", "thigh_length=0.2..2", "--num", "16"], "--randomize: thigh_length drew a value of "),
     ("simulate", ["--randomize", "foot_radius=0", "--num", "4"],

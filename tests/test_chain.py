@@ -9,6 +9,7 @@ own solver options, to 1e-4 relative. Trajectories through touchdown stay within
 from __future__ import annotations
 
 import copy
+import re
 from pathlib import Path
 
 import jax
@@ -19,12 +20,13 @@ import pytest
 from mujoco import mjx
 
 from hopper_mjx import model
-from hopper_mjx.engine import chain, chain_smooth
+from hopper_mjx.engine import chain, chain_constraint, chain_smooth
 from hopper_mjx.engine.chain_model import NotChain, describe
 from hopper_mjx.engine.mjx import MjxEngine
 from hopper_mjx.model.robot import stance_qpos
 
 SECOND_URDF = Path(__file__).parent / "data" / "long_shin_hopper.urdf"
+SECOND_FRICTION = (0.4, 1.5, 0.8)  # N·m of dry friction its haa, hfe, kfe get, as <dynamics friction> (constants)
 N_STATES = 12
 HOLD_P, HOLD_D = np.array([400.0, 400.0, 200.0]), np.array([18.0, 15.0, 4.0])
 GRAVITIES = (9.81, 3.71, 1.62)
@@ -77,17 +79,30 @@ def random_states(m: mujoco.MjModel, n: int, seed: int):
     return qpos, qvel, ctrl, gravity
 
 
+FRICTION_ROWS = ("friction_jac", "friction_D", "friction_aref", "friction_loss", "friction_bound")
+
+
+def _friction_rows(m, d) -> dict:
+    """C's joint dry-friction rows: J, D, aref, the force bound f and the residual's bound f R; their states."""
+    at = d.efc_type == mujoco.mjtConstraint.mjCNSTR_FRICTION_DOF
+    jac = d.efc_J.reshape(d.nefc, m.nv)[at]
+    return dict(zip(FRICTION_ROWS + ("friction_state",), (jac, d.efc_D[at], d.efc_aref[at], d.efc_frictionloss[at],
+                                                          d.efc_frictionloss[at] * d.efc_R[at], d.efc_state[at])))
+
+
 def mujoco_c(m: mujoco.MjModel, qpos, qvel, ctrl, gravity) -> dict:
     """MuJoCo C's stages for each state: forward, then one step."""
     m = copy.deepcopy(m)
     out = {k: [] for k in ("xpos", "xmat", "mass", "qacc", "qfrc_constraint", "qpos", "qvel", "ncon",
-                           "foot_force", "qfrc_smooth")}
+                           "foot_force", "qfrc_smooth", *FRICTION_ROWS, "friction_state")}
     for q, v, u, g in zip(qpos, qvel, ctrl, gravity):
         m.opt.gravity[:] = g
         d = mujoco.MjData(m)
         d.qpos[:], d.qvel[:], d.ctrl[:] = q, v, u
         mujoco.mj_forward(m, d)
         out["foot_force"].append(_foot_force(m, d))
+        for key, value in _friction_rows(m, d).items():
+            out[key].append(value)
         full = np.zeros((m.nv, m.nv))
         mujoco.mj_fullM(m, d, full)
         for key, value in (("xpos", d.xpos[1:]), ("xmat", d.xmat[1:]), ("mass", full), ("qfrc_smooth", d.qfrc_smooth),
@@ -123,7 +138,11 @@ def chain_stages(engine: chain.ChainEngine):
         after = engine.integrate(params, data, gravity)
         vec = lambda v: jnp.stack([jnp.asarray(x, qpos.dtype) for x in v])
         mass = jnp.zeros((cm.nv, cm.nv), qpos.dtype).at[tuple(np.array(upper).T)].set(data.mass)
-        return {
+        jac, weight, aref, loss = chain_constraint.friction_rows(engine.instance(params), tuple(qvel))
+        rows = [[vec(j) for j in jac], weight, aref, [f for f, _ in loss], [b for _, b in loss]]
+        friction = {k: vec(v) if v else jnp.zeros((0, cm.nv) if k == "friction_jac" else 0, qpos.dtype)
+                    for k, v in zip(FRICTION_ROWS, rows)}
+        return friction | {
             "xpos": jnp.stack([vec(o) for o in pose.origin]) + qpos[:3],
             "xmat": jnp.stack([vec(r) for r in pose.rot]),
             "mass": mass + jnp.triu(mass, 1).T, "qfrc_smooth": data.qfrc_smooth, "qacc": data.qacc,
@@ -151,12 +170,33 @@ def seed_states(seed_model):
     return random_states(seed_model, N_STATES, seed=7)
 
 
+def at_rest(states):
+    """Every other state with its hinges at rest and weak motors: dry friction that sticks as well as slips."""
+    qpos, qvel, ctrl, gravity = (np.array(x) for x in states)
+    qvel[::2, 6:] = 0.0
+    ctrl[::2] *= 0.02
+    return qpos, qvel, ctrl, gravity
+
+
+def with_joint_friction(out: Path, losses) -> Path:
+    """The second URDF, written to `out`, with its joints' <dynamics friction> `losses`, in order."""
+    losses = iter(losses)
+    out.write_text(re.sub(r'friction="0"', lambda _: f'friction="{next(losses)}"', SECOND_URDF.read_text()))
+    return out
+
+
 @pytest.fixture(scope="module")
-def float64_results(seed_model, seed_states):
-    """Chain in float64 (x64 only inside this fixture) for the seed and the second URDF,
-    both solving to convergence, with MuJoCo C's converged answers."""
-    second = model.load(SECOND_URDF)
-    second_states = random_states(second, 6, seed=11)
+def second_model(tmp_path_factory):
+    """The second URDF with dry joint friction (its <dynamics friction>): rows the chain folds as constants."""
+    return model.load(with_joint_friction(tmp_path_factory.mktemp("urdf") / "rubbing.urdf", SECOND_FRICTION))
+
+
+@pytest.fixture(scope="module")
+def float64_results(seed_model, seed_states, second_model):
+    """Chain in float64 (x64 only inside this fixture) for the seed and the second URDF (with joint
+    friction, half its states at rest), both solving to convergence, with MuJoCo C's converged answers."""
+    second = second_model
+    second_states = at_rest(random_states(second, 6, seed=11))
     c_seed = mujoco_c(converged(seed_model, 50), *seed_states)
     c_second = mujoco_c(converged(second, 50), *second_states)
     jax.config.update("jax_enable_x64", True)
@@ -196,11 +236,24 @@ def test_states_cover_contacts_limits_and_tilt(seed_model, seed_states, float32_
 STAGES = ("xpos", "xmat", "mass", "qfrc_smooth", "qacc", "qfrc_constraint", "qpos", "qvel")
 
 
+def test_a_urdfs_joint_friction_reaches_the_chain(second_model, float64_results):
+    """<dynamics friction> is MuJoCo's dof_frictionloss, which the chain folds into one row per hinge, sticking
+    (C's quadratic state) in some states and slipping in others; the seed robot has none."""
+    np.testing.assert_array_equal(second_model.dof_frictionloss, (0,) * 6 + SECOND_FRICTION)
+    hinges = [link.hinge for link in describe(second_model).links if link.hinge is not None]
+    assert tuple(h.frictionloss for h in hinges) == SECOND_FRICTION
+    ours, c = float64_results["second"]
+    assert c["friction_state"].shape == (6, 3) and float64_results["seed"][1]["friction_state"].size == 0
+    stick = c["friction_state"] == mujoco.mjtConstraintState.mjCNSTRSTATE_QUADRATIC
+    assert 2 <= stick.sum() < stick.size - 2
+    np.testing.assert_array_equal(np.abs(c["friction_jac"]).sum(axis=2), 1)  # a unit row per hinge
+
+
 @pytest.mark.parametrize("urdf", ["seed", "second"])
-@pytest.mark.parametrize("stage", STAGES)
+@pytest.mark.parametrize("stage", STAGES + FRICTION_ROWS)
 def test_float64_stages_match_mujoco_c(float64_results, urdf, stage):
     ours, c = float64_results[urdf]
-    err = np.abs(ours[stage] - c[stage]).max()
+    err = np.abs(ours[stage] - c[stage]).max(initial=0.0)
     assert err <= 1e-9, f"{urdf} {stage}: chain and MuJoCo C differ by {err:.2e}"
 
 
@@ -308,7 +361,12 @@ def test_models_outside_the_topology_are_refused_with_one_line(seed_model):
     rk4.opt.integrator = mujoco.mjtIntegrator.mjINT_RK4
     elliptic = copy.deepcopy(seed_model)
     elliptic.opt.cone = mujoco.mjtCone.mjCONE_ELLIPTIC
-    for bad, why in ((rk4, "integrator"), (elliptic, "cone")):
+    rubbing_base = copy.deepcopy(seed_model)
+    rubbing_base.dof_frictionloss[3] = 0.1
+    negative = copy.deepcopy(seed_model)
+    negative.dof_frictionloss[7] = -0.1
+    for bad, why in ((rk4, "integrator"), (elliptic, "cone"), (rubbing_base, "free joint has friction loss"),
+                     (negative, "negative friction loss")):
         with pytest.raises(NotChain, match=why) as err:
             describe(bad)
         assert "\n" not in str(err.value)
@@ -325,17 +383,18 @@ CHAIN_ROBOT = ("body_mass=scale(0.7,1.3),body_inertia=scale(0.7,1.3),base_com=-0
                "shank_length=0.3..0.42,foot_radius=0.02..0.045")
 
 
-@pytest.mark.parametrize("text", ["foot_friction=0.3,dof_damping=0.02", CHAIN_ROBOT])
+@pytest.mark.parametrize("text", ["foot_friction=0.3,dof_damping=0.02", CHAIN_ROBOT + ",dof_frictionloss=0..3"])
 def test_float64_stages_with_a_run_time_robot_match_mujoco_c(seed_model, text):
     """The chain takes an instance's robot as run-time values (per-instance robots, hopper_mjx.model.variation):
-    every stage agrees with MuJoCo C given a model holding those values, with mj_setConst's constants."""
+    every stage agrees with MuJoCo C given a model holding those values, with mj_setConst's constants. Dry joint
+    friction (half the states at rest): its rows, sticking and slipping, and what the solver makes of them."""
     from hopper_mjx.model import variation
     from hopper_mjx.randomize import Spec
 
     spec = Spec.parse(text)
     values = variation.with_constants(seed_model, variation.draw(spec, seed_model, 1, seed=2))
     varied = variation.instance_model(seed_model, values, 0)
-    states = random_states(varied, N_STATES, seed=7)  # contacts and limits of this robot
+    states = at_rest(random_states(varied, N_STATES, seed=7))  # contacts and limits of this robot
     c = mujoco_c(converged(varied, 50), *states)
     jax.config.update("jax_enable_x64", True)
     try:
@@ -346,8 +405,11 @@ def test_float64_stages_with_a_run_time_robot_match_mujoco_c(seed_model, text):
     finally:
         jax.config.update("jax_enable_x64", False)
     assert (c["ncon"] >= 1).all()
-    for stage in STAGES:
-        err = np.abs(np.asarray(out[stage]) - c[stage]).max()
+    if "dof_frictionloss" in spec.fields:
+        stick = c["friction_state"] == mujoco.mjtConstraintState.mjCNSTRSTATE_QUADRATIC
+        assert stick.shape == (N_STATES, 3) and 2 <= stick.sum() <= stick.size - 2
+    for stage in STAGES + FRICTION_ROWS:
+        err = np.abs(np.asarray(out[stage]) - c[stage]).max(initial=0.0)
         assert err <= 1e-9, f"{stage}: chain and MuJoCo C differ by {err:.2e}"
     nominal = mujoco_c(converged(seed_model, 50), *states)
     assert np.abs(nominal["qacc"] - c["qacc"]).max() > 1e-2  # the values change the answer

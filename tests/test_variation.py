@@ -13,12 +13,12 @@ from hopper_mjx.model import variation
 from hopper_mjx.model.layout import Layout
 from hopper_mjx.randomize import Dist, Spec
 
-# Masses, inertias, centre of mass, friction, damping, armature, motor strength and the leg's morphology at
-# once: what the chain takes at run time; with dry friction, what mjx takes.
-ON_CHAIN = ("body_mass=scale(0.8,1.2),body_inertia=scale(0.8,1.2),base_com=uniform(-0.02,0.02),"
-            "foot_friction=uniform(0.4,1.0),dof_damping=uniform(0.02,0.5),dof_armature=0..0.01,"
-            "actuator_gear=scale(0.8,1.2),shank_length=scale(0.8,1.2),thigh_length=0.3..0.4,foot_radius=0.02..0.04")
-EVERYTHING = ON_CHAIN + ",dof_frictionloss=uniform(0,0.2)"
+# Masses, inertias, centre of mass, friction, damping, dry joint friction, armature, motor strength and the leg's
+# morphology at once: what both engines take at run time.
+EVERYTHING = ("body_mass=scale(0.8,1.2),body_inertia=scale(0.8,1.2),base_com=uniform(-0.02,0.02),"
+              "foot_friction=uniform(0.4,1.0),dof_damping=uniform(0.02,0.5),dof_armature=0..0.01,"
+              "actuator_gear=scale(0.8,1.2),shank_length=scale(0.8,1.2),thigh_length=0.3..0.4,foot_radius=0.02..0.04,"
+              "dof_frictionloss=uniform(0,0.2)")
 
 
 def test_a_spec_reads_every_distribution_and_prints_back_the_same():
@@ -187,18 +187,17 @@ def test_same_seed_same_draws_and_results(recorded, tmp_path):
         np.testing.assert_array_equal(again[k], recorded[k], err_msg=k)
 
 
-def test_auto_takes_mjx_for_a_variation_the_chain_cannot_take(mj_model, capsys):
+def test_auto_keeps_the_chain_for_every_parameter_and_refuses_a_field_it_cannot_take(mj_model, capsys):
+    from hopper_mjx.randomize import check_engine_varies
     from hopper_mjx.sim import Sim
 
     batch = cli.check_batch(simulate.parser().parse_args(["--randomize", "foot_friction=0.5,dof_frictionloss=0.1"]))
     sim = Sim(mj_model, engine=batch.physics.engine, varies=batch.physics.variation.fields)
-    assert sim.engine.name == "mjx"
-    assert "note: engine auto uses mjx (the chain engine cannot vary dof_frictionloss per instance yet)" in \
-        capsys.readouterr().err
-    with pytest.raises(ValueError, match="the chain engine cannot vary dof_frictionloss"):
-        Sim(sim.mj_model, engine="chain", varies=batch.physics.variation.fields)
-    # The robot's masses, geometry, friction, damping, armature and gear it takes at run time: auto keeps the chain.
-    assert Sim(mj_model, varies=registry.CHAIN_VARIES).engine.name == "chain"
+    assert sim.engine.name == "chain" and "uses mjx" not in capsys.readouterr().err
+    # Every parameter's field is one the chain takes at run time; a model field no parameter sets is refused.
+    assert {p.field for p in registry.PARAMETERS.values()} <= registry.CHAIN_VARIES
+    with pytest.raises(ValueError, match="the chain engine cannot vary jnt_stiffness per instance yet"):
+        check_engine_varies("chain", frozenset({"jnt_stiffness", "dof_frictionloss"}))
 
 
 def test_friction_and_damping_leave_mujocos_constants_as_they_are(mj_model):
@@ -213,9 +212,9 @@ def test_friction_and_damping_leave_mujocos_constants_as_they_are(mj_model):
 
 @pytest.fixture(scope="module")
 def on_chain(tmp_path_factory):
-    """Every parameter the chain takes at run time, on the chain (each instance from its own stance)."""
-    return _simulate(tmp_path_factory.mktemp("vary") / "chain.npz", "chain", ON_CHAIN)
+    """Every parameter, dry joint friction among them, on the chain (each instance from its own stance)."""
+    return _simulate(tmp_path_factory.mktemp("vary") / "chain.npz", "chain", EVERYTHING)
 
 
 def test_the_chain_takes_each_instances_robot_as_mujoco_c_does(mj_model, on_chain):
-    _follows_mujoco_c(mj_model, on_chain, ON_CHAIN, "chain")
+    _follows_mujoco_c(mj_model, on_chain, EVERYTHING, "chain")

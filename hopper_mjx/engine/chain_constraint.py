@@ -1,14 +1,19 @@
-"""Constraint rows of the chain: joint limits and floor contacts, with MuJoCo's equations.
+"""Constraint rows of the chain: joint dry friction, joint limits and floor contacts, with MuJoCo's equations.
 
-Every row that can ever exist has a fixed slot (a limit per limited hinge; per contact
-pair one slot for a sphere, four for a box's lowest corners; four pyramid edges or one
-frictionless row each). A row that does not exist this step gets D = 0, which takes it
-out of the cost, gradient and Hessian exactly as if MuJoCo had not created it.
+Every row that can ever exist has a fixed slot (a dry-friction row per hinge with friction
+loss; a limit per limited hinge; per contact pair one slot for a sphere, four for a box's
+lowest corners; four pyramid edges or one frictionless row each). A row that does not exist
+this step gets D = 0, which takes it out of the cost, gradient and Hessian exactly as if
+MuJoCo had not created it.
 
 Per row, as MuJoCo's mj_makeImpedance / mj_referenceConstraint:
     imp  = solimp's sigmoid of |pos - margin| / width
     R    = max(mjMINVAL, invweight0 * (1 - imp) / imp),   D = 1 / R
     aref = -B * (J qvel) - K * imp * (pos - margin),  K, B from solref (refsafe-clamped)
+
+A hinge's dry friction (frictionloss f > 0, or a run-time value) is one two-sided row on its
+dof, at pos = margin = 0 with the dof's solref / solimp; the solver bounds its force to
+|force| <= f (`Rows.loss`). A run-time f of 0 gives a row whose force is always 0.
 """
 
 from __future__ import annotations
@@ -31,6 +36,8 @@ class Rows(NamedTuple):
     jac: tuple  # per row: nv scalars (constant 0 where the row cannot reach the dof)
     weight: tuple  # per row: D, 0 when the row does not exist
     aref: tuple  # per row: reference acceleration
+    loss: tuple  # per row: None (a one-sided row), or a friction row's (f, f R), its force bound and its
+    #              residual's bound: the force is -D r inside |r| < f R and -+f beyond (MuJoCo's Huber cost)
 
 
 class FootContact(NamedTuple):
@@ -75,6 +82,25 @@ def _row(cm, sol, invweight, jac, qvel, violation, exists):
     vel = al.dot(jac, qvel)
     aref = al.sub(al.mul(-b, vel), k * imp * violation)
     return jnp.where(exists, 1 / r, 0.0), aref
+
+
+def friction_rows(cm: ChainModel, qvel):
+    """MuJoCo's mj_instantiateFriction for the hinges: its impedance at pos = 0 is a constant."""
+    jac, weight, aref, loss = [], [], [], []
+    for link in cm.links:
+        h = link.hinge
+        if h is None or (al.is_const(h.frictionloss) and not h.frictionloss):
+            continue
+        k, b, dmin, dmax = _stiffness_damping(cm, h.friction_sol)
+        flat = dmin == dmax or h.friction_sol.solimp[2] <= MINVAL
+        imp = 0.5 * (dmin + dmax) if flat else dmin  # getimpedance at zero violation
+        r = al.mul(h.invweight, (1 - imp) / imp)
+        r = max(MINVAL, r) if al.is_const(r) else jnp.maximum(MINVAL, r)
+        row = [0.0] * cm.nv
+        row[h.dof] = 1.0
+        jac.append(tuple(row)), weight.append(1 / r), aref.append(al.mul(-b, qvel[h.dof]))
+        loss.append((h.frictionloss, al.mul(h.frictionloss, r)))
+    return jac, weight, aref, loss
 
 
 def _limit_rows(cm: ChainModel, qpos, qvel):
@@ -171,7 +197,9 @@ def _foot(pose: Pose, slots, rows, directions) -> FootContact:
 
 
 def _assemble(cm: ChainModel, pose: Pose, qpos, qvel, slots) -> tuple[Rows, FootContact]:
-    jac, weight, aref = _limit_rows(cm, qpos, qvel)
+    jac, weight, aref, loss = friction_rows(cm, qvel)
+    limits = _limit_rows(cm, qpos, qvel)
+    jac, weight, aref = jac + limits[0], weight + limits[1], aref + limits[2]
     foot = None
     for pair, pair_slots in zip(cm.pairs, slots):
         friction, invweight = pair.friction, pair.invweight  # constants, or an instance's (chain_model.instance)
@@ -185,11 +213,12 @@ def _assemble(cm: ChainModel, pose: Pose, qpos, qvel, slots) -> tuple[Rows, Foot
                 jac.append(row), weight.append(d), aref.append(a)
         if pair.is_foot:
             foot = _foot(pose, pair_slots, tuple(range(first, len(jac))), pair_directions)
-    return Rows(tuple(jac), tuple(weight), tuple(aref)), foot
+    loss += [None] * (len(jac) - len(loss))  # the limits and contacts are one-sided
+    return Rows(tuple(jac), tuple(weight), tuple(aref), tuple(loss)), foot
 
 
 def rows(cm: ChainModel, gate, pose: Pose, qpos, qvel, terrain=None) -> tuple[Rows, FootContact]:
-    """All constraint rows (MuJoCo's order: limits, then contacts by pair) and the foot's; `terrain`
+    """All constraint rows (MuJoCo's order: friction, limits, then contacts by pair) and the foot's; `terrain`
     (chain_hfield.TerrainParams) for a heightfield floor."""
     slots = stored(gate, lambda p, t: _all_slots(cm, p, t), pose, terrain)
     return stored(gate, lambda *a: _assemble(cm, *a), pose, qpos, qvel, slots)

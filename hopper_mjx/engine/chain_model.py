@@ -1,13 +1,14 @@
 """The chain engine's view of a compiled model: every number it needs, as Python constants.
 
 `describe(mj_model)` reads the topology the chain engine is written for (a free base, a
-serial chain of bodies each with at most one hinge, explicit sphere / box contact pairs
-with a plane floor, or the sphere foot alone with a heightfield floor, Euler with implicit
-joint damping, Newton on a pyramidal cone) and raises `NotChain` with one line saying why
-when the model is outside it. The result is a frozen dataclass of floats and tuples: the
-step reads it at trace time, so every axis, offset, inertia and solver parameter is a
-constant of the compiled function (a heightfield's heights are not: `terrain_heights`), and
-`instance` puts one instance's varied numbers (a per-instance robot) in place of the constants.
+serial chain of bodies each with at most one hinge, explicit sphere / box contact pairs with
+a plane floor, or the sphere foot alone with a heightfield floor, Euler with implicit joint
+damping, dry friction on the hinges only, Newton on a pyramidal cone) and raises `NotChain`
+with one line saying why when the model is outside it. The result is a frozen dataclass of
+floats and tuples: the step reads it at trace time, so every axis, offset, inertia and
+solver parameter is a constant of the compiled function (a heightfield's heights are not:
+`terrain_heights`), and `instance` puts one instance's varied numbers (a per-instance robot)
+in place of the constants.
 """
 
 from __future__ import annotations
@@ -44,7 +45,9 @@ class Hinge:
     qpos0: float
     limit: tuple[float, float, float] | None  # (lower, upper, margin) rad, None if unlimited
     sol: SolParams
-    invweight: float  # dof_invweight0: the limit row's approximate inverse mass
+    invweight: float  # dof_invweight0: the limit and friction rows' approximate inverse mass
+    frictionloss: float = 0.0  # dry friction, N·m: a friction row when nonzero (or a run-time value)
+    friction_sol: SolParams | None = None  # the friction row's dof_solref / dof_solimp
 
 
 @dataclass(frozen=True)
@@ -190,7 +193,9 @@ def _check_options(m: mujoco.MjModel) -> None:
     _require(opt.noslip_iterations == 0, "noslip iterations are set")
     _require(opt.density == 0 and opt.viscosity == 0 and not np.any(opt.wind), "the medium is not empty")
     _require(m.neq == 0 and m.ntendon == 0 and m.nflex == 0, "it has equalities, tendons or flexes")
-    _require(not np.any(m.dof_frictionloss) and not np.any(m.jnt_stiffness), "it has friction loss or springs")
+    _require(not np.any(m.dof_frictionloss[:6]), "its free joint has friction loss")
+    _require(not np.any(m.dof_frictionloss < 0), "a joint has negative friction loss")  # C makes rows of it anyway
+    _require(not np.any(m.jnt_stiffness), "it has springs")
     _require(not np.any(m.body_gravcomp) and m.nmocap == 0 and m.na == 0, "it has gravcomp, mocap or actuator state")
 
 
@@ -217,7 +222,8 @@ def _hinge(m: mujoco.MjModel, j: int) -> Hinge:
     return Hinge(
         axis=_vec(m.jnt_axis[j]), pos=_vec(m.jnt_pos[j]), qpos_adr=int(m.jnt_qposadr[j]), dof=dof,
         qpos0=float(m.qpos0[m.jnt_qposadr[j]]), limit=limit, sol=_sol(m.jnt_solref[j], m.jnt_solimp[j]),
-        invweight=float(m.dof_invweight0[dof]),
+        invweight=float(m.dof_invweight0[dof]), frictionloss=float(m.dof_frictionloss[dof]),
+        friction_sol=_sol(m.dof_solref[dof], m.dof_solimp[dof]),
     )
 
 
@@ -358,15 +364,17 @@ def _key(field: str, index: tuple) -> str:
 def entries(cm: ChainModel, values: dict, settable: dict) -> dict:
     """One instance's numbers the chain reads from `values` ({model field: that field's array}): {"field[i, j]":
     scalar} of each entry `settable[field]` marks, and MuJoCo's derived constraint weights (`body_invweight0` of
-    the bodies with a contact pair, `dof_invweight0` of the limited hinges: model.variation.with_constants).
+    the bodies with a contact pair, `dof_invweight0` of the hinges with a limit or friction row:
+    model.variation.with_constants).
     Sliced once per rollout, so that the step reads scalars, not arrays."""
     out = {_key(f, tuple(int(i) for i in index)): values[f][index]
            for f, mask in settable.items() if f in values for index in zip(*np.nonzero(mask))}
     if "body_invweight0" in values:
         out |= {_key("body_invweight0", (p.body + 1, 0)): values["body_invweight0"][p.body + 1, 0] for p in cm.pairs}
-    if "dof_invweight0" in values:
+    if "dof_invweight0" in values:  # of the hinges with a row: a limit, or friction (the model's or drawn)
+        rowed = lambda h: h.limit is not None or h.frictionloss or "dof_frictionloss" in values
         out |= {_key("dof_invweight0", (link.hinge.dof,)): values["dof_invweight0"][link.hinge.dof]
-                for link in cm.links if link.hinge is not None and link.hinge.limit is not None}
+                for link in cm.links if link.hinge is not None and rowed(link.hinge)}
     return out
 
 
@@ -389,7 +397,8 @@ def instance(cm: ChainModel, m: mujoco.MjModel, robot: dict) -> ChainModel:
                      for i, j in ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2)))
 
     def hinge(h: Hinge | None) -> Hinge | None:
-        return h if h is None else dataclasses.replace(h, invweight=pick("dof_invweight0", (h.dof,), h.invweight))
+        return h if h is None else dataclasses.replace(h, invweight=pick("dof_invweight0", (h.dof,), h.invweight),
+                                                       frictionloss=pick("dof_frictionloss", (h.dof,), h.frictionloss))
 
     links = tuple(dataclasses.replace(
         link, pos=vec("body_pos", b, link.pos), hinge=hinge(link.hinge), mass=pick("body_mass", (b,), link.mass),

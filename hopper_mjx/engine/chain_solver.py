@@ -2,7 +2,9 @@
 
 Minimises, over the joint accelerations a,
     0.5 (a - a0)' M (a - a0) + sum over active rows 0.5 D (J a - aref)^2,
-a row being active when J a - aref < 0 (limits and pyramid edges are one-sided). From the
+a row being active when J a - aref < 0 (limits and pyramid edges are one-sided); a joint's
+dry-friction row (`Rows.loss`: bound f) costs that quadratic only for |J a - aref| < f R and
+f |J a - aref| - f^2 R / 2 beyond, where its force is the bound (MuJoCo's Huber cost). From the
 better of the warm start and a0 = M^-1 qfrc_smooth, each iteration takes the Newton
 direction of the current active set (the 9x9 Hessian M + J' D J, Cholesky-factorised
 unrolled) and an exact line search along it. The cost along a line is a convex piecewise
@@ -73,9 +75,28 @@ def _residuals(rows: Rows, qacc):
     return tuple(al.sub(al.dot(j, qacc), a) for j, a in zip(rows.jac, rows.aref))
 
 
+def _quadratic(r, loss):
+    """Whether a row at residual r is in its quadratic piece (D counts in the Hessian)."""
+    return r < 0 if loss is None else jnp.abs(r) < loss[1]
+
+
+def _force(w, r, loss):
+    """-D r in the quadratic piece; a friction row's bound -f sign(r) beyond it; 0 for an inactive one-sided row."""
+    if loss is None:
+        return jnp.where(r < 0, -w * r, 0.0)
+    return jnp.where(_quadratic(r, loss), -w * r, jnp.where(r < 0, loss[0], -loss[0]))
+
+
+def _row_cost(w, r, loss):
+    if loss is None:
+        return jnp.where(r < 0, 0.5 * w * r * r, 0.0)
+    f, bound = loss
+    return jnp.where(_quadratic(r, loss), 0.5 * w * r * r, f * jnp.abs(r) - 0.5 * f * bound)
+
+
 def _forces(rows: Rows, residual):
-    """Row forces -D r of the active rows (r < 0) and their joint-space sum J' f."""
-    force = tuple(jnp.where(r < 0, -w * r, 0.0) for w, r in zip(rows.weight, residual))
+    """Row forces (`_force`) and their joint-space sum J' f."""
+    force = tuple(_force(w, r, loss) for w, r, loss in zip(rows.weight, residual, rows.loss))
     nv = len(rows.jac[0])
     return force, tuple(al.total(al.mul(j[i], f) for j, f in zip(rows.jac, force)) for i in range(nv))
 
@@ -83,18 +104,19 @@ def _forces(rows: Rows, residual):
 def _cost(gate, mass, qfrc_smooth, qacc_smooth, rows: Rows, qacc):
     residual, ma = stored(gate, lambda r, x: (_residuals(r, x), sym_matvec(mass, x, len(x))), rows, qacc)
     gauss = 0.5 * al.dot(al.vsub(ma, qfrc_smooth), al.vsub(qacc, qacc_smooth))
-    return gauss + al.total(jnp.where(r < 0, 0.5 * w * r * r, 0.0) for w, r in zip(rows.weight, residual))
+    return gauss + al.total(_row_cost(w, r, loss) for w, r, loss in zip(rows.weight, residual, rows.loss))
 
 
-def _line(weight, residual, slope, g1, g2, alpha):
+def _line(weight, loss, residual, slope, g1, g2, alpha):
     """(alpha, cost up to a constant, derivative, curvature) along the search direction."""
     d1, d2, cost = g1 + alpha * g2, g2, alpha * (g1 + 0.5 * alpha * g2)
-    for w, r, s in zip(weight, residual, slope):  # rows that do not exist have w = 0
+    for w, bound, r, s in zip(weight, loss, residual, slope):  # rows that do not exist have w = 0
         x = r + alpha * s
-        on = x < 0
-        d1 = d1 + jnp.where(on, w * s * x, 0.0)
+        on = _quadratic(x, bound)
+        beyond = 0.0 if bound is None else jnp.where(x < 0, -bound[0] * s, bound[0] * s)  # the slope of f |x|
+        d1 = d1 + jnp.where(on, w * s * x, beyond)
         d2 = d2 + jnp.where(on, w * s * s, 0.0)
-        cost = cost + jnp.where(on, 0.5 * w * x * x, 0.0)
+        cost = cost + (jnp.where(on, 0.5 * w * x * x, 0.0) if bound is None else _row_cost(w, x, bound))
     return alpha, cost, d1, jnp.maximum(d2, MINVAL)
 
 
@@ -117,11 +139,11 @@ def _bracket(line, bracket):
     return lo, hi, found_hi, candidate
 
 
-def _line_search(gate, weight, residual, slope, g1, g2, iterations: int):
+def _line_search(gate, weight, loss, residual, slope, g1, g2, iterations: int):
     """The step along the search direction that minimises the cost (see the module doc), and
     the cost's decrease."""
     line = lambda a, args: _line(*args, a)
-    args = (weight, residual, slope, g1, g2)
+    args = (weight, loss, residual, slope, g1, g2)
     lo = stored(gate, line, jnp.zeros_like(g1), args)
     hi = (jnp.full_like(g1, FAR), jnp.full_like(g1, FAR), jnp.full_like(g1, FAR), jnp.ones_like(g1))
     bracket = (lo, hi, jnp.zeros_like(g1, dtype=bool), -lo[2] / lo[3])
@@ -156,7 +178,7 @@ class _Iterate(NamedTuple):
 def _evaluate(gate, mass, qfrc_smooth, rows: Rows, qacc) -> _Iterate:
     def residuals(rows, qacc):
         residual = _residuals(rows, qacc)
-        active = tuple(jnp.where(r < 0, w, 0.0) for w, r in zip(rows.weight, residual))
+        active = tuple(jnp.where(_quadratic(r, loss), w, 0.0) for w, r, loss in zip(rows.weight, residual, rows.loss))
         return residual, active, sym_matvec(mass, qacc, len(qacc))
     residual, active, ma = stored(gate, residuals, rows, qacc)
     force, qfrc_c = stored(gate, _forces, rows, residual)
@@ -176,7 +198,7 @@ def _newton_step(gate, mass, qfrc_smooth, rows: Rows, ls_iterations: int, it: _I
         slope = tuple(al.dot(j, search) for j in rows.jac)
         return slope, al.dot(search, al.vsub(ma, qfrc_smooth)), al.dot(search, sym_matvec(mass, search, n))
     slope, g1, g2 = stored(gate, along, search, it.ma)
-    alpha, decrease = _line_search(gate, rows.weight, it.residual, slope, g1, g2, ls_iterations)
+    alpha, decrease = _line_search(gate, rows.weight, rows.loss, it.residual, slope, g1, g2, ls_iterations)
     return tuple(al.add(a, al.mul(alpha, s)) for a, s in zip(it.qacc, search)), decrease
 
 
