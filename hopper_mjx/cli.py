@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from hopper_mjx import budget, registry
+from hopper_mjx import budget, registry, runtime
 from hopper_mjx.checks import (  # noqa: F401  re-exported: the tools use them beside the options
     DEFAULT_TIMESTEP,
     MAX_TIMESTEP,
@@ -55,6 +55,7 @@ def check_controller(text: str, height: float = 0.0, speed=(0.0, 0.0), physics: 
     from hopper_mjx.model.robot import standing_height
 
     physics = physics or Physics()
+    runtime.configure()  # reading the policy is the command's first JAX computation
     try:
         config = policy.load(path)[1]  # the parameters too: a damaged copy is refused before any compile
         monoped.same_robot(config.robot, physics.mj_model, f"the policy {path}")

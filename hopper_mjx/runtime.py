@@ -42,8 +42,15 @@ def cpu_cache_dir(base: Path | str) -> Path:
     return Path(base) / f"cpu-{hashlib.sha256(cpu_features().encode()).hexdigest()[:12]}"
 
 
+_configured: list = []  # set by the first `configure`: JAX takes the device count only before its first computation
+
+
 def configure(*, devices: int | None = None, cache_dir: Path | str | None = CACHE_DIR) -> None:
-    """Call before the first JAX computation of the process."""
+    """Call before the first JAX computation of the process; later calls do nothing (a command's checks may
+    need JAX, e.g. to read a trained policy, before its run does)."""
+    if _configured:
+        return
+    _configured.append((devices, cache_dir))
     # XLA's C++ log without its INFO lines; warnings and errors still print (a command's stderr
     # filter drops the known false alarms among them); TF_CPP_MIN_LOG_LEVEL=0 shows everything.
     os.environ.setdefault("TF_CPP_MIN_LOG_LEVEL", "1")

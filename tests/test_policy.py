@@ -176,3 +176,30 @@ def test_a_damaged_policy_folder_is_one_line_naming_it(trained, tmp_path, capsys
     err = capsys.readouterr().err
     assert err.startswith(f"error: --controller: {message}") and err.count("\n") == 1, err
     assert not npz.exists()
+
+
+
+def test_reading_a_policy_for_the_checks_leaves_jax_a_device_per_core(trained):
+    """Every command checks its arguments, `policy:PATH` included, before it configures JAX for its run; reading
+    the policy is then the process's first JAX computation, and JAX takes the device count only before that
+    one. In a process of its own (an in-process call inherits this session's configured JAX and cannot show
+    it): the check, then the command's configuration, then as many devices as cores."""
+    import subprocess
+    import sys
+    import textwrap
+
+    from test_bad_inputs import ENV
+
+    out, _ = trained
+    script = textwrap.dedent(f"""
+        import os
+        from hopper_mjx import cli, runtime
+        cli.check_controller("policy:{out}", 0.1)
+        runtime.configure()
+        import jax
+        print(len(jax.devices()), os.cpu_count())
+    """)
+    done = subprocess.run([sys.executable, "-c", script], env=ENV, capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr[-2000:]
+    devices, cores = done.stdout.split()
+    assert devices == cores
