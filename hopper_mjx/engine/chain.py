@@ -29,7 +29,7 @@ from hopper_mjx import registry
 from hopper_mjx.engine import chain_algebra as al
 from hopper_mjx.engine import chain_constraint, chain_smooth, chain_solver
 from hopper_mjx.engine.chain_hfield import TerrainParams
-from hopper_mjx.engine.chain_model import ChainModel, NotChain, describe, entries, instance, terrain_heights
+from hopper_mjx.engine.chain_model import ChainModel, NotChain, derive, describe, entries, instance, terrain_heights
 from hopper_mjx.engine.chain_stage import stored
 from hopper_mjx.model import variation
 
@@ -44,7 +44,7 @@ class ChainParams(NamedTuple):
 
     gate: jax.Array
     terrain: TerrainParams | None = None
-    robot: dict | None = None  # this instance's numbers in place of the constants: chain_model.entries
+    robot: dict | None = None  # this instance's numbers in place of the constants: chain_model.derive
 
 
 @jax.tree_util.register_dataclass
@@ -140,7 +140,10 @@ class ChainEngine:
         other = set(values) - self.varies
         if other:
             raise ValueError(f"the chain engine cannot take {', '.join(sorted(other))} at run time")
-        return model._replace(robot=entries(self.chain, values, self.settable)) if values else model
+        if not values:
+            return model
+        # Once per rollout: what the step would recompute from the drawn numbers every step (`derive`).
+        return model._replace(robot=derive(self.chain, self.source, entries(self.chain, values, self.settable)))
 
     def instance(self, model: ChainParams) -> ChainModel:
         """The chain model of this instance: the folded constants, or its robot's values in their place."""

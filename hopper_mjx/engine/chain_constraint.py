@@ -157,8 +157,9 @@ def _directions(cm: ChainModel, pair: ContactPair, friction, frame=None) -> tupl
         return (normal,)
     out = []
     for t, mu in ((frame[3:6], friction[0]), (frame[6:9], friction[1])):
-        out.append(tuple(n + mu * ti for n, ti in zip(normal, t)))
-        out.append(tuple(n - mu * ti for n, ti in zip(normal, t)))
+        # Folded: a run-time (drawn) mu leaves the components where the tangent is 0 constant.
+        out.append(tuple(al.add(n, al.mul(mu, ti)) for n, ti in zip(normal, t)))
+        out.append(tuple(al.sub(n, al.mul(mu, ti)) for n, ti in zip(normal, t)))
     return tuple(out)
 
 

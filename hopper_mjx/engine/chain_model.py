@@ -378,9 +378,41 @@ def entries(cm: ChainModel, values: dict, settable: dict) -> dict:
     return out
 
 
+def derive(cm: ChainModel, m: mujoco.MjModel, robot: dict) -> dict:
+    """`robot` (`entries`) and what the step would otherwise recompute from it every step: each drawn body's
+    inertia turned into its body frame (sym6) and each pair's row inverse mass, MuJoCo's pyramid rule applied
+    to a drawn friction or body weight. Computed once per rollout (`ChainEngine.vary`), so that the step only
+    loads them where the unvaried step reads constants."""
+
+    def pick(field: str, index: tuple, constant):
+        return robot.get(_key(field, index), constant)
+
+    out = dict(robot)
+    for b in range(1, m.nbody):
+        diag = tuple(pick("body_inertia", (b, k), float(m.body_inertia[b, k])) for k in range(3))
+        if all(map(al.is_const, diag)):
+            continue
+        r = _quat_mat(m.body_iquat[b]).reshape(3, 3)
+        for k, (i, j) in enumerate(((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))):
+            out[_key(_FRAME_INERTIA, (b, k))] = al.total(al.mul(float(r[i, a] * r[j, a]), diag[a]) for a in range(3))
+    for p, pair in enumerate(cm.pairs):
+        mu = (pick("pair_friction", (p, 0), pair.friction[0]), pick("pair_friction", (p, 1), pair.friction[1]))
+        body_invweight = pick("body_invweight0", (pair.body + 1, 0), pair.body_invweight)
+        if all(map(al.is_const, mu)) and body_invweight is pair.body_invweight:
+            continue
+        out[_key(_ROW_INVWEIGHT, (p,))] = body_invweight if pair.condim == 1 else pyramid_invweight(
+            body_invweight, mu[0], cm.impratio)
+    return out
+
+
+_FRAME_INERTIA = "inertia in the body frame"  # derived keys (`derive`), apart from the model fields'
+_ROW_INVWEIGHT = "pair row invweight"
+
+
 def instance(cm: ChainModel, m: mujoco.MjModel, robot: dict) -> ChainModel:
-    """`cm` as one instance's robot: each number of `robot` (`entries`) replaces the constant folded from `m`,
-    the nominal model; every other number, zeros among them, stays a constant (so the algebra still folds it)."""
+    """`cm` as one instance's robot: each number of `robot` (`derive`) replaces the constant folded from `m`,
+    the nominal model; every other number, zeros among them, stays a constant (so the algebra still folds it).
+    Only loads: what follows from the drawn numbers alone was computed once, by `derive`."""
 
     def pick(field: str, index: tuple, constant):
         return robot.get(_key(field, index), constant)
@@ -389,12 +421,7 @@ def instance(cm: ChainModel, m: mujoco.MjModel, robot: dict) -> ChainModel:
         return tuple(pick(field, (row, k), c) for k, c in enumerate(constant))
 
     def inertia(b: int, constant: Sym6) -> Sym6:
-        diag = vec("body_inertia", b, m.body_inertia[b])
-        if all(map(al.is_const, diag)):
-            return constant
-        r = _quat_mat(m.body_iquat[b]).reshape(3, 3)
-        return tuple(al.total(al.mul(float(r[i, a] * r[j, a]), diag[a]) for a in range(3))
-                     for i, j in ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2)))
+        return tuple(pick(_FRAME_INERTIA, (b, k), c) for k, c in enumerate(constant))
 
     def hinge(h: Hinge | None) -> Hinge | None:
         return h if h is None else dataclasses.replace(h, invweight=pick("dof_invweight0", (h.dof,), h.invweight),
@@ -408,13 +435,9 @@ def instance(cm: ChainModel, m: mujoco.MjModel, robot: dict) -> ChainModel:
         g = int(m.pair_geom2[p])
         size = (pick("geom_size", (g, 0), pair.size[0]),) + pair.size[1:]
         friction = (pick("pair_friction", (p, 0), pair.friction[0]), pick("pair_friction", (p, 1), pair.friction[1]))
-        body_invweight = pick("body_invweight0", (pair.body + 1, 0), pair.body_invweight)
-        invweight = pair.invweight
-        if not all(map(al.is_const, friction)) or body_invweight is not pair.body_invweight:
-            invweight = body_invweight if pair.condim == 1 else pyramid_invweight(body_invweight, friction[0],
-                                                                                  cm.impratio)
-        pairs.append(dataclasses.replace(pair, size=size, friction=friction, invweight=invweight,
-                                         body_invweight=body_invweight))
+        pairs.append(dataclasses.replace(
+            pair, size=size, friction=friction, invweight=pick(_ROW_INVWEIGHT, (p,), pair.invweight),
+            body_invweight=pick("body_invweight0", (pair.body + 1, 0), pair.body_invweight)))
     acts = tuple((a[0], pick("actuator_gear", (k, 0), a[1])) + a[2:] for k, a in enumerate(cm.actuators))
     return dataclasses.replace(
         cm, base_mass=pick("body_mass", (1,), cm.base_mass), base_com=vec("body_ipos", 1, cm.base_com),
