@@ -50,7 +50,7 @@ def configure(*, devices: int | None = None, cache_dir: Path | str | None = CACH
     need JAX, e.g. to read a trained policy, before its run does)."""
     if _configured:
         return
-    _configured.append((devices, cache_dir))
+    _configured.append(True)
     # XLA's C++ log without its INFO lines; warnings and errors still print (a command's stderr
     # filter drops the known false alarms among them); TF_CPP_MIN_LOG_LEVEL=0 shows everything.
     os.environ.setdefault("TF_CPP_MIN_LOG_LEVEL", "1")

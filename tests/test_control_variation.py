@@ -165,17 +165,6 @@ def sim_layout(mj_model):
     return Layout.of(mj_model)
 
 
-@pytest.mark.parametrize("text, message", [
-    ("kp=1", "unknown parameter 'kp'"),
-    ("action_delay=10..2", "bounds reversed"),
-    ("gyro_noise=0..inf", "non-finite"),
-    ("gyro_bias=scale(0.9,1.1)", "gyro_bias is an offset"),
-])
-def test_a_bad_control_parameter_is_refused(text, message):
-    with pytest.raises(ValueError, match=message):
-        Spec.parse(text)
-
-
 def test_a_drawn_negative_value_is_refused_naming_the_instance(mj_model):
     with pytest.raises(ValueError, match=r"action_delay drew a value of -[\d.]+ ms for instance \d+; it must be >= 0"):
         variation.draw_controls(Spec.parse("action_delay=normal(1,5)"), mj_model, 20, 0)

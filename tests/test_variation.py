@@ -43,6 +43,11 @@ def test_a_spec_reads_every_distribution_and_prints_back_the_same():
     ("base_mass", "is not NAME=DISTRIBUTION"),
     ("base_mass=heavy", "cannot read 'heavy'"),
     ("base_mass=1,base_mass=2", "base_mass given twice"),
+    # the controller's, motors' and sensors' parameters, read by the same parser
+    ("kp=1", "unknown parameter 'kp'"),
+    ("action_delay=10..2", "bounds reversed"),
+    ("gyro_noise=0..inf", "non-finite"),
+    ("gyro_bias=scale(0.9,1.1)", "gyro_bias is an offset"),
 ])
 def test_a_bad_spec_is_refused_naming_what_is_wrong(text, message):
     with pytest.raises(ValueError, match=message):
