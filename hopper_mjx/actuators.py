@@ -16,6 +16,9 @@ actuator sits between it and the engine, per instance and pure, as the core vmap
   Its electrical power is the mechanical power plus the copper loss i²R, which for these figures is
   tau² w0 / tau_s (R = V² / (tau_s w0), i = tau w0 / V); the supply gives no energy back (no
   regeneration), so the energy drawn is the integral of max(P, 0).
+- A position controller (a policy, `control.base.Servo`) commands joint targets instead: they go
+  through the same delay line (`delayed`), its drivers' PD law makes the torque on the joints as they
+  are now, and the motors' envelope applies to that (`motors`).
 - An action delay of `delay` physics steps, per instance, applies each command that many steps
   after the controller gave it; the motors start from zero torque (the line starts empty).
 
@@ -108,16 +111,23 @@ class Actuation:
         joint speeds from qvel (nv,)."""
         lay = self.layout
         act, gear = jnp.asarray(lay.actuator_of_joint), jnp.asarray(lay.gear)
-        commanded = ctrl[act] * gear
-        line = jnp.concatenate([commanded[None], drive.line[:-1]])
-        torque = line[drive.motor.delay]
-        speed = qvel[jnp.asarray(lay.joint_dof)]
+        torque, drive = self.delayed(drive, ctrl[act] * gear)
+        torque, drive = self.motors(drive, torque, qvel, dt)
+        return jnp.zeros_like(ctrl).at[act].set(torque / gear), drive
+
+    def delayed(self, drive: Drive, command: jax.Array) -> tuple[jax.Array, Drive]:
+        """(the command (3,), joint order, given `delay` steps ago; drive with `command` pushed into its line)."""
+        line = jnp.concatenate([command[None], drive.line[:-1]])
+        return line[drive.motor.delay], drive._replace(line=line)
+
+    def motors(self, drive: Drive, torque: jax.Array, qvel: jax.Array, dt: float) -> tuple[jax.Array, Drive]:
+        """(the joint torques (3,) the motors apply for `torque` asked now, within their envelope at the joint
+        speeds from qvel (nv,); drive with the energy drawn over dt s)."""
+        speed = qvel[jnp.asarray(self.layout.joint_dof)]
         low, high = envelope(drive.motor, speed)
         torque = jnp.clip(torque, low, high)
         if self.kind == "dc":
             power = jnp.maximum(electrical_power(drive.motor, torque, speed), 0.0)
         else:
             power = jnp.abs(torque * speed)
-        energy = drive.energy + dt * power.sum()
-        applied = jnp.zeros_like(ctrl).at[act].set(torque / gear)
-        return applied, drive._replace(line=line, energy=energy)
+        return torque, drive._replace(energy=drive.energy + dt * power.sum())

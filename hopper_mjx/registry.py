@@ -159,7 +159,8 @@ CONTROL_PARAMETERS = {
                                             open_low=True, joints=True, needs="dc"),
     "motor_torque_limit": ControlParameter("N·m", "a dc motor's current limit as the joint torque it allows, per "
                                            "joint", "effort", open_low=True, joints=True, needs="dc"),
-    "action_delay": ControlParameter("ms", "from a command to the motors' torque, whole physics steps "
+    "action_delay": ControlParameter("ms", "from a command (a torque, or a policy's joint targets) to the motors, "
+                                     "whole physics steps "
                                      "(rounded)", high=1000.0),
     "sensor_delay": ControlParameter("ms", "the controller reads its observation this late, whole physics "
                                      "steps (rounded)", high=1000.0),

@@ -27,7 +27,7 @@ from jax.sharding import Mesh, NamedSharding, PartitionSpec
 from hopper_mjx import engine as engines
 from hopper_mjx import registry, signals
 from hopper_mjx.actuators import Actuation, Drive, Motor
-from hopper_mjx.control.base import Controller, CState, zero_torque
+from hopper_mjx.control.base import Controller, CState, to_ctrl, zero_torque
 from hopper_mjx.model import variation as model_variation
 from hopper_mjx.model import world
 from hopper_mjx.model.robot import Robot
@@ -182,13 +182,17 @@ class Sim:
         if sensing and self.sensing.passthrough:
             raise ValueError("per-instance sensors need a Sim made with sensing=Sensing(...)")
         sense = () if self.sensing.passthrough else self.sensing.init(obs, sensing.pop("delay", 0), sensing)
+        drive = () if motor is None else self.actuation.init(motor)
+        if drive and controller.servo is not None:  # a delay line of targets starts full of the first ones
+            first = jax.vmap(controller.servo.first)(cstate)
+            drive = drive._replace(line=jnp.repeat(first[:, None], self.actuation.depth, axis=1))
         return State(
             data=data,
             gravity=jnp.asarray(g, dtype=jnp.float32),
             key=jax.random.split(key, n),
             cstate=cstate,
             diverged=jnp.zeros(n, dtype=bool),
-            drive=() if motor is None else self.actuation.init(motor),
+            drive=drive,
             step=jnp.zeros(n, jnp.int32) if self.counts_steps else (),
             variation=variation,
             sense=sense,
@@ -375,15 +379,24 @@ def _instance_rollout(engine, actuation: Actuation, pushes: Pushes | None, sensi
         d, step, sense = state.data, state.step, state.sense
         if pushes is not None:  # static: without pushes the step is today's
             d = d.replace(qvel=push(pushes, state.key, step, d.qvel))  # `step` steps done: the time is step·dt
-        obs = signals.observe(engine, model, d, sensed)
+        now = obs = signals.observe(engine, model, d, sensed)
         if not sensing.passthrough:  # static: exact, prompt sensors add nothing
             obs, sense = sensing.apply(sense, obs, state.key, step)
         if counts:
             step = step + 1
-        ctrl, cstate = controller.act(state.cstate, obs, state.gravity)
+        command, cstate = controller.act(state.cstate, obs, state.gravity)
         drive = state.drive
-        if not actuation.passthrough:  # what the motors make of the command (static: ideal adds nothing)
-            ctrl, drive = actuation.apply(drive, ctrl, d.qvel, dt)
+        if controller.servo is None:
+            ctrl = command
+            if not actuation.passthrough:  # what the motors make of the command (static: ideal adds nothing)
+                ctrl, drive = actuation.apply(drive, ctrl, d.qvel, dt)
+        else:  # joint targets: delayed on their way to the drivers, whose PD reads the joints as they are now
+            if actuation.depth > 1:
+                command, drive = actuation.delayed(drive, command)
+            torque, cstate = controller.servo.track(cstate, command, now)
+            if not actuation.passthrough:
+                torque, drive = actuation.motors(drive, torque, d.qvel, dt)
+            ctrl = to_ctrl(actuation.layout, torque)
         d1 = engine.forward(model, d.replace(ctrl=ctrl), state.gravity)
         measure = lambda: signals.measure(engine, model, d1, state.gravity, sensed)
         # An unbatched predicate stays a real conditional under vmap: off-tick steps skip the signals.

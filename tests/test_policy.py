@@ -60,6 +60,43 @@ def test_policy_runs_as_a_core_controller(trained, mj_model, sim):
     assert (np.abs(np.asarray(cs.last_action)) <= 1).all() and np.abs(np.asarray(cs.last_action)).sum() > 0
 
 
+def test_an_action_delay_holds_back_the_policys_targets_not_its_pd_loop(trained, mj_model):
+    """With an action delay of 6 steps the policy's joint drivers track the targets it set 6 physics steps
+    before (the standing targets until then), on the joints as they are now: the same path, to float32
+    rounding, as the policy with that delay line written into a torque controller and no delay in the
+    core."""
+    from hopper_mjx.control.base import Controller, to_ctrl
+    from hopper_mjx.envs import policy
+    from hopper_mjx.sim import Sim, gravity_vectors
+
+    out, _ = trained
+    late, steps, g = 6, 300, gravity_vectors([9.81, 1.62])
+    servo = policy.policy_controller(mj_model, out)
+    layout = Sim(mj_model).layout
+
+    def init(obs, params):  # the policy's state and its own line of targets, full of the first ones
+        cs = servo.init(obs, params)
+        return cs, jnp.tile(cs.target, (late + 1, 1))
+
+    def act(state, obs, gravity):
+        cs, line = state
+        target, cs = servo.act(cs, obs, gravity)
+        line = jnp.concatenate([target[None], line[:-1]])
+        torque, cs = servo.servo.track(cs, line[late], obs)
+        return to_ctrl(layout, torque), (cs, line)
+
+    by_hand = Controller(name="late targets by hand", init=init, act=act)
+    delayed = Sim(mj_model, delay_steps=late)
+    paths = {}
+    for name, sim, controller in (("servo", delayed, servo), ("by hand", Sim(mj_model), by_hand)):
+        state = sim.reset(g, key=0, controller=controller)
+        paths[name] = np.asarray(sim.rollout(state, controller, steps=steps)[1].qpos)
+    # (A core that ignored the delay, or delayed the torque, would part from the hand-written line.)
+    np.testing.assert_allclose(paths["servo"], paths["by hand"], atol=1e-5)
+    line = np.asarray(delayed.reset(g, key=0, controller=servo).drive.line)
+    assert (line == line[:, :1]).all() and np.abs(line).max() > 0.5  # full of the standing targets
+
+
 def test_policy_path_errors_name_the_problem(tmp_path, mj_model, sim):
     from hopper_mjx.envs import policy
 

@@ -8,6 +8,13 @@ A controller is a pair of pure functions for one instance, vmapped by the core:
   from the instance's `Observation` (time, qpos, qvel and the foot contact of the
   previous physics step, as a real controller reads its sensors before it acts).
 
+A position controller (``servo`` set: a trained policy) instead returns joint targets from ``act``;
+its joints' drivers track them with ``servo.track`` at the physics rate, on the joints as they are
+now. An action delay then holds back the targets, not the torque: the policy's command is late, the
+drivers' PD loop is not (the seed's ros_control position controllers; Isaac Lab's delayed PD actuator).
+A delayed stiff PD loop is unstable: a policy whose 300 N·m/rad PD torque was delayed by 4 ms fell
+at every gravity.
+
 Controllers are built by factories and compared by identity, so one built
 controller reuses one compiled rollout.
 """
@@ -37,12 +44,24 @@ class Commands:
     write: Callable[[CState, Any, float], CState]
 
 
+@dataclass(frozen=True)
+class Servo:
+    """The joint drivers of a position controller: `track(cstate, target (3,) rad, obs) -> (joint torques
+    (3,) N·m, cstate)` at the physics rate, and `first(cstate) -> (3,)` the targets it starts from (what
+    a delay line holds before the first command reaches it)."""
+
+    track: Callable[[CState, jax.Array, Observation], tuple[jax.Array, CState]]
+    first: Callable[[CState], jax.Array]
+
+
 @dataclass(frozen=True, eq=False)
 class Controller:
     name: str
     init: Callable[[Observation, Any], CState]
+    # (ctrl (nu,), cstate); with `servo`: (joint targets (3,) rad, cstate)
     act: Callable[[CState, Observation, jax.Array], tuple[jax.Array, CState]]
     commands: Commands | None = None  # None: the controller takes no commands (none, hold, pid)
+    servo: Servo | None = None  # a position controller's joint drivers; None: `act` gives the torque
 
 
 def pd(kp, kd, error: jax.Array, rate: jax.Array, bias: jax.Array | None = None) -> jax.Array:

@@ -19,7 +19,8 @@ A task (`hopper_mjx.envs.tasks`) is a `MonopedEnv` that says what it commands
   fresh episode (gravity, command, initial state) instead of replaying the first one.
 - **Robots** (`randomize`, a `--randomize` spec): a pool of `ROBOT_POOL` robots is drawn once with
   `randomize_seed` (the model fields with MuJoCo's constants, the PD factors, the action delay), and
-  each episode runs one of them (`State.info["robot"]`), its commands through its own delay line.
+  each episode runs one of them (`State.info["robot"]`), its joint targets through its own delay line
+  (late targets, as the core's policy controller: the joints' PD loop itself is prompt).
 
 Everything is one instance; Brax's wrappers vmap it.
 """
@@ -49,7 +50,7 @@ from hopper_mjx.signals import Observation
 MAX_TILT_FROM_VERTICAL = 0.8  # rad between the base's z axis and the vertical that ends an episode
 # State.info keys a task owns; the resampling auto-reset replaces exactly these (wrappers.py).
 TASK_INFO = ("command", "gravity", "last_action", "rng")
-ROBOT_INFO = ("robot", "line")  # a randomised task's too: the episode's robot and its motors' delay line
+ROBOT_INFO = ("robot", "line")  # a randomised task's too: the episode's robot and its drivers' delay line
 ROBOT_POOL = 256  # robots a randomised task draws once; an episode runs one of them
 # The control parameters a task draws (the others, sensor noise and delay and dc motors, not in training yet).
 TRAINED_CONTROLS = ("kp_scale", "kd_scale", "action_delay")
@@ -324,7 +325,7 @@ class MonopedEnv(Env):
         self.n_frames = decimation(self.layout, config)
         self.robots = robot_pool(config, mj_model, self.layout)  # {} for the URDF's robot
         delays = np.asarray(self.robots.get("action_delay", 0))
-        self.line_depth = int(delays.max()) + 1  # the motors' delay line: the longest delay in the pool
+        self.line_depth = int(delays.max()) + 1  # the drivers' delay line: the longest delay in the pool
         self.engine = engines.make(config.engine, trained, config.variation.fields)
         self.standing_qpos = robot.standing_qpos(mj_model).astype(np.float32)  # as the policy controller
         self.stance = self.standing_qpos[list(self.layout.joint_qpos)]
@@ -384,14 +385,14 @@ class MonopedEnv(Env):
         zero = jnp.zeros(())
         terms = self.reward_terms(data, -gravity[2], command, last_action, last_action, zero, zero > 0)
         info = {"command": command, "gravity": gravity, "last_action": last_action, "rng": rng}
-        if self.robots:  # this episode's robot, its motors' delay line empty
+        if self.robots:  # this episode's robot, its drivers' delay line holding the standing targets
             info |= {"robot": jax.random.randint(jax.random.fold_in(rng, 1), (), 0, ROBOT_POOL),
-                     "line": jnp.zeros((self.line_depth, 3))}
+                     "line": jnp.tile(jnp.asarray(self.stance), (self.line_depth, 1))}
         return State(data, obs, zero, zero, {k: zero for k in terms}, info)
 
     def physics(self, model, data, gravity: jax.Array, target: jax.Array, robot=None):
         """`n_frames` physics steps of one instance under its own gravity, the PD law tracking
-        `target`: (data, mean of (torque / limit)², the motors' delay line). The engine's step is
+        `target`: (data, mean of (torque / limit)², the drivers' delay line of targets). The engine's step is
         traced once, in the loop. `robot`: (PD factors or None, action delay steps, delay line) of a
         randomised episode's robot (`model` already its own); None: the URDF's, prompt."""
         cfg, lay, engine = self.config, self.layout, self.engine
@@ -400,10 +401,11 @@ class MonopedEnv(Env):
 
         def one_physics_step(carry, _):
             d, effort, line = carry
-            torque = pd_torque(lay, cfg, target, d, scale)
-            if line is not None:  # each torque applied `delay` physics steps after it was commanded
-                line = jnp.concatenate([torque[None], line[:-1]])
-                torque = line[delay]
+            late = target
+            if line is not None:  # the drivers get the targets `delay` physics steps after the policy set them
+                line = jnp.concatenate([target[None], line[:-1]])
+                late = line[delay]
+            torque = pd_torque(lay, cfg, late, d, scale)
             d = engine.forward(model, d.replace(ctrl=to_ctrl(lay, torque)), gravity)
             return (engine.integrate(model, d, gravity), effort + jnp.mean((torque / limit) ** 2), line), None
 

@@ -31,7 +31,7 @@ from brax.training.agents.ppo import networks as ppo_networks
 from brax.training.agents.sac import networks as sac_networks
 
 from hopper_mjx import registry
-from hopper_mjx.control.base import Commands, Controller, PDScale, joint_state, to_ctrl
+from hopper_mjx.control.base import Commands, Controller, PDScale, Servo, joint_state
 from hopper_mjx.envs import monoped, tasks
 from hopper_mjx.model.layout import Layout
 from hopper_mjx.model.robot import Robot, standing_height, standing_qpos
@@ -216,14 +216,18 @@ def policy_controller(mj_model: mujoco.MjModel, path) -> Controller:
                            None if params is None else params.pd)
 
     def act(cs: PolicyState, obs: Observation, gravity):
+        """The joint targets: new ones every `every` physics steps (the policy rate), held between."""
         features = monoped.observe(layout, cfg, obs, gravity, cs.command, cs.last_action)
         decide = cs.tick % every == 0
         action = jnp.where(decide, policy(features), cs.last_action)
         target = jnp.where(decide, monoped.joint_targets(layout, cfg, stance, action), cs.target)
+        return target, cs._replace(target=target, last_action=action, tick=cs.tick + 1)
+
+    def track(cs: PolicyState, target, obs: Observation):
+        """The drivers' PD law on `target` (late by the action delay) and the joints as they are now."""
         torque = monoped.pd_torque(layout, cfg, target, obs, cs.pd)
         power = jnp.abs(torque * joint_state(layout, obs)[1]).sum()
-        work = cs.work + power * layout.timestep
-        return to_ctrl(layout, torque), PolicyState(cs.command, target, action, cs.tick + 1, work, cs.pd)
+        return torque, cs._replace(work=cs.work + power * layout.timestep)
 
     commands = None
     if tasks.task_class(cfg.task).command_size:  # the hopping tasks: (apex height above the floor, vx, vy)
@@ -237,4 +241,5 @@ def policy_controller(mj_model: mujoco.MjModel, path) -> Controller:
             return cs._replace(command=jnp.broadcast_to(row, cs.command.shape))
 
         commands = Commands(read=read, write=write)
-    return Controller(name=f"{registry.POLICY_PREFIX}{path}", init=init, act=act, commands=commands)
+    return Controller(name=f"{registry.POLICY_PREFIX}{path}", init=init, act=act, commands=commands,
+                      servo=Servo(track=track, first=lambda cs: cs.target))
