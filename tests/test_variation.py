@@ -223,3 +223,22 @@ def on_chain(tmp_path_factory):
 
 def test_the_chain_takes_each_instances_robot_as_mujoco_c_does(mj_model, on_chain):
     _follows_mujoco_c(mj_model, on_chain, EVERYTHING, "chain")
+
+
+def test_the_varied_program_is_the_same_whatever_order_its_fields_come_in(mj_model):
+    """The fields a batch varies are a set, whose order changes with each process's string hashing: the program
+    traced from them (and so its persistent-cache key) must not, or every run compiles it afresh."""
+    import jax
+
+    from hopper_mjx.engine import chain
+
+    spec = Spec.parse(EVERYTHING)
+    values = variation.with_constants(mj_model, variation.draw(spec, mj_model, 1, seed=0))
+    one = {field: v[0] for field, v in values.items()}
+    engine = chain.make(mj_model, varies=spec.fields)
+    traced = lambda: str(jax.make_jaxpr(lambda v: engine.vary(engine.model, v))(one))
+    first = traced()
+    for order in (reversed, sorted):
+        engine.settable = dict(order(list(engine.settable.items())))
+        assert traced() == first, order.__name__
+    assert first.count("slice") >= 20  # each drawn entry is sliced out of its field's array once, here

@@ -366,9 +366,11 @@ def entries(cm: ChainModel, values: dict, settable: dict) -> dict:
     scalar} of each entry `settable[field]` marks, and MuJoCo's derived constraint weights (`body_invweight0` of
     the bodies with a contact pair, `dof_invweight0` of the hinges with a limit or friction row:
     model.variation.with_constants).
-    Sliced once per rollout, so that the step reads scalars, not arrays."""
+    Sliced once per rollout, so that the step reads scalars, not arrays; in field order, whatever the order of
+    `settable` (a set's order changes with the process's string hashing, and with it the traced program and so its
+    persistent-cache key: a program compiled afresh runs slower than one loaded, docs/performance.md)."""
     out = {_key(f, tuple(int(i) for i in index)): values[f][index]
-           for f, mask in settable.items() if f in values for index in zip(*np.nonzero(mask))}
+           for f, mask in sorted(settable.items()) if f in values for index in zip(*np.nonzero(mask))}
     if "body_invweight0" in values:
         out |= {_key("body_invweight0", (p.body + 1, 0)): values["body_invweight0"][p.body + 1, 0] for p in cm.pairs}
     if "dof_invweight0" in values:  # of the hinges with a row: a limit, or friction (the model's or drawn)
