@@ -57,7 +57,7 @@ class Stepper:
         self.reset = jax.jit(jax.vmap(env.reset))
         after = jax.jit(jax.vmap(env.after_physics, in_axes=(None, 0, 0, 0, 0)))
         targets = jax.vmap(env.targets)
-        # physics gives (data, effort, delay line); the URDF's prompt robot has no line
+        # physics gives (data, effort, the episode's carry); the URDF's ideal, prompt robot carries nothing
         self.step = lambda s, a: after(model, s, a,
                                        *physics(model, s.pipeline_state, s.info["gravity"], targets(a))[:2])
 
