@@ -141,14 +141,8 @@ def check(args):
     if args.algo not in ALGORITHMS:
         raise ValueError(f"--algo {args.algo!r} is unknown; choose from {', '.join(ALGORITHMS)}")
     physics = cli.check_physics(args)
-    tool = "training (its Brax environments)"
-    cli.refuse_terrain(physics.ground, tool)
-    cli.check_ideal_motors(physics, tool)
-    untrained = [n for n in (physics.variation.controls if physics.variation else {})
-                 if n not in envs.monoped.TRAINED_CONTROLS]
-    if untrained:
-        raise ValueError(f"--randomize: training draws {', '.join(envs.monoped.TRAINED_CONTROLS)} of the control "
-                         f"parameters, not {', '.join(untrained)} (yet)")
+    cli.refuse_terrain(physics.ground, "training (its Brax environments)")
+    cli.check_controls(physics, registry.POLICY_PREFIX)  # a dc motor's drawn figures need --motor dc
     _layers(args.policy_layers), _layers(args.value_layers)
     if args.gravity_range is not None:
         lo, hi = _pair(args.gravity_range, "--gravity-range")
@@ -163,6 +157,7 @@ def check(args):
         if args.seeds < 1:
             raise ValueError(f"--seeds must be >= 1, got {args.seeds}")
         cli.check_seed(args.seed + args.seeds - 1)
+    check_task_physics(args, physics)
     # The evaluation's options too: a mistake there would otherwise surface after the whole training run.
     for g in _floats(args.eval_gravity, "--eval-gravity"):
         cli.check_range("--eval-gravity", g, low=0, open_low=True)
@@ -188,10 +183,34 @@ def check(args):
     return physics
 
 
+def check_task_physics(args, physics) -> None:
+    """The motors' delay and the pushes in whole steps of the task's own physics step (2 ms, not the core's
+    1 ms), and every delay the robot pool of each seed draws shorter than an episode."""
+    from hopper_mjx import envs
+    from hopper_mjx.envs.monoped import ROBOT_POOL
+    from hopper_mjx.pushes import Pushes
+
+    config = envs.default_config(args.task)
+    step = config.timestep
+    if abs(round(physics.action_delay / step) * step - physics.action_delay) > 1e-9:
+        raise ValueError(f"--action-delay must be a whole number of the training's physics steps ({step * 1e3:g} ms), "
+                         f"got {physics.action_delay * 1e3:g} ms")
+    if physics.push is not None:
+        try:
+            Pushes.of(*physics.push, step)
+        except ValueError as err:
+            raise ValueError(f"--push: {err} in training") from None
+    episode = args.episode_length / config.policy_rate
+    for seed in range(args.seed, args.seed + (args.seeds or 1)):
+        cli.check_delay(physics, episode, ROBOT_POOL, seed,
+                        run=f"an episode (--episode-length {args.episode_length} at {config.policy_rate:g} Hz)")
+
+
 def task_config(args, physics):
     from hopper_mjx import envs
 
-    overrides = {"observe_gravity": args.observe_gravity, "engine": physics.engine}
+    overrides = {"observe_gravity": args.observe_gravity, "engine": physics.engine, "motor": physics.motor,
+                 "action_delay": physics.action_delay, "push": physics.push}
     if physics.variation:  # the robots episodes run: drawn once, with the run's seed
         overrides |= {"randomize": str(physics.variation), "randomize_seed": args.seed}
     if args.gravity_range is not None:

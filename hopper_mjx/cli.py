@@ -204,14 +204,16 @@ def check_ideal_motors(physics: Physics, tool: str) -> None:
                          "delay or pushes, only, for now")
 
 
-def check_delay(physics: Physics, duration: float | None, n: int = 1, seed: int = 0) -> None:
+def check_delay(physics: Physics, duration: float | None, n: int = 1, seed: int = 0, *,
+                run: str = "the run's --duration") -> None:
     """An action delay shorter than the run (else no command ever reaches the motors), and so every delay
-    the `n` instances draw with `seed` (`--randomize action_delay=...,sensor_delay=...`)."""
+    the `n` instances draw with `seed` (`--randomize action_delay=...,sensor_delay=...`); `run` names the
+    duration in the message (training: an episode)."""
     if duration is None:
         return
     if physics.action_delay >= duration:
-        raise ValueError(f"--action-delay {physics.action_delay * 1e3:g} ms is not shorter than the run's "
-                         f"--duration {duration:g} s: no command would reach the motors")
+        raise ValueError(f"--action-delay {physics.action_delay * 1e3:g} ms is not shorter than {run} "
+                         f"{duration:g} s: no command would reach the motors")
     for name in ("action_delay", "sensor_delay"):
         longest = physics.longest_delay(name) * physics.timestep
         if longest < duration:  # the distribution cannot draw so long a delay: no draws needed
@@ -221,8 +223,8 @@ def check_delay(physics: Physics, duration: float | None, n: int = 1, seed: int 
         drawn = draw_controls(physics.variation, physics.mj_model, n, seed)[name]
         i = int(np.argmax(drawn))
         if drawn[i] * 1e-3 >= duration:
-            raise ValueError(f"--randomize: {name} drew {drawn[i]:g} ms for instance {i}, not shorter than the "
-                             f"run's --duration {duration:g} s")
+            raise ValueError(f"--randomize: {name} drew {drawn[i]:g} ms for instance {i}, not shorter than "
+                             f"{run} {duration:g} s")
 
 
 def check_controls(physics: Physics, controller: str) -> None:

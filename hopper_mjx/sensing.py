@@ -73,18 +73,27 @@ class Sensing:
         if any(np.any(np.asarray(v) != 0) for v in figures.values()) and not self.noisy:
             raise ValueError("noisy sensor figures need Sensing(noisy=True)")
         f32 = lambda name, shape: jnp.asarray(np.broadcast_to(figures.get(name, 0.0), (n, *shape)), jnp.float32)
-        line = jax.tree_util.tree_map(lambda x: jnp.repeat(x[:, None], self.depth, axis=1), obs)
-        return SensorState(line=line, delay=jnp.asarray(delay), gyro_noise=f32("gyro_noise", ()),
+        return SensorState(line=jax.vmap(self.first)(obs), delay=jnp.asarray(delay), gyro_noise=f32("gyro_noise", ()),
                            gyro_bias=f32("gyro_bias", (3,)), accel_noise=f32("accel_noise", ()),
                            odom_pos_noise=f32("odom_pos_noise", ()), odom_vel_noise=f32("odom_vel_noise", ()))
+
+    def first(self, obs: Observation) -> Observation:
+        """One instance's delay line before its first step: every slot holds its first observation."""
+        return jax.tree_util.tree_map(lambda x: jnp.repeat(x[None], self.depth, axis=0), obs)
 
     def apply(self, s: SensorState, obs: Observation, key: jax.Array, step: jax.Array
               ) -> tuple[Observation, SensorState]:
         """(what the controller reads, the state after this step) of one instance, at physics step `step`."""
         if self.noisy:
             obs = noisy(s, obs, jax.random.fold_in(jax.random.fold_in(key, step), NOISE_STREAM))
-        line = jax.tree_util.tree_map(lambda new, old: jnp.concatenate([new[None], old[:-1]]), obs, s.line)
-        return jax.tree_util.tree_map(lambda x: x[s.delay], line), s._replace(line=line)
+        shift = lambda new, old: jnp.concatenate([new[None], old[:-1]])  # newest first
+        s = s._replace(line=jax.tree_util.tree_map(shift, obs, s.line))
+        return reading(s), s
+
+
+def reading(s: SensorState) -> Observation:
+    """What one instance's controller reads now: the line's observation `delay` steps old."""
+    return jax.tree_util.tree_map(lambda x: x[s.delay], s.line)
 
 
 def noisy(s: SensorState, obs: Observation, key: jax.Array) -> Observation:

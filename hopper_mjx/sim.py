@@ -205,24 +205,8 @@ class Sim:
         return self.pushes is not None or self.sensing.noisy
 
     def per_instance(self, controls: dict) -> dict:
-        """`reset`'s motor= and sensing= for each instance's drawn control parameters ({name: (N, ...)},
-        `model.variation.draw_controls`; delays in ms): {} when none of them is drawn. The PD factors go to
-        the controller (`control.base.pd_scale`)."""
-        step_ms = self.layout.timestep * 1e3
-        steps = lambda name: np.round(np.asarray(controls[name]) / step_ms).astype(np.int32)
-        out = {}
-        figures = {k: controls[f"motor_{k}"] for k in ("stall_torque", "no_load_speed", "torque_limit")
-                   if f"motor_{k}" in controls}
-        if (figures or "action_delay" in controls) and not self.actuation.passthrough:  # else all ideal, prompt
-            n = len(next(iter(controls.values())))
-            delay = steps("action_delay") if "action_delay" in controls else self.delay_steps
-            out["motor"] = self.actuation.motor(n, delay_steps=delay, **figures)
-        sensing = {k: controls[k] for k in FIGURES if k in controls}
-        if "sensor_delay" in controls:
-            sensing["delay"] = steps("sensor_delay")
-        if sensing and not self.sensing.passthrough:  # else every drawn delay is 0 and no noise is drawn
-            out["sensing"] = sensing
-        return out
+        """`reset`'s motor= and sensing= for each instance's drawn control parameters (`per_instance`)."""
+        return per_instance(controls, self.actuation, self.sensing, self.layout.timestep, self.delay_steps)
 
     def _first_observation(self, data, ground):
         """What each controller's `init` reads: the observation at the start, on the instance's ground."""
@@ -341,6 +325,28 @@ class Sim:
             on_cpu = all(d.platform == "cpu" for d in self.devices)
             self._compiled[cache_key] = jax.jit(sharded, compiler_options=CPU_COMPILER_OPTIONS if on_cpu else None)
         return self._compiled[cache_key]
+
+
+def per_instance(controls: dict, actuation: Actuation, sensing: Sensing, timestep: float, delay_steps: int = 0) -> dict:
+    """{"motor": `Motor`, "sensing": {"delay": steps, `sensing.FIGURES`...}} of N instances' drawn control
+    parameters ({name: (N, ...)}, `model.variation.draw_controls`; delays in ms, to whole steps of `timestep` s),
+    each only when drawn and its model adds something ({} when neither); `delay_steps`: the action delay of
+    instances that draw none. The PD factors go to the controller (`control.base.pd_scale`)."""
+    step_ms = timestep * 1e3
+    steps = lambda name: np.round(np.asarray(controls[name]) / step_ms).astype(np.int32)
+    out = {}
+    figures = {k: controls[f"motor_{k}"] for k in ("stall_torque", "no_load_speed", "torque_limit")
+               if f"motor_{k}" in controls}
+    if (figures or "action_delay" in controls) and not actuation.passthrough:  # else all ideal, prompt
+        n = len(next(iter(controls.values())))
+        delay = steps("action_delay") if "action_delay" in controls else delay_steps
+        out["motor"] = actuation.motor(n, delay_steps=delay, **figures)
+    drawn = {k: controls[k] for k in FIGURES if k in controls}
+    if "sensor_delay" in controls:
+        drawn["delay"] = steps("sensor_delay")
+    if drawn and not sensing.passthrough:  # else every drawn delay is 0 and no noise is drawn
+        out["sensing"] = drawn
+    return out
 
 
 def _pad(state: State, size: int) -> State:

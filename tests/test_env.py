@@ -7,6 +7,7 @@ task's own part (`after_physics`) compiles apart, cheaply. One test runs the rea
 """
 
 import dataclasses
+import json
 
 import jax
 import jax.numpy as jnp
@@ -57,7 +58,7 @@ class Stepper:
         self.reset = jax.jit(jax.vmap(env.reset))
         after = jax.jit(jax.vmap(env.after_physics, in_axes=(None, 0, 0, 0, 0)))
         targets = jax.vmap(env.targets)
-        # physics gives (data, effort, delay line); the URDF's prompt robot has no line
+        # physics gives (data, effort, the episode's carry); the URDF's ideal, prompt robot carries nothing
         self.step = lambda s, a: after(model, s, a,
                                        *physics(model, s.pipeline_state, s.info["gravity"], targets(a))[:2])
 
@@ -276,6 +277,20 @@ def test_config_rejects_bad_ranges(mj_model):
     assert MonopedConfig.from_dict(cfg.to_dict()) == cfg
     legacy = {k: v for k, v in MonopedConfig().to_dict().items() if k not in ("task", "lateral_speed_range")}
     assert MonopedConfig.from_dict(legacy).task == "hop"  # policy folders from before the tasks
+    # The robot's motors and pushes: saved as JSON (the push a list) and read back; a config saved before them
+    # loads as ideal, prompt motors without pushes.
+    io = dataclasses.replace(cfg, motor="dc", action_delay=0.004, push=(1.0, 0.3), randomize="gyro_noise=0..0.05")
+    assert MonopedConfig.from_dict(json.loads(json.dumps(io.to_dict()))) == io
+    before = {k: v for k, v in cfg.to_dict().items() if k not in ("motor", "action_delay", "push")}
+    assert (MonopedConfig.from_dict(before).motor, MonopedConfig.from_dict(before).action_delay,
+            MonopedConfig.from_dict(before).push) == ("ideal", 0.0, None)
+    for bad, message in ((dict(motor="stepper"), "unknown motor 'stepper'"),
+                         (dict(action_delay=0.003), "action_delay must be a whole number .* \\(2 ms\\), got 3 ms"),
+                         (dict(push=(0.001, 0.3)), "push interval must be a whole number"),
+                         (dict(push=(1.0, -0.3)), "push speed must be >= 0"),
+                         (dict(randomize="motor_stall_torque=scale(0.5,1)"), "dc motor's figures; set motor='dc'")):
+        with pytest.raises(ValueError, match=message):
+            dataclasses.replace(cfg, **bad)
 
 
 def test_env_and_metrics_falls_are_different_measures(mj_model):

@@ -179,8 +179,8 @@ CASES = [
     (TRAIN, ["--out", "new", "--eval-gravity", "9.81,,x"], "--eval-gravity"),
     (TRAIN, ["--out", "a_file"], "--out a_file"),
     (TRAIN, ["--out", "new", "--seed", "-3"], "--seed must be in 0..4294967295"),
-    (TRAIN, ["--out", "new", "--randomize", "kp_scale=0.8..1.2,gyro_noise=0.01"],
-     "--randomize: training draws kp_scale, kd_scale, action_delay of the control parameters, not gyro_noise"),
+    (TRAIN, ["--out", "new", "--randomize", "kp_scale=0.8..1.2,sensor_delay=300..900", "--episode-length", "10"],
+     "--randomize: sensor_delay drew"),
     # policy folders copied, edited or cut short
     ("simulate", ["--controller", "policy:pol_empty_env", *SIM], "hopper_env.json is not valid JSON"),
     ("simulate", ["--controller", "policy:pol_binary_env", *SIM], "hopper_env.json is not valid JSON"),

@@ -29,7 +29,11 @@ TINY = ["--timesteps", "80", "--num-envs", "4", "--batch-size", "4", "--num-mini
         "--unroll-length", "5", "--updates-per-batch", "1", "--episode-length", "20", "--eval-every", "40",
         "--num-eval-envs", "2", "--policy-layers", "8,8", "--value-layers", "8,8", "--sac-min-replay", "16",
         "--sac-grad-updates", "1"]
-PPO = ["--task", "hop", "--algo", "ppo", "--no-eval"]
+# The robots the core runs (dc motors, drawn action and sensor delays and gyro noise, a push every 0.2 s of
+# the 0.4 s episodes): the tiny run's program, shared by every test that reruns it.
+ROBOT_IO = ["--motor", "dc", "--push", "0.2,0.3", "--randomize",
+            "sensor_delay=0..10,gyro_noise=0..0.05,action_delay=0..10"]
+PPO = ["--task", "hop", "--algo", "ppo", "--no-eval", *ROBOT_IO]
 
 
 def _train(base, *args):
@@ -97,6 +101,27 @@ def test_ppo_tiny_run_changes_the_params_and_restores_its_checkpoint_identically
         np.testing.assert_array_equal(a, b)
 
 
+def test_the_policy_records_the_robots_it_trained_on_and_runs_them_in_the_core(trained):
+    """hopper_env.json holds the motors, delays, noise and pushes; the core runs the policy with them."""
+    from hopper_mjx import randomize
+    from hopper_mjx.envs import policy
+    from hopper_mjx.scenario import Physics, Scenario
+    from hopper_mjx.signals import SensorConfig
+    from hopper_mjx.sim import gravity_vectors
+
+    out, _ = trained
+    config = policy.read(out / "policy")[3]
+    assert (config.motor, config.push, config.action_delay) == ("dc", (0.2, 0.3), 0.0)
+    assert randomize.Spec.parse(config.randomize) == randomize.Spec.parse(ROBOT_IO[-1])
+    physics = Physics(motor="dc", push=(0.2, 0.3), variation=randomize.Spec.parse(config.randomize))
+    sim, final, traj = Scenario(gravity=gravity_vectors([9.81, 1.62]), physics=physics,
+                                controller=f"policy:{out}").run(0.3, SensorConfig())
+    steps = np.asarray(final.step)  # the core counts its physics steps (pushes, noise), the policy its own
+    assert steps.min() >= 300 and (np.asarray(final.cstate.tick) == steps).all()
+    assert np.isfinite(traj.qpos).all() and not np.asarray(final.diverged).any()
+    assert (np.asarray(final.drive.energy) > 0).all() and np.asarray(final.sense.gyro_noise).max() > 0
+
+
 def test_a_rerun_resumes_from_the_last_checkpoint(trained, capsys):
     """Run again with the same total: it finds the newest checkpoint and has nothing left to train."""
     out, record = trained
@@ -142,6 +167,18 @@ def test_train_rejects_bad_input_in_one_line_before_anything_runs(trained, capsy
     (["--eval-gravity", "9.81,abc"], "--eval-gravity must be comma-separated numbers, got '9.81,abc'"),
     (["--eval-gravity", "9.81,-1"], "--eval-gravity must be finite and > 0, got -1"),
     (["--seed", "-1"], "--seed must be in 0..4294967295, got -1"),
+    # The robots' motors, delays and pushes: on the training's own 2 ms physics step, within an episode.
+    (["--action-delay", "3"], "--action-delay must be a whole number of the training's physics steps (2 ms), got 3 ms"),
+    (["--push", "0.001,0.3"], "--push: the push interval must be a whole number (>= 1) of physics steps (0.002 s), "
+                              "got 0.001 s in training"),
+    (["--action-delay", "400", "--episode-length", "20"],
+     "--action-delay 400 ms is not shorter than an episode (--episode-length 20 at 50 Hz) 0.4 s: no command would "
+     "reach the motors"),
+    (["--randomize", "sensor_delay=300..900", "--episode-length", "20"],
+     "--randomize: sensor_delay drew 899 ms for instance 5, not shorter than an episode (--episode-length 20 at "
+     "50 Hz) 0.4 s"),
+    (["--motor", "ideal", "--randomize", "motor_no_load_speed=scale(0.8,1.2)"],
+     "--randomize: motor_no_load_speed is a dc motor's figure; add --motor dc"),
 ])
 def test_a_new_run_is_refused_before_its_folder_is_made(tmp_path, capsys, args, message):
     """Every option, the evaluation's too, is checked before the run folder exists (a mistake in

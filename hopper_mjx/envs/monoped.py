@@ -18,9 +18,19 @@ A task (`hopper_mjx.envs.tasks`) is a `MonopedEnv` that says what it commands
   in `State.info["gravity"]`; `wrappers.wrap_for_training` makes Brax's auto-reset draw a
   fresh episode (gravity, command, initial state) instead of replaying the first one.
 - **Robots** (`randomize`, a `--randomize` spec): a pool of `ROBOT_POOL` robots is drawn once with
-  `randomize_seed` (the model fields with MuJoCo's constants, the PD factors, the action delay), and
-  each episode runs one of them (`State.info["robot"]`), its joint targets through its own delay line
-  (late targets, as the core's policy controller: the joints' PD loop itself is prompt).
+  `randomize_seed` (the model fields with MuJoCo's constants, and the control parameters: PD factors,
+  dc motor figures, action and sensor delays, IMU and odometry noise and bias), and each episode runs
+  one of them (`State.info["robot"]`).
+- **Motors, sensors, pushes**, composed as the core composes them (`hopper_mjx.sim`), from the same
+  pure pieces, at the physics rate inside `physics`, as the core runs a policy (a position controller,
+  `control.base.Servo`): its joint targets go through the delay line (`actuators.Actuation`: a fixed
+  `action_delay` or the robot's), the joints' drivers track them with the PD law on the joints as they
+  are now, and the motors (`motor` ideal or dc) apply that torque within their envelope; the policy
+  reads the sensors (`sensing.Sensing`: the robot's noise and bias on the IMU's rate and the odometry,
+  its sensor delay), while the reward and the termination read the true state; every `push` interval
+  the base gets a horizontal velocity change (`pushes.push`). The drive, the sensors' line and the
+  episode's physics-step count live in `State.info` (`EPISODE_INFO`); a fresh episode starts its delay
+  line full of the standing targets. A config that asks none of them steps today's program.
 
 Everything is one instance; Brax's wrappers vmap it.
 """
@@ -30,6 +40,7 @@ from __future__ import annotations
 import copy
 import dataclasses
 import math
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -38,22 +49,29 @@ import numpy as np
 from brax.envs.base import Env, State
 
 from hopper_mjx import engine as engines
-from hopper_mjx import metrics, signals
+from hopper_mjx import metrics, registry, signals
 from hopper_mjx import model as hopper_model
+from hopper_mjx.actuators import Actuation, Drive, Motor
 from hopper_mjx.control.base import PDScale, joint_state, pd, saturate, scaled, to_ctrl
 from hopper_mjx.model import robot
 from hopper_mjx.model.layout import Layout
 from hopper_mjx.model.world import EARTH_GRAVITY
+from hopper_mjx.pushes import Pushes, push
 from hopper_mjx.randomize import Spec
+from hopper_mjx.sensing import FIGURES, Sensing, SensorState, reading
 from hopper_mjx.signals import Observation
+from hopper_mjx.sim import per_instance
 
 MAX_TILT_FROM_VERTICAL = 0.8  # rad between the base's z axis and the vertical that ends an episode
 # State.info keys a task owns; the resampling auto-reset replaces exactly these (wrappers.py).
 TASK_INFO = ("command", "gravity", "last_action", "rng")
-ROBOT_INFO = ("robot", "line")  # a randomised task's too: the episode's robot and its drivers' delay line
+# And these, each where the config asks for it (`MonopedEnv.task_info`): the episode's robot (randomised),
+# its motors' drive (`actuators.Drive`: figures, delay line, energy; dc or delayed motors), its sensors'
+# state (`sensing.SensorState`: figures and delay line; drawn sensor delay or noise), and the physics steps
+# since the episode's start (pushes, sensor noise).
+EPISODE_INFO = ("robot", "drive", "sense", "physics_steps")
 ROBOT_POOL = 256  # robots a randomised task draws once; an episode runs one of them
-# The control parameters a task draws (the others, sensor noise and delay and dc motors, not in training yet).
-TRAINED_CONTROLS = ("kp_scale", "kd_scale", "action_delay")
+EPISODE_STREAM = 2  # folded into an episode's key: the pushes' directions and the sensor noise
 RANGES = ("gravity_range", "apex_range", "speed_range", "lateral_speed_range", "initial_clearance", "height_band")
 # Fields of configs saved before stand was redefined (its foot-support term); a policy's hopper_env.json with
 # them still loads (they only shaped the reward it was trained on).
@@ -110,7 +128,9 @@ class MonopedConfig:
     # The robots episodes run: a --randomize spec ("" the URDF's robot), drawn once with randomize_seed.
     randomize: str = ""
     randomize_seed: int = 0
-
+    motor: str = registry.DEFAULT_MOTOR  # a registry.MOTORS name: the joints' motors (hopper_mjx.actuators)
+    action_delay: float = 0.0  # s from the PD torque to the motors', whole steps of `timestep`; a drawn one wins
+    push: tuple[float, float] | None = None  # (interval s, speed m/s) of random horizontal pushes in an episode
 
     def __post_init__(self):
         for name in RANGES:
@@ -126,11 +146,21 @@ class MonopedConfig:
         if not (self.policy_rate > 0 and self.timestep > 0):
             raise ValueError(f"policy_rate and timestep must be positive, got {self.policy_rate}, {self.timestep}")
         engines.check_name(self.engine)
-        spec = self.variation
-        untrained = [name for name in spec.controls if name not in TRAINED_CONTROLS]
-        if untrained:
-            raise ValueError(f"randomize: the tasks draw {', '.join(TRAINED_CONTROLS)} of the control parameters, "
-                             f"not {', '.join(untrained)} (yet)")
+        registry.check("motor", registry.MOTORS, self.motor)
+        if not (math.isfinite(self.action_delay) and self.action_delay >= 0
+                and abs(self.delay_steps * self.timestep - self.action_delay) <= 1e-9):
+            raise ValueError(f"action_delay must be a whole number (>= 0) of physics steps ({self.timestep * 1e3:g} "
+                             f"ms), got {self.action_delay * 1e3:g} ms")
+        if self.push is not None:
+            Pushes.of(*self.push, self.timestep)  # raises for an interval of no whole step, a negative speed
+        dc_only = [name for name in self.variation.controls if registry.CONTROL_PARAMETERS[name].needs == "dc"]
+        if dc_only and self.motor != "dc":
+            raise ValueError(f"randomize: {', '.join(dc_only)} are a dc motor's figures; set motor='dc'")
+
+    @property
+    def delay_steps(self) -> int:
+        """The fixed action delay in physics steps."""
+        return round(self.action_delay / self.timestep)
 
     @property
     def variation(self) -> Spec:
@@ -280,20 +310,26 @@ def speed_term(cfg: MonopedConfig, d, command_speed: jax.Array) -> jax.Array:
     return cfg.w_speed * jnp.exp(-jnp.sum((d.qvel[0:2] - command_speed) ** 2) / cfg.speed_scale**2)
 
 
-def robot_pool(cfg: MonopedConfig, mj_model: mujoco.MjModel, layout: Layout) -> dict[str, jax.Array]:
-    """{model field or control parameter: (ROBOT_POOL, ...)} of the robots a randomised task's episodes run
-    (the model fields with the constants MuJoCo derives from them; delays in physics steps); {} without."""
+def robot_pool(cfg: MonopedConfig, mj_model: mujoco.MjModel) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
+    """({model field: (ROBOT_POOL, ...)}, {control parameter: (ROBOT_POOL, ...)}) of the robots a randomised
+    task's episodes run: the model fields with the constants MuJoCo derives from them, the control parameters
+    as `model.variation.draw_controls` draws them (delays in ms); ({}, {}) without."""
     spec = cfg.variation
     if not spec:
-        return {}
+        return {}, {}
     from hopper_mjx.model import variation
 
     fields = variation.with_constants(mj_model, variation.draw(spec, mj_model, ROBOT_POOL, cfg.randomize_seed))
-    controls = variation.draw_controls(spec, mj_model, ROBOT_POOL, cfg.randomize_seed)
-    if "action_delay" in controls:  # ms -> steps of the task's own timestep
-        controls["action_delay"] = np.round(controls["action_delay"] / (layout.timestep * 1e3)).astype(np.int32)
-    return {k: jnp.asarray(v, jnp.int32 if k == "action_delay" else jnp.float32)
-            for k, v in (fields | controls).items()}
+    return fields, variation.draw_controls(spec, mj_model, ROBOT_POOL, cfg.randomize_seed)
+
+
+class Episode(NamedTuple):
+    """What one episode's physics carries from step to step besides the engine's data; () where the config
+    adds nothing (then the step is today's)."""
+
+    drive: Drive | tuple = ()  # the motors' figures, delay line and energy
+    sense: SensorState | tuple = ()  # the sensors' figures and delay line
+    steps: jax.Array | tuple = ()  # () int32, physics steps since the episode's start
 
 
 def training_model(mj_model: mujoco.MjModel, cfg: MonopedConfig) -> mujoco.MjModel:
@@ -323,13 +359,42 @@ class MonopedEnv(Env):
         self.config = config
         self.layout = Layout.of(trained)
         self.n_frames = decimation(self.layout, config)
-        self.robots = robot_pool(config, mj_model, self.layout)  # {} for the URDF's robot
-        delays = np.asarray(self.robots.get("action_delay", 0))
-        self.line_depth = int(delays.max()) + 1  # the drivers' delay line: the longest delay in the pool
+        fields, controls = robot_pool(config, mj_model)
+        # {model field or PD factor: (ROBOT_POOL, ...)}: {} for the URDF's robot with its own gains
+        self.robots = {k: jnp.asarray(v, jnp.float32) for k, v in fields.items()} | {
+            k: jnp.asarray(v, jnp.float32) for k, v in controls.items() if k in ("kp_scale", "kd_scale")}
         self.engine = engines.make(config.engine, trained, config.variation.fields)
+        self.motors, self.sensors = self._robot_io(controls)
+        self.pushes = None if config.push is None else Pushes.of(*config.push, self.layout.timestep)
         self.standing_qpos = robot.standing_qpos(mj_model).astype(np.float32)  # as the policy controller
         self.stance = self.standing_qpos[list(self.layout.joint_qpos)]
         self.standing_height = float(self.standing_qpos[2])
+
+    def _robot_io(self, controls: dict) -> tuple[Motor | None, SensorState | None]:
+        """Sets the static motors (`self.actuation`) and sensors (`self.sensing`) the config asks for, and
+        returns the pool's motor figures and sensor figures, (P, ...) each (P = ROBOT_POOL when drawn, else 1),
+        or None where they add nothing."""
+        lay, step_ms = self.layout, self.layout.timestep * 1e3
+        longest = lambda name: int(round(controls[name].max() / step_ms)) if name in controls else 0
+        self.actuation = Actuation(lay, self.config.motor, max(self.config.delay_steps, longest("action_delay")))
+        self.sensing = Sensing(longest("sensor_delay"), any(name in controls for name in FIGURES))
+        drawn = per_instance(controls, self.actuation, self.sensing, lay.timestep, self.config.delay_steps)
+        motors = None
+        if not self.actuation.passthrough:
+            motors = drawn.get("motor") or self.actuation.motor(1, delay_steps=self.config.delay_steps)
+        sensors = None
+        if not self.sensing.passthrough:  # the pool's figures (its line is filled at each episode's start)
+            data = jax.eval_shape(self.engine.make_data, jnp.zeros(lay.nq), jnp.zeros(lay.nv))
+            shapes = jax.eval_shape(lambda d: signals.observe(self.engine, self.engine.model, d), data)
+            blank = jax.tree_util.tree_map(lambda x: jnp.zeros((ROBOT_POOL, *x.shape), x.dtype), shapes)
+            figures = dict(drawn["sensing"])
+            sensors = self.sensing.init(blank, figures.pop("delay", 0), figures)
+        return motors, sensors
+
+    @property
+    def counts_steps(self) -> bool:
+        """An episode counts its physics steps: the pushes' schedule and the sensor noise are keyed by them."""
+        return self.pushes is not None or self.sensing.noisy
 
     @classmethod
     def default_config(cls) -> MonopedConfig:
@@ -361,7 +426,8 @@ class MonopedEnv(Env):
     @property
     def task_info(self) -> tuple[str, ...]:
         """The `State.info` keys a fresh episode replaces (`wrappers.ResampleAutoReset`)."""
-        return TASK_INFO + (ROBOT_INFO if self.robots else ())
+        on = (bool(self.config.variation), self.motors is not None, self.sensors is not None, self.counts_steps)
+        return TASK_INFO + tuple(k for k, used in zip(EPISODE_INFO, on) if used)
 
     def reward_terms(self, d, g, command, action, last_action, effort, fell) -> dict[str, jax.Array]:
         """Per-step reward terms (already weighted); their sum is the reward."""
@@ -380,37 +446,79 @@ class MonopedEnv(Env):
         data = self.engine.make_data(qpos, jnp.zeros(lay.nv, qpos.dtype))
         command = self.sample_command(k_cmd)
         last_action = jnp.zeros(3)
-        obs = observe(lay, cfg, signals.observe(self.engine, self.engine.model, data), gravity, command,
-                      last_action)
+        info = {"command": command, "gravity": gravity, "last_action": last_action, "rng": rng}
+        info |= self._start_episode(rng, signals.observe(self.engine, self.engine.model, data))
+        obs = observe(lay, cfg, self.read(data, info), gravity, command, last_action)
         zero = jnp.zeros(())
         terms = self.reward_terms(data, -gravity[2], command, last_action, last_action, zero, zero > 0)
-        info = {"command": command, "gravity": gravity, "last_action": last_action, "rng": rng}
-        if self.robots:  # this episode's robot, its drivers' delay line holding the standing targets
-            info |= {"robot": jax.random.randint(jax.random.fold_in(rng, 1), (), 0, ROBOT_POOL),
-                     "line": jnp.tile(jnp.asarray(self.stance), (self.line_depth, 1))}
         return State(data, obs, zero, zero, {k: zero for k in terms}, info)
 
-    def physics(self, model, data, gravity: jax.Array, target: jax.Array, robot=None):
-        """`n_frames` physics steps of one instance under its own gravity, the PD law tracking
-        `target`: (data, mean of (torque / limit)², the drivers' delay line of targets). The engine's step is
-        traced once, in the loop. `robot`: (PD factors or None, action delay steps, delay line) of a
-        randomised episode's robot (`model` already its own); None: the URDF's, prompt."""
+    def _start_episode(self, rng: jax.Array, first: Observation) -> dict:
+        """The `EPISODE_INFO` of an episode from its key: its robot, its motors at rest with their delay line
+        full of the standing targets, its sensors' line holding the `first` observation (read at step 0, as
+        the core's), no step yet."""
+        info = {}
+        robot = 0
+        if self.config.variation:
+            robot = info["robot"] = jax.random.randint(jax.random.fold_in(rng, 1), (), 0, ROBOT_POOL)
+        pick = lambda pool: jax.tree_util.tree_map(lambda x: x[robot if x.shape[0] > 1 else 0], pool)
+        if self.motors is not None:
+            line = jnp.tile(jnp.asarray(self.stance), (self.actuation.depth, 1))  # the standing targets
+            info["drive"] = Drive(pick(self.motors), line, jnp.zeros(()))
+        if self.sensors is not None:
+            sense = pick(self.sensors)._replace(line=self.sensing.first(first))
+            info["sense"] = self.sensing.apply(sense, first, self.episode_key(rng), jnp.zeros((), jnp.int32))[1]
+        if self.counts_steps:
+            info["physics_steps"] = jnp.zeros((), jnp.int32)
+        return info
+
+    @staticmethod
+    def episode_key(rng: jax.Array) -> jax.Array:
+        """The key of an episode's pushes and sensor noise (with the physics step's index)."""
+        return jax.random.fold_in(rng, EPISODE_STREAM)
+
+    def read(self, data, info: dict) -> Observation:
+        """What the policy reads of its robot: the sensors' reading, else the state (its last contact)."""
+        if self.sensors is None:
+            return signals.observe(self.engine, self.engine.model, data)
+        return reading(info["sense"])
+
+    def physics(self, model, data, gravity: jax.Array, target: jax.Array, scale: PDScale | None = None,
+                episode: Episode = Episode(), key: jax.Array | None = None):
+        """`n_frames` physics steps of one instance under its own gravity, the PD law tracking `target`:
+        (data, mean of (torque / limit)², the episode's carry). The engine's step is traced once, in the
+        loop. `scale`: the episode's robot's PD factors; `episode`: its drive, sensors and step count
+        (`Episode`), `key` its `episode_key`. Each physics step is the core's (`sim`), rotated so that it
+        ends on what the next one reads: the PD law, the motors, the engine; then
+        the step counted, the push due, and the new state into the sensors. The joints' drivers run the PD
+        law on the targets the delay line gives them and on the joints as they are now: the sensors' delay and
+        noise are the policy's, not the drivers' (the core's policy controller does the same)."""
         cfg, lay, engine = self.config, self.layout, self.engine
         limit = jnp.asarray(lay.effort_limit)
-        scale, delay, line = robot if robot is not None else (None, None, None)
 
         def one_physics_step(carry, _):
-            d, effort, line = carry
-            late = target
-            if line is not None:  # the drivers get the targets `delay` physics steps after the policy set them
-                line = jnp.concatenate([target[None], line[:-1]])
-                late = line[delay]
-            torque = pd_torque(lay, cfg, late, d, scale)
+            d, effort, ep = carry
+            if self.motors is None:  # static: ideal, prompt motors add nothing
+                torque = pd_torque(lay, cfg, target, d, scale)
+            else:  # as the core's policy controller (`control.base.Servo`): late targets, a prompt PD loop
+                late, drive = self.actuation.delayed(ep.drive, target)
+                torque, drive = self.actuation.motors(drive, pd_torque(lay, cfg, late, d, scale), d.qvel,
+                                                      lay.timestep)
+                ep = ep._replace(drive=drive)
             d = engine.forward(model, d.replace(ctrl=to_ctrl(lay, torque)), gravity)
-            return (engine.integrate(model, d, gravity), effort + jnp.mean((torque / limit) ** 2), line), None
+            d, effort = engine.integrate(model, d, gravity), effort + jnp.mean((torque / limit) ** 2)
+            if self.counts_steps:
+                ep = ep._replace(steps=ep.steps + 1)
+            if self.pushes is not None:  # `steps` done: the push due now, before anything reads the state
+                d = d.replace(qvel=push(self.pushes, key, ep.steps, d.qvel))
+            if self.sensors is not None:
+                ep = ep._replace(sense=self.sensing.apply(ep.sense, signals.observe(engine, model, d), key,
+                                                          ep.steps)[1])
+            return (d, effort, ep), None
 
-        (data, effort, line), _ = jax.lax.scan(one_physics_step, (data, jnp.zeros(()), line), None, self.n_frames)
-        return data, effort / self.n_frames, line
+        (data, effort, episode), _ = jax.lax.scan(one_physics_step, (data, jnp.zeros(()), episode), None,
+                                                  self.n_frames)
+        return data, effort / self.n_frames, episode
 
     def run_time_model(self, gravity: jax.Array):
         """The engine's model as a value known only at run time, as the core passes it (an argument
@@ -433,19 +541,20 @@ class MonopedEnv(Env):
 
     def step_with(self, model, state: State, action: jax.Array) -> State:
         """`step` with the engine's model pytree given: the physics, then `after_physics`."""
-        robot = None
-        if self.robots:  # the episode's robot: its model, PD factors and delay line
-            k = state.info["robot"]
+        info, scale = state.info, None
+        if self.robots:  # the episode's robot: its model and PD factors
+            k = info["robot"]
             model = self.engine.vary(model, {f: v[k] for f, v in self.robots.items() if f in self.engine.varies})
             pick = lambda name: self.robots[name][k] if name in self.robots else None
             scale = None if pick("kp_scale") is None and pick("kd_scale") is None else PDScale(
                 *(jnp.ones(3) if v is None else v for v in (pick("kp_scale"), pick("kd_scale"))))
-            delay = pick("action_delay")
-            robot = (scale, 0 if delay is None else delay, state.info["line"])
-        data, effort, line = self.physics(model, state.pipeline_state, state.info["gravity"], self.targets(action),
-                                          robot)
-        if line is not None:
-            state = state.replace(info={**state.info, "line": line})
+        episode = Episode(*(info.get(name, ()) for name in ("drive", "sense", "physics_steps")))
+        key = self.episode_key(info["rng"]) if self.counts_steps else None
+        data, effort, episode = self.physics(model, state.pipeline_state, info["gravity"], self.targets(action),
+                                             scale, episode, key)
+        carried = {name: value for name, value in zip(("drive", "sense", "physics_steps"), episode) if name in info}
+        if carried:
+            state = state.replace(info={**info, **carried})
         return self.after_physics(model, state, action, data, effort)
 
     def targets(self, action: jax.Array) -> jax.Array:
@@ -460,8 +569,9 @@ class MonopedEnv(Env):
         command, last_action = state.info["command"], state.info["last_action"]
         terms = self.reward_terms(data, -gravity[2], command, action, last_action, effort, fell)
         reward = jnp.nan_to_num(sum(terms.values()), nan=-cfg.fall_penalty)
-        # The contact of the last forward, as the core's controllers see it.
-        obs = observe(lay, cfg, signals.observe(self.engine, model, data), gravity, command, action)
+        # The sensors' reading, or the state with the contact of the last forward, as the core's controllers see it.
+        sensed = signals.observe(self.engine, model, data) if self.sensors is None else reading(state.info["sense"])
+        obs = observe(lay, cfg, sensed, gravity, command, action)
         info = {**state.info, "last_action": action}
         return state.replace(pipeline_state=data, obs=obs, reward=reward, done=fell.astype(jnp.float32),
                              metrics={**state.metrics, **terms}, info=info)
