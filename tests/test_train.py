@@ -374,3 +374,25 @@ def test_a_damaged_history_is_refused_in_one_line(tmp_path, capsys):
     assert err == f"error: --out: {out.resolve() / 'metrics.json'} is damaged (cut short?); move it away to train " \
                   "from the checkpoints without the old history, or use another --out\n"
     assert (out / "metrics.json").read_text() == '{"history": [{"step": 4'
+
+
+def test_the_robustness_table_gives_each_row_groups_median_and_range_over_its_seeds():
+    """experiments/robustness.py's table from its sweeps' comparison.json groups: per gravity and column, the
+    median [min-max] over a group's seeds of the survival and of the survivors' apex error (none: '–')."""
+    robustness = _load_script("robustness")
+    args = robustness.parser().parse_args(["--policies", "a=x", "--out", "o", "--values", "9.81,1.62"])
+    found = {"raibert": ["raibert"], "a": ["policy:s0", "policy:s1", "policy:s2"]}
+    row = lambda g, alive, err: {"gravity": g, "survival": alive, "apex_error": err}
+    done = {("urdf", "raibert"): {"groups": [row(9.81, 1.0, 0.001), row(1.62, 0.94, 0.031)]},
+            ("randomized", "raibert"): {"groups": [row(9.81, 0.16, 0.033), row(1.62, 0.0, float("nan"))]},
+            ("urdf", "a"): {"groups": [row(9.81, 0.45, 0.016), row(1.62, 0.06, 0.02), row(9.81, 0.58, 0.044),
+                                       row(1.62, 0.2, 0.06), row(9.81, 0.98, 0.022), row(1.62, 0.56, 0.032)]},
+            ("randomized", "a"): {"groups": [row(9.81, 0.0, float("nan")), row(1.62, 0.0, float("nan")),
+                                             row(9.81, 0.5, 0.04), row(1.62, 0.0, float("nan")),
+                                             row(9.81, 0.25, 0.02), row(1.62, 0.0, float("nan"))]}}
+    lines = robustness.table(args, found, done).splitlines()[2:]
+    assert lines == ["| 9.81 | raibert | 1 | 100 % | 0.001 | 16 % | 0.033 |",
+                     "| 1.62 | raibert | 1 | 94 % | 0.031 | 0 % | – |",
+                     "| 9.81 | a | 3 | 58 % [45 %–98 %] | 0.022 [0.016–0.044] | 25 % [0 %–50 %] "
+                     "| 0.030 [0.020–0.040] |",
+                     "| 1.62 | a | 3 | 20 % [6 %–56 %] | 0.032 [0.020–0.060] | 0 % [0 %–0 %] | – |"]
