@@ -131,7 +131,8 @@ def add_physics_options(p: argparse.ArgumentParser, *, engine_help: str = "") ->
     p.add_argument("--motor", default=registry.DEFAULT_MOTOR,
                    help=f"the joints' motors: {registry.listed(registry.MOTORS)}; default {registry.DEFAULT_MOTOR}")
     p.add_argument("--action-delay", type=float, default=0.0, metavar="MS",
-                   help="ms from a controller's command to the motors' torque (whole physics steps)")
+                   help="ms from a controller's command (a torque, or a policy's joint targets) to the motors "
+                        "(whole physics steps)")
     p.add_argument("--push", type=floats("--push"), default=None, metavar="INTERVAL,SPEED",
                    help="random pushes during the run: every INTERVAL s each base's horizontal velocity changes "
                         "by SPEED m/s in a direction of its own")

@@ -49,7 +49,7 @@ class Physics:
     variation: Spec | None = None  # per-instance robot parameters, drawn per instance (None: the URDF's robot)
     engine: str = registry.DEFAULT_ENGINE
     motor: str = registry.DEFAULT_MOTOR  # a registry.MOTORS name: what the joints' motors are (hopper_mjx.actuators)
-    action_delay: float = 0.0  # s from a controller's command to the motors' torque, whole physics steps
+    action_delay: float = 0.0  # s from a command (torque, or a policy's targets) to the motors, whole steps
     push: tuple[float, float] | None = None  # (interval s, speed m/s) of random horizontal pushes during runs
 
     @property
