@@ -70,6 +70,9 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--gravity-range", default=None,
                    help="low,high m/s², drawn log-uniformly per episode (default: the task's, 0.5,12)")
     p.add_argument("--observe-gravity", action="store_true", help="put the gravity magnitude in the observation")
+    p.add_argument("--policy-rate", type=float, default=None, metavar="HZ",
+                   help="policy steps per second (default: the task's, 50); must divide the training's physics rate "
+                        "(500 Hz). --episode-length counts policy steps at this rate")
     cli.add_physics_options(p)
     p.add_argument("--sac-replay", type=int, default=1_000_000, help="SAC: replay buffer size (env steps)")
     p.add_argument("--sac-min-replay", type=int, default=8192, help="SAC: env steps collected before learning")
@@ -192,6 +195,12 @@ def check_task_physics(args, physics) -> None:
 
     config = envs.default_config(args.task)
     step = config.timestep
+    rate = config.policy_rate if args.policy_rate is None else args.policy_rate
+    if args.policy_rate is not None:
+        frames = 1 / (args.policy_rate * step) if math.isfinite(args.policy_rate) and args.policy_rate > 0 else 0
+        if frames < 1 or abs(frames - round(frames)) > 1e-6:
+            raise ValueError(f"--policy-rate must divide the training's physics rate ({1 / step:g} Hz) into whole "
+                             f"steps, got {args.policy_rate:g} Hz")
     if abs(round(physics.action_delay / step) * step - physics.action_delay) > 1e-9:
         raise ValueError(f"--action-delay must be a whole number of the training's physics steps ({step * 1e3:g} ms), "
                          f"got {physics.action_delay * 1e3:g} ms")
@@ -200,10 +209,10 @@ def check_task_physics(args, physics) -> None:
             Pushes.of(*physics.push, step)
         except ValueError as err:
             raise ValueError(f"--push: {err} in training") from None
-    episode = args.episode_length / config.policy_rate
+    episode = args.episode_length / rate
     for seed in range(args.seed, args.seed + (args.seeds or 1)):
         cli.check_delay(physics, episode, ROBOT_POOL, seed,
-                        run=f"an episode (--episode-length {args.episode_length} at {config.policy_rate:g} Hz)")
+                        run=f"an episode (--episode-length {args.episode_length} at {rate:g} Hz)")
 
 
 def task_config(args, physics):
@@ -215,6 +224,8 @@ def task_config(args, physics):
         overrides |= {"randomize": str(physics.variation), "randomize_seed": args.seed}
     if args.gravity_range is not None:
         overrides["gravity_range"] = _pair(args.gravity_range, "--gravity-range")
+    if args.policy_rate is not None:
+        overrides["policy_rate"] = args.policy_rate
     return envs.make(args.task, physics.mj_model, **overrides)
 
 

@@ -179,6 +179,14 @@ def test_train_rejects_bad_input_in_one_line_before_anything_runs(trained, capsy
      "50 Hz) 0.4 s"),
     (["--motor", "ideal", "--randomize", "motor_no_load_speed=scale(0.8,1.2)"],
      "--randomize: motor_no_load_speed is a dc motor's figure; add --motor dc"),
+    (["--policy-rate", "30"], "--policy-rate must divide the training's physics rate (500 Hz) into whole steps, "
+                              "got 30 Hz"),
+    (["--policy-rate", "0"], "--policy-rate must divide the training's physics rate (500 Hz) into whole steps, "
+                             "got 0 Hz"),
+    # The episode is counted in policy steps at the given rate: 20 steps at 100 Hz are 0.2 s.
+    (["--policy-rate", "100", "--action-delay", "200", "--episode-length", "20"],
+     "--action-delay 200 ms is not shorter than an episode (--episode-length 20 at 100 Hz) 0.2 s: no command would "
+     "reach the motors"),
 ])
 def test_a_new_run_is_refused_before_its_folder_is_made(tmp_path, capsys, args, message):
     """Every option, the evaluation's too, is checked before the run folder exists (a mistake in
@@ -396,3 +404,20 @@ def test_the_robustness_table_gives_each_row_groups_median_and_range_over_its_se
                      "| 9.81 | a | 3 | 58 % [45 %–98 %] | 0.022 [0.016–0.044] | 25 % [0 %–50 %] "
                      "| 0.030 [0.020–0.040] |",
                      "| 1.62 | a | 3 | 20 % [6 %–56 %] | 0.032 [0.020–0.060] | 0 % [0 %–0 %] | – |"]
+
+
+def test_a_policy_rate_sets_the_tasks_physics_steps_per_action_and_the_policy_keeps_it(tmp_path):
+    """--policy-rate 100: 5 of the training's 2 ms steps per action (10 at the default 50 Hz), saved in the task's
+    config, from which the policy controller in the core takes 10 of its 1 ms steps per action."""
+    from hopper_mjx.envs import monoped
+    from hopper_mjx.model.layout import Layout
+
+    frames = {}
+    for rate in (None, "100"):
+        args = train_script.parser().parse_args(["--task", "hop", "--out", str(tmp_path / "run"),
+                                                 *(["--policy-rate", rate] if rate else [])])
+        physics = train_script.check(args)
+        env = train_script.task_config(args, physics)
+        frames[rate] = env.n_frames, monoped.decimation(Layout.of(physics.mj_model), env.config)
+        assert monoped.MonopedConfig.from_dict(env.config.to_dict()) == env.config
+    assert frames == {None: (10, 20), "100": (5, 10)}
