@@ -370,6 +370,23 @@ def on_ground(engine, mj_model: mujoco.MjModel, model, heights):
     return model.replace(hfield_data=data.ravel().astype(model.hfield_data.dtype))
 
 
+def _drive(actuation: Actuation, controller, command, cstate, drive, now, qvel, dt):
+    """(ctrl, controller state, drive): a controller's command through the delay line and the motors. A torque
+    controller's command is its torque; a servo's (a policy's) is joint targets, delayed on their way to the
+    drivers, whose PD law reads the joints as they are `now`."""
+    if controller.servo is None:
+        if actuation.passthrough:  # static: ideal, prompt motors add nothing
+            return command, cstate, drive
+        ctrl, drive = actuation.apply(drive, command, qvel, dt)
+        return ctrl, cstate, drive
+    if actuation.depth > 1:
+        command, drive = actuation.delayed(drive, command)
+    torque, cstate = controller.servo.track(cstate, command, now)
+    if not actuation.passthrough:
+        torque, drive = actuation.motors(drive, torque, qvel, dt)
+    return to_ctrl(actuation.layout, torque), cstate, drive
+
+
 def _instance_rollout(engine, actuation: Actuation, pushes: Pushes | None, sensing: Sensing, controller, steps, tick,
                       periods, sensors, terrain=None, mj_model=None):
     """One instance's rollout: `steps` physics steps, a record every `tick` steps; on a height field
@@ -391,18 +408,7 @@ def _instance_rollout(engine, actuation: Actuation, pushes: Pushes | None, sensi
         if counts:
             step = step + 1
         command, cstate = controller.act(state.cstate, obs, state.gravity)
-        drive = state.drive
-        if controller.servo is None:
-            ctrl = command
-            if not actuation.passthrough:  # what the motors make of the command (static: ideal adds nothing)
-                ctrl, drive = actuation.apply(drive, ctrl, d.qvel, dt)
-        else:  # joint targets: delayed on their way to the drivers, whose PD reads the joints as they are now
-            if actuation.depth > 1:
-                command, drive = actuation.delayed(drive, command)
-            torque, cstate = controller.servo.track(cstate, command, now)
-            if not actuation.passthrough:
-                torque, drive = actuation.motors(drive, torque, d.qvel, dt)
-            ctrl = to_ctrl(actuation.layout, torque)
+        ctrl, cstate, drive = _drive(actuation, controller, command, cstate, state.drive, now, d.qvel, dt)
         d1 = engine.forward(model, d.replace(ctrl=ctrl), state.gravity)
         measure = lambda: signals.measure(engine, model, d1, state.gravity, sensed)
         # An unbatched predicate stays a real conditional under vmap: off-tick steps skip the signals.
