@@ -192,17 +192,15 @@ def check_task_physics(args, physics) -> None:
     """The motors' delay and the pushes in whole steps of the task's own physics step (2 ms, not the core's
     1 ms), and every delay the robot pool of each seed draws shorter than an episode."""
     from hopper_mjx import envs
-    from hopper_mjx.envs.monoped import ROBOT_POOL
+    from hopper_mjx.envs.monoped import ROBOT_POOL, steps_per_action
     from hopper_mjx.pushes import Pushes
 
     config = envs.default_config(args.task)
     step = config.timestep
     rate = config.policy_rate if args.policy_rate is None else args.policy_rate
-    if args.policy_rate is not None:
-        frames = 1 / (args.policy_rate * step) if math.isfinite(args.policy_rate) and args.policy_rate > 0 else 0
-        if frames < 1 or abs(frames - round(frames)) > 1e-6:
-            raise ValueError(f"--policy-rate must divide the training's physics rate ({1 / step:g} Hz) into whole "
-                             f"steps, got {args.policy_rate:g} Hz")
+    if args.policy_rate is not None and steps_per_action(args.policy_rate, step) is None:
+        raise ValueError(f"--policy-rate must divide the training's physics rate ({1 / step:g} Hz) into whole "
+                         f"steps, got {args.policy_rate:g} Hz")
     if abs(round(physics.action_delay / step) * step - physics.action_delay) > 1e-9:
         raise ValueError(f"--action-delay must be a whole number of the training's physics steps ({step * 1e3:g} ms), "
                          f"got {physics.action_delay * 1e3:g} ms")

@@ -193,12 +193,19 @@ def same_robot(recorded: str, mj_model, what: str) -> str:
     return found
 
 
+def steps_per_action(rate: float, timestep: float) -> int | None:
+    """Whole physics steps of `timestep` s per policy step at `rate` Hz; None where the rate does not divide the
+    physics rate (or is not a positive number)."""
+    steps = 1.0 / (rate * timestep) if math.isfinite(rate) and rate > 0 else 0.0
+    return int(round(steps)) if steps >= 1 and abs(steps - round(steps)) <= 1e-6 else None
+
+
 def decimation(layout: Layout, cfg: MonopedConfig) -> int:
     """Physics steps per policy step; the policy rate must divide the physics rate."""
-    steps = 1.0 / (cfg.policy_rate * layout.timestep)
-    if steps < 1 or abs(steps - round(steps)) > 1e-6:
+    steps = steps_per_action(cfg.policy_rate, layout.timestep)
+    if steps is None:
         raise ValueError(f"policy_rate={cfg.policy_rate} Hz must divide the physics rate {1 / layout.timestep:g} Hz")
-    return int(round(steps))
+    return steps
 
 
 def log_uniform(key: jax.Array, bounds: tuple[float, float]) -> jax.Array:
