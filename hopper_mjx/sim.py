@@ -312,7 +312,7 @@ class Sim:
                 chunks = jax.tree_util.tree_map(
                     lambda x: x.reshape((n_local // chunk, chunk) + x.shape[1:]), state
                 )
-                out = jax.lax.map(jax.vmap(lambda s: one(model, heights, s)), chunks)
+                out = jax.lax.map(jax.vmap(lambda s: one(model, heights, s), axis_name=engines.BATCH_AXIS), chunks)
                 return jax.tree_util.tree_map(lambda x: x.reshape((n_local,) + x.shape[2:]), out)
 
             sharded = jax.shard_map(

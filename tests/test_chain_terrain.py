@@ -5,7 +5,7 @@ contact with GJK + EPA to `opt.ccd_tolerance`; the chain computes the point EPA 
 So: at C's default tolerance the distances agree to within it; with C's tolerance tightened
 (1e-14) every stage agrees in float64 to ~1e-9. Trajectories through touchdown (float64, the
 model's own options) stay within 1e-3 m of C. A new terrain is a new input, not a new compile.
-The models here have no base-box pairs: the chain refuses those on a heightfield (not written).
+The models here have no base-box pairs (test_chain_terrain_box.py has the box against the terrain).
 """
 
 from __future__ import annotations
@@ -22,7 +22,6 @@ from test_chain import HOLD_D, HOLD_P, STAGES, chain_stages, converged, mujoco_c
 
 from hopper_mjx import metrics
 from hopper_mjx.engine import chain, chain_constraint, chain_smooth
-from hopper_mjx.engine.chain_model import NotChain, describe
 from hopper_mjx.model.robot import stance_qpos
 
 HALF = 1.0  # m: the terrains span 2 m x 2 m
@@ -219,12 +218,6 @@ def test_float64_stages_match_mujoco_c(float64_contacts, name):
     print(f"\n{name}:", {k: f"{v:.1e}" for k, v in errors.items()})
     for stage, err in errors.items():
         assert err <= 1e-9, f"{name} {stage}: chain and MuJoCo C differ by {err:.2e}"
-
-
-def test_the_base_box_on_a_heightfield_is_refused_in_one_line():
-    with pytest.raises(NotChain, match="base box") as err:
-        describe(hfield_model(terrain("rough"), HALF, HALF))
-    assert "\n" not in str(err.value)
 
 
 def models_tolerance() -> float:

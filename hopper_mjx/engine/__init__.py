@@ -16,10 +16,12 @@ Every engine has, per instance and pure (the core vmaps them):
 - `foot_contact(model, data) -> (flag, force, pos)` of the last forward: () bool foot
   touching, (3,) N floor-on-foot force and (3,) m contact point, world frame.
 
+The core vmaps over instances with `axis_name=BATCH_AXIS`, so that an engine may skip a stage
+no instance of the chunk needs (the chain engine's base box against a heightfield).
 `data` is a pytree with `qpos`, `qvel`, `qacc`, `ctrl`, `time` and `.replace(**fields)`.
 "mjx" (MuJoCo MJX, any model) is the reference and the fallback; "chain" is MuJoCo's step
-specialised to the monoped's topology (free base, serial chain of hinges, sphere foot on a
-plane, or on a heightfield without the base box's pairs; several times faster on CPU);
+specialised to the monoped's topology (free base, serial chain of hinges, sphere foot and base
+box on a plane or a heightfield; several times faster on CPU);
 "auto" picks "chain" when the model qualifies and otherwise "mjx", with a one-line notice
 on stderr saying why.
 """
@@ -32,6 +34,7 @@ from typing import Any, Protocol, runtime_checkable
 import mujoco
 
 from hopper_mjx import registry
+from hopper_mjx.engine.chain_stage import BATCH_AXIS
 from hopper_mjx.engine.mjx import MjxEngine
 from hopper_mjx.randomize import check_engine_varies
 
@@ -78,7 +81,7 @@ def make(name: str, mj_model: mujoco.MjModel, varies: frozenset[str] = frozenset
 
         try:
             check_engine_varies("chain", varies)
-            return chain.make(mj_model, varies=varies)
+            return chain.make_for_tools(mj_model, varies=varies)
         except ValueError as err:  # NotChain, or a varied field
             if name == "chain":
                 raise
@@ -86,4 +89,4 @@ def make(name: str, mj_model: mujoco.MjModel, varies: frozenset[str] = frozenset
     return MjxEngine(mj_model, varies)
 
 
-__all__ = ["CPU_COMPILER_OPTIONS", "Engine", "MjxEngine", "check_name", "make"]
+__all__ = ["BATCH_AXIS", "CPU_COMPILER_OPTIONS", "Engine", "MjxEngine", "check_name", "make"]

@@ -20,10 +20,11 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
+import jax
 import jax.numpy as jnp
 
 from hopper_mjx.engine import chain_algebra as al
-from hopper_mjx.engine import chain_hfield
+from hopper_mjx.engine import chain_hfield, chain_hfield_box
 from hopper_mjx.engine.chain_model import ChainModel, ContactPair, SolParams
 from hopper_mjx.engine.chain_smooth import Pose, dof_body
 from hopper_mjx.engine.chain_stage import stored
@@ -163,21 +164,44 @@ def _directions(cm: ChainModel, pair: ContactPair, friction, frame=None) -> tupl
     return tuple(out)
 
 
-def _terrain_slots(cm: ChainModel, pair: ContactPair, pose: Pose, terrain) -> list:
-    """Per heightfield contact slot of the (sphere) pair: (exists, distance, point relative to
-    O, contact frame)."""
-    centre = al.vadd(pose.origin[pair.body], al.matvec(pose.rot[pair.body], pair.pos))
-    world = al.vadd(centre, pose.base_pos)
-    slots = []
-    for con in chain_hfield.sphere_contacts(cm.terrain, terrain, world, pair.size[0]):
-        slots.append((con.exists, con.dist, al.vsub(con.pos, pose.base_pos), chain_hfield.make_frame(con.normal)))
-    return slots
+def box_frame(pair: ContactPair, pose: Pose) -> tuple:
+    """The box's centre (world) and its rotation (3x3 array, its axes as columns)."""
+    centre = al.vadd(al.vadd(pose.origin[pair.body], al.matvec(pose.rot[pair.body], pair.pos)), pose.base_pos)
+    rot = al.matmul(pose.rot[pair.body], pair.rot)
+    as_array = lambda v: jnp.stack(jnp.broadcast_arrays(*(jnp.asarray(x) for x in v)))
+    return as_array(centre), as_array(rot).reshape(3, 3)
 
 
-def _all_slots(cm: ChainModel, pose: Pose, terrain):
+def box_near(cm: ChainModel, pose: Pose, terrain):
+    """() bool: the base box (on a heightfield floor) may touch it this step."""
+    pair = cm.pairs[cm.terrain.box]
+    return chain_hfield_box.box_near(cm.terrain, terrain, *box_frame(pair, pose), pair.size)
+
+
+def _terrain_slots(cm: ChainModel, pair: ContactPair, pose: Pose, terrain, box_on) -> list:
+    """Per heightfield contact slot of the pair: (exists, distance, point relative to O, contact frame).
+    The box's prisms are collided only where `box_on` (a box of the batch is near its ground)."""
+    if pair.kind == "box":
+        centre, rot = box_frame(pair, pose)
+        keep = cm.terrain.box_keep
+        collide = lambda c, r: chain_hfield_box.box_contacts(cm.terrain, terrain, c, r, pair.size, keep)
+        dtype = centre.dtype
+        absent = lambda c, r: tuple(chain_hfield.Contact(jnp.zeros((), bool), jnp.zeros((), dtype),
+                                                         (jnp.zeros((), dtype),) * 3,
+                                                         (jnp.zeros((), dtype),) * 2 + (jnp.ones((), dtype),))
+                                    for _ in range(keep))
+        contacts = jax.lax.cond(box_on, collide, absent, centre, rot)
+    else:
+        centre = al.vadd(pose.origin[pair.body], al.matvec(pose.rot[pair.body], pair.pos))
+        contacts = chain_hfield.sphere_contacts(cm.terrain, terrain, al.vadd(centre, pose.base_pos), pair.size[0])
+    return [(con.exists, con.dist, al.vsub(con.pos, pose.base_pos), chain_hfield.make_frame(con.normal))
+            for con in contacts]
+
+
+def _all_slots(cm: ChainModel, pose: Pose, terrain, box_on=None):
     """Per pair, per slot: (exists, distance, point relative to O, contact frame: None for the plane's)."""
     if cm.terrain is not None:
-        return tuple(tuple(_terrain_slots(cm, pair, pose, terrain)) for pair in cm.pairs)
+        return tuple(tuple(_terrain_slots(cm, pair, pose, terrain, box_on)) for pair in cm.pairs)
     normal = cm.contact_frame[0:3]
     height = al.dot(normal, al.vsub(pose.base_pos, cm.floor_point))  # base origin above the floor
     return tuple(tuple((dist <= pair.include_margin, dist, point, None)
@@ -218,8 +242,11 @@ def _assemble(cm: ChainModel, pose: Pose, qpos, qvel, slots) -> tuple[Rows, Foot
     return Rows(tuple(jac), tuple(weight), tuple(aref), tuple(loss)), foot
 
 
-def rows(cm: ChainModel, gate, pose: Pose, qpos, qvel, terrain=None) -> tuple[Rows, FootContact]:
+def rows(cm: ChainModel, gate, pose: Pose, qpos, qvel, terrain=None, box_on=None) -> tuple[Rows, FootContact]:
     """All constraint rows (MuJoCo's order: friction, limits, then contacts by pair) and the foot's; `terrain`
-    (chain_hfield.TerrainParams) for a heightfield floor."""
-    slots = stored(gate, lambda p, t: _all_slots(cm, p, t), pose, terrain)
+    (chain_hfield.TerrainParams) for a heightfield floor, `box_on` (() bool) whether to collide its base box
+    (by default where `box_near`)."""
+    if cm.terrain is not None and cm.terrain.box is not None and box_on is None:
+        box_on = box_near(cm, pose, terrain)
+    slots = stored(gate, lambda p, t, b: _all_slots(cm, p, t, b), pose, terrain, box_on)
     return stored(gate, lambda *a: _assemble(cm, *a), pose, qpos, qvel, slots)

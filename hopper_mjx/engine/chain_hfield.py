@@ -123,10 +123,11 @@ def _prism_contact(p, top, bottom, radius) -> Contact:
     return Contact(inside | (dist_out < radius), -depth, pos, normal)
 
 
-def _block_start(t: Terrain, centre, radius):
-    """The block's first (row, col): the cell under the sphere box's low corner, clamped so
-    the block lies in the grid (then it still covers every cell the box reaches)."""
-    rows, cols = t.block
+def block_start(t: Terrain, centre, radius, block):
+    """The first (row, col) of a block of (rows, cols) cells around a body of bounding `radius`:
+    the cell under its bounding box's low corner, clamped so the block lies in the grid (then it
+    still covers every cell the box reaches)."""
+    rows, cols = block
     x = centre[0] - t.origin[0] + t.hx - radius
     y = centre[1] - t.origin[1] + t.hy - radius
     col = jnp.clip(jnp.floor(x / t.dx).astype(jnp.int32), 0, t.ncol - 1 - cols)
@@ -137,7 +138,7 @@ def _block_start(t: Terrain, centre, radius):
 def sphere_contacts(t: Terrain, terrain: TerrainParams, centre, radius: float) -> tuple[Contact, ...]:
     """One contact slot per prism of the block around the sphere (world centre `centre`)."""
     rows, cols = t.block
-    row, col = _block_start(t, centre, radius)
+    row, col = block_start(t, centre, radius, t.block)
     block = jax.lax.dynamic_slice(terrain.heights, (row, col), (rows + 1, cols + 1))
     dtype = block.dtype
     x0 = t.origin[0] - t.hx + t.dx * col.astype(dtype)
@@ -158,31 +159,14 @@ def sphere_contacts(t: Terrain, terrain: TerrainParams, centre, radius: float) -
 
 
 def deepest(contacts: tuple[Contact, ...], keep: int) -> tuple[Contact, ...]:
-    """The `keep` deepest present contacts (absent slots where fewer exist), deepest first:
-    fewer constraint rows, the same contacts as C whenever at most `keep` exist."""
-    key = [jnp.where(c.exists, c.dist, jnp.inf) for c in contacts]
-    out = []
-    for _ in range(keep):
-        least = key[0]
-        for k in key[1:]:
-            least = jnp.minimum(least, k)
-        found = jnp.isfinite(least)
-        taken, hits = jnp.zeros((), bool), []
-        for i, k in enumerate(key):
-            hit = (k == least) & ~taken & found
-            taken = taken | hit
-            hits.append(hit)
-            key[i] = jnp.where(hit, jnp.inf, k)
-
-        def pick(field):
-            total = 0.0
-            for hit, c in zip(hits, contacts):
-                total = total + jnp.where(hit, field(c), 0.0)
-            return total
-        out.append(Contact(found, pick(lambda c: c.dist), tuple(pick(lambda c, j=j: c.pos[j]) for j in range(3)),
-                           tuple(jnp.where(found, pick(lambda c, j=j: c.normal[j]), float(j == 2))
-                                 for j in range(3))))
-    return tuple(out)
+    """The `keep` deepest present contacts (absent slots where fewer exist), deepest first, the earlier
+    slot first among equals: fewer constraint rows, the same contacts as C whenever at most `keep` exist."""
+    depth = jnp.stack([jnp.where(c.exists, -c.dist, -jnp.inf) for c in contacts])
+    fields = jnp.stack([jnp.stack([c.dist, *c.pos, *c.normal]) for c in contacts])  # (slots, 7)
+    top, idx = jax.lax.top_k(depth, keep)
+    found = jnp.isfinite(top)
+    picked = jnp.where(found[:, None], fields[idx], jnp.array([0.0, 0, 0, 0, 0, 0, 1], fields.dtype))
+    return tuple(Contact(found[k], picked[k, 0], tuple(picked[k, 1:4]), tuple(picked[k, 4:7])) for k in range(keep))
 
 
 def make_frame(normal) -> tuple:

@@ -40,3 +40,16 @@ def stored(gate: jax.Array, fn, *args):
     outs = iter(jax.lax.cond(gate, replay, zeros, traced_in))
     leaves = [x if is_const(x) else next(outs) for x in box["leaves"]]
     return jax.tree_util.tree_unflatten(box["tree"], leaves)
+
+
+# The name the core gives its vmap over instances (`jax.vmap(..., axis_name=BATCH_AXIS)`).
+BATCH_AXIS = "instances"
+
+
+def batch_any(flag: jax.Array) -> jax.Array:
+    """Whether `flag` holds for any instance of the vmapped batch (unbatched, so a `lax.cond` on it stays a
+    conditional and a stage few instances need is skipped for the whole chunk); the flag itself outside it."""
+    try:
+        return jax.lax.pmax(flag.astype(jnp.int32), BATCH_AXIS) > 0
+    except NameError:  # not under the core's vmap: per instance (a select under another vmap)
+        return flag

@@ -95,7 +95,7 @@ def chain_cut(engine, depth: int):
         if depth >= 2:
             outputs.append(chain._smooth(cm, gate, pose, qpos, qvel, tuple(d.ctrl), tuple(g)))
         if depth >= 3:
-            outputs.append(chain_constraint.rows(cm, gate, pose, qpos, qvel))
+            outputs.append(chain_constraint.rows(cm, gate, pose, qpos, qvel, engine.model.terrain))
         leaves = [x for x in jax.tree_util.tree_leaves(outputs) if not isinstance(x, (int, float))]
         return d.replace(qvel=d.qvel + 1e-12 * sum(jnp.sum(x) for x in leaves))  # keeps every output
 
