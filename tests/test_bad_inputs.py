@@ -131,8 +131,6 @@ CASES = [
     ("simulate", ["--terrain", "rough:cell=0.002", "--num", "30000"], "--terrain rough:cell=0.002, --num: 90,000 "
                                                                        "instances would need about"),
     ("simulate", ["--terrain", "rough:cell=0.0001"], "--terrain: a 40001 x 40001 grid has 1,600,080,001 vertices"),
-    ("simulate", ["--terrain", "steps", "--engine", "chain"], "--engine chain runs on the flat floor only, for now"),
-    ("perf.bench", ["--terrain", "steps", "--engine", "chain"], "--engine chain runs on the flat floor only"),
     ("sweep", ["gravity", "--terrain", "rough", "--out", "s"], "--terrain: a gravity sweep (an obstacle or terrain "
      "sweep takes terrain) runs on the flat ground only"),
     ("sweep", ["obstacle", "--heights", "0.1,-0.05", "--out", "s"], "--terrain: height=-0.05 must be >= 0 m"),

@@ -160,15 +160,14 @@ def test_generators_are_pure_functions_of_the_vertices():
     assert not generators.flat(x, y).any()
 
 
-def test_auto_steps_a_terrain_with_mjx_and_says_why(capsys):
+def test_auto_steps_a_terrain_with_the_chain_engine(capsys):
     from hopper_mjx import engine
+    from hopper_mjx.engine import chain
 
     m = model.load(terrain=terrain.parse("steps").terrain())
-    assert engine.make("auto", m).name == "mjx"
-    notice = capsys.readouterr().err
-    assert notice.startswith("note: engine auto uses mjx") and "heightfield" in notice and notice.count("\n") == 1
-    with pytest.raises(ValueError, match="not a chain model"):
-        engine.make("chain", m)
+    auto = engine.make("auto", m)
+    assert auto.name == "chain" and capsys.readouterr().err == ""
+    assert auto.chain.terrain.max_contacts == chain.FOOT_CONTACTS and auto.chain.terrain.box is not None
 
 
 def test_seed_each_draws_every_instance_its_own_ground():

@@ -126,7 +126,7 @@ def check(args):
     grounds = terrain_grounds(args)
     if grounds:  # the model compiles the first; every grid point's ground is checked as --terrain is
         n = min(args.chunk, args.num * len(gravity) * len(grounds))
-        grounds = [str(cli.check_ground(g, [args.engine], n=n)) for g in grounds]  # as the manifest keeps them
+        grounds = [str(cli.check_ground(g, n=n)) for g in grounds]  # as the manifest keeps them
         args.terrain = grounds[0]
     physics = cli.check_physics(args, n=args.num, seed=args.seed)  # one robot per replicate, drawn now
     if not grounds:
