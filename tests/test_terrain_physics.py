@@ -134,3 +134,43 @@ def test_mjx_takes_the_height_field_as_a_traced_input():
     flag, _, pos = jax.jit(jax.vmap(foot))(grids)
     assert flag.tolist() == [True, False]
     assert float(pos[0, 2]) == pytest.approx(0.05 - 0.001, abs=2e-4)  # midway through the overlap
+
+
+def test_chain_follows_mujoco_c_on_the_exported_terrains(tmp_path, capsys):
+    """The chain engine (float32, the foot's and the box's contacts on the height field) against C on each
+    exported model: the same limp drops, the three grounds given to one compiled batch as its instances'
+    heights. Its paths through the touchdowns stay within 1e-3 m of C's."""
+    from hopper_mjx.signals import SensorConfig
+    from hopper_mjx.sim import Sim, gravity_vectors
+
+    exported, starts, grounds = {}, {}, {}
+    for name, spec in DROPS.items():
+        path = tmp_path / f"{name}.xml"
+        assert model_main.main(["--export", str(path), "--terrain", spec]) == 0
+        exported[name] = path
+        t = terrain.from_model(mujoco.MjModel.from_xml_path(str(path)))
+        starts[name], grounds[name] = start_qpos(mujoco.MjModel.from_xml_path(str(path)), t), t.heights
+    cases = [(name, g) for name in DROPS for g in GRAVITIES]
+    sim = Sim(mujoco.MjModel.from_xml_path(str(exported["rough"])), engine="chain")
+    _, traj = sim.run(gravity_vectors([g for _, g in cases]), duration=DROP_SECONDS,
+                      sensors=SensorConfig.uniform(1000), qpos=np.stack([starts[n] for n, _ in cases]),
+                      ground=np.stack([grounds[n] for n, _ in cases]))
+    ours = np.asarray(traj.qpos)[:, :, :3]
+    worst = {}
+    for i, (name, g) in enumerate(cases):
+        m = mujoco.MjModel.from_xml_path(str(exported[name]))
+        m.opt.gravity[:] = (0.0, 0.0, -g)
+        d = mujoco.MjData(m)
+        d.qpos[:] = starts[name]
+        c = []
+        for _ in range(ours.shape[1]):
+            c.append(d.qpos[:3].copy())
+            mujoco.mj_step(m, d)
+        c = np.array(c)
+        assert c[:, 2].min() < starts[name][2] - 0.05  # it fell onto the terrain
+        worst[name, g] = float(np.linalg.norm(ours[i] - c, axis=1).max())
+    with capsys.disabled():
+        for name in DROPS:
+            print(f"\n{name}: max |base path chain - C| over {DROP_SECONDS} s at g = {GRAVITIES}: "
+                  + ", ".join(f"{worst[name, g]:.2e}" for g in GRAVITIES) + " m")
+    assert max(worst.values()) < 1e-3
