@@ -220,12 +220,12 @@ def _advance_qpos(cm: ChainModel, qpos: jax.Array, qvel: jax.Array) -> jax.Array
     return jnp.concatenate([qpos[:3] + h * qvel[:3], quat, hinges])
 
 
-# The foot's contacts on a heightfield that the tools keep as constraint rows (`engine.make`): C's set whenever
-# the foot touches at most the six triangles around one vertex, which a 3 cm sphere on 4 cm cells does unless
-# it sits in a pit. Every slot costs its four pyramid rows in the solve whether or not it holds a contact
-# (measured, N = 1024 on rough ground: 18 slots, all C could make, 39 us a step; 6 slots 8.4 us; 4 slots 7.4 us
-# but a standing foot on a vertex then loses contacts, and its path leaves C's by 1e-3 m in 0.4 s).
-FOOT_CONTACTS = 6
+# The foot's contacts on a heightfield that the tools keep as constraint rows (`engine.make`). Every slot costs
+# its four pyramid rows in the solve whether or not it holds a contact. Measured with perf.bench's standing batch,
+# N = 1024 on rough:amp=0.02 (CPU us a step; final state against native): all 18 slots 39.8 us, 7.5e-7 m;
+# 10 slots 14.0 us; 8 slots 9.5 us, 6.8e-7 m; 6 slots 8.2 us, but some feet then touch more prisms than
+# are kept and the batch leaves native's by 1e-3 m in 0.4 s.
+FOOT_CONTACTS = 8
 
 
 def make(mj_model: mujoco.MjModel, max_foot_contacts: int | None = None,
