@@ -241,16 +241,17 @@ START_XY = {"rough": (0.0, 0.0), "step": (0.0, 0.0), "bump": (0.07, 0.02)}  # th
 DROP = 0.03  # m above the first contact
 
 
-def _step_fn(engine: chain.ChainEngine):
-    """A compiled, vmapped step (forward + integrate), each instance on its own terrain."""
+def _step_fn(engine: chain.ChainEngine, axis_name: str | None = None):
+    """A compiled, vmapped step (forward + integrate), each instance on its own terrain: (qpos, qvel, qacc,
+    foot touching, qfrc_constraint). `axis_name`: the core's (chain.BATCH_AXIS) to vmap as it does."""
     def one(params, qpos, qvel, ctrl, gravity, warm):
         data = engine.make_data(qpos, qvel).replace(ctrl=ctrl, qacc_warmstart=warm)
         data = engine.forward(params, data, gravity)
         after = engine.integrate(params, data, gravity)
-        return after.qpos, after.qvel, data.qacc, data.foot_touching
+        return after.qpos, after.qvel, data.qacc, data.foot_touching, data.qfrc_constraint
 
     axes = chain.ChainParams(gate=None, terrain=chain.TerrainParams(0, 0))
-    return jax.jit(jax.vmap(one, in_axes=(axes, 0, 0, 0, 0, 0)))
+    return jax.jit(jax.vmap(one, in_axes=(axes, 0, 0, 0, 0, 0), axis_name=axis_name))
 
 
 @pytest.fixture(scope="module")
@@ -286,7 +287,7 @@ def trajectories(models):
         for _ in range(TRAJ_STEPS):
             ctrl = np.where(hold[:, None], HOLD_P * (q0[7:] - qpos[:, 7:]) - HOLD_D * qvel[:, 6:], 0.0)
             out = step(params, *(jnp.asarray(x) for x in (qpos, qvel, ctrl, gravity, warm)))
-            qpos, qvel, warm, touching = (np.asarray(x) for x in out)
+            qpos, qvel, warm, touching, _ = (np.asarray(x) for x in out)
             touched.append(touching)
             for m, d, h in zip(cmodels, cdata, hold):
                 d.ctrl[:] = np.where(h, HOLD_P * (q0[7:] - d.qpos[7:]) - HOLD_D * d.qvel[6:], 0.0)
