@@ -180,7 +180,9 @@ def terrain_metrics(traj, *, command_speed=(0.0, 0.0), obstacles=None) -> dict[s
 
     - distance_made_good: m, the base's net horizontal travel from the start to the end of the record (or its
       fall), along the commanded direction when a speed is commanded, else in whichever direction;
-    - obstacles_cleared: how many of `obstacles` the base passed beyond (their far end) before any fall;
+    - obstacles_cleared: how many of `obstacles` the foot touched down beyond (their far end) before any fall
+      (not the base: a robot that trips on a block and topples forward carries its base past the block before
+      the fall test sees it down);
     - highest_cleared: m, the highest of those (NaN when none; a trench counts as its negative depth);
     - fall_x, fall_y: m, where the base was at its fall (NaN without one).
 
@@ -200,7 +202,10 @@ def terrain_metrics(traj, *, command_speed=(0.0, 0.0), obstacles=None) -> dict[s
     made_good = np.where(speed > 0, along, np.linalg.norm(travel, axis=1))
     given = np.zeros((0, 3)) if obstacles is None else np.asarray(obstacles, dtype=float)
     bands = np.broadcast_to(given, (n, *given.shape[-2:]))
-    farthest = np.where(fall.upright, qpos[:, :, 0], -np.inf).max(axis=1)  # the base's reach before any fall
+    # The farthest foothold before any fall.
+    landed = np.asarray(traj.contact.flag, dtype=bool) & (np.asarray(traj.time["contact"])[None, :]
+                                                         <= fall.t_fall[:, None])
+    farthest = np.where(landed, np.asarray(traj.contact.pos, dtype=float)[:, :, 0], -np.inf).max(axis=1)
     with np.errstate(invalid="ignore"):
         cleared = np.isfinite(bands[:, :, 1]) & (farthest[:, None] > bands[:, :, 1])
     highest = np.where(cleared, bands[:, :, 2], -np.inf).max(axis=1, initial=-np.inf)

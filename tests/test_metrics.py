@@ -33,7 +33,9 @@ def _trajectory(n_samples=1000):
     angle = 1.0  # rad of pitch
     qpos[3, late, 3:7] = [np.cos(angle / 2), 0, np.sin(angle / 2), 0]
     flag = np.stack([stance, np.ones(n_samples, bool), stance, stance])
-    traj = SimpleNamespace(qpos=qpos, contact=SimpleNamespace(flag=flag), time={"state": t, "contact": t})
+    foothold = np.stack([qpos[:, :, 0], qpos[:, :, 1], np.zeros_like(t)[None].repeat(4, 0)], axis=-1)
+    pos = np.where(flag[:, :, None], foothold, 0.0)  # the foot under the base while in contact
+    traj = SimpleNamespace(qpos=qpos, contact=SimpleNamespace(flag=flag, pos=pos), time={"state": t, "contact": t})
     return traj, t
 
 
@@ -139,7 +141,11 @@ def test_terrain_metrics_distance_obstacles_and_where_the_falls_happened():
     assert out["distance_made_good"][0] == pytest.approx(end)
     assert out["distance_made_good"][1] == 0.0
     assert out["distance_made_good"][2] == pytest.approx(SPEED * 5.0)  # up to its fall
-    assert out["obstacles_cleared"].tolist() == [3, 0, 2, 2]  # x = 2.97 m passes 2.6; the fallen stop at 1.5
+    assert out["obstacles_cleared"].tolist() == [3, 0, 2, 2]  # footholds to 2.9 m pass 2.6; the fallen stop at 1.5
+    # A base that passes a block while its foot stays before it (tripping forward) has not cleared it.
+    tripped = SimpleNamespace(qpos=traj.qpos, time=traj.time, contact=SimpleNamespace(
+        flag=traj.contact.flag, pos=np.where(traj.contact.pos[..., :1] > 0.65, 0.0, traj.contact.pos)))
+    assert metrics.terrain_metrics(tripped, obstacles=blocks)["obstacles_cleared"].tolist() == [0, 0, 0, 0]
     assert out["highest_cleared"][0] == pytest.approx(0.3)
     assert out["highest_cleared"][2] == pytest.approx(0.15)
     assert np.isnan(out["highest_cleared"][1])
