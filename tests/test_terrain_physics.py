@@ -79,7 +79,9 @@ PATH_TOLERANCE = 3.5e-3  # m
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("name", list(DROPS))
+# The step only: each terrain compiles MJX's hfield program anew (about 2 minutes); the chain's test below runs all
+# three drops against C in one program. The other two were measured with every terrain listed here (numbers above).
+@pytest.mark.parametrize("name", ["steps"])
 def test_mjx_follows_mujoco_c_on_the_exported_terrain(name, tmp_path, capsys):
     from hopper_mjx.signals import SensorConfig
     from hopper_mjx.sim import Sim, gravity_vectors

@@ -30,7 +30,7 @@ from hopper_mjx.engine import chain_algebra as al
 from hopper_mjx.engine import chain_constraint, chain_smooth, chain_solver
 from hopper_mjx.engine.chain_hfield import TerrainParams
 from hopper_mjx.engine.chain_model import ChainModel, NotChain, derive, describe, entries, instance, terrain_heights
-from hopper_mjx.engine.chain_stage import BATCH_AXIS, batch_any, stored
+from hopper_mjx.engine.chain_stage import BATCH_AXIS, stored
 from hopper_mjx.model import variation
 
 __all__ = ["BATCH_AXIS", "ChainData", "ChainEngine", "ChainParams", "NotChain", "TerrainParams", "make",
@@ -170,10 +170,7 @@ class ChainEngine:
         gravity = tuple(jnp.asarray(gravity, dtype)[i] for i in range(3))
         pose = chain_smooth.kinematics(cm, gate, qpos)
         mass, qfrc_smooth, qacc_smooth = _smooth(cm, gate, pose, qpos, qvel, ctrl, gravity)
-        box_on = None
-        if cm.terrain is not None and cm.terrain.box is not None:  # its prisms only when a box nears the ground
-            box_on = batch_any(chain_constraint.box_near(cm, pose, model.terrain))
-        rows, foot = chain_constraint.rows(cm, gate, pose, qpos, qvel, model.terrain, box_on)
+        rows, foot = chain_constraint.rows(cm, gate, pose, qpos, qvel, model.terrain)
         warm = tuple(data.qacc_warmstart[i] for i in range(cm.nv))
         sol = chain_solver.solve(gate, mass, qfrc_smooth, qacc_smooth, warm, rows, iterations=cm.iterations,
                                  ls_iterations=cm.ls_iterations, tolerance=cm.tolerance,

@@ -27,7 +27,7 @@ from hopper_mjx.engine import chain_algebra as al
 from hopper_mjx.engine import chain_hfield, chain_hfield_box
 from hopper_mjx.engine.chain_model import ChainModel, ContactPair, SolParams
 from hopper_mjx.engine.chain_smooth import Pose, dof_body
-from hopper_mjx.engine.chain_stage import stored
+from hopper_mjx.engine.chain_stage import batch_any, stored
 
 MINVAL = 1e-15  # mujoco.mjMINVAL
 MINIMP, MAXIMP = 0.0001, 0.9999  # mujoco.mjMINIMP, mjMAXIMP
@@ -245,8 +245,8 @@ def _assemble(cm: ChainModel, pose: Pose, qpos, qvel, slots) -> tuple[Rows, Foot
 def rows(cm: ChainModel, gate, pose: Pose, qpos, qvel, terrain=None, box_on=None) -> tuple[Rows, FootContact]:
     """All constraint rows (MuJoCo's order: friction, limits, then contacts by pair) and the foot's; `terrain`
     (chain_hfield.TerrainParams) for a heightfield floor, `box_on` (() bool) whether to collide its base box
-    (by default where `box_near`)."""
+    (by default where `box_near` for any instance of the core's vmapped chunk: `batch_any`)."""
     if cm.terrain is not None and cm.terrain.box is not None and box_on is None:
-        box_on = box_near(cm, pose, terrain)
+        box_on = batch_any(box_near(cm, pose, terrain))
     slots = stored(gate, lambda p, t, b: _all_slots(cm, p, t, b), pose, terrain, box_on)
     return stored(gate, lambda *a: _assemble(cm, *a), pose, qpos, qvel, slots)

@@ -73,43 +73,12 @@ def _closest_on_lines(p, u, q, v):
     return _add(p, u, s), _add(q, v, t)
 
 
-def _box_prism(t: Terrain, centre, axes, half, tops, bottom):
-    """Per prism: (penetrates, depth, normal prism -> box, contact point), all (P, ...). Vectors are
-    tuples of (P,) or (P, axes) components, so that the prisms (not x, y, z) are the arrays' minor axis."""
-    dtype = tops.dtype
-    P = tops.shape[0]
-    v = [tuple(tops[:, j, k] for k in range(3)) for j in range(3)]  # the top triangle
-    w = [(x, y, jnp.broadcast_to(bottom, x.shape)) for x, y, _ in v]  # the bottom one
-    box = [tuple(axes[i, k] for k in range(3)) for i in range(3)]
-    c = tuple(centre[k] for k in range(3))
-    edges = [_add(v[(j + 1) % 3], v[j], -1.0) for j in range(3)]  # top edges v0v1, v1v2, v2v0
-    top_normal = _cross(edges[0], edges[1])
-    top_normal = tuple(x * jnp.where(top_normal[2] < 0, -1.0, 1.0) for x in top_normal)
-    # Every triangle of a regular grid has its edges along x, y and the diagonal: the walls' directions.
-    flat = [(1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (t.dx, t.dy, 0.0)]
-    z = (0.0, 0.0, 1.0)
-    walls = [(d[1], -d[0], 0.0) for d in flat]
-    cand = ([*box, z, *walls] + [_cross(a, d) for a in box for d in (*flat, z)]
-            + [top_normal] + [_cross(a, e) for a in box for e in edges])  # 29 axes, in `kind`'s order below
-    ux, uy, uz = (jnp.stack([jnp.broadcast_to(jnp.asarray(a[k], dtype), (P,)) for a in cand], 1) for k in range(3))
-    norm = jnp.sqrt(ux * ux + uy * uy + uz * uz)
-    usable = norm > PARALLEL * jnp.maximum(1.0, jnp.max(norm, axis=1, keepdims=True))
-    inv = 1 / jnp.where(norm > 0, norm, 1.0)
-    u = (ux * inv, uy * inv, uz * inv)
-    proj = [_dot(tuple(x[:, None] for x in p), u) for p in v + w]
-    p_max, p_min = proj[0], proj[0]
-    for x in proj[1:]:
-        p_max, p_min = jnp.maximum(p_max, x), jnp.minimum(p_min, x)
-    reach = _dot(c, u)
-    radius = sum(half[i] * jnp.abs(_dot(box[i], u)) for i in range(3))
-    up, down = p_max - (reach - radius), (reach + radius) - p_min  # overlap if the box leaves along +u / -u
-    depth = jnp.where(usable, jnp.minimum(up, down), jnp.inf)
-    best = jnp.argmin(depth, axis=1)
-    take = lambda x: jnp.take_along_axis(x, best[:, None], 1)[:, 0]
-    d = take(depth)
-    sign = jnp.where(take(up) <= take(down), 1.0, -1.0)
-    n = tuple(sign * take(x) for x in u)
-
+def _contact_point(c, box, half, v, w, n, d, best):
+    """The middle of the two deepest points of the box and each prism, given the axis `best` (in `_box_prism`'s
+    order) of least overlap `d` along `n`: a face meets the other body's deepest vertex (or, lying parallel, the
+    middle of its deepest feature), an edge pair the two edges' nearest points."""
+    dtype = d.dtype
+    P = d.shape[0]
     # The box's deepest feature along -n: each axis at its far side, or (lying parallel) at the prism's
     # centroid, clipped to the box.
     centroid = tuple((v[0][k] + v[1][k] + v[2][k] + w[0][k] + w[1][k] + w[2][k]) / 6 for k in range(3))
@@ -159,6 +128,47 @@ def _box_prism(t: Terrain, centre, axes, half, tops, bottom):
     prism_face = (best >= 3) & (best < 7) | (best == 19)
     pos = tuple(jnp.where(edge_pair, 0.5 * (a + b), jnp.where(prism_face, f, g))
                 for a, b, f, g in zip(on_box_edge, on_prism_edge, on_box_face, on_prism_face))
+    return pos
+
+
+def _box_prism(t: Terrain, centre, axes, half, tops, bottom):
+    """Per prism: (penetrates, depth, normal prism -> box, contact point), all (P, ...). Vectors are
+    tuples of (P,) or (P, axes) components, so that the prisms (not x, y, z) are the arrays' minor axis."""
+    dtype = tops.dtype
+    P = tops.shape[0]
+    v = [tuple(tops[:, j, k] for k in range(3)) for j in range(3)]  # the top triangle
+    w = [(x, y, jnp.broadcast_to(bottom, x.shape)) for x, y, _ in v]  # the bottom one
+    box = [tuple(axes[i, k] for k in range(3)) for i in range(3)]
+    c = tuple(centre[k] for k in range(3))
+    edges = [_add(v[(j + 1) % 3], v[j], -1.0) for j in range(3)]  # top edges v0v1, v1v2, v2v0
+    top_normal = _cross(edges[0], edges[1])
+    top_normal = tuple(x * jnp.where(top_normal[2] < 0, -1.0, 1.0) for x in top_normal)
+    # Every triangle of a regular grid has its edges along x, y and the diagonal: the walls' directions.
+    flat = [(1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (t.dx, t.dy, 0.0)]
+    z = (0.0, 0.0, 1.0)
+    walls = [(d[1], -d[0], 0.0) for d in flat]
+    cand = ([*box, z, *walls] + [_cross(a, d) for a in box for d in (*flat, z)]
+            + [top_normal] + [_cross(a, e) for a in box for e in edges])  # 29 axes, in `kind`'s order below
+    ux, uy, uz = (jnp.stack([jnp.broadcast_to(jnp.asarray(a[k], dtype), (P,)) for a in cand], 1) for k in range(3))
+    norm = jnp.sqrt(ux * ux + uy * uy + uz * uz)
+    usable = norm > PARALLEL * jnp.maximum(1.0, jnp.max(norm, axis=1, keepdims=True))
+    inv = 1 / jnp.where(norm > 0, norm, 1.0)
+    u = (ux * inv, uy * inv, uz * inv)
+    proj = [_dot(tuple(x[:, None] for x in p), u) for p in v + w]
+    p_max, p_min = proj[0], proj[0]
+    for x in proj[1:]:
+        p_max, p_min = jnp.maximum(p_max, x), jnp.minimum(p_min, x)
+    reach = _dot(c, u)
+    radius = sum(half[i] * jnp.abs(_dot(box[i], u)) for i in range(3))
+    up, down = p_max - (reach - radius), (reach + radius) - p_min  # overlap if the box leaves along +u / -u
+    depth = jnp.where(usable, jnp.minimum(up, down), jnp.inf)
+    best = jnp.argmin(depth, axis=1)
+    take = lambda x: jnp.take_along_axis(x, best[:, None], 1)[:, 0]
+    d = take(depth)
+    sign = jnp.where(take(up) <= take(down), 1.0, -1.0)
+    n = tuple(sign * take(x) for x in u)
+
+    pos = _contact_point(c, box, half, v, w, n, d, best)
     # C skips a prism whose top lies wholly below the box's lowest point.
     lowest = c[2] - sum(half[i] * jnp.abs(box[i][2]) for i in range(3))
     reaches = (v[0][2] >= lowest) | (v[1][2] >= lowest) | (v[2][2] >= lowest)

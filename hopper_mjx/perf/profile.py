@@ -48,12 +48,13 @@ def best_cost(step, data, gravity, steps: int) -> float:
     """µs per instance-step of a compiled vmapped scan of step(data, gravity) from data."""
     import jax
 
+    from hopper_mjx.engine import BATCH_AXIS
     from hopper_mjx.sim import CPU_COMPILER_OPTIONS
 
     def one(d, g):
         return jax.lax.scan(lambda d, _: (step(d, g), None), d, None, length=steps)[0]
 
-    f = jax.jit(jax.vmap(one), compiler_options=CPU_COMPILER_OPTIONS)
+    f = jax.jit(jax.vmap(one, axis_name=BATCH_AXIS), compiler_options=CPU_COMPILER_OPTIONS)  # as the core vmaps
     jax.block_until_ready(f(data, gravity))  # compiles
     best = np.inf
     for _ in range(REPEATS):
