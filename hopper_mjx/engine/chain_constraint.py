@@ -242,11 +242,12 @@ def _assemble(cm: ChainModel, pose: Pose, qpos, qvel, slots) -> tuple[Rows, Foot
     return Rows(tuple(jac), tuple(weight), tuple(aref), tuple(loss)), foot
 
 
-def rows(cm: ChainModel, gate, pose: Pose, qpos, qvel, terrain=None, box_on=None) -> tuple[Rows, FootContact]:
+def rows(cm: ChainModel, gate, pose: Pose, qpos, qvel, terrain=None) -> tuple[Rows, FootContact]:
     """All constraint rows (MuJoCo's order: friction, limits, then contacts by pair) and the foot's; `terrain`
-    (chain_hfield.TerrainParams) for a heightfield floor, `box_on` (() bool) whether to collide its base box
-    (by default where `box_near` for any instance of the core's vmapped chunk: `batch_any`)."""
-    if cm.terrain is not None and cm.terrain.box is not None and box_on is None:
+    (chain_hfield.TerrainParams) for a heightfield floor, whose base box is collided where `box_near` holds for
+    any instance of the core's vmapped chunk (`batch_any`)."""
+    box_on = None
+    if cm.terrain is not None and cm.terrain.box is not None:
         box_on = batch_any(box_near(cm, pose, terrain))
     slots = stored(gate, lambda p, t, b: _all_slots(cm, p, t, b), pose, terrain, box_on)
     return stored(gate, lambda *a: _assemble(cm, *a), pose, qpos, qvel, slots)
