@@ -76,6 +76,7 @@ def parser() -> argparse.ArgumentParser:
                    help="policy steps per second (default: the task's, 50); must divide the training's physics rate "
                         "(500 Hz). --episode-length counts policy steps at this rate")
     cli.add_physics_options(p)
+    p.set_defaults(terrain=None)  # the task's own ground (hop_terrain's rough ground; flat for the others)
     p.add_argument("--sac-replay", type=int, default=1_000_000, help="SAC: replay buffer size (env steps)")
     p.add_argument("--sac-min-replay", type=int, default=8192, help="SAC: env steps collected before learning")
     p.add_argument("--sac-grad-updates", type=int, default=8, help="SAC: gradient updates per env step batch")
@@ -145,8 +146,10 @@ def check(args):
         raise ValueError(f"--task: {err}") from None
     if args.algo not in ALGORITHMS:
         raise ValueError(f"--algo {args.algo!r} is unknown; choose from {', '.join(ALGORITHMS)}")
+    if args.terrain is None:
+        args.terrain = envs.default_config(args.task).terrain or "flat"
     physics = cli.check_physics(args)
-    cli.refuse_terrain(physics.ground, "training (its Brax environments)")
+    cli.refuse_each(physics.ground, "training")
     cli.check_controls(physics, registry.POLICY_PREFIX)  # a dc motor's drawn figures need --motor dc
     _layers(args.policy_layers), _layers(args.value_layers)
     if args.gravity_range is not None:
@@ -180,7 +183,8 @@ def check(args):
         from hopper_mjx.envs import monoped, policy
 
         _, algo, net, config = policy.read(resume[0])
-        size = monoped.observation_size(envs.tasks.task_class(args.task).command_size, args.observe_gravity)
+        size = monoped.observation_size(envs.tasks.task_class(args.task).command_size, args.observe_gravity,
+                                        not physics.ground.is_flat)
         if algo != args.algo or config.task != args.task or net["observation_size"] != size:
             raise ValueError(f"--out {args.out} holds a {algo} policy of task {config.task!r} with "
                              f"{net['observation_size']} observations; --task {args.task} --algo {args.algo} "
@@ -219,7 +223,8 @@ def task_config(args, physics):
     from hopper_mjx import envs
 
     overrides = {"observe_gravity": args.observe_gravity, "engine": physics.engine, "motor": physics.motor,
-                 "action_delay": physics.action_delay, "push": physics.push}
+                 "action_delay": physics.action_delay, "push": physics.push,
+                 "terrain": "" if physics.ground.is_flat else str(physics.ground)}
     if physics.variation:  # the robots episodes run: drawn once, with the run's seed
         overrides |= {"randomize": str(physics.variation), "randomize_seed": args.seed}
     if args.gravity_range is not None:

@@ -49,6 +49,7 @@ TASKS = {
     "stand": "stay up, upright and in place; small hops allowed",
     "hop": "hop in place to a commanded apex",
     "hop_velocity": "hop to a commanded apex at a commanded (vx, vy)",
+    "hop_terrain": "hop_velocity over rough ground, reading a height scan around the base",
 }
 
 
@@ -65,6 +66,7 @@ TASK_REFERENCES = {
     "stand": Reference("raibert", 0.05),
     "hop": Reference("raibert"),
     "hop_velocity": Reference("raibert"),
+    "hop_terrain": Reference("raibert"),
 }
 
 

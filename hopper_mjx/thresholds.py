@@ -22,7 +22,7 @@ def describe(task: str) -> str:
     if task == "stand":
         return (f"every instance survives, drifting <= {SPEED_TOLERANCE} m/s (the mean speed over the last 5 s: a "
                 f"bounded region) with any hops rising <= {STAND_MAX_RISE} m")
-    speed = "mean speed error" if task == "hop_velocity" else "mean drift"
+    speed = "mean speed error" if task in ("hop_velocity", "hop_terrain") else "mean drift"
     return (f"every instance survives with >= {MIN_HOPS} hops, apex rise within {APEX_TOLERANCE:.0%} of the "
             f"command and {speed} <= {SPEED_TOLERANCE} m/s")
 

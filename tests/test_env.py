@@ -1,4 +1,4 @@
-"""The tasks (stand, hop, hop_velocity) and the training wrapper.
+"""The tasks (stand, hop, hop_velocity, hop_terrain) and the training wrapper.
 
 The physics is what costs the compile. Every task's physics (`MonopedEnv.physics`) is the same
 XLA program (same physics config), compiled once and found in the compile cache by the others; a
@@ -24,7 +24,7 @@ DROP = dict(observe_gravity=True, initial_clearance=(0.5, 0.5), initial_joint_no
 
 
 def test_registry_names_defaults_and_overrides(mj_model):
-    assert envs.names() == list(registry.TASKS) == ["stand", "hop", "hop_velocity"]
+    assert envs.names() == list(registry.TASKS) == ["stand", "hop", "hop_velocity", "hop_terrain"]
     for name in envs.names():
         cfg = envs.default_config(name)
         assert cfg.task == name and cfg.gravity_range == (0.5, 12.0)
@@ -35,6 +35,43 @@ def test_registry_names_defaults_and_overrides(mj_model):
         envs.make("run")
     with pytest.raises(ValueError, match="unknown hop config field"):
         envs.make("hop", gravity=3.0)
+
+
+def test_hop_terrain_observes_the_base_height_over_the_ground_mujoco_c_casts(tmp_path):
+    """hop_terrain's observation ends with the height scan: at each point of `monoped.SCAN` (turned with the
+    base's yaw), the base's height over the ground. MuJoCo C's ray cast down onto the same model's height field
+    gives the ground; they agree to float32 rounding at reset poses spread over the ground."""
+    import mujoco
+
+    from hopper_mjx import model as hopper_model
+    from hopper_mjx.terrain import scan as terrain_scan
+
+    env = envs.make("hop_terrain", observe_gravity=True)
+    assert env.config.terrain == tasks.HOP_TERRAIN and env.observation_size == 28 + len(monoped.SCAN) == 53
+    m, rng = hopper_model.load(terrain=env.config.ground.terrain()), np.random.default_rng(0)
+    d = mujoco.MjData(m)
+    d.qpos[:2] = 100.0  # the robot far off the ground, out of the rays' way
+    mujoco.mj_kinematics(m, d)
+    reset = jax.jit(env.reset)
+    worst = 0.0
+    for k in range(6):
+        state = reset(jax.random.PRNGKey(k))
+        xy, psi = rng.uniform(-5, 5, 2), rng.uniform(-np.pi, np.pi)
+        qpos = state.pipeline_state.qpos.at[:2].set(xy).at[3:7].set(
+            jnp.array([np.cos(psi / 2), 0, 0, np.sin(psi / 2)]))
+        obs = env.observe_signals(env.engine.model, state.pipeline_state.replace(qpos=qpos))
+        features = monoped.observe(env.layout, env.config, obs, state.info["gravity"], state.info["command"],
+                                   jnp.zeros(3))
+        scan = np.asarray(features[-len(monoped.SCAN):])
+        assert float(terrain_scan.yaw(qpos[3:7])) == pytest.approx(psi, abs=1e-5)
+        c, s = np.cos(psi), np.sin(psi)
+        for (px, py), height_over in zip(monoped.SCAN, scan):
+            start = np.array([xy[0] + c * px - s * py, xy[1] + s * px + c * py, 5.0])
+            geomid = np.array([-1], np.int32)
+            distance = mujoco.mj_ray(m, d, start, np.array([0.0, 0.0, -1.0]), None, 1, -1, geomid)
+            assert m.geom_type[geomid[0]] == mujoco.mjtGeom.mjGEOM_HFIELD
+            worst = max(worst, abs(height_over - (float(qpos[2]) - (5.0 - distance))))
+    assert worst < 2e-5, worst
 
 
 # What `MonopedEnv.physics` reads of the config: tasks that agree on these share its program.

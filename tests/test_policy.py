@@ -106,6 +106,26 @@ def test_policy_path_errors_name_the_problem(tmp_path, mj_model, sim):
         policy.policy_params(sim.robot, 2, height=0.1, speed=(0.1,))
 
 
+def test_a_policy_trained_on_terrain_is_refused_on_the_flat_plane(trained, mj_model, tmp_path):
+    """A hop_terrain policy reads a height scan: on a model without a height field it is one clear error,
+    before its network is built."""
+    import json
+
+    from hopper_mjx.envs import monoped, policy, tasks
+
+    folder = tmp_path / "terrain-policy"
+    shutil.copytree(trained[0] / "policy", folder)
+    config = json.loads((folder / policy.ENV_CONFIG).read_text())
+    config |= {"task": "hop_terrain", "terrain": tasks.HOP_TERRAIN}
+    (folder / policy.ENV_CONFIG).write_text(json.dumps(config))
+    net_file = folder / policy.NETWORK_CONFIGS["ppo"]
+    net = json.loads(net_file.read_text())
+    net_file.write_text(json.dumps({**net, "observation_size": net["observation_size"] + len(monoped.SCAN)}))
+    assert policy.read(folder)[3].terrain == tasks.HOP_TERRAIN  # a consistent folder: sizes agree
+    with pytest.raises(ValueError, match="reads a height scan .*run it on a --terrain"):
+        policy.policy_controller(mj_model, folder)
+
+
 def test_policy_commands_and_sizes_are_checked_before_anything_runs(trained, sim, tmp_path, capsys):
     """simulate with a hop policy: a command outside its training box, or a folder whose task config
     does not match its network's input, is one line on stderr and exit 2, with nothing written."""

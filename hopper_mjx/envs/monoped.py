@@ -13,7 +13,10 @@ A task (`hopper_mjx.envs.tasks`) is a `MonopedEnv` that says what it commands
   law at the physics rate (`pd_torque`), saturated at the effort limits.
 - **Observations** (`observe`) are what a real robot reads: the IMU, the odometry's height
   and velocity, the foot contact, the joints, the task's command and the previous action;
-  gravity only when `observe_gravity` is set.
+  gravity only when `observe_gravity` is set; on a `terrain`, the base's height over the ground at
+  the height scan's points (`SCAN`, legged_gym's measured_heights).
+- **Terrain** (`terrain`, a --terrain spec; "" the flat plane): one fixed ground every episode
+  starts on, at the origin, as the core's instances start (the spec is checked to stay below the foot there).
 - **Gravity** is drawn per episode at `reset`, log-uniformly over `gravity_range`, and kept
   in `State.info["gravity"]`; `wrappers.wrap_for_training` makes Brax's auto-reset draw a
   fresh episode (gravity, command, initial state) instead of replaying the first one.
@@ -61,6 +64,7 @@ from hopper_mjx.randomize import Spec
 from hopper_mjx.sensing import FIGURES, Sensing, SensorState, reading
 from hopper_mjx.signals import Observation
 from hopper_mjx.sim import per_instance
+from hopper_mjx.terrain import scan as terrain_scan
 
 MAX_TILT_FROM_VERTICAL = 0.8  # rad between the base's z axis and the vertical that ends an episode
 # State.info keys a task owns; the resampling auto-reset replaces exactly these (wrappers.py).
@@ -131,6 +135,7 @@ class MonopedConfig:
     motor: str = registry.DEFAULT_MOTOR  # a registry.MOTORS name: the joints' motors (hopper_mjx.actuators)
     action_delay: float = 0.0  # s from the PD torque to the motors', whole steps of `timestep`; a drawn one wins
     push: tuple[float, float] | None = None  # (interval s, speed m/s) of random horizontal pushes in an episode
+    terrain: str = ""  # a --terrain spec with a fixed seed: the ground of every episode ("" the flat plane)
 
     def __post_init__(self):
         for name in RANGES:
@@ -153,6 +158,9 @@ class MonopedConfig:
                              f"ms), got {self.action_delay * 1e3:g} ms")
         if self.push is not None:
             Pushes.of(*self.push, self.timestep)  # raises for an interval of no whole step, a negative speed
+        ground = self.ground  # raises TerrainError (a ValueError) for a bad spec
+        if ground.each:
+            raise ValueError(f"terrain {self.terrain!r}: training puts every episode on one ground; give a fixed seed")
         dc_only = [name for name in self.variation.controls if registry.CONTROL_PARAMETERS[name].needs == "dc"]
         if dc_only and self.motor != "dc":
             raise ValueError(f"randomize: {', '.join(dc_only)} are a dc motor's figures; set motor='dc'")
@@ -166,6 +174,13 @@ class MonopedConfig:
     def variation(self) -> Spec:
         """The robots' spec (empty: the URDF's robot); raises ValueError for a bad one."""
         return Spec.parse(self.randomize) if self.randomize else Spec()
+
+    @property
+    def ground(self):
+        """The parsed `terrain` (`terrain.Ground`; FLAT for "")."""
+        from hopper_mjx import terrain
+
+        return terrain.parse(self.terrain) if self.terrain else terrain.FLAT
 
     @property
     def vy_range(self) -> tuple[float, float]:
@@ -239,11 +254,15 @@ def pd_torque(layout: Layout, cfg: MonopedConfig, target: jax.Array, obs, scale:
 ROBOT_SIGNALS = (("orientation", 4), ("angular rate", 3), ("height", 1), ("linear velocity", 3), ("foot contact", 1),
                  ("contact force", 3), ("joint angles", 3), ("joint rates", 3))
 MIN_GRAVITY = 0.1  # m/s², a floor under g where it divides (no task draws less than 0.5)
+# The policy's height scan on a terrain, (K, 2) m in the base's yaw frame: the core's default scan (5 x 5 points
+# 0.1 m apart), fixed here so that a policy reads the points it was trained on whatever scan a run records.
+SCAN = terrain_scan.scan_points()
 
 
-def observation_size(command_size: int, observe_gravity: bool) -> int:
-    """The robot's signals + the command + 3 of the previous action (+ gravity)."""
-    return sum(size for _, size in ROBOT_SIGNALS) + command_size + 3 + int(observe_gravity)
+def observation_size(command_size: int, observe_gravity: bool, on_terrain: bool = False) -> int:
+    """The robot's signals + the command + 3 of the previous action (+ gravity) (+ the height scan)."""
+    return (sum(size for _, size in ROBOT_SIGNALS) + command_size + 3 + int(observe_gravity)
+            + len(SCAN) * int(on_terrain))
 
 
 def observe(layout: Layout, cfg: MonopedConfig, obs: Observation, gravity: jax.Array,
@@ -266,6 +285,10 @@ def observe(layout: Layout, cfg: MonopedConfig, obs: Observation, gravity: jax.A
     parts = [*robot, command, last_action]
     if cfg.observe_gravity:
         parts.append(-gravity[2:3] / EARTH_GRAVITY)
+    if cfg.terrain:  # the base's height over the ground at each scan point, from where the odometry puts it
+        ground = terrain_scan.measured_heights(obs.ground.heights, obs.ground.size, obs.qpos[:3], obs.qpos[3:7],
+                                               jnp.asarray(SCAN, obs.qpos.dtype))
+        parts.append(obs.qpos[2] - ground)
     return jnp.nan_to_num(jnp.concatenate(parts), posinf=0.0, neginf=0.0)
 
 
@@ -330,6 +353,20 @@ def robot_pool(cfg: MonopedConfig, mj_model: mujoco.MjModel) -> tuple[dict[str, 
     return fields, variation.draw_controls(spec, mj_model, ROBOT_POOL, cfg.randomize_seed)
 
 
+def same_ground(ground, mj_model: mujoco.MjModel, what: str):
+    """(heights (nrow, ncol) float32 m, half-extents) of `mj_model`'s height field, None on its plane; refuses
+    a model whose floor is not `ground` (a `terrain.Ground`)."""
+    from hopper_mjx import terrain
+
+    grid, wanted = terrain.from_model(mj_model), ground.terrain()
+    same = (grid is None) == (wanted is None) and (wanted is None or (
+        grid.shape == wanted.shape and np.allclose(grid.size, wanted.size)
+        and np.allclose(grid.heights, wanted.heights, atol=1e-4)))
+    if not same:
+        raise ValueError(f"{what} is for the ground {ground}, not the model's: give --terrain {ground}")
+    return None if grid is None else (jnp.asarray(grid.heights, jnp.float32), tuple(float(h) for h in grid.size))
+
+
 class Episode(NamedTuple):
     """What one episode's physics carries from step to step besides the engine's data; () where the config
     adds nothing (then the step is today's)."""
@@ -360,8 +397,10 @@ class MonopedEnv(Env):
     command_size: int = 0
 
     def __init__(self, config: MonopedConfig, mj_model: mujoco.MjModel | None = None):
-        mj_model = mj_model if mj_model is not None else hopper_model.load()
+        ground = config.ground
+        mj_model = mj_model if mj_model is not None else hopper_model.load(terrain=ground.terrain())
         config = dataclasses.replace(config, robot=same_robot(config.robot, mj_model, "this task's config"))
+        self.terrain = same_ground(ground, mj_model, "this task's config")
         trained = training_model(mj_model, config)
         self.config = config
         self.layout = Layout.of(trained)
@@ -392,11 +431,16 @@ class MonopedEnv(Env):
         sensors = None
         if not self.sensing.passthrough:  # the pool's figures (its line is filled at each episode's start)
             data = jax.eval_shape(self.engine.make_data, jnp.zeros(lay.nq), jnp.zeros(lay.nv))
-            shapes = jax.eval_shape(lambda d: signals.observe(self.engine, self.engine.model, d), data)
+            shapes = jax.eval_shape(lambda d: self.observe_signals(self.engine.model, d), data)
             blank = jax.tree_util.tree_map(lambda x: jnp.zeros((ROBOT_POOL, *x.shape), x.dtype), shapes)
             figures = dict(drawn["sensing"])
             sensors = self.sensing.init(blank, figures.pop("delay", 0), figures)
         return motors, sensors
+
+    def observe_signals(self, model, data) -> Observation:
+        """What a controller reads of the state (`signals.observe`), with the ground on a terrain."""
+        sensed = () if self.terrain is None else (*self.terrain, jnp.asarray(SCAN, jnp.float32))
+        return signals.observe(self.engine, model, data, sensed)
 
     @property
     def counts_steps(self) -> bool:
@@ -416,7 +460,7 @@ class MonopedEnv(Env):
     # Brax reads these.
     @property
     def observation_size(self) -> int:
-        return observation_size(self.command_size, self.config.observe_gravity)
+        return observation_size(self.command_size, self.config.observe_gravity, self.terrain is not None)
 
     @property
     def action_size(self) -> int:
@@ -454,7 +498,7 @@ class MonopedEnv(Env):
         command = self.sample_command(k_cmd)
         last_action = jnp.zeros(3)
         info = {"command": command, "gravity": gravity, "last_action": last_action, "rng": rng}
-        info |= self._start_episode(rng, signals.observe(self.engine, self.engine.model, data))
+        info |= self._start_episode(rng, self.observe_signals(self.engine.model, data))
         obs = observe(lay, cfg, self.read(data, info), gravity, command, last_action)
         zero = jnp.zeros(())
         terms = self.reward_terms(data, -gravity[2], command, last_action, last_action, zero, zero > 0)
@@ -487,7 +531,7 @@ class MonopedEnv(Env):
     def read(self, data, info: dict) -> Observation:
         """What the policy reads of its robot: the sensors' reading, else the state (its last contact)."""
         if self.sensors is None:
-            return signals.observe(self.engine, self.engine.model, data)
+            return self.observe_signals(self.engine.model, data)
         return reading(info["sense"])
 
     def physics(self, model, data, gravity: jax.Array, target: jax.Array, scale: PDScale | None = None,
@@ -519,7 +563,7 @@ class MonopedEnv(Env):
             if self.pushes is not None:  # `steps` done: the push due now, before anything reads the state
                 d = d.replace(qvel=push(self.pushes, key, ep.steps, d.qvel))
             if self.sensors is not None:
-                ep = ep._replace(sense=self.sensing.apply(ep.sense, signals.observe(engine, model, d), key,
+                ep = ep._replace(sense=self.sensing.apply(ep.sense, self.observe_signals(model, d), key,
                                                           ep.steps)[1])
             return (d, effort, ep), None
 
@@ -538,9 +582,10 @@ class MonopedEnv(Env):
         return jax.tree_util.tree_map(lambda x: jnp.where(downward, x, jnp.zeros_like(x)), self.engine.model)
 
     def batch_step(self, state: State, action: jax.Array) -> State:
-        """`step` of a batch of instances (leading axis), one run-time engine model for all."""
+        """`step` of a batch of instances (leading axis), one run-time engine model for all, vmapped as the core
+        vmaps (a stage no instance needs, the base box on a terrain, is skipped for the batch)."""
         model = self.run_time_model(state.info["gravity"])
-        return jax.vmap(self.step_with, in_axes=(None, 0, 0))(model, state, action)
+        return jax.vmap(self.step_with, in_axes=(None, 0, 0), axis_name=engines.BATCH_AXIS)(model, state, action)
 
     def step(self, state: State, action: jax.Array) -> State:
         """One policy step of one instance (vmapped, prefer `batch_step`: its model stays unbatched)."""
@@ -577,7 +622,7 @@ class MonopedEnv(Env):
         terms = self.reward_terms(data, -gravity[2], command, action, last_action, effort, fell)
         reward = jnp.nan_to_num(sum(terms.values()), nan=-cfg.fall_penalty)
         # The sensors' reading, or the state with the contact of the last forward, as the core's controllers see it.
-        sensed = signals.observe(self.engine, model, data) if self.sensors is None else reading(state.info["sense"])
+        sensed = self.observe_signals(model, data) if self.sensors is None else reading(state.info["sense"])
         obs = observe(lay, cfg, sensed, gravity, command, action)
         info = {**state.info, "last_action": action}
         return state.replace(pipeline_state=data, obs=obs, reward=reward, done=fell.astype(jnp.float32),

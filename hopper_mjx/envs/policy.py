@@ -30,7 +30,7 @@ from brax.training.acme import running_statistics
 from brax.training.agents.ppo import networks as ppo_networks
 from brax.training.agents.sac import networks as sac_networks
 
-from hopper_mjx import registry
+from hopper_mjx import registry, terrain
 from hopper_mjx.control.base import Commands, Controller, PDScale, Servo, joint_state
 from hopper_mjx.envs import monoped, tasks
 from hopper_mjx.model.layout import Layout
@@ -99,7 +99,7 @@ def read(path) -> tuple[Path, str, dict, monoped.MonopedConfig]:
     path = resolve(path)
     try:
         config = monoped.MonopedConfig.from_dict(_json_object(path / ENV_CONFIG))
-        expected = monoped.observation_size(tasks.task_class(config.task).command_size, config.observe_gravity)
+        expected = tasks.observation_size(config)
     except (TypeError, ValueError) as err:  # an unknown task or field, a value of the wrong type
         raise ValueError(f"{path / ENV_CONFIG}: {err}" if str(path) not in str(err) else str(err)) from None
     algo = algorithm_of(path)
@@ -113,7 +113,8 @@ def read(path) -> tuple[Path, str, dict, monoped.MonopedConfig]:
         raise ValueError(f"{net_file} lacks {', '.join(missing)}")
     if net["observation_size"] != expected:
         raise ValueError(f"{path}: the policy takes {net['observation_size']} observations but task "
-                         f"{config.task!r} (observe_gravity={config.observe_gravity}) gives {expected}")
+                         f"{config.task!r} (observe_gravity={config.observe_gravity}"
+                         f"{', terrain ' + config.terrain if config.terrain else ''}) gives {expected}")
     return path, algo, net, config
 
 
@@ -204,8 +205,12 @@ def policy_params(robot: Robot, n: int, *, height: float, speed=(0.0, 0.0), conf
 
 def policy_controller(mj_model: mujoco.MjModel, path) -> Controller:
     """The trained policy as a core `Controller`; params: per-instance (3,) commands or None."""
-    policy, cfg = load(path)
+    cfg = read(path)[3]  # JSON only: its robot and ground are checked before the network is built
     monoped.same_robot(cfg.robot, mj_model, f"the policy {path}")
+    if cfg.terrain and terrain.from_model(mj_model) is None:
+        raise ValueError(f"the policy {path} reads a height scan (trained on --terrain {cfg.terrain}): run it on a "
+                         "--terrain other than flat")
+    policy, cfg = load(path)
     layout = Layout.of(mj_model)
     every = monoped.decimation(layout, cfg)  # raises if the policy rate does not divide the physics rate
     stance = jnp.asarray(standing_qpos(mj_model)[list(layout.joint_qpos)], jnp.float32)
@@ -233,13 +238,13 @@ def policy_controller(mj_model: mujoco.MjModel, path) -> Controller:
     if tasks.task_class(cfg.task).command_size:  # the hopping tasks: (apex height above the floor, vx, vy)
         standing = standing_height(mj_model)
 
-        def read(cs: PolicyState):
+        def read_command(cs: PolicyState):
             return cs.command[:, 1:], cs.command[:, 0] - standing
 
-        def write(cs: PolicyState, speed, rise: float) -> PolicyState:
+        def write_command(cs: PolicyState, speed, rise: float) -> PolicyState:
             row = jnp.array([standing + rise, *speed], jnp.float32)
             return cs._replace(command=jnp.broadcast_to(row, cs.command.shape))
 
-        commands = Commands(read=read, write=write)
+        commands = Commands(read=read_command, write=write_command)
     return Controller(name=f"{registry.POLICY_PREFIX}{path}", init=init, act=act, commands=commands,
                       servo=Servo(track=track, first=lambda cs: cs.target))

@@ -5,6 +5,7 @@
 | `stand` | none: stay up in place, small hops allowed | alive, height band (crouch to a small apex), speed (to zero) |
 | `hop` | apex height, zero speed | apex (ballistic), speed (to zero) |
 | `hop_velocity` | apex height and (vx, vy) | apex (ballistic), speed (to the command) |
+| `hop_terrain` | apex height and (vx, vy), on rough ground | as `hop_velocity`; the height scan is observed |
 
 Every task also pays `monoped.posture_terms` (upright, effort, smoothness, spin, fall).
 """
@@ -18,6 +19,7 @@ import jax.numpy as jnp
 
 from hopper_mjx import registry, thresholds
 from hopper_mjx.envs.monoped import MonopedConfig, MonopedEnv, closeness, outside, predicted_apex, speed_term
+from hopper_mjx.envs.monoped import observation_size as monoped_observation_size
 
 # The gravity range every task draws from by default, m/s², log-uniform.
 GRAVITY_RANGE = (0.5, 12.0)
@@ -97,7 +99,22 @@ class HopVelocity(Hop):
                              w_apex=2.0, apex_scale=0.04)
 
 
-TASKS: dict[str, type[MonopedEnv]] = {"stand": Stand, "hop": Hop, "hop_velocity": HopVelocity}
+# Rough ground as Raibert is asked to cross it (docs/control.md), wide enough that no episode reaches its edge:
+# 20 s at the command box's fastest (0.5, 0.3) m/s is 11.7 m from the start.
+HOP_TERRAIN = "rough:amp=0.02,wavelength=0.4,seed=1,size=24x24"
+
+
+class HopTerrain(HopVelocity):
+    """`hop_velocity` over rough ground, reading the ground's height around the base (the height scan,
+    `monoped.SCAN`). The apex is the base's height in the world, as the evaluation measures it."""
+
+    @classmethod
+    def default_config(cls) -> MonopedConfig:
+        return dataclasses.replace(HopVelocity.default_config(), task="hop_terrain", terrain=HOP_TERRAIN)
+
+
+TASKS: dict[str, type[MonopedEnv]] = {"stand": Stand, "hop": Hop, "hop_velocity": HopVelocity,
+                                      "hop_terrain": HopTerrain}
 
 
 def names() -> list[str]:
@@ -107,6 +124,11 @@ def names() -> list[str]:
 def task_class(name: str) -> type[MonopedEnv]:
     registry.check("task", registry.TASKS, name)
     return TASKS[name]
+
+
+def observation_size(config: MonopedConfig) -> int:
+    """The observations a policy of `config` takes (`monoped.observation_size`)."""
+    return monoped_observation_size(task_class(config.task).command_size, config.observe_gravity, bool(config.terrain))
 
 
 def default_config(name: str) -> MonopedConfig:
