@@ -10,7 +10,8 @@ evaluations), and on the kicked gravity sweep of the run's policy (RUN/sweep/: `
 gravity --controller policy:RUN`, nine default gravities, the default kick) the worst gravity's survival,
 apex error |rise/command - 1| and speed error. Each task's reference controller (`registry.TASK_REFERENCES`:
 Raibert at the runs' command for the hopping tasks, Raibert at a 5 cm apex for stand) is swept the same way
-(OUT's folder, reference-<task>/); stand's apex column is its reference's error against its own command.
+(OUT's folder, reference-<task>/). Every sweep runs on the run's own ground (`--terrain`: hop_terrain's rough
+ground; flat for the others). Stand's apex column is its reference's error against its own command.
 With --sweep the missing sweeps are run (each resumable); without it a run without a sweep shows n/a; ∞ marks
 an error with no survivor or no hop to measure it on. One plot beside the table (OUT with .png): every seed's
 evaluation reward against training minutes.
@@ -84,13 +85,15 @@ def sweep_measures(folder: Path, height: float) -> dict:
     }
 
 
-def run_sweep(controller: str, folder: Path, height: float, speed, num: int, duration: float) -> None:
-    """The kicked gravity sweep of `controller` into `folder` (resumes a cut-short one), by the sweep's own
-    command."""
+def run_sweep(controller: str, folder: Path, height: float, speed, num: int, duration: float,
+              ground: str = "flat") -> None:
+    """The kicked gravity sweep of `controller` into `folder` on `ground` (a --terrain spec; resumes a cut-short
+    one), by the sweep's own command."""
     from hopper_mjx.sweep.__main__ import main as sweep
 
     argv = ["gravity", "--controller", controller, "--num", str(num), "--duration", str(duration),
-            "--height", str(height), "--speed", f"{speed[0]},{speed[1]}", "--out", str(folder), "--no-progress"]
+            "--height", str(height), "--speed", f"{speed[0]},{speed[1]}", "--terrain", ground, "--out", str(folder),
+            "--no-progress"]
     if sweep(argv) != 0:
         raise ValueError(f"the sweep of {controller} into {folder} failed")
 
@@ -100,11 +103,12 @@ def run_record(run: Path, do_sweep: bool, num: int, duration: float) -> dict:
     record = _json(run / "metrics.json")
     args = record["args"]
     height, speed = command(args)
+    ground = args.get("terrain") or "flat"  # the run's own ground (hop_terrain's rough ground); runs before it: flat
     found = _json(run / "threshold.json") if (run / "threshold.json").is_file() else None
     rates = [r["training/sps"] for r in record["history"] if r.get("training/sps")]
     if do_sweep and not (run / SWEEP / "summary.json").is_file():
-        run_sweep(f"policy:{run}", run / SWEEP, height, speed, num, duration)
-    return {"run": str(run), "task": args["task"], "algo": args["algo"], "seed": args["seed"],
+        run_sweep(f"policy:{run}", run / SWEEP, height, speed, num, duration, ground)
+    return {"run": str(run), "task": args["task"], "algo": args["algo"], "seed": args["seed"], "ground": ground,
             "scanned": (run / "threshold.json").is_file(),
             "minutes_to_threshold": None if found is None else found["wall_time"] / 60,
             "steps_per_s": statistics.median(rates) if rates else None,
@@ -179,7 +183,7 @@ def build(paths: list[Path], out: Path, *, do_sweep: bool, num: int, duration: f
         height = first["height"] if ref.height is None else ref.height  # stand's runs command no apex
         folder = out.parent / f"reference-{task}"
         if do_sweep and not (folder / "summary.json").is_file():
-            run_sweep(ref.controller, folder, height, first["speed"], num, duration)
+            run_sweep(ref.controller, folder, height, first["speed"], num, duration, first["ground"])
         references[task] = {"controller": f"{ref.controller} at {height:g} m", "height": height,
                             **sweep_measures(folder, height)}
     text = table(records, references)

@@ -131,8 +131,10 @@ CASES = [
     ("simulate", ["--terrain", "rough:cell=0.002", "--num", "30000"], "--terrain rough:cell=0.002, --num: 90,000 "
                                                                        "instances would need about"),
     ("simulate", ["--terrain", "rough:cell=0.0001"], "--terrain: a 40001 x 40001 grid has 1,600,080,001 vertices"),
-    ("sweep", ["gravity", "--terrain", "rough", "--out", "s"], "--terrain: a gravity sweep (an obstacle or terrain "
-     "sweep takes terrain) runs on the flat ground only"),
+    ("sweep", ["gains", "--param", "speed_gain", "--values", "1,2", "--terrain", "rough", "--out", "s"],
+     "--terrain: a gains sweep (a gravity, obstacle or terrain sweep takes terrain) runs on the flat ground only"),
+    ("sweep", ["gravity", "--terrain", "rough:seed=each", "--out", "s"], "a gravity sweep puts every instance on one "
+     "ground; give a fixed seed"),
     ("sweep", ["obstacle", "--heights", "0.1,-0.05", "--out", "s"], "--terrain: height=-0.05 must be >= 0 m"),
     ("sweep", ["obstacle", "--heights", "0.3", "--x", "0", "--out", "s"], "the ground within 0.1 m of the start "
      "rises to 0.300 m"),

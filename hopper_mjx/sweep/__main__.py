@@ -129,8 +129,10 @@ def check(args):
         grounds = [str(cli.check_ground(g, n=n)) for g in grounds]  # as the manifest keeps them
         args.terrain = grounds[0]
     physics = cli.check_physics(args, n=args.num, seed=args.seed)  # one robot per replicate, drawn now
-    if not grounds:
-        cli.refuse_terrain(physics.ground, f"a {args.kind} sweep (an obstacle or terrain sweep takes terrain)")
+    if not grounds and args.kind in ("gravity", "compare"):  # every instance on the one ground --terrain gives
+        cli.refuse_each(physics.ground, f"a {args.kind} sweep")
+    elif not grounds:
+        cli.refuse_terrain(physics.ground, f"a {args.kind} sweep (a gravity, obstacle or terrain sweep takes terrain)")
     cli.check_delay(physics, args.duration, args.num, args.seed)
     names = args.controllers.split(",") if args.kind == "compare" else [getattr(args, "controller", "raibert")]
     if len(set(names)) != len(names):
