@@ -39,6 +39,7 @@ from hopper_mjx import cli, command, runtime
 from hopper_mjx.live import CHUNK_TIME, HEIGHT_STEP, SHOWN, SPEED_STEP, LiveBatch, LiveRun, spread
 
 SPACING = 1.5  # m between neighbouring robots on the display grid
+GROUND_GAP = 0.5  # m between neighbouring copies of a terrain on the display grid
 LABEL_ABOVE = 0.45  # m above the base centre
 ROBOT_GROUP = 2  # geom group of the robots: MuJoCo's key 2 hides and shows them
 FRAME_TIME = 1 / 60  # s: the shortest time between two frames
@@ -62,16 +63,32 @@ def grid_offsets(count: int, spacing: float = SPACING) -> np.ndarray:
     return np.stack([k % cols - (cols - 1) / 2, (rows - 1) / 2 - k // cols], axis=1) * spacing
 
 
+def spacing(physics) -> float:
+    """m between neighbouring robots on the display grid: on a terrain, its copies side by side with a gap."""
+    ground = physics.ground
+    return SPACING if ground.is_flat else max(ground.size) + GROUND_GAP
+
+
 def display_model(physics, count: int):
     """(MjModel, qpos address of each copy's free joint, its first body id, bodies per copy):
     `count` copies of the robot of `physics` (a `scenario.Physics`) over the pictures' checkered
-    floor, for display only."""
-    from hopper_mjx.model import scene
+    floor, for display only. On a terrain every copy has its own copy of the ground under it, at its
+    offset on the display grid (`grid_offsets` at `spacing`): each instance is drawn where it is, in its
+    own world."""
+    from hopper_mjx.model import FLOOR_GEOM, scene
 
     def dressed():
         return scene.dress(physics.spec())
 
     display = dressed()  # floor, sky, lights and robot copy 0
+    if not physics.ground.is_flat:
+        floor = display.geom(FLOOR_GEOM)
+        z = float(floor.pos[2])
+        for k, (x, y) in enumerate(grid_offsets(count, spacing(physics))):
+            ground = floor if k == 0 else display.worldbody.add_geom(
+                type=mujoco.mjtGeom.mjGEOM_HFIELD, hfieldname=floor.hfieldname, material=floor.material,
+                contype=0, conaffinity=0)
+            ground.pos = [x, y, z]
     for k in range(1, count):
         source = dressed()  # a fresh spec per copy: attaching moves the body
         display.worldbody.add_frame().attach_body(source.worldbody.first_body(), f"monoped_{k}/", "")
@@ -97,13 +114,13 @@ def needs_display() -> str | None:
 class Display:
     """The viewer window: copies of the shown instances, labels, texts and keys."""
 
-    def __init__(self, viewer, m, qpos_adr, first_body, bodies_per_copy, shown, gravity):
+    def __init__(self, viewer, m, qpos_adr, first_body, bodies_per_copy, shown, gravity, spacing: float = SPACING):
         self.viewer, self.m = viewer, m
         self.d = viewer.d
         self.qpos_adr, self.first_body, self.bodies = qpos_adr, first_body, bodies_per_copy
         self.shown = shown
         self.gravity = np.linalg.norm(gravity, axis=1)
-        self.offsets = grid_offsets(len(shown))
+        self.offsets = grid_offsets(len(shown), spacing)
         self.selected = 0  # index into shown
         self.labels: list[str] = []
         width = np.ptp(self.offsets, axis=0).max()
@@ -238,7 +255,7 @@ def main(argv=None) -> int:
 
     try:
         checked = cli.check_batch(args)
-        cli.refuse_terrain(checked.physics.ground, "view (it draws the instances side by side, not where they are)")
+        cli.refuse_each(checked.physics.ground, "view")
         if not 1 <= args.show <= SHOWN:
             raise ValueError(f"--show must be in 1..{SHOWN}, got {args.show}")
         shown = spread(len(checked.gravity), args.show)
@@ -352,7 +369,7 @@ def watch(args, physics, batch, shown: list[int], stream) -> int:
     run = LiveRun(batch, factor=args.speed_factor, sinks=[stream] if stream else [], paused=args.paused)
     holder = {}
     viewer = launch_viewer(m, key_callback=lambda key: holder["on_key"](key) if holder else None)
-    display = Display(viewer, m, qpos_adr, first_body, bodies, shown, batch.gravity)
+    display = Display(viewer, m, qpos_adr, first_body, bodies, shown, batch.gravity, spacing(physics))
     holder["on_key"] = key_handler(run, display, requests)
     stats, announced = FrameStats(), False
     with run:

@@ -376,6 +376,42 @@ def test_without_a_display_view_says_so_and_names_render(monkeypatch, capsys):
     assert len(err.splitlines()) == 1
 
 
+def test_view_draws_each_robot_over_its_own_copy_of_the_terrain():
+    """On a terrain the viewer's display model has one copy of the ground per shown robot, at that robot's
+    offset on the display grid: a ray cast down at any (x, y) of a copy (its offset added) meets the height the
+    simulated model's ray meets at (x, y), so each robot is drawn on the ground it stands on."""
+    import mujoco
+
+    from hopper_mjx import view
+
+    physics = cli.check_batch(simulate.parser().parse_args(
+        [*ARGS, "--terrain", "rough:amp=0.05,wavelength=0.3,seed=2,size=2x2"])).physics
+    m, qpos_adr, first_body, _ = view.display_model(physics, 4)
+    offsets = view.grid_offsets(4, view.spacing(physics))
+    grounds = np.flatnonzero(m.geom_type == mujoco.mjtGeom.mjGEOM_HFIELD)
+    assert len(grounds) == 4 and view.spacing(physics) == 2.5
+    d = mujoco.MjData(m)
+    mujoco.mj_forward(m, d)
+    np.testing.assert_allclose(d.geom_xpos[grounds, :2], offsets)
+    sim_model = physics.mj_model
+    sim_data = mujoco.MjData(sim_model)
+    sim_data.qpos[:2] = 100.0  # the robot out of the rays' way
+    mujoco.mj_forward(sim_model, sim_data)
+    d.qpos[qpos_adr[:, None] + np.arange(2)] = 100.0
+    mujoco.mj_forward(m, d)
+
+    def ground(model, data, x, y):
+        geom = np.array([-1], np.int32)
+        return 5.0 - mujoco.mj_ray(model, data, np.array([x, y, 5.0]), np.array([0.0, 0, -1]), None, 1, -1, geom)
+
+    rng = np.random.default_rng(0)
+    for (ox, oy) in offsets:
+        for x, y in rng.uniform(-0.95, 0.95, (10, 2)):
+            assert ground(m, d, ox + x, oy + y) == pytest.approx(ground(sim_model, sim_data, x, y), abs=1e-9)
+    heights = [ground(sim_model, sim_data, x, y) for x, y in rng.uniform(-0.95, 0.95, (10, 2))]
+    assert np.ptp(heights) > 0.02  # rough ground, not a plane
+
+
 # -- the viewer under Xvfb ------------------------------------------------------------------
 def read_xwd(path: Path) -> np.ndarray:
     """(height, width, 3) uint8 RGB of an X window dump (Xvfb -fbdir keeps the screen in one)."""
