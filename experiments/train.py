@@ -4,6 +4,7 @@ physics on the chain engine (`--engine mjx` for MuJoCo MJX).
     nice -n 5 python experiments/train.py --task hop --algo ppo --out runs/hop-ppo --observe-gravity
     python experiments/train.py --task hop --algo ppo --out runs/hop-ppo --observe-gravity   # again: resumes
     python experiments/train.py --task hop_velocity --algo sac --out runs/hopv-sac
+    python experiments/train.py --task hop_terrain --algo ppo --out runs/hopt-ppo   # its rough ground, a height scan
     python experiments/train.py --task hop --out runs/hop-ppo --observe-gravity --scan-checkpoints --eval-num 64
     python -m hopper_mjx.simulate --controller policy:runs/hop-ppo --gravity 9.81,3.71,1.62 --duration 10
 
@@ -75,8 +76,8 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--policy-rate", type=float, default=None, metavar="HZ",
                    help="policy steps per second (default: the task's, 50); must divide the training's physics rate "
                         "(500 Hz). --episode-length counts policy steps at this rate")
-    cli.add_physics_options(p)
-    p.set_defaults(terrain=None)  # the task's own ground (hop_terrain's rough ground; flat for the others)
+    cli.add_physics_options(p, terrain=None, terrain_default="the task's own: hop_terrain's rough ground, flat for "
+                                                             "the others")
     p.add_argument("--sac-replay", type=int, default=1_000_000, help="SAC: replay buffer size (env steps)")
     p.add_argument("--sac-min-replay", type=int, default=8192, help="SAC: env steps collected before learning")
     p.add_argument("--sac-grad-updates", type=int, default=8, help="SAC: gradient updates per env step batch")

@@ -114,10 +114,12 @@ def add_batch_options(p: argparse.ArgumentParser, *, gravity=(9.81, 3.71, 1.62),
 
 
 # -- the physics every tool runs: the robot, the engine (and what a world sets) ------------------
-def add_physics_options(p: argparse.ArgumentParser, *, engine_help: str = "") -> None:
-    """The options of a `scenario.Physics`, one set for every tool; `check_physics` reads them."""
+def add_physics_options(p: argparse.ArgumentParser, *, engine_help: str = "", terrain: str | None = "flat",
+                        terrain_default: str = "flat") -> None:
+    """The options of a `scenario.Physics`, one set for every tool; `check_physics` reads them. `terrain`: the
+    --terrain default (None: the tool picks one, `terrain_default` says which)."""
     p.add_argument("--urdf", default=None, help="monoped URDF (default: the shipped one)")
-    p.add_argument("--terrain", default="flat", metavar="SPEC", help=terrain_help())
+    p.add_argument("--terrain", default=terrain, metavar="SPEC", help=terrain_help(terrain_default))
     p.add_argument("--randomize", default=None, metavar="NAME=DIST,...",
                    help="robot parameters drawn per instance with --seed, e.g. \"foot_friction=uniform(0.4,1.0),"
                         "body_mass=scale(0.9,1.1),dof_damping=0.02..0.2\"; DIST: a number, a..b, uniform(a,b), "

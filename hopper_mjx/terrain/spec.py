@@ -280,11 +280,11 @@ def read_png(path: str) -> np.ndarray:
     return image.astype(np.float64) / top
 
 
-def terrain_help() -> str:
-    """The --terrain option's help text, from the registry."""
+def terrain_help(default: str = "flat") -> str:
+    """The --terrain option's help text, from the registry; `default`: what the tool does without it."""
     return (f"the ground: NAME[:KEY=VALUE,...], NAME one of {registry.listed(registry.TERRAINS)}; e.g. "
             "rough:amp=0.03,wavelength=0.4,seed=1, obstacle:height=0.15,x=0.6, heightmap:ground.png,size=4x4,"
-            "height=0.3 (keys: docs/terrain.md; default flat)")
+            f"height=0.3 (keys: docs/terrain.md; default {default})")
 
 
 def check_terrain(text: str, n: int = 1) -> Ground:
