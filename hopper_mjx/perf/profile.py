@@ -44,22 +44,25 @@ CHAIN_STAGES = ("kinematics", "mass matrix, bias forces, actuation", "constraint
                 "integration")
 
 
-def best_cost(step, data, gravity, steps: int) -> float:
-    """µs per instance-step of a compiled vmapped scan of step(data, gravity) from data."""
+def best_cost(step, model, data, gravity, steps: int) -> float:
+    """µs per instance-step of a compiled vmapped scan of step(model, data, gravity) from data. The engine's
+    `model` is an argument of the compiled function, as the core passes it: as a constant the compiler would fold
+    the chain's stored stages away and time another program (several times slower on a terrain)."""
     import jax
 
     from hopper_mjx.engine import BATCH_AXIS
     from hopper_mjx.sim import CPU_COMPILER_OPTIONS
 
-    def one(d, g):
-        return jax.lax.scan(lambda d, _: (step(d, g), None), d, None, length=steps)[0]
+    def one(m, d, g):
+        return jax.lax.scan(lambda d, _: (step(m, d, g), None), d, None, length=steps)[0]
 
-    f = jax.jit(jax.vmap(one, axis_name=BATCH_AXIS), compiler_options=CPU_COMPILER_OPTIONS)  # as the core vmaps
-    jax.block_until_ready(f(data, gravity))  # compiles
+    f = jax.jit(jax.vmap(one, in_axes=(None, 0, 0), axis_name=BATCH_AXIS),  # as the core vmaps
+                compiler_options=CPU_COMPILER_OPTIONS)
+    jax.block_until_ready(f(model, data, gravity))  # compiles
     best = np.inf
     for _ in range(REPEATS):
         start = time.perf_counter()
-        jax.block_until_ready(f(data, gravity))
+        jax.block_until_ready(f(model, data, gravity))
         best = min(best, time.perf_counter() - start)
     return best / (gravity.shape[0] * steps) * 1e6
 
@@ -71,8 +74,8 @@ def rollout_cost(mj_model, qpos, qvel, gravity, steps: int) -> float:
 
     model = mjx.put_model(mj_model)
     data = jax.vmap(lambda q, v: mjx.make_data(mj_model).replace(qpos=q, qvel=v))(qpos, qvel)
-    step = lambda d, g: mjx.step(model.replace(opt=model.opt.replace(gravity=g)), d)
-    return best_cost(step, data, gravity, steps)
+    step = lambda m, d, g: mjx.step(m.replace(opt=m.opt.replace(gravity=g)), d)
+    return best_cost(step, model, data, gravity, steps)
 
 
 def chain_cut(engine, depth: int):
@@ -83,12 +86,13 @@ def chain_cut(engine, depth: int):
     from hopper_mjx.engine import chain, chain_constraint, chain_smooth
 
     if depth == len(CHAIN_STAGES):
-        return lambda d, g: engine.integrate(engine.model, engine.forward(engine.model, d, g), g)
+        return lambda m, d, g: engine.integrate(m, engine.forward(m, d, g), g)
     if depth == len(CHAIN_STAGES) - 1:
-        return lambda d, g: d.replace(qacc_warmstart=engine.forward(engine.model, d, g).qacc)
-    cm, gate = engine.chain, engine.model.gate
+        return lambda m, d, g: d.replace(qacc_warmstart=engine.forward(m, d, g).qacc)
+    cm = engine.chain
 
-    def step(d, g):
+    def step(model, d, g):
+        gate = model.gate
         qpos = tuple(d.qpos[i] for i in range(cm.nq))
         qvel = tuple(d.qvel[i] for i in range(cm.nv))
         pose = chain_smooth.kinematics(cm, gate, qpos)
@@ -96,7 +100,7 @@ def chain_cut(engine, depth: int):
         if depth >= 2:
             outputs.append(chain._smooth(cm, gate, pose, qpos, qvel, tuple(d.ctrl), tuple(g)))
         if depth >= 3:
-            outputs.append(chain_constraint.rows(cm, gate, pose, qpos, qvel, engine.model.terrain))
+            outputs.append(chain_constraint.rows(cm, gate, pose, qpos, qvel, model.terrain))
         leaves = [x for x in jax.tree_util.tree_leaves(outputs) if not isinstance(x, (int, float))]
         return d.replace(qvel=d.qvel + 1e-12 * sum(jnp.sum(x) for x in leaves))  # keeps every output
 
@@ -107,7 +111,8 @@ def chain_costs(engine, qpos, qvel, gravity, steps: int) -> dict:
     import jax
 
     data = jax.vmap(engine.make_data)(qpos, qvel)
-    cumulative = [best_cost(chain_cut(engine, k), data, gravity, steps) for k in range(1, len(CHAIN_STAGES) + 1)]
+    cumulative = [best_cost(chain_cut(engine, k), engine.model, data, gravity, steps)
+                  for k in range(1, len(CHAIN_STAGES) + 1)]
     return dict(zip(CHAIN_STAGES, np.diff(cumulative, prepend=0.0))) | {"full step": cumulative[-1]}
 
 
