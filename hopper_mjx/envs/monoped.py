@@ -16,7 +16,7 @@ A task (`hopper_mjx.envs.tasks`) is a `MonopedEnv` that says what it commands
   gravity only when `observe_gravity` is set; on a `terrain`, the base's height over the ground at
   the height scan's points (`SCAN`, legged_gym's measured_heights).
 - **Terrain** (`terrain`, a --terrain spec; "" the flat plane): one fixed ground every episode
-  starts on, at the origin, as the core's instances start (the spec is checked to stay below the foot there).
+  starts on, at the origin, as the core's instances start (train.py's --terrain check keeps it below the foot there).
 - **Gravity** is drawn per episode at `reset`, log-uniformly over `gravity_range`, and kept
   in `State.info["gravity"]`; `wrappers.wrap_for_training` makes Brax's auto-reset draw a
   fresh episode (gravity, command, initial state) instead of replaying the first one.
