@@ -63,7 +63,10 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--batch-size", type=int, default=128)
     p.add_argument("--num-minibatches", type=int, default=8)
     p.add_argument("--updates-per-batch", type=int, default=4)
-    p.add_argument("--learning-rate", type=float, default=3e-4)
+    p.add_argument("--learning-rate", type=float, default=3e-4, help="Adam's step (PPO: the first one with --desired-kl)")
+    p.add_argument("--desired-kl", type=float, default=None, metavar="KL",
+                   help="PPO: adapt the learning rate after each update to keep the policy's KL step near KL "
+                        "(x1.5 below KL/2, /1.5 above 2 KL, as legged_gym's PPO does); default: a fixed rate")
     # 1e-3, not Brax's usual 1e-2: on hop the 1e-2 exploration kept knocking the robot over (evaluation reward
     # collapsing 623 -> 100 and back), and no seed met the honest threshold in 8 M steps (docs/learning.md).
     p.add_argument("--entropy-cost", type=float, default=1e-3, help="PPO's entropy bonus (default 0.001)")
@@ -157,6 +160,11 @@ def check(args):
         lo, hi = _pair(args.gravity_range, "--gravity-range")
         if not 0 < lo <= hi:
             raise ValueError(f"--gravity-range must be 0 < low <= high m/s², got {args.gravity_range!r}")
+    if args.desired_kl is not None:
+        if args.algo != "ppo":
+            raise ValueError("--desired-kl is for --algo ppo (Brax's SAC has no adaptive learning rate)")
+        cli.check_range("--desired-kl", args.desired_kl, low=0, open_low=True)
+    cli.check_range("--learning-rate", args.learning_rate, low=0, open_low=True)
     for flag in ("num_envs", "timesteps", "episode_length", "eval_every", "num_eval_envs", "unroll_length",
                  "batch_size", "num_minibatches", "eval_num"):
         if getattr(args, flag) < 1:
@@ -272,6 +280,7 @@ def run_ppo(args, env, factory, remaining: int, start_step: int, resume, progres
         gae_lambda=0.95,
         clipping_epsilon=0.2,
         max_grad_norm=1.0,
+        **({} if args.desired_kl is None else {"learning_rate_schedule": "ADAPTIVE_KL", "desired_kl": args.desired_kl}),
         progress_fn=progress,
         run_evals=not args.no_eval,
         policy_params_fn=lambda step, make_policy, params: save_checkpoint(step, params),
