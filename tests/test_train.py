@@ -155,6 +155,10 @@ def test_a_minutes_budget_stops_at_the_first_evaluation_past_it(tmp_path, capsys
     (["--terrain", "rough:amp=0.02,seed=each"], "--terrain rough:amp=0.02,wavelength=0.4,seed=each,size=4x4,cell=0.04:"
                                                 " training puts every instance on one ground; give a fixed seed"),
     (["--minutes", "0"], "--minutes must be finite and > 0, got 0"),
+    # The folder's networks are 8-8 (TINY): Brax would restore them into networks of the default sizes.
+    ([*ROBOT_IO], "holds networks with 8-8 hidden layers where --policy-layers asks 64-64-64: pass --policy-layers "
+                  "8,8 to resume it"),
+    ([*ROBOT_IO, "--policy-layers", "8,8"], "where --value-layers asks 64-64-64"),
 ])
 def test_train_rejects_bad_input_in_one_line_before_anything_runs(trained, capsys, args, message):
     out, _ = trained
