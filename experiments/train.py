@@ -65,7 +65,8 @@ def parser() -> argparse.ArgumentParser:
     # 8 epochs over each batch and a value MLP as small as the policy's: seed 1 of hop met its threshold at 5.7 M
     # steps (3.4 min) where 4 epochs and a 128-128-128 value MLP needed 16.0 M (6.9 min; docs/learning.md).
     p.add_argument("--updates-per-batch", type=int, default=8, help="PPO: epochs over each batch (default 8)")
-    p.add_argument("--learning-rate", type=float, default=3e-4, help="Adam's step (PPO: the first one with --desired-kl)")
+    p.add_argument("--learning-rate", type=float, default=3e-4,
+                   help="Adam's step (PPO: the first one with --desired-kl)")
     p.add_argument("--desired-kl", type=float, default=None, metavar="KL",
                    help="PPO: adapt the learning rate after each update to keep the policy's KL step near KL "
                         "(x1.5 below KL/2, /1.5 above 2 KL, as legged_gym's PPO does); default: a fixed rate")
