@@ -163,7 +163,12 @@ def check(args):
     physics = cli.check_physics(args)
     cli.refuse_each(physics.ground, "training")
     cli.check_controls(physics, registry.POLICY_PREFIX)  # a dc motor's drawn figures need --motor dc
-    _layers(args.policy_layers), _layers(args.value_layers)
+    for flag in ("policy_layers", "value_layers"):
+        try:
+            _layers(getattr(args, flag))
+        except ValueError:
+            raise ValueError(f"--{flag.replace('_', '-')} must be comma-separated positive integers (hidden layer "
+                             f"sizes), got {getattr(args, flag)!r}") from None
     if args.gravity_range is not None:
         lo, hi = _pair(args.gravity_range, "--gravity-range")
         if not 0 < lo <= hi:
@@ -174,7 +179,7 @@ def check(args):
         cli.check_range("--desired-kl", args.desired_kl, low=0, open_low=True)
     cli.check_range("--learning-rate", args.learning_rate, low=0, open_low=True)
     for flag in ("num_envs", "timesteps", "episode_length", "eval_every", "num_eval_envs", "unroll_length",
-                 "batch_size", "num_minibatches", "eval_num"):
+                 "batch_size", "num_minibatches", "updates_per_batch", "eval_num", "sac_replay", "sac_grad_updates"):
         if getattr(args, flag) < 1:
             raise ValueError(f"--{flag.replace('_', '-')} must be >= 1, got {getattr(args, flag)}")
     cli.check_seed(args.seed)

@@ -177,6 +177,12 @@ def test_train_rejects_bad_input_in_one_line_before_anything_runs(trained, capsy
     (["--eval-gravity", "9.81,-1"], "--eval-gravity must be finite and > 0, got -1"),
     (["--seed", "-1"], "--seed must be in 0..4294967295, got -1"),
     (["--desired-kl", "0"], "--desired-kl must be finite and > 0, got 0"),
+    # Zero epochs used to train a whole run that never updated its networks.
+    (["--updates-per-batch", "0"], "--updates-per-batch must be >= 1, got 0"),
+    (["--value-layers", "0,3"], "--value-layers must be comma-separated positive integers (hidden layer sizes), "
+                                "got '0,3'"),
+    (["--policy-layers", "64,x"], "--policy-layers must be comma-separated positive integers (hidden layer sizes), "
+                                  "got '64,x'"),
     (["--algo", "sac", "--desired-kl", "0.01"], "--desired-kl is for --algo ppo (Brax's SAC has no adaptive learning "
                                                "rate)"),
     (["--learning-rate", "nan"], "--learning-rate must be finite and > 0, got nan"),
