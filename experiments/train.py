@@ -214,12 +214,11 @@ def check(args):
         # Brax restores the checkpoint's parameters into networks of the asked sizes: they must be its sizes.
         kwargs = net["network_factory_kwargs"]
         for flag, key in LAYER_FLAGS[algo]:
-            saved, asked = tuple(kwargs[key]), _layers(getattr(args, flag))
+            saved, asked, option = tuple(kwargs[key]), _layers(getattr(args, flag)), "--" + flag.replace("_", "-")
             if saved != asked:
                 raise ValueError(f"--out {args.out} holds networks with {'-'.join(map(str, saved))} hidden layers "
-                                 f"where --{flag.replace('_', '-')} asks {'-'.join(map(str, asked))}: pass "
-                                 f"--{flag.replace('_', '-')} {','.join(map(str, saved))} to resume it, or use "
-                                 f"another --out")
+                                 f"where {option} asks {'-'.join(map(str, asked))}: pass {option} "
+                                 f"{','.join(map(str, saved))} to resume it, or use another --out")
     return physics
 
 
