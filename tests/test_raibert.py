@@ -243,6 +243,56 @@ def test_rising_towards_a_step_the_leg_is_drawn_up_by_its_rise(robot):
         assert float(kinematics.leg_length(leg, target[2])) == pytest.approx(cfg.leg_length - shorter, abs=1e-4)
 
 
+def _fine_step(x0=0.2, rise=0.05):
+    """A 2 m x 2 m grid of the tools' 4 cm cells whose ground rises by `rise` beyond x = x0: the riser is the
+    ramp across the cell before x0."""
+    xs = np.linspace(-1.0, 1.0, 51)
+    return np.broadcast_to(np.where(xs >= x0 - 1e-9, rise, 0.0), (51, 51))
+
+
+def test_a_foothold_on_a_riser_is_moved_clear_of_it(robot):
+    """Wherever across a 5 cm step's riser (the ramp from x = 0.16 to 0.20) the foot would land, the foothold is
+    moved so that the foot sphere (radius 3 cm) lands clear of the ramp, on the ground below or on the step;
+    on level and on gentle rough ground the placement is left exactly as it was."""
+    leg, r = robot.leg, robot.leg.foot_radius
+    body = raibert.sense(robot, _obs(robot))  # at rest in the air: it lands where the placement puts it
+    com_x = float(raibert.foothold(leg, body, jnp.zeros(2), jnp.zeros(2))[0])
+    placement = jnp.zeros(2)
+    step = _ground(_fine_step())
+    for want in np.arange(0.10, 0.27, 0.005):  # the landing point, world x
+        base_xy = jnp.array([want - com_x, 0.0])
+        moved = raibert.clear_of_edges(leg, body, step, base_xy, placement, jnp.float32(0.1), 9.81)
+        lands = want + float(moved[0])
+        assert lands + r <= 0.16 + 1e-6 or lands - r >= 0.20 - 1e-6, f"aimed at {want:.3f}, lands at {lands:.3f}"
+        assert abs(float(moved[1])) < 1e-7
+    xs = np.linspace(-1.0, 1.0, 51)
+    rough = 0.02 * np.sin(2 * np.pi * xs / 0.4)[None, :] * np.cos(2 * np.pi * xs / 0.4)[:, None]
+    for heights in (np.zeros((51, 51)), rough):
+        for want in (0.0, 0.13, 0.31):
+            moved = raibert.clear_of_edges(leg, body, _ground(heights), jnp.array([want - com_x, 0.0]), placement,
+                                           jnp.float32(0.1), 9.81)
+            assert np.asarray(moved).tolist() == [0.0, 0.0]
+
+
+def test_below_a_risers_top_the_swing_waits(robot):
+    """Rising towards a step 5 cm up, the foot still below its top: the PD's target keeps the foot where it is
+    under the COM (the leg only shortens); once the foot is above the top and clear, it reaches ahead to place."""
+    cfg, leg = raibert.RaibertConfig(), robot.leg
+    inertia = raibert.inertia_facts(leg)
+    step = _ground(_step(x0=0.1))  # the foot is near x = 0, the foothold v·T_s/2 = 0.15 ahead of the COM
+    ahead = {}
+    for clearance in (0.03, 0.12):  # the foot's bottom above z = 0: below the step's top, then above it
+        body = raibert.sense(robot, _obs(robot, z=robot.standing_height + clearance,
+                                         qvel=np.r_[0.5, 0, 0.5, np.zeros(6)]))
+        torque = raibert.flight_torque(leg, cfg, body, jnp.zeros(3), _speed(0.6), 9.81, inertia, ground=step,
+                                       base_xy=jnp.zeros(2))
+        target = body.q + torque / jnp.asarray(raibert.FLIGHT_KP)
+        now = np.asarray(body.foot - body.com)[:2]
+        ahead[clearance] = np.asarray(kinematics.foot_position(leg, target) - body.com)[:2] - now
+    np.testing.assert_allclose(ahead[0.03], 0.0, atol=1e-4)
+    assert ahead[0.12][0] > 0.1
+
+
 # -- each instance's own leg -----------------------------------------------------------------
 SHANKS = (0.30, 0.38, 0.45)  # m: one batch, three legs (the URDF's is 0.35)
 
