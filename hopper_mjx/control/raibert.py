@@ -93,13 +93,14 @@ MAX_SPEED_OFFSET = 0.1  # m, bound on the integral part of the foot placement
 MAX_RETRACT = 0.15  # m, bound on the leg's shortening in a rising flight towards higher ground
 MIN_SQUEEZE = 0.02  # m, floor under the remaining thrust stroke the extra force is spread over
 # The foothold kept off terrain edges (`clear_of_edges`): the ground is sampled every EDGE_STEP m along the travel
-# direction; an edge is a kink, a second difference over EDGE_STEP above EDGE_KINK m (rough ground's gentle
-# curvature, 2 mm on amp=0.02 at wavelength 0.4, passes; a step's riser across one 4 cm cell gives 25 mm), flagged
-# at the samples within EDGE_STEP of it. A foot lands with no flagged sample within EDGE_MARGIN of its centre, so no
-# edge within 4 cm (the sphere's 3 cm radius and a margin); the foothold moves at most EDGE_SHIFTS steps to find
-# that, enough to leave a riser's ramp from anywhere on it. Wider windows (10 cm ahead, room for the next swing) with
-# shifts of up to 10 cm tilted the body at touchdown and took the Moon's step from 66 % cleared to 53 %.
-EDGE_STEP, EDGE_KINK, EDGE_MARGIN, EDGE_SHIFTS = 0.02, 0.005, 0.02, 3
+# direction; an edge is a kink (a second difference above EDGE_KINK m: a step's riser, a ramp across one 4 cm cell,
+# gives up to 12 mm at its ends; rough ground's curvature, 0.5 mm on amp=0.02 at wavelength 0.4, passes) or ground
+# steeper than EDGE_SLOPE (the ramp between its kinks; that rough ground's steepest is 0.31). The foot's centre
+# lands with no edge sample within EDGE_MARGIN (so no edge within 2 cm: a 3 cm sphere that close to a 51° riser's
+# foot stands on the ground; on top of a step it stands on the top), the foothold moving at most EDGE_SHIFTS steps to
+# find that. Windows reaching 10 cm ahead with shifts of up to 10 cm tilted the body at touchdown and took the
+# Moon's step from 66 % cleared to 53 % (docs/control.md).
+EDGE_STEP, EDGE_KINK, EDGE_SLOPE, EDGE_MARGIN, EDGE_SHIFTS = 0.01, 0.003, 0.6, 0.01, 5
 # m: a flight towards ground higher than under the foot by more than RISER holds the foot where it is (relative to
 # the COM) until its bottom is SWING_CLEARANCE above the ground it lands on, so that its swing does not catch the riser.
 RISER, SWING_CLEARANCE = 0.02, 0.02
@@ -453,7 +454,7 @@ def foothold(leg: LegGeometry, body: Body, base_xy, placement) -> tuple[jax.Arra
 
 
 def _edge_windows() -> tuple[np.ndarray, np.ndarray]:
-    """(sample offsets (S,) m along the travel direction, (2 EDGE_SHIFTS + 1, S - 2) which kinks each candidate
+    """(sample offsets (S,) m along the travel direction, (2 EDGE_SHIFTS + 1, S - 2) which edge samples each candidate
     shift's landing window holds), constants of `clear_of_edges`."""
     back = front = round(EDGE_MARGIN / EDGE_STEP)
     first = -EDGE_SHIFTS - back - 1
@@ -466,7 +467,7 @@ def _edge_windows() -> tuple[np.ndarray, np.ndarray]:
 def clear_of_edges(leg: LegGeometry, body: Body, ground, base_xy, placement, foot_height, g):
     """`placement` (heading frame, m from the COM) moved along the travel direction, by the least whole number of
     EDGE_STEPs (at most EDGE_SHIFTS; forward first among equals), so that the foot lands clear of terrain edges
-    (see EDGE_KINK): a foot set down on a step's edge is thrown off it. Unchanged where the ground has no edge
+    (the EDGE_ constants): a foot set down on a step's edge is thrown off it. Unchanged where the ground has no edge
     there, or no shift clears it. The landing point is predicted from the ballistic flight: the COM moves v·t more
     before the foot (its bottom `foot_height` m up, world z) comes down to the ground."""
     offsets, windows = _edge_windows()
@@ -480,8 +481,9 @@ def clear_of_edges(leg: LegGeometry, body: Body, ground, base_xy, placement, foo
     lands = jnp.stack([x, y]) + body.v * fall
     samples = lands[:, None] + world_along[:, None] * jnp.asarray(offsets)[None, :]
     h = ground.height(samples[0], samples[1])
-    kink = (jnp.abs(h[2:] - 2.0 * h[1:-1] + h[:-2]) > EDGE_KINK).astype(jnp.float32)
-    blocked = jnp.asarray(windows) @ kink > 0
+    kink = jnp.abs(h[2:] - 2.0 * h[1:-1] + h[:-2]) > EDGE_KINK
+    steep = jnp.abs(h[2:] - h[:-2]) > 2.0 * EDGE_STEP * EDGE_SLOPE  # a riser's ramp is straight between its kinks
+    blocked = jnp.asarray(windows) @ (kink | steep).astype(jnp.float32) > 0
     steps = np.arange(-EDGE_SHIFTS, EDGE_SHIFTS + 1)
     order = jnp.asarray(np.abs(steps) + 0.5 * (steps < 0))  # nearest first, forward before back
     best = jnp.argmin(jnp.where(blocked, jnp.inf, order))
