@@ -436,10 +436,11 @@ def flight_torque(leg: LegGeometry, gains: RaibertConfig, body: Body, spin, spee
         hold = (rise > RISER) & (foot_height < SWING_CLEARANCE)
     time_left = (body.zdot + jnp.sqrt(body.zdot**2 + 2.0 * g * jnp.maximum(foot_height, 0.0))) / g  # to touchdown
     drift = jnp.stack([body.roll, body.pitch]) + spin[:2] * time_left / (1.0 - inertia.alpha)  # tilt at touchdown
-    placement = _within_tilt_budget(placement, (body.level @ (body.foot - body.com))[:2], drift,
+    now = (body.level @ (body.foot - body.com))[:2]  # where the foot is, heading frame from the COM
+    placement = _within_tilt_budget(placement, now, drift,
                                     inertia.swing_tilt, gains.tilt_budget, gains.leg_length)
     # Below a riser's top the foot stays where it is, the leg shortening: the swing waits until it clears.
-    placement = jnp.where(hold, (body.level @ (body.foot - body.com))[:2], placement)
+    placement = jnp.where(hold, now, placement)
     flight_length = gains.leg_length - jnp.where(body.zdot > 0, retract, 0.0)
     target = _placement_angles(leg, body.level, placement, flight_length, body.com)
     leg_rate = body.qd + jnp.concatenate([body.gyro[:2], jnp.zeros(1)])  # the leg's rate in the world
