@@ -82,6 +82,10 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--policy-rate", type=float, default=None, metavar="HZ",
                    help="policy steps per second (default: the task's, 50); must divide the training's physics rate "
                         "(500 Hz). --episode-length counts policy steps at this rate")
+    p.add_argument("--config", action="append", default=[], metavar="KEY=VALUE",
+                   help="set a field of the task's config (hopper_mjx.envs.monoped.MonopedConfig: reward weights and "
+                        "kernels, command ranges, ...; a pair as low,high), e.g. --config apex_reward=flight; "
+                        "repeatable. Saved with the policy")
     cli.add_physics_options(p, terrain=None, terrain_default="the task's own: hop_terrain's rough ground, flat for "
                                                              "the others")
     p.add_argument("--sac-replay", type=int, default=1_000_000, help="SAC: replay buffer size (env steps)")
@@ -188,6 +192,10 @@ def check(args):
             raise ValueError(f"--seeds must be >= 1, got {args.seeds}")
         cli.check_seed(args.seed + args.seeds - 1)
     check_task_physics(args, physics)
+    try:
+        envs.default_config(args.task).overridden(args.config, OWNED_FIELDS)
+    except ValueError as err:
+        raise ValueError(f"--config: {err}") from None
     # The evaluation's options too: a mistake there would otherwise surface after the whole training run.
     for g in _floats(args.eval_gravity, "--eval-gravity"):
         cli.check_range("--eval-gravity", g, low=0, open_low=True)
@@ -249,6 +257,13 @@ def check_task_physics(args, physics) -> None:
                         run=f"an episode (--episode-length {args.episode_length} at {rate:g} Hz)")
 
 
+# The task config's fields other options set: --config refuses them.
+OWNED_FIELDS = {"observe_gravity": "--observe-gravity", "engine": "--engine", "motor": "--motor",
+                "action_delay": "--action-delay", "push": "--push", "terrain": "--terrain",
+                "randomize": "--randomize", "randomize_seed": "--seed", "gravity_range": "--gravity-range",
+                "policy_rate": "--policy-rate"}
+
+
 def task_config(args, physics):
     from hopper_mjx import envs
 
@@ -261,7 +276,8 @@ def task_config(args, physics):
         overrides["gravity_range"] = _pair(args.gravity_range, "--gravity-range")
     if args.policy_rate is not None:
         overrides["policy_rate"] = args.policy_rate
-    return envs.make(args.task, physics.mj_model, **overrides)
+    config = envs.default_config(args.task).overridden(args.config, OWNED_FIELDS)
+    return envs.from_config(dataclasses.replace(config, **overrides), physics.mj_model)
 
 
 def _shared(args, env, factory, remaining: int, start_step: int, resume, per_train_step: int) -> dict:

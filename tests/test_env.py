@@ -303,6 +303,41 @@ def test_stand_pays_small_hops_in_place_like_standing_and_far_more_than_a_fall(m
     assert r_small > r_big + 0.3 and r_small > r_drift + 0.2 and r_small > r_side + env.config.fall_penalty
 
 
+def test_the_flight_apex_is_each_hops_apex_held_through_the_stance_after_it():
+    """apex_reward="flight": a drop from the initial clearance is no hop (judged at the standing height);
+    from a lift-off on, the flight's highest predicted apex, at once (its ballistic apex), held through the
+    following stance until the next lift-off."""
+    stand = 0.882
+    info = {"apex": jnp.float32(stand), "flight_top": jnp.float32(monoped.DROPPING)}
+    # (predicted apex m, flying): a 5 cm drop, a stance, a 0.98 m hop rising then falling, a stance, a 0.93 m hop.
+    steps = [(0.93, True), (0.90, True), (0.88, False), (0.87, False), (0.98, True), (0.98, True), (0.95, True),
+             (0.90, True), (0.86, False), (0.85, False), (0.93, True), (0.91, True), (0.88, False)]
+    want = [stand, stand, stand, stand, 0.98, 0.98, 0.98, 0.98, 0.98, 0.98, 0.93, 0.93, 0.93]
+    judged = []
+    for apex, flying in steps:
+        value, carried = monoped.flight_apex(jnp.float32(apex), jnp.asarray(flying), info)
+        info = {**info, **carried}
+        judged.append(float(value))
+    np.testing.assert_allclose(judged, want, atol=1e-6)
+
+
+def test_a_task_config_takes_key_value_overrides_and_names_what_is_wrong():
+    hop = envs.default_config("hop")
+    owned = {"gravity_range": "--gravity-range"}
+    cfg = hop.overridden(["apex_reward=flight", "apex_range=0.95,1.1", "w_apex=2", "solver_iterations=3"], owned)
+    assert (cfg.apex_reward, cfg.apex_range, cfg.w_apex, cfg.solver_iterations) == ("flight", (0.95, 1.1), 2.0, 3)
+    assert isinstance(cfg.solver_iterations, int) and hop.overridden([], owned) == hop
+    for pairs, message in ((["apex_reward=top"], "apex_reward must be one of predicted, flight"),
+                           (["apex_range=1.1"], "apex_range='1.1': expected 2 comma-separated"),
+                           (["w_apex=lots"], "w_apex='lots': expected a float"),
+                           (["apex_range=1.2,1.0"], "apex_range must be a finite"),
+                           (["gravity_range=1,2"], "gravity_range is set by --gravity-range"),
+                           (["task=stand"], "not KEY=VALUE with a task config field"),
+                           (["w_apex"], "not KEY=VALUE")):
+        with pytest.raises(ValueError, match=message):
+            hop.overridden(pairs, owned)
+
+
 def test_config_rejects_bad_ranges(mj_model):
     with pytest.raises(ValueError, match="gravity_range"):
         MonopedConfig(gravity_range=(12.0, 1.0))

@@ -76,6 +76,13 @@ TASK_INFO = ("command", "gravity", "last_action", "rng")
 EPISODE_INFO = ("robot", "drive", "sense", "physics_steps")
 ROBOT_POOL = 256  # robots a randomised task draws once; an episode runs one of them
 EPISODE_STREAM = 2  # folded into an episode's key: the pushes' directions and the sensor noise
+APEX_REWARDS = ("predicted", "flight")
+# The flight apex's carry (`apex_reward="flight"`): the apex judged in stance, and the flight's highest predicted
+# apex so far (NO_FLIGHT in stance), both m.
+FLIGHT_INFO = ("apex", "flight_top")
+NO_FLIGHT = -1e3
+# flight_top through an episode's first fall, from its initial clearance: a drop is not a hop.
+DROPPING = -2e3
 RANGES = ("gravity_range", "apex_range", "speed_range", "lateral_speed_range", "initial_clearance", "height_band")
 # Fields of configs saved before stand was redefined (its foot-support term); a policy's hopper_env.json with
 # them still loads (they only shaped the reward it was trained on).
@@ -107,6 +114,10 @@ class MonopedConfig:
     height_scale: float = 0.05  # m
     w_apex: float = 1.0
     apex_scale: float = 0.1  # m; exp(-|error| / scale)
+    # What the apex kernel judges (`APEX_REWARDS`): "predicted", the ballistic apex from the state (its height
+    # when falling: a hop is judged below its top all through its fall and stance); "flight", the apex of the
+    # flight under way, held through the stance after it (each hop's apex, as the evaluation measures it).
+    apex_reward: str = "predicted"
     w_speed: float = 0.5
     speed_scale: float = 0.3  # m/s
     w_upright: float = 0.5
@@ -148,6 +159,8 @@ class MonopedConfig:
         if not self.gravity_range[0] > 0:
             raise ValueError(f"gravity_range must be > 0 m/s² (magnitudes, drawn log-uniformly), "
                              f"got {self.gravity_range}")
+        if self.apex_reward not in APEX_REWARDS:
+            raise ValueError(f"apex_reward must be one of {', '.join(APEX_REWARDS)}, got {self.apex_reward!r}")
         if not (self.policy_rate > 0 and self.timestep > 0):
             raise ValueError(f"policy_rate and timestep must be positive, got {self.policy_rate}, {self.timestep}")
         engines.check_name(self.engine)
@@ -189,6 +202,38 @@ class MonopedConfig:
     def to_dict(self) -> dict:
         return dataclasses.asdict(self)
 
+    def overridden(self, pairs: list[str], owned: dict[str, str]) -> "MonopedConfig":
+        """This config with `KEY=VALUE` texts applied (a pair as `low,high`), checked whole; raises ValueError
+        naming the first bad one. `owned`: fields another option sets {field: that option}, refused here."""
+        fields = {f.name: f for f in dataclasses.fields(self)}
+        changes = {}
+        for pair in pairs:
+            key, sep, text = pair.partition("=")
+            key = key.strip()
+            if not sep or key not in fields or key in ("task", "robot"):
+                known = ", ".join(sorted(set(fields) - set(owned) - {"task", "robot"}))
+                raise ValueError(f"{pair!r} is not KEY=VALUE with a task config field; fields: {known}")
+            if key in owned:
+                raise ValueError(f"{key} is set by {owned[key]}, not here")
+            default = getattr(self, key)
+            try:
+                if isinstance(default, bool):
+                    if text.lower() not in ("true", "false"):
+                        raise ValueError
+                    value = text.lower() == "true"
+                elif isinstance(default, (int, float)):
+                    value = type(default)(text)
+                elif isinstance(default, str):
+                    value = text
+                else:  # a tuple (or a None pair): comma-separated numbers of the default's kind
+                    value = tuple(float(v) for v in text.split(","))
+                    if default is not None and len(value) != len(default):
+                        raise ValueError
+            except ValueError:
+                raise ValueError(f"{key}={text!r}: expected {_kind(default)}") from None
+            changes[key] = value
+        return dataclasses.replace(self, **changes)
+
     @classmethod
     def from_dict(cls, values: dict) -> "MonopedConfig":
         known = {f.name for f in dataclasses.fields(cls)}
@@ -197,6 +242,14 @@ class MonopedConfig:
         if unknown:
             raise ValueError(f"unknown MonopedConfig field(s): {sorted(unknown)}")
         return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in values.items()})
+
+
+def _kind(default) -> str:
+    if isinstance(default, bool):
+        return "true or false"
+    if isinstance(default, (int, float, str)):
+        return f"a {type(default).__name__}"
+    return f"{len(default) if default is not None else 'a pair of'} comma-separated numbers"
 
 
 def same_robot(recorded: str, mj_model, what: str) -> str:
@@ -309,6 +362,16 @@ def predicted_apex(d, g: jax.Array) -> jax.Array:
     """Height the base would reach on a ballistic arc from here (its current height when falling)."""
     vz = jnp.maximum(d.qvel[2], 0.0)
     return d.qpos[2] + vz**2 / (2.0 * jnp.maximum(g, MIN_GRAVITY))
+
+
+def flight_apex(apex: jax.Array, flying: jax.Array, info: dict) -> tuple[jax.Array, dict]:
+    """(the apex judged now, the new `FLIGHT_INFO`) for `apex_reward="flight"`, from this step's predicted
+    `apex` and foot contact: in flight the highest predicted apex of this flight (from lift-off on: the
+    ballistic apex), in stance the last flight's, held."""
+    top, held = info["flight_top"], info["apex"]
+    new_top = jnp.where(flying, jnp.where(top == DROPPING, top, jnp.maximum(top, apex)), NO_FLIGHT)
+    held = jnp.where(~flying & (top > NO_FLIGHT), top, held)
+    return jnp.where(flying & (new_top > NO_FLIGHT), new_top, held), {"apex": held, "flight_top": new_top}
 
 
 def tilt_from_vertical(d) -> jax.Array:
@@ -454,7 +517,7 @@ class MonopedEnv(Env):
     def sample_command(self, key: jax.Array) -> jax.Array:
         raise NotImplementedError
 
-    def task_terms(self, d, g: jax.Array, command: jax.Array) -> dict[str, jax.Array]:
+    def task_terms(self, d, g: jax.Array, command: jax.Array, apex=None) -> dict[str, jax.Array]:
         raise NotImplementedError
 
     # Brax reads these.
@@ -478,11 +541,13 @@ class MonopedEnv(Env):
     def task_info(self) -> tuple[str, ...]:
         """The `State.info` keys a fresh episode replaces (`wrappers.ResampleAutoReset`)."""
         on = (bool(self.config.variation), self.motors is not None, self.sensors is not None, self.counts_steps)
-        return TASK_INFO + tuple(k for k, used in zip(EPISODE_INFO, on) if used)
+        flight = FLIGHT_INFO if self.config.apex_reward == "flight" else ()
+        return TASK_INFO + flight + tuple(k for k, used in zip(EPISODE_INFO, on) if used)
 
-    def reward_terms(self, d, g, command, action, last_action, effort, fell) -> dict[str, jax.Array]:
-        """Per-step reward terms (already weighted); their sum is the reward."""
-        return {**self.task_terms(d, g, command),
+    def reward_terms(self, d, g, command, action, last_action, effort, fell, apex=None) -> dict[str, jax.Array]:
+        """Per-step reward terms (already weighted); their sum is the reward. `apex`: the apex the task judges
+        (m; None: `predicted_apex` of `d`)."""
+        return {**self.task_terms(d, g, command, apex),
                 **posture_terms(self.config, d, action, last_action, effort, fell)}
 
     def reset(self, rng: jax.Array) -> State:
@@ -498,6 +563,8 @@ class MonopedEnv(Env):
         command = self.sample_command(k_cmd)
         last_action = jnp.zeros(3)
         info = {"command": command, "gravity": gravity, "last_action": last_action, "rng": rng}
+        if cfg.apex_reward == "flight":  # no hop yet: judged at the standing height until the first lift-off
+            info |= {"apex": jnp.float32(self.standing_height), "flight_top": jnp.float32(DROPPING)}
         info |= self._start_episode(rng, self.observe_signals(self.engine.model, data))
         obs = observe(lay, cfg, self.read(data, info), gravity, command, last_action)
         zero = jnp.zeros(())
@@ -618,12 +685,17 @@ class MonopedEnv(Env):
         Every task shares `physics`; this is where they differ."""
         cfg, lay, gravity = self.config, self.layout, state.info["gravity"]
         fell = fallen(cfg, data)
-        command, last_action = state.info["command"], state.info["last_action"]
-        terms = self.reward_terms(data, -gravity[2], command, action, last_action, effort, fell)
+        command, last_action, info = state.info["command"], state.info["last_action"], state.info
+        apex = None
+        if cfg.apex_reward == "flight":  # the true contact, as the reward reads the true state
+            flying = ~signals.contact(self.engine, model, data).flag
+            apex, carried = flight_apex(predicted_apex(data, -gravity[2]), flying, info)
+            info = {**info, **carried}
+        terms = self.reward_terms(data, -gravity[2], command, action, last_action, effort, fell, apex)
         reward = jnp.nan_to_num(sum(terms.values()), nan=-cfg.fall_penalty)
         # The sensors' reading, or the state with the contact of the last forward, as the core's controllers see it.
         sensed = self.observe_signals(model, data) if self.sensors is None else reading(state.info["sense"])
         obs = observe(lay, cfg, sensed, gravity, command, action)
-        info = {**state.info, "last_action": action}
+        info = {**info, "last_action": action}
         return state.replace(pipeline_state=data, obs=obs, reward=reward, done=fell.astype(jnp.float32),
                              metrics={**state.metrics, **terms}, info=info)

@@ -47,7 +47,7 @@ class Stand(MonopedEnv):
     def sample_command(self, key: jax.Array) -> jax.Array:
         return jnp.zeros(0)
 
-    def task_terms(self, d, g: jax.Array, command: jax.Array) -> dict[str, jax.Array]:
+    def task_terms(self, d, g: jax.Array, command: jax.Array, apex=None) -> dict[str, jax.Array]:
         cfg = self.config
         # The ballistic apex, so a hop above the band loses from its take-off on, not only at its top.
         rise = predicted_apex(d, g) - self.standing_height
@@ -76,10 +76,11 @@ class Hop(MonopedEnv):
         return jnp.concatenate([draw(k_apex, cfg.apex_range), draw(k_vx, cfg.speed_range),
                                 draw(k_vy, cfg.vy_range)])
 
-    def task_terms(self, d, g: jax.Array, command: jax.Array) -> dict[str, jax.Array]:
+    def task_terms(self, d, g: jax.Array, command: jax.Array, apex=None) -> dict[str, jax.Array]:
         cfg = self.config
+        apex = predicted_apex(d, g) if apex is None else apex
         return {
-            "apex": cfg.w_apex * closeness(predicted_apex(d, g) - command[0], cfg.apex_scale),
+            "apex": cfg.w_apex * closeness(apex - command[0], cfg.apex_scale),
             "speed": speed_term(cfg, d, command[1:3]),
         }
 
