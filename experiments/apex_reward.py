@@ -1,0 +1,83 @@
+"""What the hop task's apex term pays a hopper, per policy step, under each `apex_reward` (docs/learning.md).
+
+    python -m hopper_mjx.simulate --controller raibert --height 0.08 --gravity 9.81,3.71,1.62 --num 1 \\
+        --duration 10 --rate 500 --out runs/apex/h08.npz        # one file per hop height
+    python experiments/apex_reward.py runs/apex/*.npz --command 0.10
+
+Each file is a `simulate --out` recording. Its states are read at the training's policy rate (50 Hz), over
+the last half of the run, and judged as `hopper_mjx.envs` judges them: the term `exp(-|apex - command| /
+0.1)` of hop, with the apex `predicted` (the ballistic apex of each state) or `flight` (each hop's own,
+held through the stance after it). The rise printed is the median flight apex over the standing height.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import numpy as np
+
+POLICY_RATE = 50.0  # Hz, the tasks' default
+
+
+def judged(qpos: np.ndarray, qvel: np.ndarray, contact: np.ndarray, g: float, standing: float):
+    """(predicted, flight) apex (T,) m of one instance's states, by the environment's own rules."""
+    import jax.numpy as jnp
+
+    from hopper_mjx.envs import monoped
+
+    class State:  # what `predicted_apex` reads
+        def __init__(self, q, v):
+            self.qpos, self.qvel = q, v
+
+    predicted = np.asarray([float(monoped.predicted_apex(State(q, v), jnp.float32(g))) for q, v in zip(qpos, qvel)])
+    info = {"apex": jnp.float32(standing), "flight_top": jnp.float32(monoped.DROPPING)}
+    flight = []
+    for apex, touching in zip(predicted, contact):
+        value, carried = monoped.flight_apex(jnp.float32(apex), jnp.asarray(not touching), info)
+        info = {**info, **carried}
+        flight.append(float(value))
+    return predicted, np.asarray(flight)
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("runs", nargs="+", help="simulate --out .npz files")
+    p.add_argument("--command", type=float, default=0.10, help="commanded apex rise above standing, m")
+    p.add_argument("--scale", type=float, default=0.1, help="the apex kernel's width, m (hop's)")
+    args = p.parse_args(argv)
+    try:  # every input read before anything is computed
+        if not (np.isfinite(args.command) and args.command > 0 and np.isfinite(args.scale) and args.scale > 0):
+            raise ValueError(f"--command and --scale must be > 0, got {args.command}, {args.scale}")
+        runs = []
+        for name in args.runs:
+            with np.load(name) as f:
+                runs.append((name, {k: f[k] for k in ("time", "gravity", "qpos", "qvel", "contact")}))
+    except (OSError, ValueError, KeyError) as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 2
+    from hopper_mjx import model
+    from hopper_mjx.model import robot
+
+    standing = float(robot.standing_qpos(model.load())[2])
+    print(f"apex term per policy step, hop's kernel exp(-|apex - command| / {args.scale:g} m), command "
+          f"{args.command:g} m above standing ({standing:.3f} m); the last half of each run at {POLICY_RATE:g} Hz\n")
+    print("| run | g m/s² | measured rise m | predicted | flight |")
+    print("|---|---|---|---|---|")
+    for name, run in runs:
+        every = max(1, round(1 / (POLICY_RATE * float(run["time"][1] - run["time"][0]))))
+        for i, gvec in enumerate(run["gravity"]):
+            g = float(-gvec[2])
+            predicted, flight = judged(run["qpos"][i, ::every], run["qvel"][i, ::every], run["contact"][i, ::every],
+                                       g, standing)
+            half = len(flight) // 2  # the flight rule runs from the start, judged over the last half
+            predicted, flight = predicted[half:], flight[half:]
+            term = lambda apex: float(np.mean(np.exp(-np.abs(apex - standing - args.command) / args.scale)))
+            print(f"| {Path(name).name} | {g:g} | {np.median(flight) - standing:.3f} | {term(predicted):.3f} | "
+                  f"{term(flight):.3f} |")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
