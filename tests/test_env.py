@@ -324,11 +324,14 @@ def test_the_flight_apex_is_each_hops_apex_held_through_the_stance_after_it():
 def test_a_task_config_takes_key_value_overrides_and_names_what_is_wrong():
     hop = envs.default_config("hop")
     owned = {"gravity_range": "--gravity-range"}
-    cfg = hop.overridden(["apex_reward=flight", "apex_range=0.95,1.1", "w_apex=2", "solver_iterations=3"], owned)
+    cfg = hop.overridden(["apex_reward=flight", "apex_range=0.95,1.1", "w_apex=2", "solver_iterations=3",
+                          "lateral_speed_range=-0.1,0.1"], owned)
     assert (cfg.apex_reward, cfg.apex_range, cfg.w_apex, cfg.solver_iterations) == ("flight", (0.95, 1.1), 2.0, 3)
+    assert cfg.vy_range == (-0.1, 0.1)
     assert isinstance(cfg.solver_iterations, int) and hop.overridden([], owned) == hop
     for pairs, message in ((["apex_reward=top"], "apex_reward must be one of predicted, flight"),
                            (["apex_range=1.1"], "apex_range='1.1': expected 2 comma-separated"),
+                           (["lateral_speed_range=0.1,0.2,0.3"], "expected 2 comma-separated"),
                            (["w_apex=lots"], "w_apex='lots': expected a float"),
                            (["apex_range=1.2,1.0"], "apex_range must be a finite"),
                            (["gravity_range=1,2"], "gravity_range is set by --gravity-range"),

@@ -225,9 +225,9 @@ class MonopedConfig:
                     value = type(default)(text)
                 elif isinstance(default, str):
                     value = text
-                else:  # a tuple (or a None pair): comma-separated numbers of the default's kind
+                else:  # a tuple, or a pair whose default is None: comma-separated numbers
                     value = tuple(float(v) for v in text.split(","))
-                    if default is not None and len(value) != len(default):
+                    if len(value) != (2 if default is None else len(default)):
                         raise ValueError
             except ValueError:
                 raise ValueError(f"{key}={text!r}: expected {_kind(default)}") from None
@@ -249,7 +249,7 @@ def _kind(default) -> str:
         return "true or false"
     if isinstance(default, (int, float, str)):
         return f"a {type(default).__name__}"
-    return f"{len(default) if default is not None else 'a pair of'} comma-separated numbers"
+    return f"{2 if default is None else len(default)} comma-separated numbers"
 
 
 def same_robot(recorded: str, mj_model, what: str) -> str:
