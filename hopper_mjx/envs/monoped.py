@@ -205,7 +205,7 @@ class MonopedConfig:
     def overridden(self, pairs: list[str], owned: dict[str, str]) -> "MonopedConfig":
         """This config with `KEY=VALUE` texts applied (a pair as `low,high`), checked whole; raises ValueError
         naming the first bad one. `owned`: fields another option sets {field: that option}, refused here."""
-        fields = {f.name: f for f in dataclasses.fields(self)}
+        fields = {f.name for f in dataclasses.fields(self)}
         changes = {}
         for pair in pairs:
             key, sep, text = pair.partition("=")
