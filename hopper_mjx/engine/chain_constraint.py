@@ -178,7 +178,7 @@ def box_near(cm: ChainModel, pose: Pose, terrain):
     return chain_hfield_box.box_near(cm.terrain, terrain, *box_frame(pair, pose), pair.size)
 
 
-def _terrain_slots(cm: ChainModel, pair: ContactPair, pose: Pose, terrain, box_on) -> list:
+def _terrain_slots(cm: ChainModel, pair: ContactPair, pose: Pose, terrain, box_on, gate) -> list:
     """Per heightfield contact slot of the pair: (exists, distance, point relative to O, contact frame).
     The box's prisms are collided only where `box_on` (a box of the batch is near its ground)."""
     if pair.kind == "box":
@@ -193,15 +193,16 @@ def _terrain_slots(cm: ChainModel, pair: ContactPair, pose: Pose, terrain, box_o
         contacts = jax.lax.cond(box_on, collide, absent, centre, rot)
     else:
         centre = al.vadd(pose.origin[pair.body], al.matvec(pose.rot[pair.body], pair.pos))
-        contacts = chain_hfield.sphere_contacts(cm.terrain, terrain, al.vadd(centre, pose.base_pos), pair.size[0])
+        contacts = chain_hfield.sphere_contacts(cm.terrain, terrain, al.vadd(centre, pose.base_pos), pair.size[0],
+                                                gate)
     return [(con.exists, con.dist, al.vsub(con.pos, pose.base_pos), chain_hfield.make_frame(con.normal))
             for con in contacts]
 
 
-def _all_slots(cm: ChainModel, pose: Pose, terrain, box_on=None):
+def _all_slots(cm: ChainModel, pose: Pose, terrain, box_on=None, gate=None):
     """Per pair, per slot: (exists, distance, point relative to O, contact frame: None for the plane's)."""
     if cm.terrain is not None:
-        return tuple(tuple(_terrain_slots(cm, pair, pose, terrain, box_on)) for pair in cm.pairs)
+        return tuple(tuple(_terrain_slots(cm, pair, pose, terrain, box_on, gate)) for pair in cm.pairs)
     normal = cm.contact_frame[0:3]
     height = al.dot(normal, al.vsub(pose.base_pos, cm.floor_point))  # base origin above the floor
     return tuple(tuple((dist <= pair.include_margin, dist, point, None)
@@ -249,5 +250,5 @@ def rows(cm: ChainModel, gate, pose: Pose, qpos, qvel, terrain=None) -> tuple[Ro
     box_on = None
     if cm.terrain is not None and cm.terrain.box is not None:
         box_on = batch_any(box_near(cm, pose, terrain))
-    slots = stored(gate, lambda p, t, b: _all_slots(cm, p, t, b), pose, terrain, box_on)
+    slots = stored(gate, lambda p, t, b, g: _all_slots(cm, p, t, b, g), pose, terrain, box_on, gate)
     return stored(gate, lambda *a: _assemble(cm, *a), pose, qpos, qvel, slots)

@@ -33,6 +33,7 @@ import jax.numpy as jnp
 
 from hopper_mjx.engine import chain_algebra as al
 from hopper_mjx.engine.chain_model import Terrain
+from hopper_mjx.engine.chain_stage import stored
 
 
 class TerrainParams(NamedTuple):
@@ -135,8 +136,10 @@ def block_start(t: Terrain, centre, radius, block):
     return row, col
 
 
-def sphere_contacts(t: Terrain, terrain: TerrainParams, centre, radius: float) -> tuple[Contact, ...]:
-    """One contact slot per prism of the block around the sphere (world centre `centre`)."""
+def sphere_contacts(t: Terrain, terrain: TerrainParams, centre, radius: float, gate=None) -> tuple[Contact, ...]:
+    """One contact slot per prism of the block around the sphere (world centre `centre`); with
+    `Terrain.max_contacts`, the deepest that many. The prisms' contacts are stored once behind `gate`
+    (chain_stage.stored): fused into the choice of the deepest, every prism's test ran once per slot kept."""
     rows, cols = t.block
     row, col = block_start(t, centre, radius, t.block)
     block = jax.lax.dynamic_slice(terrain.heights, (row, col), (rows + 1, cols + 1))
@@ -144,18 +147,22 @@ def sphere_contacts(t: Terrain, terrain: TerrainParams, centre, radius: float) -
     x0 = t.origin[0] - t.hx + t.dx * col.astype(dtype)
     y0 = t.origin[1] - t.hy + t.dy * row.astype(dtype)
 
-    def vertex(r, c):
-        return (x0 + t.dx * c, y0 + t.dy * r, block[r, c])
+    def prisms(centre, block, x0, y0, bottom):
+        def vertex(r, c):
+            return (x0 + t.dx * c, y0 + t.dy * r, block[r, c])
 
-    out = []
-    for r in range(rows):
-        for c in range(cols):
-            a, b, cc, d = vertex(r, c), vertex(r, c + 1), vertex(r + 1, c), vertex(r + 1, c + 1)
-            for top in ((a, cc, d), (a, d, b)):
-                out.append(_prism_contact(centre, top, terrain.bottom, radius))
+        out = []
+        for r in range(rows):
+            for c in range(cols):
+                a, b, cc, d = vertex(r, c), vertex(r, c + 1), vertex(r + 1, c), vertex(r + 1, c + 1)
+                for top in ((a, cc, d), (a, d, b)):
+                    out.append(_prism_contact(centre, top, bottom, radius))
+        return tuple(out)
+
+    out = stored(jnp.array(True) if gate is None else gate, prisms, tuple(centre), block, x0, y0, terrain.bottom)
     if t.max_contacts is not None and t.max_contacts < len(out):
-        return deepest(tuple(out), t.max_contacts)
-    return tuple(out)
+        return deepest(out, t.max_contacts)
+    return out
 
 
 def deepest(contacts: tuple[Contact, ...], keep: int) -> tuple[Contact, ...]:
