@@ -173,7 +173,7 @@ class ChainEngine:
         rows, foot = chain_constraint.rows(cm, gate, pose, qpos, qvel, model.terrain)
         warm = tuple(data.qacc_warmstart[i] for i in range(cm.nv))
         sol = chain_solver.solve(gate, mass, qfrc_smooth, qacc_smooth, warm, rows, iterations=cm.iterations,
-                                 ls_iterations=cm.ls_iterations, tolerance=cm.tolerance,
+                                 ls_iterations=cm.ls_iterations, tolerance=cm.tolerance, ls_tolerance=cm.ls_tolerance,
                                  cost_scale=cm.cost_scale, warmstart=cm.warmstart)
         upper = [mass[i, j] for i in range(cm.nv) for j in range(i, cm.nv)]
         return data.replace(

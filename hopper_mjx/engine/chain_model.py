@@ -134,6 +134,7 @@ class ChainModel:
     iterations: int
     ls_iterations: int
     tolerance: float
+    ls_tolerance: float  # the line search stops where |d cost / d alpha| < tolerance ls_tolerance |search| / scale
     cost_scale: float  # MuJoCo's 1 / (meaninertia * nv): the solver's cost and gradient scale
     impratio: float
     warmstart: bool
@@ -375,7 +376,7 @@ def describe(m: mujoco.MjModel) -> ChainModel:
         actuators=acts, actuator_qpos=act_qpos, joint_force_range=frc,
         floor_normal=_vec(normal), floor_point=_vec(m.geom_pos[floor]), contact_frame=_make_frame(normal),
         pairs=pairs, terrain=_terrain(m, floor, pairs), timestep=float(opt.timestep), iterations=int(opt.iterations),
-        ls_iterations=int(opt.ls_iterations), tolerance=float(opt.tolerance),
+        ls_iterations=int(opt.ls_iterations), tolerance=float(opt.tolerance), ls_tolerance=float(opt.ls_tolerance),
         cost_scale=1.0 / (float(m.stat.meaninertia) * max(1, int(m.nv))), impratio=float(opt.impratio),
         warmstart=not opt.disableflags & dis.mjDSBL_WARMSTART,
         refsafe=not opt.disableflags & dis.mjDSBL_REFSAFE, eulerdamp=not opt.disableflags & dis.mjDSBL_EULERDAMP,

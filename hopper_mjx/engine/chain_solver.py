@@ -23,9 +23,11 @@ import jax.numpy as jnp
 
 from hopper_mjx.engine import chain_algebra as al
 from hopper_mjx.engine.chain_constraint import MINVAL, Rows
-from hopper_mjx.engine.chain_stage import stored
+from hopper_mjx.engine.chain_stage import batch_any, stored
 
 FAR = 1e30  # the search's upper end before any point past the minimum is found
+# The line search takes a derivative within this many rounding units of its terms' magnitudes as zero.
+ROUNDING = 16
 UNROLLED_LINE_SEARCH = 8  # up to this many steps, each is its own stored stage (measured faster than a loop)
 
 
@@ -108,27 +110,33 @@ def _cost(gate, mass, qfrc_smooth, qacc_smooth, rows: Rows, qacc):
 
 
 def _line(weight, loss, residual, slope, g1, g2, alpha):
-    """(alpha, cost up to a constant, derivative, curvature) along the search direction."""
+    """(alpha, cost up to a constant, derivative, curvature, the derivative's terms' sum of magnitudes: its
+    rounding scale) along the search direction."""
     d1, d2, cost = g1 + alpha * g2, g2, alpha * (g1 + 0.5 * alpha * g2)
+    size = jnp.abs(g1) + jnp.abs(alpha * g2)
     for w, bound, r, s in zip(weight, loss, residual, slope):  # rows that do not exist have w = 0
         x = r + alpha * s
         on = _quadratic(x, bound)
         beyond = 0.0 if bound is None else jnp.where(x < 0, -bound[0] * s, bound[0] * s)  # the slope of f |x|
-        d1 = d1 + jnp.where(on, w * s * x, beyond)
+        term = jnp.where(on, w * s * x, beyond)
+        d1, size = d1 + term, size + jnp.abs(term)
         d2 = d2 + jnp.where(on, w * s * s, 0.0)
         cost = cost + (jnp.where(on, 0.5 * w * x * x, 0.0) if bound is None else _row_cost(w, x, bound))
-    return alpha, cost, d1, jnp.maximum(d2, MINVAL)
+    return alpha, cost, d1, jnp.maximum(d2, MINVAL), size
 
 
 def _pick(c, p, q):
     return tuple(jnp.where(c, x, y) for x, y in zip(p, q))
 
 
-def _bracket(line, bracket):
+def _bracket(line, gtol, bracket):
     """One line-search step: evaluate the candidate, keep it as the lower or upper end, and
-    choose the next candidate (Newton from either end inside the bracket, else the secant)."""
-    lo, hi, found_hi, candidate = bracket
+    choose the next candidate (Newton from either end inside the bracket, else the secant); done
+    at a point whose derivative is below `gtol` (MuJoCo C's test)."""
+    lo, hi, found_hi, candidate, searching = bracket
     p = line(candidate)
+    # The derivative is zero to within its rounding (float32 cannot reach C's float64 gtol) or below gtol.
+    done = jnp.abs(p[2]) < jnp.maximum(gtol, ROUNDING * jnp.finfo(p[2].dtype).eps * p[4])
     below = p[2] < 0
     lo, hi = _pick(below, p, lo), _pick(below, hi, p)
     found_hi = found_hi | ~below
@@ -136,26 +144,32 @@ def _bracket(line, bracket):
     secant = lo[0] - lo[2] * (hi[0] - lo[0]) / jnp.maximum(hi[2] - lo[2], MINVAL)
     inside = lambda a: (a > lo[0]) & (a < hi[0])
     candidate = jnp.where(~found_hi | inside(from_lo), from_lo, jnp.where(inside(from_hi), from_hi, secant))
-    return lo, hi, found_hi, candidate
+    # Converged: keep the point (its ends may not bracket it) and propose it again, for `best` to take;
+    # a search that converged before holds, whether or not others of its chunk still search.
+    lo, hi = _pick(done, p, lo), _pick(done, p, hi)
+    new = (lo, hi, found_hi | done, jnp.where(done, p[0], candidate), ~done)
+    return jax.tree_util.tree_map(lambda n, o: jnp.where(searching, n, o), new, bracket)
 
 
-def _line_search(gate, weight, loss, residual, slope, g1, g2, iterations: int):
+def _line_search(gate, weight, loss, residual, slope, g1, g2, iterations: int, gtol):
     """The step along the search direction that minimises the cost (see the module doc), and
-    the cost's decrease."""
+    the cost's decrease. Like MuJoCo C, the search stops at a point where the derivative is below
+    `gtol`; a step runs while any instance of the core's chunk is still searching (`batch_any`)."""
     line = lambda a, args: _line(*args, a)
     args = (weight, loss, residual, slope, g1, g2)
     lo = stored(gate, line, jnp.zeros_like(g1), args)
-    hi = (jnp.full_like(g1, FAR), jnp.full_like(g1, FAR), jnp.full_like(g1, FAR), jnp.ones_like(g1))
-    bracket = (lo, hi, jnp.zeros_like(g1, dtype=bool), -lo[2] / lo[3])
-    one_step = lambda b: _bracket(lambda x: line(x, args), b)
+    hi = (jnp.full_like(g1, FAR), jnp.full_like(g1, FAR), jnp.full_like(g1, FAR), jnp.ones_like(g1), jnp.zeros_like(g1))
+    bracket = (lo, hi, jnp.zeros_like(g1, dtype=bool), -lo[2] / lo[3], jnp.ones_like(g1, dtype=bool))
+    one_step = lambda b: _bracket(lambda x: line(x, args), gtol, b)
     if iterations <= UNROLLED_LINE_SEARCH:
         for _ in range(iterations):
-            bracket = stored(gate, one_step, bracket)
+            searching = batch_any(bracket[4])  # outside `stored`, whose trace has no batch axis
+            bracket = stored(gate, lambda b, go: jax.lax.cond(go, one_step, lambda x: x, b), bracket, searching)
     else:  # a long search (a converged reference) as a loop: one trace, a smaller program
         bracket = jax.lax.fori_loop(0, iterations, lambda _, b: one_step(b), bracket)
 
     def best(bracket, args, start_cost):
-        lo, hi, found_hi, candidate = bracket
+        lo, hi, found_hi, candidate, _ = bracket
         last = line(candidate, args)
         out = _pick(last[1] < lo[1], last, lo)
         out = _pick(found_hi & (hi[1] < out[1]), hi, out)
@@ -186,7 +200,7 @@ def _evaluate(gate, mass, qfrc_smooth, rows: Rows, qacc) -> _Iterate:
     return _Iterate(tuple(qacc), residual, active, ma, force, qfrc_c, grad)
 
 
-def _newton_step(gate, mass, qfrc_smooth, rows: Rows, ls_iterations: int, it: _Iterate):
+def _newton_step(gate, mass, qfrc_smooth, rows: Rows, ls_iterations: int, it: _Iterate, ls_tol: float):
     """The next point along the Newton direction of the current active set, and the cost's decrease."""
     n = len(it.qacc)
     hessian = stored(gate, lambda act, jac: {
@@ -198,12 +212,14 @@ def _newton_step(gate, mass, qfrc_smooth, rows: Rows, ls_iterations: int, it: _I
         slope = tuple(al.dot(j, search) for j in rows.jac)
         return slope, al.dot(search, al.vsub(ma, qfrc_smooth)), al.dot(search, sym_matvec(mass, search, n))
     slope, g1, g2 = stored(gate, along, search, it.ma)
-    alpha, decrease = _line_search(gate, rows.weight, rows.loss, it.residual, slope, g1, g2, ls_iterations)
+    gtol = ls_tol * jnp.sqrt(al.dot(search, search))  # MuJoCo's tolerance ls_tolerance |search| / scale
+    alpha, decrease = _line_search(gate, rows.weight, rows.loss, it.residual, slope, g1, g2, ls_iterations, gtol)
     return tuple(al.add(a, al.mul(alpha, s)) for a, s in zip(it.qacc, search)), decrease
 
 
 def solve(gate, mass: dict, qfrc_smooth, qacc_smooth, qacc_warmstart, rows: Rows, *, iterations: int,
-          ls_iterations: int, tolerance: float, cost_scale: float, warmstart: bool = True) -> Solution:
+          ls_iterations: int, tolerance: float, cost_scale: float, ls_tolerance: float = 0.01,
+          warmstart: bool = True) -> Solution:
     """The constrained accelerations and the rows' forces. Like MuJoCo, an instance stops
     iterating once the scaled cost decrease or gradient falls below the tolerance."""
     qacc = qacc_smooth
@@ -216,10 +232,17 @@ def solve(gate, mass: dict, qfrc_smooth, qacc_smooth, qacc_warmstart, rows: Rows
 
     def body(carry):
         it, _, count = carry
-        qacc, decrease = _newton_step(gate, mass, qfrc_smooth, rows, ls_iterations, it)
+        qacc, decrease = _newton_step(gate, mass, qfrc_smooth, rows, ls_iterations, it,
+                                      tolerance * ls_tolerance / cost_scale)
         it = _evaluate(gate, mass, qfrc_smooth, rows, qacc)
         gradient = jnp.sqrt(al.dot(it.grad, it.grad))
-        return it, (cost_scale * decrease < tolerance) | (cost_scale * gradient < tolerance), count + 1
+        # Or the gradient is zero to within the rounding of its terms (M a, qfrc_smooth, J' f): in float32
+        # C's float64 tolerance may be out of reach, and more iterations would only stir the rounding.
+        norm = lambda v: jnp.sqrt(al.dot(v, v))
+        terms = norm(it.ma) + norm(qfrc_smooth) + norm(it.qfrc_constraint)
+        rounding = ROUNDING * jnp.finfo(gradient.dtype).eps * terms
+        return it, ((cost_scale * decrease < tolerance) | (cost_scale * gradient < tolerance)
+                    | (gradient < rounding)), count + 1
 
     # Under vmap the loop runs until every instance is done; finished ones are held.
     it, _, _ = jax.lax.while_loop(lambda c: ~c[1] & (c[2] < iterations), body,
