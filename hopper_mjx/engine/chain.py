@@ -218,7 +218,8 @@ def _advance_qpos(cm: ChainModel, qpos: jax.Array, qvel: jax.Array) -> jax.Array
 
 
 # The foot's contacts on a heightfield that the tools keep as constraint rows (`engine.make`). Every slot costs
-# its four pyramid rows in the solve whether or not it holds a contact. Measured with perf.bench's standing batch,
+# its four pyramid rows in the solve whether or not it holds a contact. Measured (before docs/performance.md's levers
+# c10 and c11, which made every figure smaller) with perf.bench's standing batch,
 # N = 1024 on rough:amp=0.02 (CPU us a step; final state against native): all 18 slots 39.8 us, 7.5e-7 m;
 # 10 slots 14.0 us; 8 slots 9.5 us, 6.8e-7 m; 6 slots 8.2 us, but some feet then touch more prisms than
 # are kept and the batch leaves native's by 1e-3 m in 0.4 s.
