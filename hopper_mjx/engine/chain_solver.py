@@ -26,7 +26,8 @@ from hopper_mjx.engine.chain_constraint import MINVAL, Rows
 from hopper_mjx.engine.chain_stage import batch_any, stored
 
 FAR = 1e30  # the search's upper end before any point past the minimum is found
-# The line search takes a derivative within this many rounding units of its terms' magnitudes as zero.
+# The line search's derivative and the Newton loop's gradient count as zero within this many rounding units
+# (float eps) of their terms' magnitudes.
 ROUNDING = 16
 UNROLLED_LINE_SEARCH = 8  # up to this many steps, each is its own stored stage (measured faster than a loop)
 
@@ -221,7 +222,8 @@ def solve(gate, mass: dict, qfrc_smooth, qacc_smooth, qacc_warmstart, rows: Rows
           ls_iterations: int, tolerance: float, cost_scale: float, ls_tolerance: float = 0.01,
           warmstart: bool = True) -> Solution:
     """The constrained accelerations and the rows' forces. Like MuJoCo, an instance stops
-    iterating once the scaled cost decrease or gradient falls below the tolerance."""
+    iterating once the scaled cost decrease or gradient falls below the tolerance, or (float32)
+    once the gradient is zero to within its rounding."""
     qacc = qacc_smooth
     if warmstart:
         better = _cost(gate, mass, qfrc_smooth, qacc_smooth, rows, qacc_warmstart) < _cost(
