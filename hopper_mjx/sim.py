@@ -40,7 +40,6 @@ gravity_vectors = world.gravity_vectors  # the gravity convention lives beside t
 
 AXIS = "instances"
 DIVERGED_SPEED = 1e6  # rad/s or m/s: beyond this a state is taken as diverged
-CPU_COMPILER_OPTIONS = engines.CPU_COMPILER_OPTIONS
 
 class State(NamedTuple):
     """The batch's state; every leaf has the instance axis first."""
@@ -322,8 +321,8 @@ class Sim:
                 out_specs=PartitionSpec(AXIS),
                 check_vma=False,
             )
-            on_cpu = all(d.platform == "cpu" for d in self.devices)
-            self._compiled[cache_key] = jax.jit(sharded, compiler_options=CPU_COMPILER_OPTIONS if on_cpu else None)
+            options = self.engine.compiler_options if all(d.platform == "cpu" for d in self.devices) else None
+            self._compiled[cache_key] = jax.jit(sharded, compiler_options=options)
         return self._compiled[cache_key]
 
 

@@ -38,7 +38,6 @@ import mujoco
 import numpy as np
 
 from hopper_mjx.control.base import Controller, saturate, to_ctrl
-from hopper_mjx.engine import CPU_COMPILER_OPTIONS
 from hopper_mjx.model.layout import Layout
 from hopper_mjx.model.robot import Robot, standing_qpos
 from hopper_mjx.signals import Observation
@@ -167,7 +166,7 @@ def velocity_jacobians(engine, layout: Layout):
         zero = jnp.zeros(layout.nv, qpos.dtype)
         return jax.jacfwd(next_qvel, (0, 1, 2))(zero, zero, jnp.zeros_like(torque), qpos, g)
 
-    return jax.jit(jacobians, compiler_options=CPU_COMPILER_OPTIONS)
+    return jax.jit(jacobians, compiler_options=engine.compiler_options)
 
 
 def discrete(layout: Layout, qpos, torque, dv_dq, dv_dv, dv_du) -> Linear:

@@ -36,13 +36,8 @@ import mujoco
 from hopper_mjx import registry
 from hopper_mjx.engine.chain_stage import BATCH_AXIS
 from hopper_mjx.engine.mjx import MjxEngine
+from hopper_mjx.engine.xla import CPU_COMPILER_OPTIONS, FUSION_EMITTERS
 from hopper_mjx.randomize import check_engine_varies
-
-# XLA:CPU's newer fusion emitters recompute the chained body transforms of
-# mjx.kinematics inside each fused consumer; the classic emitters keep the step
-# ~35% cheaper here (docs/performance.md), and compile it much faster. Same arithmetic,
-# so same results. Every jit of an engine step on CPU passes these.
-CPU_COMPILER_OPTIONS = {"xla_cpu_use_fusion_emitters": False}
 
 
 @runtime_checkable
@@ -53,6 +48,7 @@ class Engine(Protocol):
     model: Any
     freeze_fields: tuple[str, ...]
     varies: frozenset[str]
+    compiler_options: dict  # XLA:CPU options for a jit of this engine's step (engine/xla.py)
 
     def vary(self, model, values: dict) -> Any: ...
 
@@ -89,4 +85,4 @@ def make(name: str, mj_model: mujoco.MjModel, varies: frozenset[str] = frozenset
     return MjxEngine(mj_model, varies)
 
 
-__all__ = ["BATCH_AXIS", "CPU_COMPILER_OPTIONS", "Engine", "MjxEngine", "check_name", "make"]
+__all__ = ["BATCH_AXIS", "CPU_COMPILER_OPTIONS", "FUSION_EMITTERS", "Engine", "MjxEngine", "check_name", "make"]

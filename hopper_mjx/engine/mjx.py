@@ -17,6 +17,7 @@ from mujoco import mjx
 from mujoco.mjx._src import support  # contact_force: decodes MJX's pyramidal/elliptic efc rows
 
 from hopper_mjx import registry
+from hopper_mjx.engine.xla import CPU_COMPILER_OPTIONS
 from hopper_mjx.model.layout import Layout
 from hopper_mjx.model.variation import CONSTANTS
 
@@ -60,6 +61,7 @@ class MjxEngine:
     name = "mjx"
     # A diverged instance keeps these from its last finite state (the rest is recomputed).
     freeze_fields = ("qpos", "qvel", "act", "qacc_warmstart")
+    compiler_options = CPU_COMPILER_OPTIONS
     # Every field a parameter sets, and the constants derived from them: MJX reads them all as arrays.
     varies = frozenset(p.field for p in registry.PARAMETERS.values()) | frozenset(CONSTANTS)
 

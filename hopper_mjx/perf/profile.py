@@ -44,20 +44,20 @@ CHAIN_STAGES = ("kinematics", "mass matrix, bias forces, actuation", "constraint
                 "integration")
 
 
-def best_cost(step, model, data, gravity, steps: int) -> float:
+def best_cost(step, model, data, gravity, steps: int, options: dict) -> float:
     """µs per instance-step of a compiled vmapped scan of step(model, data, gravity) from data. The engine's
     `model` is an argument of the compiled function, as the core passes it: as a constant the compiler would fold
-    the chain's stored stages away and time another program (several times slower on a terrain)."""
+    the chain's stored stages away and time another program (several times slower on a terrain). `options`: the
+    engine's XLA:CPU options (`Engine.compiler_options`), as the core compiles it."""
     import jax
 
     from hopper_mjx.engine import BATCH_AXIS
-    from hopper_mjx.sim import CPU_COMPILER_OPTIONS
 
     def one(m, d, g):
         return jax.lax.scan(lambda d, _: (step(m, d, g), None), d, None, length=steps)[0]
 
     f = jax.jit(jax.vmap(one, in_axes=(None, 0, 0), axis_name=BATCH_AXIS),  # as the core vmaps
-                compiler_options=CPU_COMPILER_OPTIONS)
+                compiler_options=options)
     jax.block_until_ready(f(model, data, gravity))  # compiles
     best = np.inf
     for _ in range(REPEATS):
@@ -75,7 +75,9 @@ def rollout_cost(mj_model, qpos, qvel, gravity, steps: int) -> float:
     model = mjx.put_model(mj_model)
     data = jax.vmap(lambda q, v: mjx.make_data(mj_model).replace(qpos=q, qvel=v))(qpos, qvel)
     step = lambda m, d, g: mjx.step(m.replace(opt=m.opt.replace(gravity=g)), d)
-    return best_cost(step, model, data, gravity, steps)
+    from hopper_mjx.engine import CPU_COMPILER_OPTIONS
+
+    return best_cost(step, model, data, gravity, steps, CPU_COMPILER_OPTIONS)  # the mjx engine's
 
 
 def chain_cut(engine, depth: int):
@@ -111,7 +113,7 @@ def chain_costs(engine, qpos, qvel, gravity, steps: int) -> dict:
     import jax
 
     data = jax.vmap(engine.make_data)(qpos, qvel)
-    cumulative = [best_cost(chain_cut(engine, k), engine.model, data, gravity, steps)
+    cumulative = [best_cost(chain_cut(engine, k), engine.model, data, gravity, steps, engine.compiler_options)
                   for k in range(1, len(CHAIN_STAGES) + 1)]
     return dict(zip(CHAIN_STAGES, np.diff(cumulative, prepend=0.0))) | {"full step": cumulative[-1]}
 

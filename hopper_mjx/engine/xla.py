@@ -1,0 +1,10 @@
+"""XLA:CPU compiler options for a jit of an engine's step."""
+
+# XLA:CPU's emitters, chosen per engine and floor (`Engine.compiler_options`; every jit of an engine step on CPU
+# passes its engine's). The newer fusion emitters recompute the chained body transforms of mjx.kinematics inside
+# each fused consumer; the classic ones keep that step ~35% cheaper (docs/performance.md), and compile it much
+# faster. The chain on a heightfield, thousands of small kernels a step, is the other way round: its rough-ground
+# step is ~20% cheaper with the fusion emitters (docs/performance.md, lever c12). The same equations either way;
+# only float32 rounding differs, as kernels fuse differently.
+CPU_COMPILER_OPTIONS = {"xla_cpu_use_fusion_emitters": False}
+FUSION_EMITTERS = {"xla_cpu_use_fusion_emitters": True}
