@@ -60,6 +60,33 @@ def test_policy_runs_as_a_core_controller(trained, mj_model, sim):
     assert (np.abs(np.asarray(cs.last_action)) <= 1).all() and np.abs(np.asarray(cs.last_action)).sum() > 0
 
 
+def test_the_network_runs_only_on_the_steps_an_instance_of_the_chunk_decides(trained, mj_model, sim):
+    """Under the core's vmap (axis BATCH_AXIS) the network is skipped on the steps no instance of the chunk
+    decides; the actions equal those of the network run for every instance and selected (a plain vmap), when
+    all, some or none of the instances decide, and an instance between its decisions keeps its last action."""
+    from hopper_mjx.engine import BATCH_AXIS
+    from hopper_mjx.envs import policy
+    from hopper_mjx.sim import gravity_vectors
+
+    out, _ = trained
+    controller = policy.policy_controller(mj_model, out)
+    g = gravity_vectors([9.81, 3.71, 1.62, 9.81])
+    params = policy.policy_params(sim.robot, 4, height=0.2, config=policy.read(out)[3])
+    state = sim.reset(g, key=0, controller=controller, params=params)
+    obs = sim._first_observation(state.data, ())
+    held = jnp.full((4, 3), 0.25, jnp.float32)
+    core = jax.jit(jax.vmap(controller.act, axis_name=BATCH_AXIS))
+    every_step = jax.jit(jax.vmap(controller.act))  # no chunk axis: the network for every instance, selected
+    per_decision = round(1 / (50.0 * sim.layout.timestep))  # the policy's 50 Hz in the 1 kHz core
+    for ticks in ([0, 0, 0, 0], [0, 3, per_decision, 7], [3, 3, 3, 3]):
+        cs = state.cstate._replace(tick=jnp.asarray(ticks, jnp.int32), last_action=held)
+        (_, skipped), (_, full) = core(cs, obs, g), every_step(cs, obs, g)
+        np.testing.assert_allclose(np.asarray(skipped.last_action), np.asarray(full.last_action), atol=1e-6)
+        decides = np.asarray(ticks) % per_decision == 0
+        action = np.asarray(skipped.last_action)
+        assert (action[~decides] == 0.25).all() and (np.abs(action[decides] - 0.25) > 1e-4).any(axis=1).all()
+
+
 def test_an_action_delay_holds_back_the_policys_targets_not_its_pd_loop(trained, mj_model):
     """With an action delay of 6 steps the policy's joint drivers track the targets it set 6 physics steps
     before (the standing targets until then), on the joints as they are now: the same path, to float32

@@ -16,8 +16,9 @@ Every engine has, per instance and pure (the core vmaps them):
 - `foot_contact(model, data) -> (flag, force, pos)` of the last forward: () bool foot
   touching, (3,) N floor-on-foot force and (3,) m contact point, world frame.
 
-The core vmaps over instances with `axis_name=BATCH_AXIS`, so that an engine may skip a stage
-no instance of the chunk needs (the chain engine's base box against a heightfield).
+The core vmaps over instances with `axis_name=BATCH_AXIS`, so that an engine (or a controller) may skip a
+stage no instance of the chunk needs (`batch_any`: the chain engine's base box against a heightfield, a
+policy's network between its decisions).
 `data` is a pytree with `qpos`, `qvel`, `qacc`, `ctrl`, `time` and `.replace(**fields)`.
 "mjx" (MuJoCo MJX, any model) is the reference and the fallback; "chain" is MuJoCo's step
 specialised to the monoped's topology (free base, serial chain of hinges, sphere foot and base
@@ -34,7 +35,7 @@ from typing import Any, Protocol, runtime_checkable
 import mujoco
 
 from hopper_mjx import registry
-from hopper_mjx.engine.chain_stage import BATCH_AXIS
+from hopper_mjx.engine.chain_stage import BATCH_AXIS, batch_any
 from hopper_mjx.engine.mjx import MjxEngine
 from hopper_mjx.engine.xla import CPU_COMPILER_OPTIONS, FUSION_EMITTERS
 from hopper_mjx.randomize import check_engine_varies
@@ -85,4 +86,5 @@ def make(name: str, mj_model: mujoco.MjModel, varies: frozenset[str] = frozenset
     return MjxEngine(mj_model, varies)
 
 
-__all__ = ["BATCH_AXIS", "CPU_COMPILER_OPTIONS", "FUSION_EMITTERS", "Engine", "MjxEngine", "check_name", "make"]
+__all__ = ["BATCH_AXIS", "batch_any", "CPU_COMPILER_OPTIONS", "FUSION_EMITTERS", "Engine", "MjxEngine", "check_name",
+           "make"]
