@@ -268,7 +268,7 @@ class Sim:
         padded = -(-per_device // chunk) * chunk * len(self.devices)
         fn = self._compiled_rollout(controller, steps, tick, periods, sensors, chunk)
         padded_state = jax.device_put(_pad(state, padded), NamedSharding(self.mesh, PartitionSpec(AXIS)))
-        final, traj = fn(self.model, self.heights, padded_state)
+        final, traj = fn(self.model, self.heights, padded_state, controller.weights)
         final, traj = jax.tree_util.tree_map(lambda x: x[:n], (final, traj))
         t0 = float(state.data.time[0])
         dt = self.layout.timestep
@@ -301,23 +301,26 @@ class Sim:
         return self.rollout(state, controller, steps=steps, sensors=sensors)
 
     def _compiled_rollout(self, controller, steps, tick, periods, sensors, chunk):
-        cache_key = (controller, steps, sensors, chunk)  # tick and periods follow from sensors
+        # tick and periods follow from sensors; a controller with weights compiles once for every set of them
+        program = controller if controller.act_with is None else controller.act_with
+        cache_key = (program, steps, sensors, chunk)
         if cache_key not in self._compiled:
             one = _instance_rollout(self.engine, self.actuation, self.pushes, self.sensing, controller, steps, tick,
                                     periods, sensors, self.terrain, self.mj_model)
 
-            def per_device(model, heights, state):
+            def per_device(model, heights, state, weights):
                 n_local = state.gravity.shape[0]
                 chunks = jax.tree_util.tree_map(
                     lambda x: x.reshape((n_local // chunk, chunk) + x.shape[1:]), state
                 )
-                out = jax.lax.map(jax.vmap(lambda s: one(model, heights, s), axis_name=engines.BATCH_AXIS), chunks)
+                out = jax.lax.map(jax.vmap(lambda s: one(model, heights, s, weights), axis_name=engines.BATCH_AXIS),
+                                  chunks)
                 return jax.tree_util.tree_map(lambda x: x.reshape((n_local,) + x.shape[2:]), out)
 
             sharded = jax.shard_map(
                 per_device,
                 mesh=self.mesh,
-                in_specs=(PartitionSpec(), PartitionSpec(), PartitionSpec(AXIS)),
+                in_specs=(PartitionSpec(), PartitionSpec(), PartitionSpec(AXIS), PartitionSpec()),
                 out_specs=PartitionSpec(AXIS),
                 check_vma=False,
             )
@@ -394,7 +397,7 @@ def _instance_rollout(engine, actuation: Actuation, pushes: Pushes | None, sensi
     counts = pushes is not None or sensing.noisy
     points = None if terrain is None else jnp.asarray(sensors.scan_points(), jnp.float32)
 
-    def physics_step(model, sensed, state, record, previous):
+    def physics_step(model, sensed, act, state, record, previous):
         """One step; `record` is a traced, batch-wide flag: the signals are measured
         (after forward, before integrate) where it is true, else `previous` is passed on.
         `sensed`: (heights, size, scan points) of the instance's ground, or () on the plane."""
@@ -406,7 +409,7 @@ def _instance_rollout(engine, actuation: Actuation, pushes: Pushes | None, sensi
             obs, sense = sensing.apply(sense, obs, state.key, step)
         if counts:
             step = step + 1
-        command, cstate = controller.act(state.cstate, obs, state.gravity)
+        command, cstate = act(state.cstate, obs, state.gravity)
         ctrl, cstate, drive = _drive(actuation, controller, command, cstate, state.drive, now, d.qvel, dt)
         d1 = engine.forward(model, d.replace(ctrl=ctrl), state.gravity)
         measure = lambda: signals.measure(engine, model, d1, state.gravity, sensed)
@@ -428,17 +431,18 @@ def _instance_rollout(engine, actuation: Actuation, pushes: Pushes | None, sensi
     def one_tick(carry, _):
         # The step is traced once, in one loop, so XLA compiles the engine once (not
         # once for the recorded step and again for the others).
-        model, heights, state = carry
+        model, heights, weights, state = carry
         sensed = () if terrain is None else (heights, terrain.size, points)
+        act = controller.act if weights is None else controller.act_with(weights)
 
         def body(k, state_sig):
-            return physics_step(model, sensed, state_sig[0], record=k == 0, previous=state_sig[1])
+            return physics_step(model, sensed, act, state_sig[0], record=k == 0, previous=state_sig[1])
 
         measure = lambda: signals.measure(engine, model, state.data, state.gravity, sensed)
         state, sig = jax.lax.fori_loop(0, tick, body, (state, _zeros_like(jax.eval_shape(measure))))
-        return (model, heights, state), sig
+        return (model, heights, weights, state), sig
 
-    def run(model, heights, state):
+    def run(model, heights, state, weights=None):
         """`heights`: the model's own ground, unless the state gives the instance its own."""
         variation = state.variation
         model = engine.vary(model, variation)  # this instance's robot: per instance only where varied
@@ -446,8 +450,8 @@ def _instance_rollout(engine, actuation: Actuation, pushes: Pushes | None, sensi
             heights = state.ground
             model = on_ground(engine, mj_model, model, heights)
         # The loop carries the robot once, in `model`, not its drawn fields again in the state.
-        (_, _, state), sig = jax.lax.scan(one_tick, (model, heights, state._replace(variation={})), None,
-                                          length=steps // tick)
+        (_, _, _, state), sig = jax.lax.scan(one_tick, (model, heights, weights, state._replace(variation={})),
+                                             None, length=steps // tick)
         state = state._replace(variation=variation)
         every = {k: p // tick for k, p in periods.items()}
         decimate = lambda tree, stream: jax.tree_util.tree_map(lambda x: x[:: every[stream]], tree)

@@ -17,9 +17,8 @@ from hopper_mjx import envs
 from hopper_mjx.model import robot
 
 
-@pytest.fixture(scope="module")
-def trained(tmp_path_factory, mj_model):
-    """(folder, None): a `hop` policy folder, laid out as experiments/train.py writes one."""
+def _save_policy(out, mj_model, key: int):
+    """A `hop` policy folder at `out`, laid out as experiments/train.py writes one, its network seeded by `key`."""
     from brax.training.acme import running_statistics, specs
     from brax.training.agents.ppo import checkpoint
     from brax.training.agents.ppo import networks as ppo_networks
@@ -30,14 +29,45 @@ def trained(tmp_path_factory, mj_model):
     factory = functools.partial(ppo_networks.make_ppo_networks, policy_hidden_layer_sizes=(8, 8),
                                 value_hidden_layer_sizes=(8, 8))
     network = factory(env.observation_size, env.action_size, preprocess_observations_fn=running_statistics.normalize)
-    k_policy, k_value = jax.random.split(jax.random.PRNGKey(0))
+    k_policy, k_value = jax.random.split(jax.random.PRNGKey(key))
     params = (running_statistics.init_state(specs.Array((env.observation_size,), jnp.dtype("float32"))),
               network.policy_network.init(k_policy), network.value_network.init(k_value))
-    out = tmp_path_factory.mktemp("policy") / "run"
     checkpoint.save(out / "checkpoints", 1, params,
                     checkpoint.network_config(env.observation_size, env.action_size, True, factory))
     shutil.copytree(policy.write_env_config(out / "checkpoints" / f"{1:012d}", env.config), out / "policy")
-    return out, None
+    return out
+
+
+@pytest.fixture(scope="module")
+def trained(tmp_path_factory, mj_model):
+    """(folder, None): a `hop` policy folder, laid out as experiments/train.py writes one."""
+    return _save_policy(tmp_path_factory.mktemp("policy") / "run", mj_model, 0), None
+
+
+def test_another_checkpoints_weights_run_in_the_same_compiled_rollout(trained, mj_model, tmp_path):
+    """A policy's weights are a run-time input of the core's rollout: another checkpoint of the same network
+    (`with_weights`, as the checkpoint scan runs them) reuses the compiled program, and moves the robot exactly
+    as that checkpoint's own controller does."""
+    from hopper_mjx.envs import policy
+    from hopper_mjx.sim import Sim, gravity_vectors
+
+    first, _ = trained
+    other = _save_policy(tmp_path / "other", mj_model, 1)
+    g = gravity_vectors([9.81, 1.62])
+    base = policy.policy_controller(mj_model, first)
+    swapped = base.with_weights(policy.load_network(other)[1])
+    paths, sim = {}, Sim(mj_model)
+    for name, controller in (("first", base), ("other, swapped in", swapped)):
+        state = sim.reset(g, key=0, controller=controller)
+        paths[name] = np.asarray(sim.rollout(state, controller, steps=200)[1].qpos)
+    assert len(sim._compiled) == 1  # one program for both
+    own = policy.policy_controller(mj_model, other)
+    fresh = Sim(mj_model)
+    paths["other, its own"] = np.asarray(fresh.rollout(fresh.reset(g, key=0, controller=own), own, steps=200)[1].qpos)
+    np.testing.assert_array_equal(paths["other, swapped in"], paths["other, its own"])
+    assert np.abs(paths["first"] - paths["other, its own"]).max() > 1e-3  # the weights do move the robot
+    with pytest.raises(ValueError, match="has no weights"):
+        Sim(mj_model).limp.with_weights(())
 
 
 def test_policy_runs_as_a_core_controller(trained, mj_model, sim):

@@ -21,6 +21,7 @@ controller reuses one compiled rollout.
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 from typing import Any, Callable, NamedTuple
 
@@ -62,6 +63,17 @@ class Controller:
     act: Callable[[CState, Observation, jax.Array], tuple[jax.Array, CState]]
     commands: Commands | None = None  # None: the controller takes no commands (none, hold, pid)
     servo: Servo | None = None  # a position controller's joint drivers; None: `act` gives the torque
+    # A controller with weights (a trained policy's network): `act` is `act_with(weights)`. The core passes them
+    # to its compiled rollout as a run-time input, so another set of the same shapes (`with_weights`: another
+    # checkpoint of the run) reuses that program rather than compiling one with its numbers folded in.
+    weights: Any = None
+    act_with: Callable[[Any], Callable] | None = None
+
+    def with_weights(self, weights) -> Controller:
+        """This controller acting with `weights` (the shapes of its own), in the same compiled rollout."""
+        if self.act_with is None:
+            raise ValueError(f"controller {self.name!r} has no weights")
+        return dataclasses.replace(self, weights=weights, act=self.act_with(weights))
 
 
 def pd(kp, kd, error: jax.Array, rate: jax.Array, bias: jax.Array | None = None) -> jax.Array:

@@ -137,9 +137,9 @@ def _network(algo: str, net: dict):
     return sac_networks.make_inference_fn(network)
 
 
-def load(path):
-    """(deterministic policy fn obs -> action, MonopedConfig) of a saved PPO or SAC policy, checked: the
-    saved parameters must be readable and fit the network its config describes (traced, not compiled)."""
+def load_network(path):
+    """(apply(weights, obs) -> deterministic action, weights, MonopedConfig) of a saved PPO or SAC policy, checked:
+    the saved parameters must be readable and fit the network its config describes (traced, not compiled)."""
     path, algo, net, config = read(path)
     absl = logging.getLogger("absl")  # orbax logs its findings in a damaged folder before it fails
     level = absl.level
@@ -150,15 +150,25 @@ def load(path):
         raise ValueError(f"{path}: its parameters cannot be read ({type(err).__name__}; a copy cut short?)") from None
     finally:
         absl.setLevel(level)
+    weights = tuple(params[:2])  # the observation normaliser and the policy network
+    make_inference = _network(algo, net)
+
+    def apply(weights, obs):
+        return make_inference(weights, deterministic=True)(obs, jax.random.PRNGKey(0))[0]
+
     try:
-        inference = _network(algo, net)(params[:2], deterministic=True)
-        policy = lambda obs: inference(obs, jax.random.PRNGKey(0))[0]  # noqa: E731
-        jax.eval_shape(policy, jax.ShapeDtypeStruct((net["observation_size"],), jnp.float32))
+        jax.eval_shape(apply, weights, jax.ShapeDtypeStruct((net["observation_size"],), jnp.float32))
     except Exception as err:  # flax's shape errors, a layer list that is not numbers, ...
         first = str(err).splitlines()[0] if str(err) else ""
         raise ValueError(f"{path}: its parameters do not fit its network config ({type(err).__name__}: "
                          f"{first[:200]})") from None
-    return policy, config
+    return apply, weights, config
+
+
+def load(path):
+    """(deterministic policy fn obs -> action, MonopedConfig) of a saved PPO or SAC policy (`load_network`)."""
+    apply, weights, config = load_network(path)
+    return (lambda obs: apply(weights, obs)), config
 
 
 @jax.tree_util.register_dataclass
@@ -211,7 +221,7 @@ def policy_controller(mj_model: mujoco.MjModel, path) -> Controller:
     if cfg.terrain and terrain.from_model(mj_model) is None:
         raise ValueError(f"the policy {path} reads a height scan (trained on --terrain {cfg.terrain}): run it on a "
                          "--terrain other than flat")
-    policy, cfg = load(path)
+    apply, weights, cfg = load_network(path)
     layout = Layout.of(mj_model)
     every = monoped.decimation(layout, cfg)  # raises if the policy rate does not divide the physics rate
     stance = jnp.asarray(standing_qpos(mj_model)[list(layout.joint_qpos)], jnp.float32)
@@ -221,16 +231,18 @@ def policy_controller(mj_model: mujoco.MjModel, path) -> Controller:
         return PolicyState(command, stance, jnp.zeros(3), jnp.zeros((), jnp.int32), jnp.zeros(()),
                            None if params is None else params.pd)
 
-    def act(cs: PolicyState, obs: Observation, gravity):
-        """The joint targets: new ones every `every` physics steps (the policy rate), held between."""
-        features = monoped.observe(layout, cfg, obs, gravity, cs.command, cs.last_action)
-        decide = cs.tick % every == 0
-        # The network only on the steps some instance of the core's chunk decides (a real branch there, not a
-        # select): at a 1 kHz core and a 50 Hz policy it would otherwise run 20 times per decision.
-        action = jax.lax.cond(batch_any(decide), lambda f: jnp.where(decide, policy(f), cs.last_action),
-                              lambda f: cs.last_action, features)
-        target = jnp.where(decide, monoped.joint_targets(layout, cfg, stance, action), cs.target)
-        return target, cs._replace(target=target, last_action=action, tick=cs.tick + 1)
+    def act_with(weights):
+        def act(cs: PolicyState, obs: Observation, gravity):
+            """The joint targets: new ones every `every` physics steps (the policy rate), held between."""
+            features = monoped.observe(layout, cfg, obs, gravity, cs.command, cs.last_action)
+            decide = cs.tick % every == 0
+            # The network only on the steps some instance of the core's chunk decides (a real branch there, not a
+            # select): at a 1 kHz core and a 50 Hz policy it would otherwise run 20 times per decision.
+            action = jax.lax.cond(batch_any(decide), lambda f: jnp.where(decide, apply(weights, f), cs.last_action),
+                                  lambda f: cs.last_action, features)
+            target = jnp.where(decide, monoped.joint_targets(layout, cfg, stance, action), cs.target)
+            return target, cs._replace(target=target, last_action=action, tick=cs.tick + 1)
+        return act
 
     def track(cs: PolicyState, target, obs: Observation):
         """The drivers' PD law on `target` (late by the action delay) and the joints as they are now."""
@@ -250,5 +262,5 @@ def policy_controller(mj_model: mujoco.MjModel, path) -> Controller:
             return cs._replace(command=jnp.broadcast_to(row, cs.command.shape))
 
         commands = Commands(read=read_command, write=write_command)
-    return Controller(name=f"{registry.POLICY_PREFIX}{path}", init=init, act=act, commands=commands,
-                      servo=Servo(track=track, first=lambda cs: cs.target))
+    return Controller(name=f"{registry.POLICY_PREFIX}{path}", init=init, act=act_with(weights), commands=commands,
+                      servo=Servo(track=track, first=lambda cs: cs.target), weights=weights, act_with=act_with)
