@@ -465,12 +465,14 @@ def evaluation_batch(gravities, num: int, seed: int, nv: int):
 
 
 def evaluate(policy_path, physics, *, gravities, duration: float, height: float, num: int, seed: int = 0,
-             speed=(0.0, 0.0), raibert_too: bool = True) -> dict:
+             speed=(0.0, 0.0), raibert_too: bool = True, reuse: dict | None = None) -> dict:
     """Hop metrics of the policy and (`raibert_too`) of the Raibert controller, same batch, same commands
     (Raibert at the policy task's reference apex when the task names one: stand's, `registry.TASK_REFERENCES`).
 
     Each controller runs `num` instances per gravity for `duration` s in the core,
     from the standing pose with small random initial base velocities (the sweep's kicks).
+    `reuse`: a dict kept across calls (the scan's): the core and the policy controller, whose compiled rollout
+    a policy of the same network and task config (another checkpoint of the run) runs with its own weights.
     Returns {controller: {gravity: {metric: mean over instances}}}.
     """
     import numpy as np
@@ -482,12 +484,20 @@ def evaluate(policy_path, physics, *, gravities, duration: float, height: float,
     from hopper_mjx.sweep.runner import SENSORS
 
     mj_model = physics.mj_model
-    sim = dataclasses.replace(physics, variation=None).sim()  # the URDF's robot: `sweep compare --randomize` judges
-    # a policy on randomised ones
+    reuse = {} if reuse is None else reuse
+    if "sim" not in reuse:  # the URDF's robot: `sweep compare --randomize` judges a policy on randomised ones
+        reuse["sim"] = dataclasses.replace(physics, variation=None).sim()
+    sim = reuse["sim"]
     g, kick = evaluation_batch(gravities, num, seed, sim.layout.nv)
     sensors = SENSORS  # the sweep's streams and kicks: the numbers compare with a sweep's
-    config = policy.read(policy_path)[3]
-    controllers = {"policy": (policy.policy_controller(mj_model, policy_path),
+    _, _, net, config = policy.read(policy_path)
+    same = (json.dumps(net, sort_keys=True), json.dumps(config.to_dict(), sort_keys=True))
+    if reuse.get("network") == same:
+        controller = reuse["policy"].with_weights(policy.load_network(policy_path)[1])
+    else:
+        controller = reuse["policy"] = policy.policy_controller(mj_model, policy_path)
+        reuse["network"] = same
+    controllers = {"policy": (controller,
                               policy.policy_params(sim.robot, len(g), height=height, speed=speed, config=config))}
     if raibert_too:
         reference = registry.TASK_REFERENCES[config.task].height
@@ -524,7 +534,7 @@ def scan_checkpoints(args, physics) -> list[dict]:
                 "num": args.eval_num, "seed": args.seed, "speed": list(args.eval_speed)}
     saved = json.loads((out / SCAN).read_text()) if (out / SCAN).exists() else {}
     done = {s["step"]: s for s in saved.get("checkpoints", [])} if saved.get("settings") == settings else {}
-    scanned = []
+    scanned, reuse = [], {}  # one core and one compiled rollout for every checkpoint
     for path in sorted((out / "checkpoints").glob("[0-9]" * 12)):
         step = int(path.name)
         row = rows.get(step, {})
@@ -533,7 +543,7 @@ def scan_checkpoints(args, physics) -> list[dict]:
         if step not in done:
             result = evaluate(path, physics, gravities=gravities, duration=args.eval_duration,
                               height=args.eval_height, num=args.eval_num, seed=args.seed, speed=args.eval_speed,
-                              raibert_too=False)["policy"]
+                              raibert_too=False, reuse=reuse)["policy"]
             done[step] = {"step": step, "wall_time": row.get("wall_time"), "evaluation": result}
             print(f"step {step:>10,} ({row.get('wall_time', math.nan) / 60:.1f} min): "
                   + ", ".join(f"g {g}: {r['survival']:.0%} alive, >= {r['min_hops']} hops"
