@@ -4,6 +4,7 @@ The policy is an untrained Brax PPO network (seeded initial params) saved as exp
 saves one: what is tested is the path from a folder to a controller, not what training reaches.
 """
 
+import dataclasses
 import functools
 import os
 import shutil
@@ -68,6 +69,8 @@ def test_another_checkpoints_weights_run_in_the_same_compiled_rollout(trained, m
     assert np.abs(paths["first"] - paths["other, its own"]).max() > 1e-3  # the weights do move the robot
     with pytest.raises(ValueError, match="has no weights"):
         Sim(mj_model).limp.with_weights(())
+    with pytest.raises(ValueError, match="has weights but no act_with"):
+        dataclasses.replace(base, act_with=None)
 
 
 def test_policy_runs_as_a_core_controller(trained, mj_model, sim):

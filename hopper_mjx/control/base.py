@@ -69,6 +69,11 @@ class Controller:
     weights: Any = None
     act_with: Callable[[Any], Callable] | None = None
 
+    def __post_init__(self):
+        # The core passes `weights` to `act_with` inside its compiled rollout; without it they would reach no one.
+        if self.weights is not None and self.act_with is None:
+            raise ValueError(f"controller {self.name!r} has weights but no act_with to run them")
+
     def with_weights(self, weights) -> Controller:
         """This controller acting with `weights` (the shapes of its own), in the same compiled rollout."""
         if self.act_with is None:
