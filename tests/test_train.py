@@ -186,6 +186,7 @@ def test_train_rejects_bad_input_in_one_line_before_anything_runs(trained, capsy
     (["--algo", "sac", "--desired-kl", "0.01"], "--desired-kl is for --algo ppo (Brax's SAC has no adaptive learning "
                                                "rate)"),
     (["--learning-rate", "nan"], "--learning-rate must be finite and > 0, got nan"),
+    (["--reward-scaling", "-0.1"], "--reward-scaling must be finite and > 0, got -0.1"),
     # The robots' motors, delays and pushes: on the training's own 2 ms physics step, within an episode.
     (["--action-delay", "3"], "--action-delay must be a whole number of the training's physics steps (2 ms), got 3 ms"),
     (["--push", "0.001,0.3"], "--push: the push interval must be a whole number (>= 1) of physics steps (0.002 s), "
