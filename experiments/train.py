@@ -79,6 +79,8 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--reward-scaling", type=float, default=None,
                    help="factor on the rewards the learner sees (its value targets scale with it; "
                         "default 0.1 for ppo, 1 for sac)")
+    p.add_argument("--max-grad-norm", type=float, default=1.0,
+                   help="PPO: clip the gradient of both networks together to this global norm (0: no clip; default 1)")
     p.add_argument("--policy-layers", default="64,64,64", help="hidden layer sizes of the policy MLP")
     p.add_argument("--value-layers", default="64,64,64", help="hidden layer sizes of the value MLP")
     p.add_argument("--gravity-range", default=None,
@@ -187,6 +189,7 @@ def check(args):
             raise ValueError("--desired-kl is for --algo ppo (Brax's SAC has no adaptive learning rate)")
         cli.check_range("--desired-kl", args.desired_kl, low=0, open_low=True)
     cli.check_range("--learning-rate", args.learning_rate, low=0, open_low=True)
+    cli.check_range("--max-grad-norm", args.max_grad_norm, low=0)
     if args.reward_scaling is not None:
         cli.check_range("--reward-scaling", args.reward_scaling, low=0, open_low=True)
     for flag in ("num_envs", "timesteps", "episode_length", "eval_every", "num_eval_envs", "unroll_length",
@@ -327,7 +330,7 @@ def run_ppo(args, env, factory, remaining: int, start_step: int, resume, progres
         entropy_cost=args.entropy_cost,
         gae_lambda=0.95,
         clipping_epsilon=0.2,
-        max_grad_norm=1.0,
+        max_grad_norm=args.max_grad_norm or None,
         **({} if args.desired_kl is None else {"learning_rate_schedule": "ADAPTIVE_KL", "desired_kl": args.desired_kl}),
         progress_fn=progress,
         run_evals=not args.no_eval,
