@@ -79,7 +79,7 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--reward-scaling", type=float, default=None,
                    help="factor on the rewards the learner sees (its value targets scale with it; "
                         "default 0.1 for ppo, 1 for sac)")
-    p.add_argument("--max-grad-norm", type=float, default=1.0,
+    p.add_argument("--max-grad-norm", type=float, default=None,
                    help="PPO: clip the gradient of both networks together to this global norm (0: no clip; default 1)")
     p.add_argument("--policy-layers", default="64,64,64", help="hidden layer sizes of the policy MLP")
     p.add_argument("--value-layers", default="64,64,64", help="hidden layer sizes of the value MLP")
@@ -189,7 +189,10 @@ def check(args):
             raise ValueError("--desired-kl is for --algo ppo (Brax's SAC has no adaptive learning rate)")
         cli.check_range("--desired-kl", args.desired_kl, low=0, open_low=True)
     cli.check_range("--learning-rate", args.learning_rate, low=0, open_low=True)
-    cli.check_range("--max-grad-norm", args.max_grad_norm, low=0)
+    if args.max_grad_norm is not None:
+        if args.algo == "sac":
+            raise ValueError("--max-grad-norm is for --algo ppo (Brax's SAC does not clip its gradients)")
+        cli.check_range("--max-grad-norm", args.max_grad_norm, low=0)
     if args.reward_scaling is not None:
         cli.check_range("--reward-scaling", args.reward_scaling, low=0, open_low=True)
     for flag in ("num_envs", "timesteps", "episode_length", "eval_every", "num_eval_envs", "unroll_length",
@@ -293,6 +296,13 @@ def task_config(args, physics):
 REWARD_SCALING = {"ppo": 0.1, "sac": 1.0}  # --reward-scaling's defaults
 
 
+def learner_settings(args) -> dict:
+    """The reward scaling and (PPO) gradient clip a run uses, its algorithm's defaults filled in."""
+    scaling = REWARD_SCALING[args.algo] if args.reward_scaling is None else args.reward_scaling
+    clip = {} if args.algo != "ppo" else {"max_grad_norm": 1.0 if args.max_grad_norm is None else args.max_grad_norm}
+    return {"reward_scaling": scaling, **clip}
+
+
 def _shared(args, env, factory, remaining: int, start_step: int, resume, per_train_step: int) -> dict:
     """The keyword arguments Brax's PPO and SAC `train` both take, from ours."""
     from hopper_mjx.envs.wrappers import wrap_for_training
@@ -308,7 +318,7 @@ def _shared(args, env, factory, remaining: int, start_step: int, resume, per_tra
         wrap_env_fn=wrap_for_training,  # a fresh gravity and command every episode
         learning_rate=args.learning_rate,
         discounting=args.discounting,
-        reward_scaling=REWARD_SCALING[args.algo] if args.reward_scaling is None else args.reward_scaling,
+        reward_scaling=learner_settings(args)["reward_scaling"],
         batch_size=args.batch_size,
         normalize_observations=True,
         network_factory=factory,
@@ -330,7 +340,7 @@ def run_ppo(args, env, factory, remaining: int, start_step: int, resume, progres
         entropy_cost=args.entropy_cost,
         gae_lambda=0.95,
         clipping_epsilon=0.2,
-        max_grad_norm=args.max_grad_norm or None,
+        max_grad_norm=learner_settings(args)["max_grad_norm"] or None,
         **({} if args.desired_kl is None else {"learning_rate_schedule": "ADAPTIVE_KL", "desired_kl": args.desired_kl}),
         progress_fn=progress,
         run_evals=not args.no_eval,
@@ -412,7 +422,7 @@ def train(args, physics=None) -> dict:
 
     record_path = out / HISTORY
     record = read_history(record_path) if record_path.exists() else {"history": [], "wall_time": 0.0}
-    record.update(args=vars(args), env_config=config.to_dict())
+    record.update(args={**vars(args), **learner_settings(args)}, env_config=config.to_dict())
     resume = latest_checkpoint(out)
     start_step = resume[1] if resume else 0
     remaining = args.timesteps - start_step

@@ -188,6 +188,8 @@ def test_train_rejects_bad_input_in_one_line_before_anything_runs(trained, capsy
     (["--learning-rate", "nan"], "--learning-rate must be finite and > 0, got nan"),
     (["--reward-scaling", "-0.1"], "--reward-scaling must be finite and > 0, got -0.1"),
     (["--max-grad-norm", "nan"], "--max-grad-norm must be finite and >= 0, got nan"),
+    (["--algo", "sac", "--max-grad-norm", "1"], "--max-grad-norm is for --algo ppo (Brax's SAC does not clip its "
+                                                "gradients)"),
     # The robots' motors, delays and pushes: on the training's own 2 ms physics step, within an episode.
     (["--action-delay", "3"], "--action-delay must be a whole number of the training's physics steps (2 ms), got 3 ms"),
     (["--push", "0.001,0.3"], "--push: the push interval must be a whole number (>= 1) of physics steps (0.002 s), "
