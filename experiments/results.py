@@ -4,8 +4,8 @@
     python experiments/results.py runs/hop-ppo --out results.md --sweep                 # also run the sweeps
 
 A RUN folder is one training run, or a `--seeds` parent holding seed-<s>/ runs. Per task x algorithm,
-over its seeds, the median and [min-max] of: minutes of training to the task's threshold (threshold.json
-of --scan-checkpoints; `hopper_mjx.thresholds`), env steps/s (Brax's, the median over the run's
+over its seeds, the median and [min-max] of: minutes of training and env steps to the task's threshold
+(threshold.json of --scan-checkpoints; `hopper_mjx.thresholds`), env steps/s (Brax's, the median over the run's
 evaluations), and on the kicked gravity sweep of the run's policy (RUN/sweep/: `python -m hopper_mjx.sweep
 gravity --controller policy:RUN`, nine default gravities, the default kick) the worst gravity's survival,
 apex error |rise/command - 1| and speed error. Each task's reference controller (`registry.TASK_REFERENCES`:
@@ -111,6 +111,8 @@ def run_record(run: Path, do_sweep: bool, num: int, duration: float) -> dict:
     return {"run": str(run), "task": args["task"], "algo": args["algo"], "seed": args["seed"], "ground": ground,
             "scanned": (run / "threshold.json").is_file(),
             "minutes_to_threshold": None if found is None else found["wall_time"] / 60,
+            # steps too: a seed's steps are the same on any machine, its minutes are not
+            "steps_to_threshold": None if found is None else found["step"],
             "steps_per_s": statistics.median(rates) if rates else None,
             "curve": [(r["wall_time"] / 60, r["eval/episode_reward"]) for r in record["history"]
                       if "eval/episode_reward" in r],
@@ -127,8 +129,12 @@ def spread(values, fmt: str) -> str:
     return text if len(values) == 1 else f"{text} [{show(min(values))}–{show(max(values))}]"
 
 
-HEADER = ("| task × algorithm | seeds | at threshold | min to threshold | env steps/s | worst survival "
-          "| worst apex error | worst speed error m/s |\n|---|---|---|---|---|---|---|---|")
+HEADER = ("| task × algorithm | seeds | at threshold | min to threshold | M steps to threshold | env steps/s "
+          "| worst survival | worst apex error | worst speed error m/s |\n|---|---|---|---|---|---|---|---|---|")
+
+
+def _millions(steps):
+    return None if steps is None else steps / 1e6
 
 
 def table(records: list[dict], references: dict) -> str:
@@ -139,12 +145,13 @@ def table(records: list[dict], references: dict) -> str:
         scanned = sum(r["scanned"] for r in rows)
         lines.append(f"| {task} × {algo.upper()} | {len(rows)} | {reached} of {scanned} scanned "
                      f"| {spread([r['minutes_to_threshold'] for r in rows], '.1f')} "
+                     f"| {spread([_millions(r['steps_to_threshold']) for r in rows], '.2f')} "
                      f"| {spread([r['steps_per_s'] for r in rows], ',.0f')} "
                      f"| {spread([r['survival'] for r in rows], '.0%')} "
                      f"| {spread([r['apex_error'] for r in rows], '.0%')} "
                      f"| {spread([r['speed_error'] for r in rows], '.3f')} |")
     for task, ref in sorted(references.items()):
-        lines.append(f"| {task} × {ref['controller']} (reference) | — | — | — | — "
+        lines.append(f"| {task} × {ref['controller']} (reference) | — | — | — | — | — "
                      f"| {spread([ref['survival']], '.0%')} | {spread([ref['apex_error']], '.0%')} "
                      f"| {spread([ref['speed_error']], '.3f')} |")
     return "\n".join(lines)

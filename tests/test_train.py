@@ -351,9 +351,9 @@ def test_the_results_table_is_read_from_the_run_folders(seeded, tmp_path):
                                 if "eval/episode_reward" in r] and len(run["curve"]) >= 2
     row = next(line for line in out.read_text().splitlines() if line.startswith("| hop × PPO"))
     cells = [c.strip() for c in row.split("|")[1:-1]]
-    assert cells[1] == "2" and cells[2] == "0 of 0 scanned"
-    assert cells[4] == f"{statistics.median(rates):,.0f} [{min(rates):,.0f}–{max(rates):,.0f}]"
-    assert cells[5:] == ["n/a"] * 3
+    assert cells[1] == "2" and cells[2] == "0 of 0 scanned" and cells[3:5] == ["n/a"] * 2
+    assert cells[5] == f"{statistics.median(rates):,.0f} [{min(rates):,.0f}–{max(rates):,.0f}]"
+    assert cells[6:] == ["n/a"] * 3
     assert out.with_suffix(".png").stat().st_size > 10_000
 
 def test_the_results_table_puts_each_tasks_registered_reference_beside_it(tmp_path):
@@ -372,6 +372,8 @@ def test_the_results_table_puts_each_tasks_registered_reference_beside_it(tmp_pa
         args = {"task": task, "algo": "sac", "seed": 0, "eval_height": 0.12, "eval_speed": [0.0, 0.0]}
         (run / "metrics.json").write_text(json.dumps({"args": args, "history": []}))
         runs.append(str(run))
+    # hop's run met its threshold (as --scan-checkpoints writes it): the row gives its minutes and its steps
+    (tmp_path / "hop" / "threshold.json").write_text(json.dumps({"step": 4_915_200, "wall_time": 204.0}))
     out = tmp_path / "results.md"
     assert results.main([*runs, "--out", str(out)]) == 0
     references = json.loads(out.with_suffix(".json").read_text())["references"]
@@ -382,6 +384,8 @@ def test_the_results_table_puts_each_tasks_registered_reference_beside_it(tmp_pa
         assert references[task]["survival"] is None  # not swept
     assert references["stand"]["height"] == 0.05 and references["hop"]["height"] == 0.12
     assert "| stand × raibert at 0.05 m (reference) |" in out.read_text()
+    hop = next(line for line in out.read_text().splitlines() if line.startswith("| hop × SAC"))
+    assert [c.strip() for c in hop.split("|")[1:-1]][2:5] == ["1 of 1 scanned", "3.4", "4.92"]
 
 
 def test_train_rejects_an_out_it_cannot_make_in_one_line(tmp_path, capsys):
