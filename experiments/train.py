@@ -158,6 +158,28 @@ def latest_checkpoint(out: Path) -> tuple[Path, int] | None:
     return path, int(path.name)
 
 
+# Options Brax's SAC has no counterpart for, and why.
+PPO_ONLY = {"desired_kl": "Brax's SAC has no adaptive learning rate", "max_grad_norm": "Brax's SAC does not clip its "
+            "gradients"}
+
+
+def _check_learner(args) -> None:
+    """`check`'s part for the networks and the optimiser: raises ValueError naming the first bad argument."""
+    for flag in ("policy_layers", "value_layers"):
+        try:
+            _layers(getattr(args, flag))
+        except ValueError:
+            raise ValueError(f"--{flag.replace('_', '-')} must be comma-separated positive integers (hidden layer "
+                             f"sizes), got {getattr(args, flag)!r}") from None
+    for flag, why in PPO_ONLY.items():
+        if getattr(args, flag) is not None and args.algo != "ppo":
+            raise ValueError(f"--{flag.replace('_', '-')} is for --algo ppo ({why})")
+    cli.check_range("--learning-rate", args.learning_rate, low=0, open_low=True)
+    for flag, low, open_low in (("desired_kl", 0, True), ("max_grad_norm", 0, False), ("reward_scaling", 0, True)):
+        if getattr(args, flag) is not None:
+            cli.check_range(f"--{flag.replace('_', '-')}", getattr(args, flag), low=low, open_low=open_low)
+
+
 def check(args):
     """The run's `scenario.Physics`; raises ValueError naming the first bad argument (JSON reads only,
     nothing is built)."""
@@ -174,27 +196,11 @@ def check(args):
     physics = cli.check_physics(args)
     cli.refuse_each(physics.ground, "training")
     cli.check_controls(physics, registry.POLICY_PREFIX)  # a dc motor's drawn figures need --motor dc
-    for flag in ("policy_layers", "value_layers"):
-        try:
-            _layers(getattr(args, flag))
-        except ValueError:
-            raise ValueError(f"--{flag.replace('_', '-')} must be comma-separated positive integers (hidden layer "
-                             f"sizes), got {getattr(args, flag)!r}") from None
     if args.gravity_range is not None:
         lo, hi = _pair(args.gravity_range, "--gravity-range")
         if not 0 < lo <= hi:
             raise ValueError(f"--gravity-range must be 0 < low <= high m/s², got {args.gravity_range!r}")
-    if args.desired_kl is not None:
-        if args.algo != "ppo":
-            raise ValueError("--desired-kl is for --algo ppo (Brax's SAC has no adaptive learning rate)")
-        cli.check_range("--desired-kl", args.desired_kl, low=0, open_low=True)
-    cli.check_range("--learning-rate", args.learning_rate, low=0, open_low=True)
-    if args.max_grad_norm is not None:
-        if args.algo == "sac":
-            raise ValueError("--max-grad-norm is for --algo ppo (Brax's SAC does not clip its gradients)")
-        cli.check_range("--max-grad-norm", args.max_grad_norm, low=0)
-    if args.reward_scaling is not None:
-        cli.check_range("--reward-scaling", args.reward_scaling, low=0, open_low=True)
+    _check_learner(args)
     for flag in ("num_envs", "timesteps", "episode_length", "eval_every", "num_eval_envs", "unroll_length",
                  "batch_size", "num_minibatches", "updates_per_batch", "eval_num", "sac_replay", "sac_grad_updates"):
         if getattr(args, flag) < 1:
