@@ -31,7 +31,7 @@ from hopper_mjx.engine import chain_constraint, chain_smooth, chain_solver
 from hopper_mjx.engine.chain_hfield import TerrainParams
 from hopper_mjx.engine.chain_model import ChainModel, NotChain, derive, describe, entries, instance, terrain_heights
 from hopper_mjx.engine.chain_stage import BATCH_AXIS, stored
-from hopper_mjx.engine.xla import CPU_COMPILER_OPTIONS, FUSION_EMITTERS
+from hopper_mjx.engine.xla import CPU_COMPILER_OPTIONS, FUSION_EMITTERS, trace_once
 from hopper_mjx.model import variation
 
 __all__ = ["BATCH_AXIS", "ChainData", "ChainEngine", "ChainParams", "NotChain", "TerrainParams", "make",
@@ -124,6 +124,7 @@ class ChainEngine:
         if self.chain.terrain is not None:
             t = self.chain.terrain
             self.model = self.with_heights(terrain_heights(mj_model), t.origin[2] - t.base)
+        trace_once(self)
 
     def with_heights(self, heights, bottom=None) -> ChainParams:
         """The model argument on the terrain `heights` ((nrow, ncol) m, world, on this model's

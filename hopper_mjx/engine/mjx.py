@@ -17,7 +17,7 @@ from mujoco import mjx
 from mujoco.mjx._src import support  # contact_force: decodes MJX's pyramidal/elliptic efc rows
 
 from hopper_mjx import registry
-from hopper_mjx.engine.xla import CPU_COMPILER_OPTIONS
+from hopper_mjx.engine.xla import CPU_COMPILER_OPTIONS, trace_once
 from hopper_mjx.model.layout import Layout
 from hopper_mjx.model.variation import CONSTANTS
 
@@ -83,6 +83,7 @@ class MjxEngine:
         if self.source is not nominal:
             lossless = jnp.asarray(nominal.dof_frictionloss, self.model.dof_frictionloss.dtype)
             self.model = self.model.replace(dof_frictionloss=lossless)
+        trace_once(self)
 
     def vary(self, model: mjx.Model, values: dict) -> mjx.Model:
         """One instance's model: its values of the varied fields (and their derived constants) in place
