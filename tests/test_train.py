@@ -175,6 +175,8 @@ def test_train_rejects_bad_input_in_one_line_before_anything_runs(trained, capsy
     (["--episode-length", "0"], "--episode-length must be >= 1, got 0"),
     (["--eval-gravity", "9.81,abc"], "--eval-gravity must be comma-separated numbers, got '9.81,abc'"),
     (["--eval-gravity", "9.81,-1"], "--eval-gravity must be finite and > 0, got -1"),
+    (["--select-gravity", "0.5,0"], "--select-gravity must be finite and > 0, got 0"),
+    (["--select-gravity", "nan"], "--select-gravity must be finite and > 0, got nan"),
     (["--seed", "-1"], "--seed must be in 0..4294967295, got -1"),
     (["--desired-kl", "0"], "--desired-kl must be finite and > 0, got 0"),
     # Zero epochs used to train a whole run that never updated its networks.
@@ -290,7 +292,8 @@ def test_the_selected_checkpoint_becomes_the_policy_and_the_choice_is_recorded(t
     first, last = steps[0], steps[-1]
     assert first != last
     rows = {first: _rows(**{"9.81": (1.0, 0.100, 0.01)}), last: _rows(**{"9.81": (0.5, 0.100, 0.01)})}
-    args = train_script.parser().parse_args([*TINY, *PPO, "--out", str(out), "--eval-height", "0.10"])
+    args = train_script.parser().parse_args([*TINY, *PPO, "--out", str(out), "--eval-height", "0.10",
+                                             "--select-gravity", "9.81"])
     chosen = train_script.select_policy(args, [{"step": s, "wall_time": 1.0, "evaluation": rows[s]}
                                                for s in (first, last)])
     assert chosen["step"] == first and chosen["meets"]
@@ -303,6 +306,27 @@ def test_the_selected_checkpoint_becomes_the_policy_and_the_choice_is_recorded(t
             assert (out / "policy" / f.relative_to(source)).read_bytes() == f.read_bytes()
 
 
+
+
+def test_the_threshold_is_met_at_the_evaluation_gravities_and_the_policy_chosen_at_the_selection_ones(trained):
+    """The first checkpoint at the threshold is judged at --eval-gravity only; the policy kept is the best at
+    every --select-gravity (the sweep's nine by default), so a checkpoint that meets the threshold at 9.81
+    but rises 27 % high at 0.5 m/s² loses to a later one within 15 % at both."""
+    out, _ = trained
+    first, last = (s := [int(p.name) for p in _checkpoints(out) if p.name.isdigit()])[0], s[-1]
+    early = _rows(**{"9.81": (1.0, 0.100, 0.01), "0.5": (1.0, 0.127, 0.01)})
+    late = _rows(**{"9.81": (1.0, 0.110, 0.01), "0.5": (1.0, 0.105, 0.01)})
+    scanned = [{"step": first, "wall_time": 1.0, "evaluation": early},
+               {"step": last, "wall_time": 2.0, "evaluation": late}]
+    options = [*TINY, *PPO, "--out", str(out), "--eval-height", "0.10", "--eval-gravity", "9.81"]
+    args = train_script.parser().parse_args(options)
+    assert args.select_gravity == "0.5,1,1.62,2.5,3.71,5,7.5,9.81,12"
+    assert train_script.first_at_threshold("hop", scanned, 0.10, args.eval_gravity)["step"] == first
+    assert train_script.first_at_threshold("hop", scanned, 0.10, "0.5")["step"] == last
+    for select, kept in (("9.81,0.5", last), ("9.81", first)):  # at 9.81 alone the earlier, closer one wins
+        args = train_script.parser().parse_args([*options, "--select-gravity", select])
+        chosen = train_script.select_policy(args, scanned)
+        assert chosen["step"] == kept and chosen["gravities"] == select.split(",") and chosen["meets"]
 
 
 SEEDED = [*TINY, "--task", "hop", "--algo", "ppo", "--seed", "3"]  # with Brax's evaluations: reward curves
