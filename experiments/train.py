@@ -237,7 +237,7 @@ def check(args):
         raise ValueError(f"--eval-speed needs two finite values VX,VY in m/s, got {args.eval_speed}")
     if args.minutes is not None and not (math.isfinite(args.minutes) and args.minutes > 0):
         raise ValueError(f"--minutes must be finite and > 0, got {args.minutes:g}")
-    cli.check_writable("--out", args.out, folder=True)
+    cli.check_writable("--out", args.out, folder=True, make_parents=True)  # runs/ need not exist yet
     if args.no_eval and args.algo != "ppo":
         raise ValueError("--no-eval is for --algo ppo (Brax's SAC evaluates at every checkpoint)")
     resume = latest_checkpoint(Path(args.out))
