@@ -51,15 +51,17 @@ def simulate(cache, **env):
 
 def test_a_run_from_a_warm_cache_prints_no_alarm(tmp_path):
     """The same tiny run three times on a fresh cache: it compiles and fills the cache, then loads from
-    it without an alarm; with the filter off (TF_CPP_MIN_LOG_LEVEL=0) the load does print XLA's alarm,
-    so the run in between was a load, and the filter is what keeps its stderr clean."""
+    it without an alarm; with the filter off (TF_CPP_MIN_LOG_LEVEL=0) the load does print XLA's warnings,
+    so the run in between was a load, and the filter is what keeps its stderr clean. Which warnings depends on
+    the host: every load logs "Assume version compatibility"; the SIGILL alarm for +prefer-no-gather comes only
+    where LLVM tunes for that CPU (27 Nov's machine did, 28 Nov's AMD family 25 model 1 did not)."""
     cold = simulate(tmp_path)
     assert cold.returncode == 0 and not ALARM.search(cold.stderr), cold.stderr[-3000:]
     assert any(p.is_file() for p in tmp_path.rglob("*"))  # the compiled program is in the cache
     warm = simulate(tmp_path)
     assert warm.returncode == 0 and not ALARM.search(warm.stderr), warm.stderr[-3000:]
     unfiltered = simulate(tmp_path, TF_CPP_MIN_LOG_LEVEL="0")
-    assert unfiltered.returncode == 0 and "+prefer-no-gather" in unfiltered.stderr, unfiltered.stderr[-3000:]
+    assert unfiltered.returncode == 0 and ALARM.search(unfiltered.stderr), unfiltered.stderr[-3000:]
 
 
 def test_only_the_packages_commands_arm_the_signals(monkeypatch):
