@@ -16,6 +16,9 @@ record per evaluation, wall time) and reward_curve.png.
 
 from __future__ import annotations
 
+# First, so that Ctrl-C during the imports below is already one line (hopper_mjx.startup arms it).
+import hopper_mjx  # noqa: F401  # isort: skip
+
 import argparse
 import dataclasses
 import functools

@@ -73,6 +73,14 @@ class Stopped(NamedTuple):
     after: dict  # and once the process ended
 
 
+def armed(pid: int) -> bool:
+    """The process has armed its signal handling: `hopper_mjx.command.arm` started the watcher thread, the
+    first thread besides the main one. Before that, the interpreter is still starting up (on a loaded
+    machine this can outlast 0.5 s) and a signal ends it as Python's default handler does."""
+    lines = Path(f"/proc/{pid}/status").read_text().splitlines()
+    return any(int(line.split()[1]) >= 2 for line in lines if line.startswith("Threads:"))
+
+
 def run_to_end(argv, folder: Path) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, *command_line(argv[0]), *argv[1:]], cwd=folder, env=ENV,
                           capture_output=True, text=True, timeout=TIMEOUT)
@@ -83,7 +91,7 @@ def interrupt(argv, folder: Path, signum, when) -> Stopped:
     proc = subprocess.Popen([sys.executable, *command_line(argv[0]), *argv[1:]], cwd=folder, env=ENV,
                             stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     started = time.monotonic()
-    while not when(folder, started):
+    while not (when(folder, started) and armed(proc.pid)):
         assert proc.poll() is None, f"ended before its moment: {proc.returncode}, {proc.stderr.read()[-2000:]}"
         assert time.monotonic() - started < TIMEOUT, "its moment never came"
         time.sleep(0.02)
