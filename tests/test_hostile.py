@@ -1,8 +1,9 @@
 """Hostile input, one case per kind of trouble a user or a damaged disk brings: input files whose values
 are wrong, sizes that cannot run, run folders that are not what they seem, a policy folder copied, edited
 or cut short. Each is refused as test_bad_inputs holds a refusal (whose helpers run the cases): exit code
-2, one line naming the file, tag or flag at fault, no traceback, nothing written or overwritten, under 5 s
-of CPU (before anything is compiled). Interrupts are tests/test_interrupt.py's.
+2, one line naming the file, tag or flag at fault, no traceback, nothing written or overwritten, and
+within 2 s of CPU beyond the imports it needs (before anything is compiled). Interrupts are
+tests/test_interrupt.py's.
 """
 
 import json
