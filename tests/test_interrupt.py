@@ -1,8 +1,9 @@
 """Ctrl-C (SIGINT) and SIGTERM, sent as a user's terminal sends them, to simulate, sweep, training and
-ros.record: during the imports (0.5 s), during start-up and compilation (3 s) and mid-run. Each stops
-within a second of the signal, with exactly one line on stderr and exit code 130 (143 for SIGTERM), no
-traceback and no half-written output; finished work is kept: a rerun of the sweep resumes and gives the
-same bytes as an uninterrupted sweep, and a rerun of training resumes from its last checkpoint.
+ros.record: during the imports (0.5 s, once the package has armed its handler), during start-up and
+compilation (3 s) and mid-run. Each stops within a second of the signal, with exactly one line on stderr
+and exit code 130 (143 for SIGTERM), no traceback and no half-written output; finished work is kept: a
+rerun of the sweep resumes and gives the same bytes as an uninterrupted sweep, and a rerun of training
+resumes from its last checkpoint.
 
 The cases run a few at a time, from the shared persistent compile cache, with small batches.
 """
