@@ -6,6 +6,8 @@ So: at C's default tolerance the distances agree to within it; with C's toleranc
 (1e-14) every stage agrees in float64 to ~1e-9. Trajectories through touchdown (float64, the
 model's own options) stay within 1e-3 m of C. A new terrain is a new input, not a new compile.
 The models here have no base-box pairs (test_chain_terrain_box.py has the box against the terrain).
+The engines keep the foot's deepest `chain.FOOT_CONTACTS` prisms, as the tools make them (every contact
+of these states; half the compile of a slot per prism); the contact tests below keep every prism.
 """
 
 from __future__ import annotations
@@ -163,7 +165,7 @@ def float64_contacts(models):
     out = {}
     jax.config.update("jax_enable_x64", True)
     try:
-        engine = chain.make(converged(models["rough"], 20))
+        engine = chain.make(converged(models["rough"], 20), chain.FOOT_CONTACTS)
         contacts, stages = chain_contacts_fn(engine), chain_stages(engine)
         for name, (states, default, c_tight, c_stages) in cases.items():
             params = engine.with_heights(chain.terrain_heights(models[name]))
@@ -281,7 +283,7 @@ def trajectories(models):
     ours, theirs, touched = [], [], []
     jax.config.update("jax_enable_x64", True)
     try:
-        engine = chain.make(models["rough"])
+        engine = chain.make(models["rough"], chain.FOOT_CONTACTS)
         params = engine.with_heights(np.stack([chain.terrain_heights(models[name]) for name, _, _ in cases]))
         step = _step_fn(engine)
         for _ in range(TRAJ_STEPS):
@@ -323,14 +325,14 @@ def test_a_new_terrain_is_an_input_not_a_recompile(models):
         data = engine.forward(params, engine.make_data(qpos, qvel), jnp.array([0.0, 0.0, -9.81]))
         return data.qacc, data.foot_force
 
-    engine = chain.make(models["rough"])
+    engine = chain.make(models["rough"], chain.FOOT_CONTACTS)
     fn = jax.jit(jax.vmap(forward, in_axes=(None, 0, 0)))
     qpos, qvel, _, _ = terrain_states(models["step"], 4, seed=5)
     args = jnp.asarray(qpos, jnp.float32), jnp.asarray(qvel, jnp.float32)
     on_rough = fn(engine.model, *args)
     on_step = fn(engine.with_heights(chain.terrain_heights(models["step"])), *args)
     assert len(traces) == 1
-    own = chain.make(models["step"])
+    own = chain.make(models["step"], chain.FOOT_CONTACTS)
     reference = fn(own.model, *args)
     assert len(traces) == 1, "the step model's own engine has the same grid: the same compiled function"
     for a, b in zip(on_step, reference):
@@ -375,19 +377,24 @@ def test_deep_contacts_within_ccd_tolerance(models):
     err, err_tight = np.zeros(3), np.zeros(3)
     jax.config.update("jax_enable_x64", True)
     try:
+        engine = chain.make(models["rough"])  # every prism a slot; each terrain is its heights input (one compile)
+        radius = float(models["rough"].geom_size[models["rough"].geom("foot").id, 0])
+
+        def contacts(c, p):
+            out = chain_hfield.sphere_contacts(engine.chain.terrain, p.terrain, tuple(c[i] for i in range(3)), radius)
+            return (jnp.stack([o.exists for o in out]), jnp.stack([o.dist for o in out]),
+                    jnp.stack([jnp.stack(o.pos) for o in out]), jnp.stack([jnp.stack(o.normal) for o in out]))
+
+        fn = jax.jit(jax.vmap(contacts, in_axes=(0, None)))
         for seed, name in enumerate(TERRAINS):
             m = models[name]
             tight = copy.deepcopy(m)
             tight.opt.ccd_tolerance, tight.opt.ccd_iterations = TIGHT_CCD, 2000
-            engine = chain.make(m)
-            radius = float(m.geom_size[m.geom("foot").id, 0])
-            fn = jax.jit(jax.vmap(lambda c, p: chain_hfield.sphere_contacts(
-                engine.chain.terrain, p.terrain, tuple(c[i] for i in range(3)), radius), in_axes=(0, None)))
             centres = _deep_states(m, 100, seed)
-            out = fn(jnp.asarray(centres), engine.model)
+            exists, dist, pos, normal = (np.asarray(x) for x in fn(
+                jnp.asarray(centres), engine.with_heights(chain.terrain_heights(m))))
             for i, centre in enumerate(centres):
-                ours = [(float(c.dist[i]), np.array([float(x[i]) for x in c.pos]),
-                         np.array([float(x[i]) for x in c.normal])) for c in out if bool(c.exists[i])]
+                ours = [(dist[i, k], pos[i, k], normal[i, k]) for k in np.flatnonzero(exists[i])]
                 for reference, worst in ((_c_sphere_contacts(m, centre), err), (_c_sphere_contacts(tight, centre),
                                                                                  err_tight)):
                     assert len(ours) == len(reference), f"{name}: {len(ours)} contacts, C has {len(reference)}"
@@ -418,8 +425,8 @@ def test_max_foot_contacts_keeps_the_deepest(models):
         return jnp.stack([o.exists for o in out]), jnp.stack([o.dist for o in out])
 
     centres = jnp.asarray(_deep_states(models["bump"], 64, seed=9) + np.array([0, 0, 0.04]), jnp.float32)
-    everything = jax.vmap(lambda c: contacts(full.chain.terrain, c, full.model))(centres)
-    kept = jax.vmap(lambda c: contacts(few.chain.terrain, c, few.model))(centres)
+    everything = jax.jit(jax.vmap(lambda c: contacts(full.chain.terrain, c, full.model)))(centres)
+    kept = jax.jit(jax.vmap(lambda c: contacts(few.chain.terrain, c, few.model)))(centres)
     assert kept[0].shape[1] == keep and everything[0].shape[1] == 2 * np.prod(full.chain.terrain.block)
     counts = np.asarray(everything[0]).sum(axis=1)
     assert (counts <= keep).any() and (counts > keep).any(), counts
