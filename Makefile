@@ -31,7 +31,7 @@ lint: install
 	$(VENV)/bin/ruff check .
 
 # Two processes: XLA compiles on one core, so while one compiles the other runs. The tests that
-# measure wall-clock pacing or timing bounds then run alone.
+# measure wall-clock pacing or timing bounds then run alone. The longest files go first (tests/conftest.py).
 test: lint
-	$(PY) -m pytest -q -n 2 --dist loadfile -m "not serial"
+	$(PY) -m pytest -q -n 2 --dist loadfile --no-loadscope-reorder -m "not serial"
 	$(PY) -m pytest -q -m serial
