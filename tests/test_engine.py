@@ -80,3 +80,24 @@ def test_each_engine_compiles_with_its_own_xla_emitters(mj_model):
     assert engine.make("mjx", mj_model).compiler_options == engine.CPU_COMPILER_OPTIONS
     assert chain.make_for_tools(rough).compiler_options == engine.FUSION_EMITTERS
     assert engine.FUSION_EMITTERS["xla_cpu_use_fusion_emitters"] is True
+
+
+def test_the_same_engine_is_built_once_per_process(mj_model, capsys):
+    """`engine.make` again with an equal model (another compile of the same URDF) returns the engine already
+    built, its step's trace with it; "auto" on a chain model is the chain engine; a model that differs in
+    any number, or other varied fields, gets its own; the fallback's notice is said at every call."""
+    from hopper_mjx.model import loader
+
+    chain = engine.make("chain", mj_model)
+    assert engine.make("chain", loader.load()) is chain
+    assert engine.make("auto", loader.load()) is chain
+    other = copy.deepcopy(mj_model)
+    other.opt.timestep = 0.002
+    assert engine.make("chain", other) is not chain
+    assert engine.make("chain", mj_model, frozenset({"body_mass"})) is not chain
+    assert engine.make("mjx", mj_model) is engine.make("mjx", loader.load()) is not chain
+    rk4 = copy.deepcopy(mj_model)
+    rk4.opt.integrator = mujoco.mjtIntegrator.mjINT_RK4
+    capsys.readouterr()
+    assert engine.make("auto", rk4) is engine.make("auto", rk4)
+    assert capsys.readouterr().err.count("note: engine auto uses mjx") == 2

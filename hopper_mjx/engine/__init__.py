@@ -29,10 +29,12 @@ on stderr saying why.
 
 from __future__ import annotations
 
+import hashlib
 import sys
 from typing import Any, Protocol, runtime_checkable
 
 import mujoco
+import numpy as np
 
 from hopper_mjx import registry
 from hopper_mjx.engine.chain_stage import BATCH_AXIS, batch_any
@@ -67,23 +69,56 @@ def check_name(name: str) -> None:
     registry.check("engine", registry.ENGINES, name)
 
 
+# The engines this process has built, by name, model and varied fields (`make`). An engine is immutable once
+# built, and its step's trace (xla.trace_once) and the batched forms of that trace live on it: the same engine
+# again (a training's evaluation, the next seed of --seeds, a scan's rollouts) skips re-tracing the step.
+_BUILT: dict = {}
+_KEEP = 8  # engines kept; the oldest goes first
+
+
+def _model_key(mj_model: mujoco.MjModel) -> bytes:
+    """A digest of the whole compiled model (MuJoCo's own binary form of it)."""
+    buffer = np.empty(mujoco.mj_sizeModel(mj_model), np.uint8)
+    mujoco.mj_saveModel(mj_model, None, buffer)
+    return hashlib.sha256(buffer).digest()
+
+
 def make(name: str, mj_model: mujoco.MjModel, varies: frozenset[str] = frozenset()):
     """The engine called `name` for a compiled monoped whose model `varies` these fields per instance;
     "chain" raises `NotChain` (a ValueError) for a model outside its topology and ValueError for a
-    field it cannot vary, "auto" falls back to "mjx" for either."""
+    field it cannot vary, "auto" falls back to "mjx" for either. The same arguments again return the
+    engine already built."""
     check_name(name)
     check_engine_varies(name, varies)
+    varies, digest = frozenset(varies), _model_key(mj_model)
+    # "auto" that resolves to the chain is the chain engine: one build for both names.
+    keys = [(name, digest, varies)] + ([("chain", digest, varies)] if name == "auto" else [])
+    found = next((k for k in keys if k in _BUILT), None)
+    if found is None:
+        if len(_BUILT) >= _KEEP:
+            _BUILT.pop(next(iter(_BUILT)))
+        engine, note = _build(name, mj_model, varies)
+        found = (engine.name if not note else name, digest, varies)
+        _BUILT[found] = engine, note
+    built, note = _BUILT[found]
+    if note:  # every time: each tool that asked for "auto" says what it got
+        print(note, file=sys.stderr)
+    return built
+
+
+def _build(name: str, mj_model: mujoco.MjModel, varies: frozenset[str]):
+    """(the engine, the "auto" fallback's notice or "")."""
     if name in ("auto", "chain"):
         from hopper_mjx.engine import chain
 
         try:
             check_engine_varies("chain", varies)
-            return chain.make_for_tools(mj_model, varies=varies)
+            return chain.make_for_tools(mj_model, varies=varies), ""
         except ValueError as err:  # NotChain, or a varied field
             if name == "chain":
                 raise
-            print(f"note: engine auto uses mjx ({err})", file=sys.stderr)
-    return MjxEngine(mj_model, varies)
+            return MjxEngine(mj_model, varies), f"note: engine auto uses mjx ({err})"
+    return MjxEngine(mj_model, varies), ""
 
 
 __all__ = ["BATCH_AXIS", "batch_any", "CPU_COMPILER_OPTIONS", "FUSION_EMITTERS", "Engine", "MjxEngine", "check_name",
