@@ -23,7 +23,7 @@ from hfield_model import hfield_model
 from test_chain import HOLD_D, HOLD_P, STAGES, chain_stages, converged, mujoco_c
 
 from hopper_mjx import metrics
-from hopper_mjx.engine import chain, chain_constraint, chain_smooth
+from hopper_mjx.engine import chain, chain_constraint, chain_hfield, chain_smooth
 from hopper_mjx.model.robot import stance_qpos
 
 HALF = 1.0  # m: the terrains span 2 m x 2 m
@@ -112,8 +112,10 @@ def chain_contacts_fn(engine: chain.ChainEngine):
     def one(params, q, v):
         qpos, qvel = tuple(q[i] for i in range(cm.nq)), tuple(v[i] for i in range(cm.nv))
         pose = chain_smooth.kinematics(cm, params.gate, qpos)
-        slots = chain_constraint._all_slots(cm, pose, params.terrain)[0]
-        rows, _ = chain_constraint.rows(cm, params.gate, pose, qpos, qvel, params.terrain)
+        every = chain_constraint._all_slots(cm, pose, params.terrain, None, params.gate)
+        slots = every[0]
+        # The rows from these slots, as `rows` assembles them (it would collide the foot a second time).
+        rows, _ = chain_constraint._assemble(cm, pose, qpos, qvel, every)
         first = len(rows.jac) - 4 * len(slots)
         vec = lambda x: jnp.stack([jnp.asarray(e, q.dtype) for e in x])
         return {
@@ -257,7 +259,24 @@ def _step_fn(engine: chain.ChainEngine, axis_name: str | None = None):
 
 
 @pytest.fixture(scope="module")
-def trajectories(models):
+def step64(models):
+    """The rough model's engine (the tools' foot contacts) and its compiled float64 step, one instance per
+    trajectory: `trajectories` and the new-terrain test run the same program (it compiles once)."""
+    engine = chain.make(models["rough"], chain.FOOT_CONTACTS)
+    return engine, _step_fn(engine)
+
+
+def _x64(fn, *args):
+    """fn(*args) with float64 enabled (the step's program is the float64 one)."""
+    jax.config.update("jax_enable_x64", True)
+    try:
+        return fn(*args)
+    finally:
+        jax.config.update("jax_enable_x64", False)
+
+
+@pytest.fixture(scope="module")
+def trajectories(models, step64):
     """1.5 s from 3 cm above the terrain at three gravities, limp and holding the stance by PD,
     on the three terrains: the chain (float64, the model's own options, one compiled step with
     each instance's terrain as its input) and C side by side. In float32 the limp falls off
@@ -281,11 +300,10 @@ def trajectories(models):
         cdata[-1].qpos[:] = q
     qvel, warm = np.zeros((n, 9)), np.zeros((n, 9))
     ours, theirs, touched = [], [], []
+    engine, step = step64
     jax.config.update("jax_enable_x64", True)
     try:
-        engine = chain.make(models["rough"], chain.FOOT_CONTACTS)
         params = engine.with_heights(np.stack([chain.terrain_heights(models[name]) for name, _, _ in cases]))
-        step = _step_fn(engine)
         for _ in range(TRAJ_STEPS):
             ctrl = np.where(hold[:, None], HOLD_P * (q0[7:] - qpos[:, 7:]) - HOLD_D * qvel[:, 6:], 0.0)
             out = step(params, *(jnp.asarray(x) for x in (qpos, qvel, ctrl, gravity, warm)))
@@ -315,30 +333,27 @@ def test_trajectories_on_terrain_match_mujoco_c(trajectories):
     assert err.max() < 1e-3, f"base position differs from MuJoCo C by {err.max():.2e} m"
 
 
-def test_a_new_terrain_is_an_input_not_a_recompile(models):
+def test_a_new_terrain_is_an_input_not_a_recompile(models, step64):
     """The rough model's engine, given the step's heights, gives the step model's own answer,
-    from the same compiled function (one trace)."""
-    traces = []
-
-    def forward(params, qpos, qvel):
-        traces.append(1)
-        data = engine.forward(params, engine.make_data(qpos, qvel), jnp.array([0.0, 0.0, -9.81]))
-        return data.qacc, data.foot_force
-
-    engine = chain.make(models["rough"], chain.FOOT_CONTACTS)
-    fn = jax.jit(jax.vmap(forward, in_axes=(None, 0, 0)))
-    qpos, qvel, _, _ = terrain_states(models["step"], 4, seed=5)
-    args = jnp.asarray(qpos, jnp.float32), jnp.asarray(qvel, jnp.float32)
-    on_rough = fn(engine.model, *args)
-    on_step = fn(engine.with_heights(chain.terrain_heights(models["step"])), *args)
-    assert len(traces) == 1
+    from the same compiled function (one trace: the trajectories' step)."""
+    engine, step = step64
     own = chain.make(models["step"], chain.FOOT_CONTACTS)
-    reference = fn(own.model, *args)
-    assert len(traces) == 1, "the step model's own engine has the same grid: the same compiled function"
-    for a, b in zip(on_step, reference):
-        np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
-    assert np.abs(np.asarray(on_rough[0]) - np.asarray(on_step[0])).max() > 1.0, "the terrain changes the answer"
+    n = len(TERRAINS) * len(GRAVITIES) * 2  # the trajectories' batch: the same program
+    states = [*terrain_states(models["step"], n, seed=5)]
+    heights = {name: np.stack([chain.terrain_heights(models[name])] * n) for name in ("rough", "step")}
+    t = own.chain.terrain
 
+    def run():  # in float64: the trajectories' program
+        args = [jnp.asarray(x) for x in (*states, np.zeros_like(states[1]))]
+        return [[np.asarray(x) for x in step(params, *args)] for params in (
+            engine.with_heights(heights["rough"]), engine.with_heights(heights["step"]),
+            own.with_heights(heights["step"], np.full(n, t.origin[2] - t.base)))]  # own.model's, per instance
+
+    on_rough, on_step, reference = _x64(run)
+    assert step._cache_size() == 1, "the step model's own engine has the same grid: the same compiled function"
+    for a, b in zip(on_step, reference):
+        np.testing.assert_array_equal(a, b)
+    assert np.abs(on_rough[2] - on_step[2]).max() > 1.0, "the terrain changes the answer"
 
 
 def _deep_states(m: mujoco.MjModel, n: int, seed: int) -> np.ndarray:
@@ -368,24 +383,25 @@ def _c_sphere_contacts(m: mujoco.MjModel, centre) -> list:
     return [(c.dist, c.pos.copy(), c.frame[:3].copy()) for c in d.contact[:d.ncon]]
 
 
+def _sphere_contacts(t, params, centre, radius: float):
+    """Every contact slot of a sphere of `radius` at `centre` on the terrain `t` with `params`' heights, stacked:
+    (exists, dist, pos, normal)."""
+    out = chain_hfield.sphere_contacts(t, params.terrain, tuple(centre[i] for i in range(3)), radius)
+    return (jnp.stack([o.exists for o in out]), jnp.stack([o.dist for o in out]),
+            jnp.stack([jnp.stack(o.pos) for o in out]), jnp.stack([jnp.stack(o.normal) for o in out]))
+
+
 def test_deep_contacts_within_ccd_tolerance(models):
     """Deeper feet reach prism edges and walls, where C's EPA stops within `ccd_tolerance`:
     contact counts agree, distances within the tolerance, and with C's tolerance tightened
     the distances to 1e-9 and the normals to 1e-6 (C converges to the chain's values)."""
-    from hopper_mjx.engine import chain_hfield
-
     err, err_tight = np.zeros(3), np.zeros(3)
     jax.config.update("jax_enable_x64", True)
     try:
         engine = chain.make(models["rough"])  # every prism a slot; each terrain is its heights input (one compile)
         radius = float(models["rough"].geom_size[models["rough"].geom("foot").id, 0])
 
-        def contacts(c, p):
-            out = chain_hfield.sphere_contacts(engine.chain.terrain, p.terrain, tuple(c[i] for i in range(3)), radius)
-            return (jnp.stack([o.exists for o in out]), jnp.stack([o.dist for o in out]),
-                    jnp.stack([jnp.stack(o.pos) for o in out]), jnp.stack([jnp.stack(o.normal) for o in out]))
-
-        fn = jax.jit(jax.vmap(contacts, in_axes=(0, None)))
+        fn = jax.jit(jax.vmap(lambda c, p: _sphere_contacts(engine.chain.terrain, p, c, radius), in_axes=(0, None)))
         for seed, name in enumerate(TERRAINS):
             m = models[name]
             tight = copy.deepcopy(m)
@@ -412,21 +428,18 @@ def test_deep_contacts_within_ccd_tolerance(models):
 def test_max_foot_contacts_keeps_the_deepest(models):
     """With `max_foot_contacts`, the foot keeps its deepest contacts: all of them (C's set)
     when there are at most that many, else exactly the deepest that many."""
-    from hopper_mjx.engine import chain_hfield
-
     keep = 4
     full = chain.make(models["bump"])
     few = chain.make(models["bump"], max_foot_contacts=keep)
     assert few.chain.terrain.max_contacts == keep and full.chain.terrain.max_contacts is None
     radius = float(models["bump"].geom_size[models["bump"].geom("foot").id, 0])
 
-    def contacts(t, c, p):
-        out = chain_hfield.sphere_contacts(t, p.terrain, tuple(c[i] for i in range(3)), radius)
-        return jnp.stack([o.exists for o in out]), jnp.stack([o.dist for o in out])
+    def contacts(engine, c):
+        return _sphere_contacts(engine.chain.terrain, engine.model, c, radius)[:2]
 
     centres = jnp.asarray(_deep_states(models["bump"], 64, seed=9) + np.array([0, 0, 0.04]), jnp.float32)
-    everything = jax.jit(jax.vmap(lambda c: contacts(full.chain.terrain, c, full.model)))(centres)
-    kept = jax.jit(jax.vmap(lambda c: contacts(few.chain.terrain, c, few.model)))(centres)
+    everything = jax.jit(jax.vmap(lambda c: contacts(full, c)))(centres)
+    kept = jax.jit(jax.vmap(lambda c: contacts(few, c)))(centres)
     assert kept[0].shape[1] == keep and everything[0].shape[1] == 2 * np.prod(full.chain.terrain.block)
     counts = np.asarray(everything[0]).sum(axis=1)
     assert (counts <= keep).any() and (counts > keep).any(), counts
