@@ -42,3 +42,11 @@ def test_functions_are_at_most_80_lines():
                 if lines > MAX_FUNCTION_LINES:
                     long.append(f"{path.relative_to(ROOT)}:{node.lineno} {node.name}: {lines} lines")
     assert not long, "\n".join(long)
+
+
+def test_the_longest_first_order_names_test_files_that_exist():
+    """conftest.LONGEST_FIRST is a measured order; a renamed or removed file would drop out of it silently."""
+    from conftest import LONGEST_FIRST
+
+    missing = [name for name in LONGEST_FIRST if not (ROOT / "tests" / name).is_file()]
+    assert not missing and len(set(LONGEST_FIRST)) == len(LONGEST_FIRST), missing
