@@ -199,12 +199,9 @@ def float64_results(seed_model, seed_states, second_model):
     second_states = at_rest(random_states(second, 6, seed=11))
     c_seed = mujoco_c(converged(seed_model, 50), *seed_states)
     c_second = mujoco_c(converged(second, 50), *second_states)
-    jax.config.update("jax_enable_x64", True)
-    try:
+    with jax.enable_x64(True):
         seed = run_chain(chain.make(converged(seed_model, 20)), seed_states, jnp.float64)
         other = run_chain(chain.make(converged(second, 20)), second_states, jnp.float64)
-    finally:
-        jax.config.update("jax_enable_x64", False)
     return {"seed": (seed, c_seed), "second": (other, c_second)}
 
 
@@ -396,14 +393,11 @@ def test_float64_stages_with_a_run_time_robot_match_mujoco_c(seed_model, text):
     varied = variation.instance_model(seed_model, values, 0)
     states = at_rest(random_states(varied, N_STATES, seed=7))  # contacts and limits of this robot
     c = mujoco_c(converged(varied, 50), *states)
-    jax.config.update("jax_enable_x64", True)
-    try:
+    with jax.enable_x64(True):
         engine = chain.make(converged(seed_model, 20), varies=spec.fields)  # nominal: the values come at run time
         params = engine.vary(engine.model, {k: jnp.asarray(v[0], jnp.float64) for k, v in values.items()})
         args = [jnp.asarray(x, jnp.float64) for x in states]
         out = chain_stages(engine)(params, *args, jnp.zeros_like(args[1]))
-    finally:
-        jax.config.update("jax_enable_x64", False)
     assert (c["ncon"] >= 1).all()
     if "dof_frictionloss" in spec.fields:
         stick = c["friction_state"] == mujoco.mjtConstraintState.mjCNSTRSTATE_QUADRATIC

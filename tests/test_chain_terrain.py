@@ -165,8 +165,7 @@ def float64_contacts(models):
         c_stages = mujoco_c(converged(tight, 50), *states)
         cases[name] = (states, c_contacts(m, *states), c_contacts(tight, *states), c_stages)
     out = {}
-    jax.config.update("jax_enable_x64", True)
-    try:
+    with jax.enable_x64(True):
         engine = chain.make(converged(models["rough"], 20), chain.FOOT_CONTACTS)
         contacts, stages = chain_contacts_fn(engine), chain_stages(engine)
         for name, (states, default, c_tight, c_stages) in cases.items():
@@ -175,8 +174,6 @@ def float64_contacts(models):
             args = [jnp.asarray(x, jnp.float64) for x in states]
             ours_stages = {k: np.asarray(v) for k, v in stages(params, *args, jnp.zeros_like(args[1])).items()}
             out[name] = (ours, default, c_tight, ours_stages, c_stages)
-    finally:
-        jax.config.update("jax_enable_x64", False)
     return out
 
 
@@ -266,15 +263,6 @@ def step64(models):
     return engine, _step_fn(engine)
 
 
-def _x64(fn, *args):
-    """fn(*args) with float64 enabled (the step's program is the float64 one)."""
-    jax.config.update("jax_enable_x64", True)
-    try:
-        return fn(*args)
-    finally:
-        jax.config.update("jax_enable_x64", False)
-
-
 @pytest.fixture(scope="module")
 def trajectories(models, step64):
     """1.5 s from 3 cm above the terrain at three gravities, limp and holding the stance by PD,
@@ -301,8 +289,7 @@ def trajectories(models, step64):
     qvel, warm = np.zeros((n, 9)), np.zeros((n, 9))
     ours, theirs, touched = [], [], []
     engine, step = step64
-    jax.config.update("jax_enable_x64", True)
-    try:
+    with jax.enable_x64(True):
         params = engine.with_heights(np.stack([chain.terrain_heights(models[name]) for name, _, _ in cases]))
         for _ in range(TRAJ_STEPS):
             ctrl = np.where(hold[:, None], HOLD_P * (q0[7:] - qpos[:, 7:]) - HOLD_D * qvel[:, 6:], 0.0)
@@ -314,8 +301,6 @@ def trajectories(models, step64):
                 mujoco.mj_step(m, d)
             ours.append(qpos)
             theirs.append(np.array([d.qpos.copy() for d in cdata]))
-    finally:
-        jax.config.update("jax_enable_x64", False)
     return cases, np.array(ours), np.array(theirs), np.array(touched)
 
 
@@ -343,13 +328,11 @@ def test_a_new_terrain_is_an_input_not_a_recompile(models, step64):
     heights = {name: np.stack([chain.terrain_heights(models[name])] * n) for name in ("rough", "step")}
     t = own.chain.terrain
 
-    def run():  # in float64: the trajectories' program
+    with jax.enable_x64(True):  # the trajectories' float64 program
         args = [jnp.asarray(x) for x in (*states, np.zeros_like(states[1]))]
-        return [[np.asarray(x) for x in step(params, *args)] for params in (
+        on_rough, on_step, reference = [[np.asarray(x) for x in step(params, *args)] for params in (
             engine.with_heights(heights["rough"]), engine.with_heights(heights["step"]),
             own.with_heights(heights["step"], np.full(n, t.origin[2] - t.base)))]  # own.model's, per instance
-
-    on_rough, on_step, reference = _x64(run)
     assert step._cache_size() == 1, "the step model's own engine has the same grid: the same compiled function"
     for a, b in zip(on_step, reference):
         np.testing.assert_array_equal(a, b)
@@ -396,8 +379,7 @@ def test_deep_contacts_within_ccd_tolerance(models):
     contact counts agree, distances within the tolerance, and with C's tolerance tightened
     the distances to 1e-9 and the normals to 1e-6 (C converges to the chain's values)."""
     err, err_tight = np.zeros(3), np.zeros(3)
-    jax.config.update("jax_enable_x64", True)
-    try:
+    with jax.enable_x64(True):
         engine = chain.make(models["rough"])  # every prism a slot; each terrain is its heights input (one compile)
         radius = float(models["rough"].geom_size[models["rough"].geom("foot").id, 0])
 
@@ -417,8 +399,6 @@ def test_deep_contacts_within_ccd_tolerance(models):
                     for a, b in _match(ours, reference):
                         worst[:] = np.maximum(worst, [abs(a[0] - b[0]), np.abs(a[1] - b[1]).max(),
                                                       np.abs(a[2] - b[2]).max()])
-    finally:
-        jax.config.update("jax_enable_x64", False)
     print(f"\ndeep contacts, max |chain - C| dist, pos, normal: default tolerance {err}, tight {err_tight}")
     assert err[0] <= models_tolerance(), f"distances differ by {err[0]:.2e}, beyond C's ccd_tolerance"
     assert err[1] <= 1e-3 and err[2] <= 1e-3

@@ -87,8 +87,7 @@ def per_prism(rough):
     engine = chain.make(rough)
     cm, t, pair = engine.chain, engine.chain.terrain, engine.chain.pairs[engine.chain.terrain.box]
     poses = box_poses(rough, N_POSES, seed=0)
-    jax.config.update("jax_enable_x64", True)
-    try:
+    with jax.enable_x64(True):
         params = engine.with_heights(chain.terrain_heights(rough))
 
         def one(q):
@@ -102,8 +101,6 @@ def per_prism(rough):
         out = jax.jit(jax.vmap(one))(jnp.asarray(poses))
         out = jax.tree_util.tree_map(np.asarray, out)
         bottom = float(params.terrain.bottom)
-    finally:
-        jax.config.update("jax_enable_x64", False)
     return poses, out, bottom, np.asarray(pair.size)
 
 
@@ -184,8 +181,7 @@ def falls():
         cdata[-1].qpos[:], cdata[-1].qvel[:] = q, v
     box = int(cmodels[0].pair_geom2[0])
     ours, theirs, box_down = [], [], []
-    jax.config.update("jax_enable_x64", True)
-    try:
+    with jax.enable_x64(True):
         engine = chain.make_for_tools(models["rough"])
         params = engine.with_heights(np.stack([chain.terrain_heights(models[name]) for name, _ in cases]))
         step = _step_fn(engine, chain.BATCH_AXIS)
@@ -206,8 +202,6 @@ def falls():
         zeros = jnp.zeros((n, 9))
         beside = [jax.tree_util.tree_map(np.asarray, step(rough_params, jnp.asarray(q), zeros, jnp.zeros((n, 3)),
                                                           jnp.asarray(gravity), zeros)) for q in batches]
-    finally:
-        jax.config.update("jax_enable_x64", False)
     return cases, np.array(ours), np.array(theirs), np.array(box_down), beside
 
 

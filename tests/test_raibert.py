@@ -323,13 +323,10 @@ def test_each_instance_places_its_own_foot_with_its_own_leg(mj_model, robot):
         torque = raibert.flight_torque(leg, params.gains, body, jnp.zeros(3), _speed(0.2), 9.81, inertia)
         return body.q + torque / jnp.asarray(raibert.FLIGHT_KP)
 
-    jax.config.update("jax_enable_x64", True)
-    try:
+    with jax.enable_x64(True):
         params64 = jax.tree_util.tree_map(lambda v: jnp.asarray(v, jnp.float64), params)
         both = jax.jit(jax.vmap(lambda p, q: (target(p, q, False), target(p, q, True))))(params64, jnp.asarray(stances))
         targets = dict(zip((False, True), map(np.asarray, both)))
-    finally:
-        jax.config.update("jax_enable_x64", False)
     hfe_anchor = lambda d: d.xanchor[mj_model.joint("hfe_joint").id]
     for i, shank in enumerate(SHANKS):
         m = variation.instance_model(mj_model, values, i)
