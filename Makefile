@@ -31,7 +31,8 @@ lint: install
 	$(VENV)/bin/ruff check .
 
 # Two processes: XLA compiles on one core, so while one compiles the other runs. The tests that
-# measure wall-clock pacing or timing bounds then run alone. The longest files go first (tests/conftest.py).
+# measure wall-clock pacing or timing bounds then run alone. The longest files go first (tests/conftest.py);
+# the slowest 25 setups and tests are listed at the end, so that order can be checked against each run.
 test: lint
-	$(PY) -m pytest -q -n 2 --dist loadfile --no-loadscope-reorder -m "not serial"
+	$(PY) -m pytest -q -n 2 --dist loadfile --no-loadscope-reorder -m "not serial" --durations=25
 	$(PY) -m pytest -q -m serial
