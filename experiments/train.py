@@ -69,8 +69,8 @@ def parser() -> argparse.ArgumentParser:
     # 8 epochs over each batch and a value MLP as small as the policy's: seed 1 of hop met its threshold at 5.7 M
     # steps (3.4 min) where 4 epochs and a 128-128-128 value MLP needed 16.0 M (6.9 min; docs/learning.md).
     p.add_argument("--updates-per-batch", type=int, default=8, help="PPO: epochs over each batch (default 8)")
-    # PPO at 6e-4: on hop seed 0, the slowest of 3e-4's seeds (12.3 M steps), met the honest threshold at 4.9 M
-    # steps and held it at all nine sweep gravities (docs/learning.md).
+    # PPO at 6e-4: hop's three seeds met the honest threshold at a median 4.9 M steps where 3e-4 took 7.4 M, and
+    # every seed's policy kept all its robots up at the nine sweep gravities (docs/learning.md).
     p.add_argument("--learning-rate", type=float, default=None,
                    help="Adam's step (PPO: the first one with --desired-kl; default 6e-4 for ppo, 3e-4 for sac)")
     p.add_argument("--desired-kl", type=float, default=None, metavar="KL",
