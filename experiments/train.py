@@ -333,6 +333,7 @@ def _shared(args, env, factory, remaining: int, start_step: int, resume, per_tra
     """The keyword arguments Brax's PPO and SAC `train` both take, from ours."""
     from hopper_mjx.envs.wrappers import wrap_for_training
 
+    settings = learner_settings(args)
     return dict(
         environment=env,
         num_timesteps=remaining,
@@ -342,9 +343,9 @@ def _shared(args, env, factory, remaining: int, start_step: int, resume, per_tra
         num_eval_envs=args.num_eval_envs,
         deterministic_eval=True,
         wrap_env_fn=wrap_for_training,  # a fresh gravity and command every episode
-        learning_rate=learner_settings(args)["learning_rate"],
+        learning_rate=settings["learning_rate"],
         discounting=args.discounting,
-        reward_scaling=learner_settings(args)["reward_scaling"],
+        reward_scaling=settings["reward_scaling"],
         batch_size=args.batch_size,
         normalize_observations=True,
         network_factory=factory,
