@@ -440,7 +440,7 @@ def train(args, physics=None) -> dict:
         raise ValueError(f"--num-envs={args.num_envs} must be a multiple of the {devices} local devices")
     if args.algo == "ppo" and (args.batch_size * args.num_minibatches) % args.num_envs:
         raise ValueError("--batch-size x --num-minibatches must be a multiple of --num-envs")
-    out.mkdir(parents=True, exist_ok=True)
+    cli.make_folder("--out", out)
     command.on_stop(f"the checkpoints are saved in {out / 'checkpoints'}; rerun the same command to resume")
     env = task_config(args, physics)
     config = env.config
@@ -694,7 +694,7 @@ def main(argv=None) -> int:
     try:
         check(args)  # with --seeds: every option, and --out as the seeds' parent
         if args.seeds is not None:
-            Path(args.out).mkdir(parents=True, exist_ok=True)
+            cli.make_folder("--out", args.out)
         physics = [check(run) for run in runs]  # each seed's folder (one of another task or algorithm is refused)
     except ValueError as err:
         return cli.fail(err)

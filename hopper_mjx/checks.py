@@ -203,6 +203,22 @@ def check_writable(name: str, path: str | Path, *, folder: bool = False, may_exi
     return path
 
 
+class OutputError(ValueError):
+    """An output the system refused to create after the checks let it through (tools catch this one alone
+    around their work, so that a real error inside stays a traceback)."""
+
+
+def make_folder(name: str, path: str | Path) -> Path:
+    """Creates the output folder `path` (and its parents); a path the checks let through but the system
+    refuses (a pseudo-filesystem such as /proc, where root passes `os.access`) is one line, not a traceback."""
+    path = Path(path)
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except OSError as err:
+        raise OutputError(f"{name} {path}: cannot create it ({err.strerror or err})") from None
+    return path
+
+
 def check_readable_file(name: str, path: str | Path) -> Path:
     path = Path(path)
     if not path.is_file():

@@ -28,6 +28,7 @@ from hopper_mjx.checks import (  # noqa: F401  re-exported: the tools use them b
     check_writable,
     fail,
     floats,
+    make_folder,
     parse_floats,
     parse_indices,
     parse_scan,

@@ -179,6 +179,10 @@ CASES = [
     (TRAIN, ["--out", "new", "--num-envs", "0"], "--num-envs"),
     (TRAIN, ["--out", "new", "--eval-gravity", "9.81,,x"], "--eval-gravity"),
     (TRAIN, ["--out", "a_file"], "--out a_file"),
+    # a folder the checks may let through (root passes os.access on /proc) that the system refuses to create
+    (TRAIN, ["--out", "/proc/hopper_mjx_no/run"], "--out /proc/hopper_mjx_no"),
+    (TRAIN, ["--out", "/proc/hopper_mjx_no/run", "--seeds", "2"], "--out /proc/hopper_mjx_no"),
+    ("sweep", ["gravity", "--out", "/proc/hopper_mjx_no/s"], "--out /proc/hopper_mjx_no"),
     (TRAIN, ["--out", "new", "--seed", "-3"], "--seed must be in 0..4294967295"),
     (TRAIN, ["--out", "new", "--randomize", "kp_scale=0.8..1.2,sensor_delay=300..900", "--episode-length", "10"],
      "--randomize: sensor_delay drew"),

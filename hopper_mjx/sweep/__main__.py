@@ -23,7 +23,7 @@ from datetime import datetime, timezone
 from pathlib import Path
 
 from hopper_mjx import budget, cli, command, registry, runtime
-from hopper_mjx.checks import DEFAULT_TIMESTEP
+from hopper_mjx.checks import DEFAULT_TIMESTEP, OutputError
 from hopper_mjx.sweep import folder
 from hopper_mjx.sweep.grid import DEFAULT_GRAVITY, KICK, TERRAIN_KINDS
 
@@ -277,9 +277,12 @@ def main(argv=None) -> int:
 
         jax.distributed.initialize(args.coordinator, num_processes=args.num_processes, process_id=args.process_id)
     results = []
-    for spec in specs:
-        result = run_one(args, spec, folder_of(args, out, spec))
-        results += [result] if result else []
+    try:
+        for spec in specs:
+            result = run_one(args, spec, folder_of(args, out, spec))
+            results += [result] if result else []
+    except OutputError as err:  # the folder refused after the checks passed (a pseudo-filesystem)
+        return cli.fail(err)
     if args.kind == "compare" and results:
         print(report.write_comparison(out, specs[0], results))
     return 0

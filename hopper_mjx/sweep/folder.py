@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
+from hopper_mjx.checks import make_folder
 from hopper_mjx.files import atomic_write, partial
 from hopper_mjx.sweep.grid import SweepSpec
 
@@ -59,7 +60,7 @@ def claim(out: Path, spec: SweepSpec) -> None:
     check(out, spec)
     if (out / MANIFEST).exists():
         return
-    out.parent.mkdir(parents=True, exist_ok=True)
+    make_folder("--out", out.parent)
     made = out.with_name(f"{out.name}.claim-{os.getpid()}")
     with partial(made):
         shutil.rmtree(made, ignore_errors=True)
