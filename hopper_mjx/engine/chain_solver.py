@@ -163,9 +163,13 @@ def _line_search(gate, weight, loss, residual, slope, g1, g2, iterations: int, g
     bracket = (lo, hi, jnp.zeros_like(g1, dtype=bool), -lo[2] / lo[3], jnp.ones_like(g1, dtype=bool))
     one_step = lambda b: _bracket(lambda x: line(x, args), gtol, b)
     if iterations <= UNROLLED_LINE_SEARCH:
+        # One jit for every unrolled step: its Python is traced once and vmap batches it once (see `stored`).
+        step = jax.jit(lambda b, args, gtol: _bracket(lambda x: line(x, args), gtol, b))
         for _ in range(iterations):
             searching = batch_any(bracket[4])  # outside `stored`, whose trace has no batch axis
-            bracket = stored(gate, lambda b, go: jax.lax.cond(go, one_step, lambda x: x, b), bracket, searching)
+            bracket = stored(gate, lambda b, go, args, gtol: jax.lax.cond(go, lambda b: step(b, args, gtol),
+                                                                          lambda x: x, b),
+                             bracket, searching, args, gtol)
     else:  # a long search (a converged reference) as a loop: one trace, a smaller program
         bracket = jax.lax.fori_loop(0, iterations, lambda _, b: one_step(b), bracket)
 
@@ -246,7 +250,11 @@ def solve(gate, mass: dict, qfrc_smooth, qacc_smooth, qacc_warmstart, rows: Rows
         return it, ((cost_scale * decrease < tolerance) | (cost_scale * gradient < tolerance)
                     | (gradient < rounding)), count + 1
 
-    # Under vmap the loop runs until every instance is done; finished ones are held.
+    # Under vmap the loop runs until every instance is done; finished ones are held. An instance whose start
+    # is not finite (a diverged state) has nothing to solve and is done at once, so it cannot hold its chunk
+    # to the iteration cap. The flag and the count derive from the instance's numbers: batched from the start,
+    # vmap batches the loop's body once (JAX re-batches a while body for each carry it finds batched later).
+    done = ~jnp.isfinite(al.dot(start.grad, start.grad))
     it, _, _ = jax.lax.while_loop(lambda c: ~c[1] & (c[2] < iterations), body,
-                                  (start, jnp.zeros((), bool), jnp.zeros((), jnp.int32)))
+                                  (start, done, jnp.where(done, iterations, 0)))
     return Solution(it.qacc, it.force, it.qfrc_constraint)

@@ -33,11 +33,13 @@ def stored(gate: jax.Array, fn, *args):
         return [x for x in out_leaves if not is_const(x)]
 
     traced_in = [jnp.asarray(arg_leaves[i]) for i in traced_at]
-    # Trace the Python once; the conditional's branch replays the recorded primitives.
-    closed = jax.make_jaxpr(run)(traced_in)
-    replay = lambda t: jax.core.eval_jaxpr(closed.jaxpr, closed.consts, *t)
-    zeros = lambda _: [jnp.zeros(v.aval.shape, v.aval.dtype) for v in closed.jaxpr.outvars]
-    outs = iter(jax.lax.cond(gate, replay, zeros, traced_in))
+    # Trace the Python once (for the outputs' shapes); the conditional's branch calls the same jit, whose trace
+    # is cached. As a nested jit, vmap batches the stage once, where a plain branch is batched twice (JAX's
+    # cond rule batches each branch once to learn which outputs are batched, then again to batch them).
+    stage = jax.jit(run)
+    shapes = stage.trace(traced_in).out_info
+    zeros = lambda _: [jnp.zeros(s.shape, s.dtype) for s in shapes]
+    outs = iter(jax.lax.cond(gate, stage, zeros, traced_in))
     leaves = [x if is_const(x) else next(outs) for x in box["leaves"]]
     return jax.tree_util.tree_unflatten(box["tree"], leaves)
 
