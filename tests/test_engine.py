@@ -101,3 +101,40 @@ def test_the_same_engine_is_built_once_per_process(mj_model, capsys):
     capsys.readouterr()
     assert engine.make("auto", rk4) is engine.make("auto", rk4)
     assert capsys.readouterr().err.count("note: engine auto uses mjx") == 2
+
+
+def _equations(jaxpr) -> int:
+    """Equations of a jaxpr, those of the jaxprs nested in them (jits, branches, loop bodies) included."""
+    from jax.extend.core import ClosedJaxpr, Jaxpr
+
+    count = 0
+    for eqn in jaxpr.eqns:
+        count += 1
+        for param in eqn.params.values():
+            for sub in param if isinstance(param, (tuple, list)) else (param,):
+                if isinstance(sub, (ClosedJaxpr, Jaxpr)):
+                    count += _equations(sub.jaxpr if isinstance(sub, ClosedJaxpr) else sub)
+    return count
+
+
+def test_vmap_batches_the_chain_step_once(mj_model, monkeypatch):
+    """Under the core's vmap each equation of the chain's forward is batched about once: a stage stored behind
+    its conditional is a nested jit, whose batching JAX caches, and the Newton loop's carry is batched from the
+    start. A plain branch is batched twice (JAX's cond rule: once to learn which outputs are batched, once to
+    batch them) and a loop body once per carry found batched later: 13,553 primitives for 8,226 equations before
+    (docs/performance.md, c16), 7,102 for 8,327 now."""
+    from jax._src.interpreters import batching
+
+    eng = engine.make("chain", mj_model)
+    qpos = jnp.asarray(stance_qpos(mj_model, clearance=-0.002), jnp.float32)
+    data = eng.make_data(qpos, jnp.zeros(mj_model.nv, jnp.float32))
+    gravity = jnp.array([0.0, 0.0, -9.81], jnp.float32)
+    plain = jax.make_jaxpr(eng.forward.__wrapped__)(eng.model, data, gravity)
+    batched = []
+    process = batching.BatchTrace.process_primitive
+    monkeypatch.setattr(batching.BatchTrace, "process_primitive",
+                        lambda self, *a, **k: batched.append(1) or process(self, *a, **k))
+    many = jax.tree_util.tree_map(lambda x: jnp.stack([x] * 4), data)
+    jax.make_jaxpr(lambda m, d, g: jax.vmap(lambda x: eng.forward(m, x, g), axis_name=engine.BATCH_AXIS)(d))(
+        eng.model, many, gravity)
+    assert 0.5 * _equations(plain.jaxpr) < len(batched) < 1.1 * _equations(plain.jaxpr)
