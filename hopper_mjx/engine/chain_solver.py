@@ -161,17 +161,16 @@ def _line_search(gate, weight, loss, residual, slope, g1, g2, iterations: int, g
     lo = stored(gate, line, jnp.zeros_like(g1), args)
     hi = (jnp.full_like(g1, FAR), jnp.full_like(g1, FAR), jnp.full_like(g1, FAR), jnp.ones_like(g1), jnp.zeros_like(g1))
     bracket = (lo, hi, jnp.zeros_like(g1, dtype=bool), -lo[2] / lo[3], jnp.ones_like(g1, dtype=bool))
-    one_step = lambda b: _bracket(lambda x: line(x, args), gtol, b)
+    # One jit for every step: its Python is traced once and vmap batches it once (see `stored`).
+    step = jax.jit(lambda b, args, gtol: _bracket(lambda x: line(x, args), gtol, b))
     if iterations <= UNROLLED_LINE_SEARCH:
-        # One jit for every unrolled step: its Python is traced once and vmap batches it once (see `stored`).
-        step = jax.jit(lambda b, args, gtol: _bracket(lambda x: line(x, args), gtol, b))
         for _ in range(iterations):
             searching = batch_any(bracket[4])  # outside `stored`, whose trace has no batch axis
             bracket = stored(gate, lambda b, go, args, gtol: jax.lax.cond(go, lambda b: step(b, args, gtol),
                                                                           lambda x: x, b),
                              bracket, searching, args, gtol)
     else:  # a long search (a converged reference) as a loop: one trace, a smaller program
-        bracket = jax.lax.fori_loop(0, iterations, lambda _, b: one_step(b), bracket)
+        bracket = jax.lax.fori_loop(0, iterations, lambda _, b: step(b, args, gtol), bracket)
 
     def best(bracket, args, start_cost):
         lo, hi, found_hi, candidate, _ = bracket
