@@ -94,7 +94,7 @@ def mujoco_c(m: mujoco.MjModel, qpos, qvel, ctrl, gravity) -> dict:
     """MuJoCo C's stages for each state: forward, then one step."""
     m = copy.deepcopy(m)
     out = {k: [] for k in ("xpos", "xmat", "mass", "qacc", "qfrc_constraint", "qpos", "qvel", "ncon",
-                           "foot_force", "qfrc_smooth", *FRICTION_ROWS, "friction_state")}
+                           "foot_force", "qfrc_smooth", "solver_niter", *FRICTION_ROWS, "friction_state")}
     for q, v, u, g in zip(qpos, qvel, ctrl, gravity):
         m.opt.gravity[:] = g
         d = mujoco.MjData(m)
@@ -106,7 +106,8 @@ def mujoco_c(m: mujoco.MjModel, qpos, qvel, ctrl, gravity) -> dict:
         full = np.zeros((m.nv, m.nv))
         mujoco.mj_fullM(m, d, full)
         for key, value in (("xpos", d.xpos[1:]), ("xmat", d.xmat[1:]), ("mass", full), ("qfrc_smooth", d.qfrc_smooth),
-                           ("qacc", d.qacc), ("qfrc_constraint", d.qfrc_constraint), ("ncon", d.ncon)):
+                           ("qacc", d.qacc), ("qfrc_constraint", d.qfrc_constraint), ("ncon", d.ncon),
+                           ("solver_niter", d.solver_niter[0])):
             out[key].append(np.array(value))
         d = mujoco.MjData(m)
         d.qpos[:], d.qvel[:], d.ctrl[:] = q, v, u
@@ -147,7 +148,7 @@ def chain_stages(engine: chain.ChainEngine):
             "xmat": jnp.stack([vec(r) for r in pose.rot]),
             "mass": mass + jnp.triu(mass, 1).T, "qfrc_smooth": data.qfrc_smooth, "qacc": data.qacc,
             "qfrc_constraint": data.qfrc_constraint, "qpos": after.qpos, "qvel": after.qvel,
-            "foot_touching": data.foot_touching, "foot_force": data.foot_force,
+            "foot_touching": data.foot_touching, "foot_force": data.foot_force, "solver_niter": data.solver_niter,
         }
 
     return jax.jit(jax.vmap(one, in_axes=(None, 0, 0, 0, 0, 0)))
@@ -252,6 +253,19 @@ def test_float64_stages_match_mujoco_c(float64_results, urdf, stage):
     ours, c = float64_results[urdf]
     err = np.abs(ours[stage] - c[stage]).max(initial=0.0)
     assert err <= 1e-9, f"{urdf} {stage}: chain and MuJoCo C differ by {err:.2e}"
+
+
+def test_newton_iterations_match_mujoco_c(seed_model):
+    """At the model's own solver options, in float64, the chain runs as many Newton iterations as C
+    (solver_niter) in each of 64 states: none where the start is already the minimum, up to the cap."""
+    states = random_states(seed_model, 64, seed=7)
+    c = mujoco_c(seed_model, *states)["solver_niter"]
+    with jax.enable_x64(True):
+        ours = run_chain(chain.make(seed_model), states, jnp.float64)["solver_niter"]
+    counts = np.bincount(c, minlength=seed_model.opt.iterations + 1)
+    print("\nC's Newton iterations per state (0, 1, ...):", counts)
+    assert counts[0] >= 1 and counts[1:].min() >= 1, "the states take every count from none to the cap"
+    np.testing.assert_array_equal(ours, c)
 
 
 @pytest.mark.parametrize("stage", STAGES)

@@ -66,6 +66,7 @@ class ChainData:
     foot_touching: jax.Array  # () bool
     foot_force: jax.Array  # (3,) N floor on foot, world
     foot_pos: jax.Array  # (3,) m contact point, world (zeros when not touching)
+    solver_niter: jax.Array  # () int32 Newton iterations of the last forward (MuJoCo's solver_niter)
 
     def replace(self, **fields) -> ChainData:
         return dataclasses.replace(self, **fields)
@@ -164,6 +165,7 @@ class ChainEngine:
             qpos=qpos, qvel=jnp.asarray(qvel, dtype), qacc=zeros(cm.nv), ctrl=zeros(self.nu), time=zeros(),
             qacc_warmstart=zeros(cm.nv), mass=zeros(cm.nv * (cm.nv + 1) // 2), qfrc_smooth=zeros(cm.nv),
             qfrc_constraint=zeros(cm.nv), foot_touching=jnp.zeros((), bool), foot_force=zeros(3), foot_pos=zeros(3),
+            solver_niter=jnp.zeros((), jnp.int32),
         )
 
     def forward(self, model: ChainParams, data: ChainData, gravity) -> ChainData:
@@ -184,6 +186,7 @@ class ChainEngine:
             qacc=_vector(sol.qacc, dtype), mass=_vector(upper, dtype), qfrc_smooth=_vector(qfrc_smooth, dtype),
             qfrc_constraint=_vector(sol.qfrc_constraint, dtype), foot_touching=foot.touching,
             foot_force=_vector(_foot_force(foot, sol.force), dtype), foot_pos=_vector(foot.pos, dtype),
+            solver_niter=sol.iterations.astype(jnp.int32),
         )
 
     def integrate(self, model: ChainParams, data: ChainData, gravity) -> ChainData:

@@ -36,6 +36,7 @@ class Solution(NamedTuple):
     qacc: tuple
     force: tuple  # per row
     qfrc_constraint: tuple
+    iterations: jax.Array  # () int32: Newton iterations run, MuJoCo's solver_niter
 
 
 def _column(a: dict, b, low: dict, y, j: int):
@@ -241,19 +242,25 @@ def solve(gate, mass: dict, qfrc_smooth, qacc_smooth, qacc_warmstart, rows: Rows
                                       tolerance * ls_tolerance / cost_scale)
         it = _evaluate(gate, mass, qfrc_smooth, rows, qacc)
         gradient = jnp.sqrt(al.dot(it.grad, it.grad))
-        # Or the gradient is zero to within the rounding of its terms (M a, qfrc_smooth, J' f): in float32
-        # C's float64 tolerance may be out of reach, and more iterations would only stir the rounding.
-        norm = lambda v: jnp.sqrt(al.dot(v, v))
-        terms = norm(it.ma) + norm(qfrc_smooth) + norm(it.qfrc_constraint)
-        rounding = ROUNDING * jnp.finfo(gradient.dtype).eps * terms
         return it, ((cost_scale * decrease < tolerance) | (cost_scale * gradient < tolerance)
-                    | (gradient < rounding)), count + 1
+                    | _within_rounding(it, qfrc_smooth)), count + 1
 
     # Under vmap the loop runs until every instance is done; finished ones are held. An instance whose start
     # is not finite (a diverged state) has nothing to solve and is done at once, so it cannot hold its chunk
-    # to the iteration cap. The flag and the count derive from the instance's numbers: batched from the start,
-    # vmap batches the loop's body once (JAX re-batches a while body for each carry it finds batched later).
-    done = ~jnp.isfinite(al.dot(start.grad, start.grad))
-    it, _, _ = jax.lax.while_loop(lambda c: ~c[1] & (c[2] < iterations), body,
-                                  (start, done, jnp.where(done, iterations, 0)))
-    return Solution(it.qacc, it.force, it.qfrc_constraint)
+    # to the iteration cap. A start already at the minimum (no row active at the smooth acceleration: C's line
+    # search then finds no step and counts no iteration) is done too. The flag and the count derive from the
+    # instance's numbers: batched from the start, vmap batches the loop's body once (JAX re-batches a while
+    # body for each carry it finds batched later).
+    done = ~jnp.isfinite(al.dot(start.grad, start.grad)) | _within_rounding(start, qfrc_smooth)
+    it, _, count = jax.lax.while_loop(lambda c: ~c[1] & (c[2] < iterations), body,
+                                      (start, done, jnp.where(done, 0, 0)))
+    return Solution(it.qacc, it.force, it.qfrc_constraint, count)
+
+
+def _within_rounding(it: _Iterate, qfrc_smooth):
+    """The gradient is zero to within the rounding of its terms (M a, qfrc_smooth, J' f): in float32 C's float64
+    tolerance may be out of reach, and more iterations would only stir the rounding."""
+    norm = lambda v: jnp.sqrt(al.dot(v, v))
+    gradient = norm(it.grad)
+    terms = norm(it.ma) + norm(qfrc_smooth) + norm(it.qfrc_constraint)
+    return gradient < ROUNDING * jnp.finfo(gradient.dtype).eps * terms
