@@ -17,8 +17,11 @@ the floor, which is what a timing ablation asks for.
 
 chain: the same standing batch stepped by the chain engine cut after each of
 its stages in turn (kinematics; mass matrix, bias forces and actuation;
-constraint rows; the Newton solve; integration). Each cut keeps every output
-of its last stage alive, so the differences are what each stage costs.
+constraint rows; the Newton solve with the integration). Each cut keeps every output
+of its last stage alive, so the differences are what each stage costs. Then
+the Newton iterations (MuJoCo's solver_niter) over the same steps: how many
+each instance needs, and how many its batch runs, since a vmapped loop runs
+until the batch's slowest instance is done.
 """
 
 from __future__ import annotations
@@ -40,8 +43,10 @@ VARIANTS = (
 )
 
 
-CHAIN_STAGES = ("kinematics", "mass matrix, bias forces, actuation", "constraint rows", "Newton solve",
-                "integration")
+# The solve and the integration are one cut: cut before the integration, the state would stand still, and a
+# solve warm-started from its own answer of the step before has nothing left to do.
+CHAIN_STAGES = ("kinematics", "mass matrix, bias forces, actuation", "constraint rows",
+                "Newton solve, integration")
 
 
 def best_cost(step, model, data, gravity, steps: int, options: dict) -> float:
@@ -89,8 +94,6 @@ def chain_cut(engine, depth: int):
 
     if depth == len(CHAIN_STAGES):
         return lambda m, d, g: engine.integrate(m, engine.forward(m, d, g), g)
-    if depth == len(CHAIN_STAGES) - 1:
-        return lambda m, d, g: d.replace(qacc_warmstart=engine.forward(m, d, g).qacc)
     cm = engine.chain
 
     def step(model, d, g):
@@ -118,6 +121,22 @@ def chain_costs(engine, qpos, qvel, gravity, steps: int) -> dict:
     return dict(zip(CHAIN_STAGES, np.diff(cumulative, prepend=0.0))) | {"full step": cumulative[-1]}
 
 
+def newton_iterations(engine, qpos, qvel, gravity, steps: int) -> np.ndarray:
+    """(instances, steps) Newton iterations of each instance's forward along the same rollout the costs time."""
+    import jax
+
+    from hopper_mjx.engine import BATCH_AXIS
+
+    def one(m, d, g):
+        def step(d, _):
+            d = engine.forward(m, d, g)
+            return engine.integrate(m, d, g), d.solver_niter
+        return jax.lax.scan(step, d, None, length=steps)[1]
+
+    f = jax.jit(jax.vmap(one, in_axes=(None, 0, 0), axis_name=BATCH_AXIS), compiler_options=engine.compiler_options)
+    return np.asarray(f(engine.model, jax.vmap(engine.make_data)(qpos, qvel), gravity))
+
+
 def measure(num: int, steps: int, settle: int, physics: Physics = Physics()) -> dict:
     import jax
 
@@ -135,7 +154,12 @@ def measure(num: int, steps: int, settle: int, physics: Physics = Physics()) -> 
     standing, _ = sim.rollout(state, controller, steps=settle)
     record = {"num": num, "steps": steps, "engine": sim.engine.name, "terrain": str(physics.ground)}
     if sim.engine.name == "chain":
-        return record | {"us": chain_costs(sim.engine, standing.data.qpos, standing.data.qvel, standing.gravity, steps)}
+        args = (sim.engine, standing.data.qpos, standing.data.qvel, standing.gravity, steps)
+        niter = newton_iterations(*args)
+        cap = sim.engine.chain.iterations
+        return record | {"us": chain_costs(*args),
+                         "newton": {"instance": np.bincount(niter.ravel(), minlength=cap + 1).tolist(),
+                                    "batch": np.bincount(niter.max(axis=0), minlength=cap + 1).tolist()}}
     costs = {}
     for name, flag in VARIANTS:
         variant = without_sensors(mj_model)  # as the core: it computes its own signals
@@ -150,7 +174,7 @@ def table(record: dict) -> str:
     if record["engine"] == "chain":
         head = f"{record['num']} standing instances on one device, {record['steps']} steps, engine chain"
         parts = tuple((name, us[name]) for name in CHAIN_STAGES)
-        return _lines(head, parts, full)
+        return _lines(head, parts, full) + "\n" + _iterations(record["newton"])
     parts = (
         ("contacts (collision, contact rows, their solve)", us["full step"] - us["no contacts"]),
         ("other constraints (limit rows, the solve itself)", us["no contacts"] - us["no constraints"]),
@@ -160,6 +184,18 @@ def table(record: dict) -> str:
             f"{record['constraint_rows']} constraint rows per instance"
             + ("" if record["terrain"] == "flat" else f", terrain {record['terrain']}"))
     return _lines(head, parts, full)
+
+
+def _iterations(newton: dict) -> str:
+    """Shares of the instance-steps and of the batch's steps that ran 0, 1, ... Newton iterations, and the means."""
+    lines = [f"{'Newton iterations':50s} " + " ".join(f"{k:>6d}" for k in range(len(newton["instance"]))) + "    mean"]
+    for name, label in (("instance", "share of instance-steps (what each needs)"),
+                        ("batch", "share of the batch's steps (its slowest instance)")):
+        counts = np.asarray(newton[name])
+        share = counts / counts.sum()
+        mean = float(np.arange(len(counts)) @ share)
+        lines.append(f"{label:50s} " + " ".join(f"{x:6.1%}" for x in share) + f" {mean:7.2f}")
+    return "\n".join(lines)
 
 
 def _lines(head: str, parts, full: float) -> str:
