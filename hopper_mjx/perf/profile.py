@@ -12,8 +12,9 @@ contact rows and their share of the solve) and the rest of the constraint
 pipeline (joint-limit rows, the Newton solve itself) cost; what remains is the
 smooth dynamics (kinematics, inertia, bias forces, actuation, integration).
 Each rollout starts from the same standing batch (foot on the floor, after
-`--settle` steps holding the stance); without contacts the robots fall through
-the floor, which is what a timing ablation asks for.
+`--settle` steps holding the stance) and keeps each motor's last torque of the
+hold; without contacts the robots fall through the floor, which is what a
+timing ablation asks for.
 
 chain: the same standing batch stepped by the chain engine cut after each of
 its stages in turn (kinematics; mass matrix, bias forces and actuation;
@@ -72,13 +73,13 @@ def best_cost(step, model, data, gravity, steps: int, options: dict) -> float:
     return best / (gravity.shape[0] * steps) * 1e6
 
 
-def rollout_cost(mj_model, qpos, qvel, gravity, steps: int) -> float:
-    """µs per instance-step of mjx.step from (qpos, qvel)."""
+def rollout_cost(mj_model, qpos, qvel, ctrl, gravity, steps: int) -> float:
+    """µs per instance-step of mjx.step from (qpos, qvel), its motors held at `ctrl`."""
     import jax
     from mujoco import mjx
 
     model = mjx.put_model(mj_model)
-    data = jax.vmap(lambda q, v: mjx.make_data(mj_model).replace(qpos=q, qvel=v))(qpos, qvel)
+    data = jax.vmap(lambda q, v, u: mjx.make_data(mj_model).replace(qpos=q, qvel=v, ctrl=u))(qpos, qvel, ctrl)
     step = lambda m, d, g: mjx.step(m.replace(opt=m.opt.replace(gravity=g)), d)
     from hopper_mjx.engine import CPU_COMPILER_OPTIONS
 
@@ -112,16 +113,20 @@ def chain_cut(engine, depth: int):
     return step
 
 
-def chain_costs(engine, qpos, qvel, gravity, steps: int) -> dict:
+def _chain_data(engine, qpos, qvel, ctrl):
     import jax
 
-    data = jax.vmap(engine.make_data)(qpos, qvel)
+    return jax.vmap(lambda q, v, u: engine.make_data(q, v).replace(ctrl=u))(qpos, qvel, ctrl)
+
+
+def chain_costs(engine, qpos, qvel, ctrl, gravity, steps: int) -> dict:
+    data = _chain_data(engine, qpos, qvel, ctrl)
     cumulative = [best_cost(chain_cut(engine, k), engine.model, data, gravity, steps, engine.compiler_options)
                   for k in range(1, len(CHAIN_STAGES) + 1)]
     return dict(zip(CHAIN_STAGES, np.diff(cumulative, prepend=0.0))) | {"full step": cumulative[-1]}
 
 
-def newton_iterations(engine, qpos, qvel, gravity, steps: int) -> np.ndarray:
+def newton_iterations(engine, qpos, qvel, ctrl, gravity, steps: int) -> np.ndarray:
     """(instances, steps) Newton iterations of each instance's forward along the same rollout the costs time."""
     import jax
 
@@ -134,7 +139,7 @@ def newton_iterations(engine, qpos, qvel, gravity, steps: int) -> np.ndarray:
         return jax.lax.scan(step, d, None, length=steps)[1]
 
     f = jax.jit(jax.vmap(one, in_axes=(None, 0, 0), axis_name=BATCH_AXIS), compiler_options=engine.compiler_options)
-    return np.asarray(f(engine.model, jax.vmap(engine.make_data)(qpos, qvel), gravity))
+    return np.asarray(f(engine.model, _chain_data(engine, qpos, qvel, ctrl), gravity))
 
 
 def measure(num: int, steps: int, settle: int, physics: Physics = Physics()) -> dict:
@@ -154,7 +159,7 @@ def measure(num: int, steps: int, settle: int, physics: Physics = Physics()) -> 
     standing, _ = sim.rollout(state, controller, steps=settle)
     record = {"num": num, "steps": steps, "engine": sim.engine.name, "terrain": str(physics.ground)}
     if sim.engine.name == "chain":
-        args = (sim.engine, standing.data.qpos, standing.data.qvel, standing.gravity, steps)
+        args = (sim.engine, standing.data.qpos, standing.data.qvel, standing.data.ctrl, standing.gravity, steps)
         niter = newton_iterations(*args)
         cap = sim.engine.chain.iterations
         return record | {"us": chain_costs(*args),
@@ -164,7 +169,8 @@ def measure(num: int, steps: int, settle: int, physics: Physics = Physics()) -> 
     for name, flag in VARIANTS:
         variant = without_sensors(mj_model)  # as the core: it computes its own signals
         variant.opt.disableflags |= flag
-        costs[name] = rollout_cost(variant, standing.data.qpos, standing.data.qvel, standing.gravity, steps)
+        costs[name] = rollout_cost(variant, standing.data.qpos, standing.data.qvel, standing.data.ctrl,
+                                   standing.gravity, steps)
     return record | {"constraint_rows": int(standing.data._impl.efc_J.shape[1]), "us": costs}
 
 
