@@ -104,8 +104,11 @@ def run_sweeps(args, found: dict[str, list[str]]) -> dict[tuple[str, str], dict]
             if recorded(folder) is None:
                 print(f"{column} / {name}: {len(controllers)} controller(s)", file=sys.stderr, flush=True)
                 command = [sys.executable, "-m", "hopper_mjx.sweep", *sweep_args(args, controllers, column, folder)]
-                if subprocess.run(command).returncode != 0:
-                    raise SystemExit(f"error: the sweep into {folder} failed")
+                code = subprocess.run(command).returncode
+                if code == 2:  # refused: the sweep said why on its one line
+                    raise SystemExit(2)
+                if code != 0:
+                    raise SystemExit(f"error: the sweep into {folder} failed (exit {code})")
             result = recorded(folder)
             settings = {k: result["arguments"][k] for k in SETTINGS}
             if column == "urdf":

@@ -459,6 +459,28 @@ def test_the_robustness_table_gives_each_row_groups_median_and_range_over_its_se
                      "| 1.62 | a | 3 | 20 % [6 %–56 %] | 0.032 [0.020–0.060] | 0 % [0 %–0 %] | – |"]
 
 
+@pytest.mark.parametrize("code", [2, 1])
+def test_robustness_passes_a_refused_sweeps_one_line_on(tmp_path, monkeypatch, capsys, code):
+    """A sweep refused at run time (exit 2) has said why on its one line: robustness.py exits 2 and adds none.
+    A sweep that failed otherwise gets robustness.py's line naming its folder and exit code."""
+    import subprocess
+
+    robustness = _load_script("robustness")
+    args = robustness.parser().parse_args(["--policies", "a=x", "--out", str(tmp_path / "o")])
+    calls = []
+    monkeypatch.setattr(robustness.subprocess, "run",
+                        lambda command: calls.append(command) or subprocess.CompletedProcess(command, code))
+    with pytest.raises(SystemExit) as exit_:
+        robustness.run_sweeps(args, {"raibert": ["raibert"]})
+    assert len(calls) == 1 and calls[0][1:3] == ["-m", "hopper_mjx.sweep"]
+    err = capsys.readouterr().err.splitlines()
+    assert err == ["urdf / raibert: 1 controller(s)"]  # its progress line only
+    if code == 2:
+        assert exit_.value.code == 2
+    else:
+        assert exit_.value.code == f"error: the sweep into {tmp_path / 'o' / 'urdf' / 'raibert'} failed (exit 1)"
+
+
 def test_a_policy_rate_sets_the_tasks_physics_steps_per_action_and_the_policy_keeps_it(tmp_path):
     """--policy-rate 100: 5 of the training's 2 ms steps per action (10 at the default 50 Hz), saved in the task's
     config, from which the policy controller in the core takes 10 of its 1 ms steps per action."""
