@@ -225,9 +225,9 @@ def _newton_step(gate, mass, qfrc_smooth, rows: Rows, ls_iterations: int, it: _I
 def solve(gate, mass: dict, qfrc_smooth, qacc_smooth, qacc_warmstart, rows: Rows, *, iterations: int,
           ls_iterations: int, tolerance: float, cost_scale: float, ls_tolerance: float,
           warmstart: bool = True) -> Solution:
-    """The constrained accelerations and the rows' forces. Like MuJoCo, an instance stops
-    iterating once the scaled cost decrease or gradient falls below the tolerance, or (float32)
-    once the gradient is zero to within its rounding."""
+    """The constrained accelerations, the rows' forces and the Newton iterations run. Like MuJoCo, an
+    instance stops iterating once the scaled cost decrease or gradient falls below the tolerance, or
+    (float32) once the gradient is zero to within its rounding, and runs none from a start already there."""
     qacc = qacc_smooth
     if warmstart:
         better = _cost(gate, mass, qfrc_smooth, qacc_smooth, rows, qacc_warmstart) < _cost(
