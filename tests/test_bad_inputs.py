@@ -151,6 +151,8 @@ CASES = [
     ("simulate", ["--terrain", "rough:seed=every"], "--terrain: seed=every is not a number"),
     ("simulate", ["--scan", "5x0,0.1"], "--scan '5x0,0.1' must be NXxNY,SPACING with 1..64 points per axis"),
     ("perf.profile", ["--terrain", "crater:rim=-1", "--engine", "mjx"], "--terrain: rim=-1 must be >= 0 m"),
+    ("perf.profile", ["--settle", "50"], "--settle must be a multiple of 20 (the streams' period at this timestep), "
+     "got 50"),
     ("simulate", ["--terrain", "obstacle:height=0.2,x=-0.05"], "--terrain obstacle:height=0.2,x=-0.05: the ground "
                                                                "within 0.1 m of the start rises to 0.200 m"),
     # A variation that cannot be drawn, or drew a robot that cannot be.
