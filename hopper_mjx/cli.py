@@ -378,6 +378,16 @@ def check_rates(flags: str, sensors, batch: Scenario, duration: float | None = N
         budget.check_memory("--num, --duration", batch.n, recorded)
 
 
+def check_whole_periods(option: str, steps: int, timestep: float) -> None:
+    """`steps` (an option's value) holds a whole number of every default stream's period at `timestep`: a
+    rollout records its streams over whole periods."""
+    from hopper_mjx.signals import SensorConfig  # here: it imports JAX
+
+    whole = SensorConfig().whole(timestep)
+    if steps % whole:
+        raise ValueError(f"{option} must be a multiple of {whole} (the streams' period at this timestep), got {steps}")
+
+
 FOXGLOVE_PORT = 8765  # Foxglove's default for a WebSocket connection
 
 

@@ -13,6 +13,7 @@ Frames: world z is up; quaternions are [w, x, y, z] (MuJoCo's order).
 from __future__ import annotations
 
 import dataclasses
+import math
 from typing import Any, NamedTuple
 
 import jax
@@ -167,6 +168,10 @@ class SensorConfig:
     @classmethod
     def uniform(cls, rate: float, **noise) -> "SensorConfig":
         return cls(imu_rate=rate, odom_rate=rate, contact_rate=rate, state_rate=rate, **noise)
+
+    def whole(self, timestep: float) -> int:
+        """Physics steps that hold a whole number of every stream's period."""
+        return math.lcm(*self.periods(timestep).values())
 
     def periods(self, timestep: float) -> dict[str, int]:
         """Each stream's period in physics steps."""

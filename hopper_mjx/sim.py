@@ -81,7 +81,7 @@ def split_rollout_key(key: jax.Array) -> tuple[jax.Array, jax.Array]:
 
 def steps_for(duration: float, timestep: float, sensors: signals.SensorConfig) -> int:
     """Physics steps closest to `duration` s that hold a whole number of every stream's period (at least one)."""
-    whole = math.lcm(*sensors.periods(timestep).values())
+    whole = sensors.whole(timestep)
     return max(1, int(round(duration / timestep / whole))) * whole
 
 

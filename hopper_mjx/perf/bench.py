@@ -30,7 +30,6 @@ from __future__ import annotations
 import argparse
 import copy
 import json
-import math
 import os
 import platform
 import resource
@@ -418,12 +417,7 @@ def check(args) -> tuple[list[int] | None, Physics]:
     nums = cli.parse_indices(args.scaling, "--scaling") if args.scaling else None
     if nums is not None and (not nums or min(nums) < 1):
         raise ValueError(f"--scaling needs instance counts >= 1, got {args.scaling!r}")
-    from hopper_mjx.signals import SensorConfig  # last: it imports JAX
-
-    whole = math.lcm(*SensorConfig().periods(args.timestep).values())
-    if args.steps % whole:
-        raise ValueError(f"--steps must be a multiple of {whole} (the streams' period at this timestep), "
-                         f"got {args.steps}")
+    cli.check_whole_periods("--steps", args.steps, args.timestep)  # last: it imports JAX
     return nums, physics
 
 

@@ -27,7 +27,6 @@ until the batch's slowest instance is done.
 
 from __future__ import annotations
 
-import math
 import sys
 import time
 
@@ -225,12 +224,7 @@ def main(argv=None) -> int:
     try:
         physics = cli.check_physics(args, n=args.num)
         cli.refuse_each(physics.ground, "perf.profile")
-        from hopper_mjx.signals import SensorConfig  # last: it imports JAX
-
-        whole = math.lcm(*SensorConfig().periods(physics.timestep).values())  # the settling rollout records them
-        if args.settle % whole:
-            raise ValueError(f"--settle must be a multiple of {whole} (the streams' period at this timestep), "
-                             f"got {args.settle}")
+        cli.check_whole_periods("--settle", args.settle, physics.timestep)  # the settling rollout records them
     except ValueError as err:
         return cli.fail(err)
     runtime.configure()
