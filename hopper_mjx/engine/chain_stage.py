@@ -55,3 +55,67 @@ def batch_any(flag: jax.Array) -> jax.Array:
         return jax.lax.pmax(flag.astype(jnp.int32), BATCH_AXIS) > 0
     except NameError:  # not under the core's vmap: per instance (a select under another vmap)
         return flag
+
+
+
+def compacted_while(running, body, env, carry, *, tail: int = 8):
+    """`lax.while_loop(running, lambda c: body(env, c), carry)` per instance. Under the core's vmap a plain loop
+    runs every instance until the batch's slowest is done; here every instance takes its first step together,
+    then the few still running are gathered `tail` at a time, run to their end as a small batch and scattered back.
+    Each instance's numbers are those of its own loop (a step reads only its instance's values); only the cost
+    differs. `env`'s leaves may mix arrays and constants (the folded model numbers); `carry`'s are arrays."""
+    env_leaves, env_tree = jax.tree_util.tree_flatten(env)
+    traced_at = [i for i, x in enumerate(env_leaves) if not is_const(x)]
+    carry_leaves, carry_tree = jax.tree_util.tree_flatten(jax.tree_util.tree_map(jnp.asarray, carry))
+    n_env = len(traced_at)
+
+    def split(args):
+        leaves = list(env_leaves)
+        for i, x in zip(traced_at, args[:n_env]):
+            leaves[i] = x
+        return (jax.tree_util.tree_unflatten(env_tree, leaves),
+                jax.tree_util.tree_unflatten(carry_tree, list(args[n_env:])))
+
+    def until_done(valid, *args):  # the instance's own loop; a `valid` false stops it before it starts
+        env, carry = split(args)
+        return jax.tree_util.tree_leaves(
+            jax.lax.while_loop(lambda c: valid & running(c), lambda c: body(env, c), carry))
+
+    def first_step(*args):
+        env, carry = split(args)
+        go = running(carry)
+        return jax.tree_util.tree_leaves(
+            jax.tree_util.tree_map(lambda n, o: jnp.where(go, n, o), body(env, carry), carry))
+
+    loop = jax.custom_batching.custom_vmap(lambda *args: until_done(jnp.array(True), *args))
+
+    @loop.def_vmap
+    def _batched(size, in_batched, *args):
+        axes = [0 if b else None for b in in_batched[:n_env]] + [0] * len(carry_leaves)
+        env_args = list(args[:n_env])
+        state = [x if b else jnp.broadcast_to(x, (size,) + x.shape) for x, b in zip(args[n_env:], in_batched[n_env:])]
+        on = lambda f, *lead: jax.vmap(f, in_axes=[0] * len(lead) + axes, axis_name=BATCH_AXIS)
+        runs = lambda s: jax.vmap(lambda *c: running(jax.tree_util.tree_unflatten(carry_tree, list(c))))(*s)
+        state = jax.lax.cond(jnp.any(runs(state)), lambda s: on(first_step)(*env_args, *s), list, state)
+        width = min(tail, size)
+
+        def small_batch(loop_state):
+            state, left = loop_state
+            idx = jnp.nonzero(left, size=width, fill_value=0)[0]
+            valid = jnp.arange(width) < jnp.sum(left)  # a slot past the last runner holds instance 0, stopped
+            sub_env = [x if ax is None else x[idx] for x, ax in zip(env_args, axes)]
+            out = on(until_done, valid)(valid, *sub_env, *[x[idx] for x in state])
+            where = jnp.where(valid, idx, size)  # out of range: dropped
+            state = [x.at[where].set(o, mode="drop") for x, o in zip(state, out)]
+            return state, left.at[where].set(False, mode="drop")
+
+        state, _ = jax.lax.while_loop(lambda s: jnp.any(s[1]), small_batch, (state, runs(state)))
+        return state, [True] * len(state)
+
+    # A derivative is the plain loop's: JAX's derivative of a custom_vmap function would batch with the rule above,
+    # which it cannot differentiate (a vmapped jacfwd of the step fails to trace).
+    differentiable = jax.custom_jvp(loop)
+    differentiable.defjvp(lambda primals, tangents: jax.jvp(
+        lambda *args: until_done(jnp.array(True), *args), primals, tangents))
+    return jax.tree_util.tree_unflatten(carry_tree,
+                                        differentiable(*[env_leaves[i] for i in traced_at], *carry_leaves))
