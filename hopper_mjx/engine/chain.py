@@ -119,10 +119,6 @@ class ChainEngine:
             self.chain = dataclasses.replace(
                 self.chain, terrain=dataclasses.replace(self.chain.terrain, max_contacts=int(max_foot_contacts)))
         self.nu = int(mj_model.nu)
-        # On a heightfield a Newton iteration is dear (the foot's 8 contact slots) and the few instances that need
-        # more than one finish as a small batch (chain_solver.solve's `compact`): 15-20 % off the rough step; on
-        # the plane the small batch's own cost is more than the iterations it saves (docs/performance.md, c18).
-        self.compact = self.chain.terrain is not None
         # On a heightfield the fusion emitters run the step faster; on the plane the classic ones (xla.py).
         self.compiler_options = CPU_COMPILER_OPTIONS if self.chain.terrain is None else FUSION_EMITTERS
         self.model = ChainParams(gate=jnp.array(True))
@@ -184,7 +180,7 @@ class ChainEngine:
         warm = tuple(data.qacc_warmstart[i] for i in range(cm.nv))
         sol = chain_solver.solve(gate, mass, qfrc_smooth, qacc_smooth, warm, rows, iterations=cm.iterations,
                                  ls_iterations=cm.ls_iterations, tolerance=cm.tolerance, ls_tolerance=cm.ls_tolerance,
-                                 cost_scale=cm.cost_scale, warmstart=cm.warmstart, compact=self.compact)
+                                 cost_scale=cm.cost_scale, warmstart=cm.warmstart)
         upper = [mass[i, j] for i in range(cm.nv) for j in range(i, cm.nv)]
         return data.replace(
             qacc=_vector(sol.qacc, dtype), mass=_vector(upper, dtype), qfrc_smooth=_vector(qfrc_smooth, dtype),

@@ -23,7 +23,7 @@ import jax.numpy as jnp
 
 from hopper_mjx.engine import chain_algebra as al
 from hopper_mjx.engine.chain_constraint import MINVAL, Rows
-from hopper_mjx.engine.chain_stage import batch_any, compacted_while, stored
+from hopper_mjx.engine.chain_stage import batch_any, stored
 
 FAR = 1e30  # the search's upper end before any point past the minimum is found
 # The line search's derivative and the Newton loop's gradient count as zero within this many rounding units
@@ -224,12 +224,10 @@ def _newton_step(gate, mass, qfrc_smooth, rows: Rows, ls_iterations: int, it: _I
 
 def solve(gate, mass: dict, qfrc_smooth, qacc_smooth, qacc_warmstart, rows: Rows, *, iterations: int,
           ls_iterations: int, tolerance: float, cost_scale: float, ls_tolerance: float,
-          warmstart: bool = True, compact: bool = False) -> Solution:
+          warmstart: bool = True) -> Solution:
     """The constrained accelerations, the rows' forces and the Newton iterations run. Like MuJoCo, an
     instance stops iterating once the scaled cost decrease or gradient falls below the tolerance, or
-    (float32) once the gradient is zero to within its rounding, and runs none from a start already there.
-    `compact`: under the core's vmap, the instances that need more than one iteration finish as a small batch
-    (`chain_stage.compacted_while`): the same numbers, a different cost."""
+    (float32) once the gradient is zero to within its rounding, and runs none from a start already there."""
     qacc = qacc_smooth
     if warmstart:
         better = _cost(gate, mass, qfrc_smooth, qacc_smooth, rows, qacc_warmstart) < _cost(
@@ -238,8 +236,7 @@ def solve(gate, mass: dict, qfrc_smooth, qacc_smooth, qacc_warmstart, rows: Rows
                       qacc_warmstart, qacc_smooth)
     start = _evaluate(gate, mass, qfrc_smooth, rows, tuple(jnp.asarray(x) for x in qacc))
 
-    def body(env, carry):
-        gate, mass, qfrc_smooth, rows = env
+    def body(carry):
         it, _, count = carry
         qacc, decrease = _newton_step(gate, mass, qfrc_smooth, rows, ls_iterations, it,
                                       tolerance * ls_tolerance / cost_scale)
@@ -248,19 +245,15 @@ def solve(gate, mass: dict, qfrc_smooth, qacc_smooth, qacc_warmstart, rows: Rows
         return it, ((cost_scale * decrease < tolerance) | (cost_scale * gradient < tolerance)
                     | _within_rounding(it, qfrc_smooth)), count + 1
 
-    # Under vmap a plain loop runs until every instance is done; finished ones are held. An instance whose start
+    # Under vmap the loop runs until every instance is done; finished ones are held. An instance whose start
     # is not finite (a diverged state) has nothing to solve and is done at once, so it cannot hold its chunk
     # to the iteration cap. A start already at the minimum (no row active at the smooth acceleration: C's line
     # search then finds no step and counts no iteration) is done too. The flag and the count derive from the
     # instance's numbers: batched from the start, vmap batches the loop's body once (JAX re-batches a while
     # body for each carry it finds batched later).
     done = ~jnp.isfinite(al.dot(start.grad, start.grad)) | _within_rounding(start, qfrc_smooth)
-    running = lambda c: ~c[1] & (c[2] < iterations)
-    env, carry = (gate, mass, qfrc_smooth, rows), (start, done, jnp.where(done, 0, 0))
-    if compact:
-        it, _, count = compacted_while(running, body, env, carry)
-    else:
-        it, _, count = jax.lax.while_loop(running, lambda c: body(env, c), carry)
+    it, _, count = jax.lax.while_loop(lambda c: ~c[1] & (c[2] < iterations), body,
+                                      (start, done, jnp.where(done, 0, 0)))
     return Solution(it.qacc, it.force, it.qfrc_constraint, count)
 
 
