@@ -88,3 +88,24 @@ def test_bad_arguments_exit_with_a_message(capsys):
     assert "--randomize: the leg of instance 0 (thigh 0.35 m, shank 0.05 m, foot radius 0.03 m) cannot reach the " \
            "floor" in capsys.readouterr().err
 
+
+
+def test_profile_counts_the_newton_iterations_mujoco_c_runs():
+    """perf.profile's replay: from each state of a standing chain batch, MuJoCo C (float64) runs the Newton
+    iterations the chain (float32) ran, so the profile can say the batch's extra iterations are the physics' own."""
+    from hopper_mjx.perf import profile
+    from hopper_mjx.scenario import Physics
+
+    physics = Physics()
+    sim, standing = profile.standing_batch(8, 100, physics)  # touched down: still settling
+    assert sim.engine.name == "chain"
+    ctrl, gravity = np.asarray(standing.data.ctrl), np.asarray(standing.gravity)
+    niter, states = profile.newton_iterations(sim.engine, standing.data.qpos, standing.data.qvel, standing.data.ctrl,
+                                              standing.gravity, 40)
+    c = profile.c_iterations(physics.mj_model, states, ctrl, gravity)
+    assert niter.shape == c.shape == (8, 40)
+    print("\nC's Newton iterations (0, 1, ...):", np.bincount(c.ravel()), "the chain's:", np.bincount(niter.ravel()))
+    assert np.mean(niter == c) >= 0.95
+    assert len(np.unique(c)) >= 2, "the states take more than one count"
+    moved = tuple(np.roll(x, 1, axis=1) for x in states)  # the states one step out of line: other counts
+    assert np.mean(profile.c_iterations(physics.mj_model, moved, ctrl, gravity) == niter) < np.mean(niter == c)

@@ -21,12 +21,14 @@ its stages in turn (kinematics; mass matrix, bias forces and actuation;
 constraint rows; the Newton solve with the integration). Each cut keeps every output
 of its last stage alive, so the differences are what each stage costs. Then
 the Newton iterations (MuJoCo's solver_niter) over the same steps: how many
-each instance needs, and how many its batch runs, since a vmapped loop runs
-until the batch's slowest instance is done.
+each instance needs, how many MuJoCo C runs from the same states (whether
+they are the physics' own), and how many its batch runs, since a vmapped loop
+runs until the batch's slowest instance is done.
 """
 
 from __future__ import annotations
 
+import copy
 import sys
 import time
 
@@ -126,45 +128,74 @@ def chain_costs(engine, qpos, qvel, ctrl, gravity, steps: int) -> dict:
     return dict(zip(CHAIN_STAGES, np.diff(cumulative, prepend=0.0))) | {"full step": cumulative[-1]}
 
 
-def newton_iterations(engine, qpos, qvel, ctrl, gravity, steps: int) -> np.ndarray:
-    """(instances, steps) Newton iterations of each instance's forward along the same rollout the costs time."""
+def newton_iterations(engine, qpos, qvel, ctrl, gravity, steps: int) -> tuple[np.ndarray, tuple]:
+    """(instances, steps) Newton iterations of each instance's forward along the same rollout the costs time, and
+    the states each forward started from: (qpos, qvel, qacc_warmstart), each (instances, steps, n)."""
     import jax
 
     from hopper_mjx.engine import BATCH_AXIS
 
     def one(m, d, g):
         def step(d, _):
+            start = (d.qpos, d.qvel, d.qacc_warmstart)
             d = engine.forward(m, d, g)
-            return engine.integrate(m, d, g), d.solver_niter
+            return engine.integrate(m, d, g), (d.solver_niter, start)
         return jax.lax.scan(step, d, None, length=steps)[1]
 
     f = jax.jit(jax.vmap(one, in_axes=(None, 0, 0), axis_name=BATCH_AXIS), compiler_options=engine.compiler_options)
-    return np.asarray(f(engine.model, _chain_data(engine, qpos, qvel, ctrl), gravity))
+    niter, states = f(engine.model, _chain_data(engine, qpos, qvel, ctrl), gravity)
+    return np.asarray(niter), tuple(np.asarray(x) for x in states)
 
 
-def measure(num: int, steps: int, settle: int, physics: Physics = Physics()) -> dict:
+def c_iterations(mj_model, states, ctrl, gravity) -> np.ndarray:
+    """(instances, steps) Newton iterations MuJoCo C (float64) runs from the same states (`newton_iterations`'), each
+    instance's motors at `ctrl` and its gravity: whether the iterations a batch runs are the physics' own."""
+    m = copy.deepcopy(mj_model)
+    d = mujoco.MjData(m)
+    qpos, qvel, warm = states
+    out = np.zeros(qpos.shape[:2], int)
+    for i in range(qpos.shape[0]):
+        m.opt.gravity[:] = gravity[i]
+        d.ctrl[:] = ctrl[i]
+        for t in range(qpos.shape[1]):
+            d.qpos[:], d.qvel[:], d.qacc_warmstart[:] = qpos[i, t], qvel[i, t], warm[i, t]
+            mujoco.mj_forward(m, d)
+            out[i, t] = d.solver_niter[0]
+    return out
+
+
+def standing_batch(num: int, settle: int, physics: Physics):
+    """The core on one device (a chunk of `num`) and its batch after `settle` steps holding the stance, at
+    gravities spanning the bench's."""
     import jax
 
     from hopper_mjx.control.base import hold
-    from hopper_mjx.engine.mjx import without_sensors
     from hopper_mjx.perf.bench import GRAVITY_SPAN
     from hopper_mjx.sim import gravity_vectors
+
+    sim = physics.sim(chunk=num, devices=jax.local_devices()[:1])
+    controller = hold(sim.layout)
+    state = sim.reset(gravity_vectors(np.linspace(*GRAVITY_SPAN, num)), controller=controller)
+    return sim, sim.rollout(state, controller, steps=settle)[0]
+
+
+def measure(num: int, steps: int, settle: int, physics: Physics = Physics()) -> dict:
+    from hopper_mjx.engine.mjx import without_sensors
 
     if num < 1 or steps < 1:
         raise ValueError(f"--num and --steps must be >= 1, got {num}, {steps}")
     mj_model = physics.mj_model
-    sim = physics.sim(chunk=num, devices=jax.local_devices()[:1])
-    controller = hold(sim.layout)
-    state = sim.reset(gravity_vectors(np.linspace(*GRAVITY_SPAN, num)), controller=controller)
-    standing, _ = sim.rollout(state, controller, steps=settle)
+    sim, standing = standing_batch(num, settle, physics)
     record = {"num": num, "steps": steps, "engine": sim.engine.name, "terrain": str(physics.ground)}
     if sim.engine.name == "chain":
         args = (sim.engine, standing.data.qpos, standing.data.qvel, standing.data.ctrl, standing.gravity, steps)
-        niter = newton_iterations(*args)
+        niter, states = newton_iterations(*args)
+        c_niter = c_iterations(mj_model, states, np.asarray(standing.data.ctrl), np.asarray(standing.gravity))
         cap = sim.engine.chain.iterations
+        count = lambda x: np.bincount(x.ravel(), minlength=cap + 1).tolist()
         return record | {"us": chain_costs(*args),
-                         "newton": {"instance": np.bincount(niter.ravel(), minlength=cap + 1).tolist(),
-                                    "batch": np.bincount(niter.max(axis=0), minlength=cap + 1).tolist()}}
+                         "newton": {"instance": count(niter), "batch": count(niter.max(axis=0)), "c": count(c_niter),
+                                    "same_as_c": float(np.mean(niter == c_niter))}}
     costs = {}
     for name, flag in VARIANTS:
         variant = without_sensors(mj_model)  # as the core: it computes its own signals
@@ -196,11 +227,13 @@ def _iterations(newton: dict) -> str:
     """Shares of the instance-steps and of the batch's steps that ran 0, 1, ... Newton iterations, and the means."""
     lines = [f"{'Newton iterations':50s} " + " ".join(f"{k:>6d}" for k in range(len(newton["instance"]))) + "    mean"]
     for name, label in (("instance", "share of instance-steps (what each needs)"),
+                        ("c", "MuJoCo C from the same states (float64)"),
                         ("batch", "share of the batch's steps (its slowest instance)")):
         counts = np.asarray(newton[name])
         share = counts / counts.sum()
         mean = float(np.arange(len(counts)) @ share)
         lines.append(f"{label:50s} " + " ".join(f"{x:6.1%}" for x in share) + f" {mean:7.2f}")
+    lines.append(f"instance-steps with C's own count: {newton['same_as_c']:.1%}")
     return "\n".join(lines)
 
 
