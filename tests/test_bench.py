@@ -89,7 +89,6 @@ def test_bad_arguments_exit_with_a_message(capsys):
            "floor" in capsys.readouterr().err
 
 
-
 def test_profile_counts_the_newton_iterations_mujoco_c_runs():
     """perf.profile's replay: from each state of a standing chain batch, MuJoCo C (float64) runs the Newton
     iterations the chain (float32) ran, so the profile can say the batch's extra iterations are the physics' own."""
