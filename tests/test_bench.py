@@ -108,3 +108,45 @@ def test_profile_counts_the_newton_iterations_mujoco_c_runs():
     assert len(np.unique(c)) >= 2, "the states take more than one count"
     moved = tuple(np.roll(x, 1, axis=1) for x in states)  # the states one step out of line: other counts
     assert np.mean(profile.c_iterations(physics.mj_model, moved, ctrl, gravity) == niter) < np.mean(niter == c)
+
+
+def test_profile_solve_setup_cut_is_mujoco_c_with_no_newton_iteration():
+    """perf.profile times the solve's setup as the step with the iteration cap at 0: from the same states its
+    accelerations are MuJoCo C's with `opt.iterations = 0` (the better of the warm start and the smooth
+    accelerations), and the Newton iterations the full step adds change them where the chain ran any."""
+    import copy
+
+    import jax
+    import mujoco
+
+    from hopper_mjx.perf import profile
+    from hopper_mjx.scenario import Physics
+
+    physics = Physics()
+    sim, standing = profile.standing_batch(8, 100, physics)
+    ctrl, gravity = np.asarray(standing.data.ctrl), np.asarray(standing.gravity)
+    niter, (qpos, qvel, warm) = profile.newton_iterations(sim.engine, standing.data.qpos, standing.data.qvel,
+                                                          standing.data.ctrl, standing.gravity, 10)
+    setup = profile.without_iterations(sim.engine)
+    data = jax.vmap(lambda q, v, w, u: setup.make_data(q, v).replace(qacc_warmstart=w, ctrl=u))(
+        qpos.reshape(80, -1), qvel.reshape(80, -1), warm.reshape(80, -1), np.repeat(ctrl, 10, axis=0))
+    out = jax.vmap(setup.forward, in_axes=(None, 0, 0))(sim.engine.model, data, np.repeat(gravity, 10, axis=0))
+    assert not np.any(np.asarray(out.solver_niter))
+    m = copy.deepcopy(physics.mj_model)
+    m.opt.iterations = 0
+    d = mujoco.MjData(m)
+    c_qacc = np.zeros((80, m.nv))
+    for k in range(80):
+        i, t = divmod(k, 10)
+        m.opt.gravity[:] = gravity[i]
+        d.ctrl[:], d.qpos[:], d.qvel[:], d.qacc_warmstart[:] = ctrl[i], qpos[i, t], qvel[i, t], warm[i, t]
+        mujoco.mj_forward(m, d)
+        c_qacc[k] = d.qacc
+    chain_qacc = np.asarray(out.qacc)
+    scale = np.abs(c_qacc).max()
+    assert np.abs(chain_qacc - c_qacc).max() <= 1e-4 * scale, np.abs(chain_qacc - c_qacc).max()
+    full = np.asarray(jax.vmap(sim.engine.forward, in_axes=(None, 0, 0))(
+        sim.engine.model, data, np.repeat(gravity, 10, axis=0)).qacc)
+    ran = niter.reshape(80) > 0
+    assert ran.sum() >= 8, "the states take Newton iterations"
+    assert np.abs(full - chain_qacc)[ran].max(axis=1).min() > 1e-3 * scale  # the cut leaves those iterations out

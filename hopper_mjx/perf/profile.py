@@ -18,8 +18,11 @@ timing ablation asks for.
 
 chain: the same standing batch stepped by the chain engine cut after each of
 its stages in turn (kinematics; mass matrix, bias forces and actuation;
-constraint rows; the Newton solve with the integration). Each cut keeps every output
-of its last stage alive, so the differences are what each stage costs. Then
+constraint rows; the solve's setup with the integration; the Newton iterations).
+Each cut keeps every output of its last stage alive, so the differences are
+what each stage costs. The setup is timed as the whole step with MuJoCo's
+iteration cap (`opt.iterations`) at 0: the warm start's choice, the first
+gradient and the integration, no Newton iteration. Then
 the Newton iterations (MuJoCo's solver_niter) over the same steps: how many
 each instance needs, how many MuJoCo C runs from the same states (whether
 they are the physics' own), and how many its batch runs, since a vmapped loop
@@ -46,10 +49,11 @@ VARIANTS = (
 )
 
 
-# The solve and the integration are one cut: cut before the integration, the state would stand still, and a
-# solve warm-started from its own answer of the step before has nothing left to do.
+# The solve's setup is cut with the integration: cut before the integration, the state would stand still, and a
+# solve warm-started from its own answer of the step before has nothing left to do. So the setup is the whole
+# step with the iteration cap at 0 (`without_iterations`), and the Newton iterations what the full step adds.
 CHAIN_STAGES = ("kinematics", "mass matrix, bias forces, actuation", "constraint rows",
-                "Newton solve, integration")
+                "solve's setup (no Newton iteration), integration", "Newton iterations")
 
 
 def best_cost(step, model, data, gravity, steps: int, options: dict) -> float:
@@ -95,8 +99,9 @@ def chain_cut(engine, depth: int):
 
     from hopper_mjx.engine import chain, chain_constraint, chain_smooth
 
-    if depth == len(CHAIN_STAGES):
-        return lambda m, d, g: engine.integrate(m, engine.forward(m, d, g), g)
+    if depth >= len(CHAIN_STAGES) - 1:
+        full = engine if depth == len(CHAIN_STAGES) else without_iterations(engine)
+        return lambda m, d, g: full.integrate(m, full.forward(m, d, g), g)
     cm = engine.chain
 
     def step(model, d, g):
@@ -113,6 +118,17 @@ def chain_cut(engine, depth: int):
         return d.replace(qvel=d.qvel + 1e-12 * sum(jnp.sum(x) for x in leaves))  # keeps every output
 
     return step
+
+
+def without_iterations(engine):
+    """The chain engine of the same model with MuJoCo's Newton iteration cap (`opt.iterations`) at 0: its step
+    chooses the better of the warm start and the smooth accelerations, evaluates the gradient there and integrates.
+    It takes the same model argument (`engine.model`)."""
+    from hopper_mjx.engine import chain
+
+    source = copy.deepcopy(engine.source)
+    source.opt.iterations = 0
+    return chain.make_for_tools(source)
 
 
 def _chain_data(engine, qpos, qvel, ctrl):
@@ -211,7 +227,10 @@ def table(record: dict) -> str:
     if record["engine"] == "chain":
         head = f"{record['num']} standing instances on one device, {record['steps']} steps, engine chain"
         parts = tuple((name, us[name]) for name in CHAIN_STAGES)
-        return _lines(head, parts, full) + "\n" + _iterations(record["newton"])
+        runs = _mean(record["newton"]["batch"])
+        each = f"{us[CHAIN_STAGES[-1]] / runs:.2f} µs each" if runs else "none run"
+        return (_lines(head, parts, full) + "\n" + _iterations(record["newton"])
+                + f"\nNewton iterations the batch runs: {runs:.2f} a step, {each}")
     parts = (
         ("contacts (collision, contact rows, their solve)", us["full step"] - us["no contacts"]),
         ("other constraints (limit rows, the solve itself)", us["no contacts"] - us["no constraints"]),
@@ -231,10 +250,15 @@ def _iterations(newton: dict) -> str:
                         ("batch", "share of the batch's steps (its slowest instance)")):
         counts = np.asarray(newton[name])
         share = counts / counts.sum()
-        mean = float(np.arange(len(counts)) @ share)
-        lines.append(f"{label:50s} " + " ".join(f"{x:6.1%}" for x in share) + f" {mean:7.2f}")
+        lines.append(f"{label:50s} " + " ".join(f"{x:6.1%}" for x in share) + f" {_mean(counts):7.2f}")
     lines.append(f"instance-steps with C's own count: {newton['same_as_c']:.1%}")
     return "\n".join(lines)
+
+
+def _mean(counts) -> float:
+    """The mean Newton iterations of a count per iteration number (0, 1, ...)."""
+    counts = np.asarray(counts)
+    return float(np.arange(len(counts)) @ (counts / counts.sum()))
 
 
 def _lines(head: str, parts, full: float) -> str:
