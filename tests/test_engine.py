@@ -71,14 +71,15 @@ def test_one_mjx_step_in_contact_equals_mujoco_c(mj_model):
 
 def test_each_engine_compiles_with_its_own_xla_emitters(mj_model):
     """The chain on a heightfield takes XLA:CPU's fusion emitters (faster there), the plane and mjx the classic
-    ones. (The core's terrain runs against MuJoCo C, in test_terrain_physics.py, run under the fusion emitters.)"""
+    ones; the chain wide vectors on either. (The core's terrain runs against MuJoCo C, in test_terrain_physics.py,
+    run under the chain's options.)"""
     from hopper_mjx.engine import chain
     from tests.hfield_model import hfield_model
 
     rough = hfield_model(0.02 * np.random.default_rng(3).standard_normal((21, 21)), 1.0, 1.0)
-    assert engine.make("chain", mj_model).compiler_options == engine.CPU_COMPILER_OPTIONS
+    assert engine.make("chain", mj_model).compiler_options == engine.CPU_COMPILER_OPTIONS | engine.WIDE_VECTORS
     assert engine.make("mjx", mj_model).compiler_options == engine.CPU_COMPILER_OPTIONS
-    assert chain.make_for_tools(rough).compiler_options == engine.FUSION_EMITTERS
+    assert chain.make_for_tools(rough).compiler_options == engine.FUSION_EMITTERS | engine.WIDE_VECTORS
     assert engine.FUSION_EMITTERS["xla_cpu_use_fusion_emitters"] is True
 
 

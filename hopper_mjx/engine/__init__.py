@@ -39,7 +39,7 @@ import numpy as np
 from hopper_mjx import registry
 from hopper_mjx.engine.chain_stage import BATCH_AXIS, batch_any
 from hopper_mjx.engine.mjx import MjxEngine
-from hopper_mjx.engine.xla import CPU_COMPILER_OPTIONS, FUSION_EMITTERS
+from hopper_mjx.engine.xla import CPU_COMPILER_OPTIONS, FUSION_EMITTERS, WIDE_VECTORS
 from hopper_mjx.randomize import check_engine_varies
 
 
@@ -121,5 +121,5 @@ def _build(name: str, mj_model: mujoco.MjModel, varies: frozenset[str]):
     return MjxEngine(mj_model, varies), ""
 
 
-__all__ = ["BATCH_AXIS", "batch_any", "CPU_COMPILER_OPTIONS", "FUSION_EMITTERS", "Engine", "MjxEngine", "check_name",
-           "make"]
+__all__ = ["BATCH_AXIS", "batch_any", "CPU_COMPILER_OPTIONS", "FUSION_EMITTERS", "WIDE_VECTORS", "Engine", "MjxEngine",
+           "check_name", "make"]

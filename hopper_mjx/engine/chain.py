@@ -31,7 +31,7 @@ from hopper_mjx.engine import chain_constraint, chain_smooth, chain_solver
 from hopper_mjx.engine.chain_hfield import TerrainParams
 from hopper_mjx.engine.chain_model import ChainModel, NotChain, derive, describe, entries, instance, terrain_heights
 from hopper_mjx.engine.chain_stage import BATCH_AXIS, stored
-from hopper_mjx.engine.xla import CPU_COMPILER_OPTIONS, FUSION_EMITTERS, trace_once
+from hopper_mjx.engine.xla import CPU_COMPILER_OPTIONS, FUSION_EMITTERS, WIDE_VECTORS, trace_once
 from hopper_mjx.model import variation
 
 __all__ = ["BATCH_AXIS", "ChainData", "ChainEngine", "ChainParams", "NotChain", "TerrainParams", "make",
@@ -119,8 +119,10 @@ class ChainEngine:
             self.chain = dataclasses.replace(
                 self.chain, terrain=dataclasses.replace(self.chain.terrain, max_contacts=int(max_foot_contacts)))
         self.nu = int(mj_model.nu)
-        # On a heightfield the fusion emitters run the step faster; on the plane the classic ones (xla.py).
-        self.compiler_options = CPU_COMPILER_OPTIONS if self.chain.terrain is None else FUSION_EMITTERS
+        # On a heightfield the fusion emitters run the step faster; on the plane the classic ones; wide vectors on
+        # both (xla.py).
+        emitters = CPU_COMPILER_OPTIONS if self.chain.terrain is None else FUSION_EMITTERS
+        self.compiler_options = emitters | WIDE_VECTORS
         self.model = ChainParams(gate=jnp.array(True))
         if self.chain.terrain is not None:
             t = self.chain.terrain

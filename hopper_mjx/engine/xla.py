@@ -10,6 +10,10 @@ import jax
 # only float32 rounding differs, as kernels fuse differently.
 CPU_COMPILER_OPTIONS = {"xla_cpu_use_fusion_emitters": False}
 FUSION_EMITTERS = {"xla_cpu_use_fusion_emitters": True}
+# The chain's step is per-instance scalars that vmap makes vectors of its chunk: 512-bit vectors, where the CPU has
+# them, took 7-8 % off its step on the plane and on rough ground (docs/performance.md, lever c20); 128-bit added 21 %.
+# LLVM keeps to the widths the host supports.
+WIDE_VECTORS = {"xla_cpu_prefer_vector_width": 512}
 
 
 def trace_once(engine) -> None:
