@@ -89,18 +89,28 @@ def test_bad_arguments_exit_with_a_message(capsys):
            "floor" in capsys.readouterr().err
 
 
-def test_profile_counts_the_newton_iterations_mujoco_c_runs():
-    """perf.profile's replay: from each state of a standing chain batch, MuJoCo C (float64) runs the Newton
-    iterations the chain (float32) ran, so the profile can say the batch's extra iterations are the physics' own."""
+@pytest.fixture(scope="module")
+def settling_chain():
+    """A standing chain batch of 8, touched down and still settling, and its Newton iterations and the states
+    each forward started from over 40 steps (perf.profile's)."""
     from hopper_mjx.perf import profile
     from hopper_mjx.scenario import Physics
 
     physics = Physics()
-    sim, standing = profile.standing_batch(8, 100, physics)  # touched down: still settling
-    assert sim.engine.name == "chain"
-    ctrl, gravity = np.asarray(standing.data.ctrl), np.asarray(standing.gravity)
+    sim, standing = profile.standing_batch(8, 100, physics)
     niter, states = profile.newton_iterations(sim.engine, standing.data.qpos, standing.data.qvel, standing.data.ctrl,
                                               standing.gravity, 40)
+    return physics, sim, standing, niter, states
+
+
+def test_profile_counts_the_newton_iterations_mujoco_c_runs(settling_chain):
+    """perf.profile's replay: from each state of a standing chain batch, MuJoCo C (float64) runs the Newton
+    iterations the chain (float32) ran, so the profile can say the batch's extra iterations are the physics' own."""
+    from hopper_mjx.perf import profile
+
+    physics, sim, standing, niter, states = settling_chain
+    assert sim.engine.name == "chain"
+    ctrl, gravity = np.asarray(standing.data.ctrl), np.asarray(standing.gravity)
     c = profile.c_iterations(physics.mj_model, states, ctrl, gravity)
     assert niter.shape == c.shape == (8, 40)
     print("\nC's Newton iterations (0, 1, ...):", np.bincount(c.ravel()), "the chain's:", np.bincount(niter.ravel()))
@@ -110,7 +120,7 @@ def test_profile_counts_the_newton_iterations_mujoco_c_runs():
     assert np.mean(profile.c_iterations(physics.mj_model, moved, ctrl, gravity) == niter) < np.mean(niter == c)
 
 
-def test_profile_solve_setup_cut_is_mujoco_c_with_no_newton_iteration():
+def test_profile_solve_setup_cut_is_mujoco_c_with_no_newton_iteration(settling_chain):
     """perf.profile times the solve's setup as the step with the iteration cap at 0: from the same states its
     accelerations are MuJoCo C's with `opt.iterations = 0` (the better of the warm start and the smooth
     accelerations), and the Newton iterations the full step adds change them where the chain ran any."""
@@ -120,13 +130,10 @@ def test_profile_solve_setup_cut_is_mujoco_c_with_no_newton_iteration():
     import mujoco
 
     from hopper_mjx.perf import profile
-    from hopper_mjx.scenario import Physics
 
-    physics = Physics()
-    sim, standing = profile.standing_batch(8, 100, physics)
+    physics, sim, standing, niter, states = settling_chain
     ctrl, gravity = np.asarray(standing.data.ctrl), np.asarray(standing.gravity)
-    niter, (qpos, qvel, warm) = profile.newton_iterations(sim.engine, standing.data.qpos, standing.data.qvel,
-                                                          standing.data.ctrl, standing.gravity, 10)
+    niter, (qpos, qvel, warm) = niter[:, :10], tuple(x[:, :10] for x in states)
     setup = profile.without_iterations(sim.engine)
     data = jax.vmap(lambda q, v, w, u: setup.make_data(q, v).replace(qacc_warmstart=w, ctrl=u))(
         qpos.reshape(80, -1), qvel.reshape(80, -1), warm.reshape(80, -1), np.repeat(ctrl, 10, axis=0))
