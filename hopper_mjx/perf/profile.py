@@ -163,21 +163,27 @@ def newton_iterations(engine, qpos, qvel, ctrl, gravity, steps: int) -> tuple[np
     return np.asarray(niter), tuple(np.asarray(x) for x in states)
 
 
-def c_iterations(mj_model, states, ctrl, gravity) -> np.ndarray:
-    """(instances, steps) Newton iterations MuJoCo C (float64) runs from the same states (`newton_iterations`'), each
-    instance's motors at `ctrl` and its gravity: whether the iterations a batch runs are the physics' own."""
+def c_replay(mj_model, states, ctrl, gravity, read) -> np.ndarray:
+    """read(MjData) after MuJoCo C's (float64) mj_forward from each of the states `newton_iterations` returns
+    ((instances, steps, n) each), each instance's motors at `ctrl` and its gravity: (instances, steps, ...)."""
     m = copy.deepcopy(mj_model)
     d = mujoco.MjData(m)
     qpos, qvel, warm = states
-    out = np.zeros(qpos.shape[:2], int)
+    out = []
     for i in range(qpos.shape[0]):
         m.opt.gravity[:] = gravity[i]
         d.ctrl[:] = ctrl[i]
         for t in range(qpos.shape[1]):
             d.qpos[:], d.qvel[:], d.qacc_warmstart[:] = qpos[i, t], qvel[i, t], warm[i, t]
             mujoco.mj_forward(m, d)
-            out[i, t] = d.solver_niter[0]
-    return out
+            out.append(np.array(read(d)))
+    return np.reshape(out, qpos.shape[:2] + out[0].shape)
+
+
+def c_iterations(mj_model, states, ctrl, gravity) -> np.ndarray:
+    """(instances, steps) Newton iterations MuJoCo C (float64) runs from the same states (`newton_iterations`'), each
+    instance's motors at `ctrl` and its gravity: whether the iterations a batch runs are the physics' own."""
+    return c_replay(mj_model, states, ctrl, gravity, lambda d: d.solver_niter[0]).astype(int)
 
 
 def standing_batch(num: int, settle: int, physics: Physics):
