@@ -5,7 +5,7 @@
 
 A RUN folder is one training run, or a `--seeds` parent holding seed-<s>/ runs. Per task x algorithm,
 over its seeds, the median and [min-max] of: minutes of training and env steps to the task's threshold
-(threshold.json of --scan-checkpoints; `hopper_mjx.thresholds`), env steps/s (Brax's, the median over the run's
+(threshold.json of --scan-checkpoints; `hopper_mjx.metrics.thresholds`), env steps/s (Brax's, the median over the run's
 evaluations), and on the kicked gravity sweep of the run's policy (RUN/sweep/: `python -m hopper_mjx.sweep
 gravity --controller policy:RUN`, nine default gravities, the default kick) the worst gravity's survival,
 apex error |rise/command - 1| and speed error. Each task's reference controller (`registry.TASK_REFERENCES`:
@@ -209,9 +209,9 @@ def main(argv=None) -> int:
         runs_of(args.runs)
     except ValueError as err:
         return cli.fail(err)
-    from hopper_mjx import runtime
+    from hopper_mjx.shell import jaxsetup
 
-    runtime.configure()
+    jaxsetup.configure()
     try:
         print(build(args.runs, args.out, do_sweep=args.sweep, num=args.num, duration=args.duration))
     except ValueError as err:

@@ -16,7 +16,7 @@ record per evaluation, wall time) and reward_curve.png.
 
 from __future__ import annotations
 
-# First, so that Ctrl-C during the imports below is already one line (hopper_mjx.startup arms it).
+# First, so that Ctrl-C during the imports below is already one line (hopper_mjx.shell.startup arms it).
 import hopper_mjx  # noqa: F401  # isort: skip
 
 import argparse
@@ -29,11 +29,12 @@ import sys
 import time
 from pathlib import Path
 
-from hopper_mjx import cli, command, files, registry, runtime
-from hopper_mjx import thresholds as threshold_rule
-from hopper_mjx.files import atomic_write_text
+from hopper_mjx import cli, registry
+from hopper_mjx.metrics import thresholds
+from hopper_mjx.metrics.thresholds import APEX_TOLERANCE, MIN_HOPS, SPEED_TOLERANCE  # noqa: F401 (one definition)
+from hopper_mjx.shell import files, jaxsetup, process
+from hopper_mjx.shell.files import atomic_write_text
 from hopper_mjx.sweep.grid import DEFAULT_GRAVITY
-from hopper_mjx.thresholds import APEX_TOLERANCE, MIN_HOPS, SPEED_TOLERANCE  # noqa: F401 (one definition)
 
 HISTORY = "metrics.json"
 SCAN = "scan.json"  # every scanned checkpoint's evaluation
@@ -272,7 +273,7 @@ def check_task_physics(args, physics) -> None:
     1 ms), and every delay the robot pool of each seed draws shorter than an episode."""
     from hopper_mjx import envs
     from hopper_mjx.envs.monoped import ROBOT_POOL, steps_per_action
-    from hopper_mjx.pushes import Pushes
+    from hopper_mjx.hardware.pushes import Pushes
 
     config = envs.default_config(args.task)
     step = config.timestep
@@ -441,7 +442,7 @@ def train(args, physics=None) -> dict:
     if args.algo == "ppo" and (args.batch_size * args.num_minibatches) % args.num_envs:
         raise ValueError("--batch-size x --num-minibatches must be a multiple of --num-envs")
     cli.make_folder("--out", out)
-    command.on_stop(f"the checkpoints are saved in {out / 'checkpoints'}; rerun the same command to resume")
+    process.on_stop(f"the checkpoints are saved in {out / 'checkpoints'}; rerun the same command to resume")
     env = task_config(args, physics)
     config = env.config
     factory, checkpoint = networks(args)
@@ -528,9 +529,9 @@ def evaluate(policy_path, physics, *, gravities, duration: float, height: float,
     """
     import numpy as np
 
-    from hopper_mjx import metrics
     from hopper_mjx.control import raibert
     from hopper_mjx.envs import policy
+    from hopper_mjx.metrics import hops
     from hopper_mjx.sim import gravity_vectors
     from hopper_mjx.sweep.runner import SENSORS
 
@@ -558,7 +559,7 @@ def evaluate(policy_path, physics, *, gravities, duration: float, height: float,
     for name, (controller, params) in controllers.items():
         final, traj = sim.run(gravity_vectors(g), controller, params, duration=duration, sensors=sensors,
                               key=seed, qvel=kick)
-        m = metrics.hop_metrics(traj, g, standing_height=sim.robot.standing_height, command_speed=speed,
+        m = hops.hop_metrics(traj, g, standing_height=sim.robot.standing_height, command_speed=speed,
                                 work=np.asarray(final.cstate.work), mass=sim.layout.total_mass)
         m["survival"] = ~(m["fell"] | np.asarray(final.diverged))
         out[name] = {f"{v:g}": {**{k: _mean(m[k][g == v]) for k in COMPARED}, "min_hops": int(m["hops"][g == v].min())}
@@ -566,12 +567,12 @@ def evaluate(policy_path, physics, *, gravities, duration: float, height: float,
     return out
 
 
-threshold = threshold_rule.describe
+threshold = thresholds.describe
 
 
 def meets_threshold(task: str, row: dict, height: float) -> bool:
-    """Does one gravity's `evaluate` row meet the task's threshold (`hopper_mjx.thresholds`)?"""
-    return threshold_rule.meets(task, row, height)
+    """Does one gravity's `evaluate` row meet the task's threshold (`hopper_mjx.metrics.thresholds`)?"""
+    return thresholds.meets(task, row, height)
 
 
 def scan_checkpoints(args, physics) -> list[dict]:
@@ -621,19 +622,19 @@ def first_at_threshold(task: str, scanned: list[dict], height: float, gravities:
 
 
 def select_policy(args, scanned: list[dict]) -> dict | None:
-    """Copies the best scanned checkpoint (`hopper_mjx.thresholds.best`) into policy/ and records the
+    """Copies the best scanned checkpoint (`hopper_mjx.metrics.thresholds.best`) into policy/ and records the
     choice in SELECTION: its step, wall time, measures and rank."""
     out = Path(args.out)
     judged = [{**s, "evaluation": at_gravities(s["evaluation"], args.select_gravity, "--select-gravity")}
               for s in scanned]
-    chosen = threshold_rule.best(args.task, judged, args.eval_height)
+    chosen = thresholds.best(args.task, judged, args.eval_height)
     if chosen is None:
         return None
     shutil.rmtree(out / "policy", ignore_errors=True)
     shutil.copytree(out / "checkpoints" / f"{chosen['step']:012d}", out / "policy")
     record = {**chosen, "rule": "most gravities at the threshold, then the worst gravity's survival, then its "
-              "error over the threshold's bounds (hopper_mjx.thresholds.rank)",
-              "rank": list(threshold_rule.rank(args.task, chosen["evaluation"], args.eval_height)),
+              "error over the threshold's bounds (hopper_mjx.metrics.thresholds.rank)",
+              "rank": list(thresholds.rank(args.task, chosen["evaluation"], args.eval_height)),
               "gravities": list(chosen["evaluation"]), "threshold": threshold(args.task),
               "meets": all(meets_threshold(args.task, r, args.eval_height) for r in chosen["evaluation"].values())}
     atomic_write_text(out / SELECTION, json.dumps(record, indent=1))
@@ -689,7 +690,7 @@ def seed_runs(args) -> list[argparse.Namespace]:
 
 def main(argv=None) -> int:
     args = parser().parse_args(argv)
-    runtime.configure()
+    jaxsetup.configure()
     runs = seed_runs(args)
     try:
         check(args)  # with --seeds: every option, and --out as the seeds' parent
@@ -736,4 +737,4 @@ def train_and_report(args, physics) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(command.run(main))
+    sys.exit(process.run(main))

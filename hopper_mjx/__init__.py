@@ -4,25 +4,26 @@ The few names a user needs; everything else lives in its module (see the README'
 They are loaded on first use, so that `python -m hopper_mjx.<command>` checks its arguments
 before JAX and MuJoCo are imported (about 2 s).
 Importing the package changes no JAX setting: the command-line entry points call
-`hopper_mjx.runtime.configure()` themselves. It does choose MuJoCo's OpenGL backend
+`hopper_mjx.shell.jaxsetup.configure()` themselves. It does choose MuJoCo's OpenGL backend
 (EGL on Linux, unless MUJOCO_GL is set) and keeps MJX's import notices off stdout:
-both must be settled before MuJoCo is first imported (see `hopper_mjx.startup`).
+both must be settled before MuJoCo is first imported (see `hopper_mjx.shell.startup`).
 """
 
 import importlib
 
-from hopper_mjx import startup
+from hopper_mjx.shell import startup
 
 startup.prepare()
 
 _PUBLIC = {
     "Physics": "hopper_mjx.scenario",
     "Scenario": "hopper_mjx.scenario",
-    "SensorConfig": "hopper_mjx.signals",
+    "SensorConfig": "hopper_mjx.hardware.signals",
     "Sim": "hopper_mjx.sim",
     "State": "hopper_mjx.sim",
     "Trajectory": "hopper_mjx.sim",
     "URDFError": "hopper_mjx.model",
+    "configure": "hopper_mjx.shell.jaxsetup",
     "gravity_vectors": "hopper_mjx.model.world",
     "load": "hopper_mjx.model",
 }

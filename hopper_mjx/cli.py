@@ -1,7 +1,7 @@
 """The options the `python -m hopper_mjx.*` commands share, checked whole: the simulated batch
 (gravities or worlds, size, controller, model), the engine and the live options.
 
-The value, path and name checks themselves live below, in `hopper_mjx.checks` (re-exported here
+The value, path and name checks themselves live below, in `hopper_mjx.shell.checks` (re-exported here
 for the tools); a bad value is one line on stderr, `error: ...`, exit code 2, nothing written,
 before any model is built or compiled.
 """
@@ -15,8 +15,10 @@ from pathlib import Path
 
 import numpy as np
 
-from hopper_mjx import budget, registry, runtime
-from hopper_mjx.checks import (  # noqa: F401  re-exported: the tools use them beside the options
+from hopper_mjx import registry
+from hopper_mjx.scenario import Physics, Scenario
+from hopper_mjx.shell import budget, jaxsetup
+from hopper_mjx.shell.checks import (  # noqa: F401  re-exported: the tools use them beside the options
     DEFAULT_TIMESTEP,
     MAX_TIMESTEP,
     ArgumentParser,
@@ -35,7 +37,6 @@ from hopper_mjx.checks import (  # noqa: F401  re-exported: the tools use them b
     parser,
     warn_diverged,
 )
-from hopper_mjx.scenario import Physics, Scenario
 from hopper_mjx.terrain.spec import check_terrain, terrain_help
 
 
@@ -56,7 +57,7 @@ def check_controller(text: str, height: float = 0.0, speed=(0.0, 0.0), physics: 
     from hopper_mjx.model.robot import standing_height
 
     physics = physics or Physics()
-    runtime.configure()  # reading the policy is the command's first JAX computation
+    jaxsetup.configure()  # reading the policy is the command's first JAX computation
     try:
         config = policy.load(path)[1]  # the parameters too: a damaged copy is refused before any compile
         monoped.same_robot(config.robot, physics.mj_model, f"the policy {path}")
@@ -179,11 +180,11 @@ def check_ground(text: str, n: int = 1):
 
 
 def check_randomize(text: str | None, engines):
-    """--randomize read (`hopper_mjx.randomize.Spec`, or None without it): an unknown parameter, a bad
+    """--randomize read (`hopper_mjx.variation.spec.Spec`, or None without it): an unknown parameter, a bad
     distribution, or an engine that cannot take the varied fields raise ValueError."""
     if not text:
         return None
-    from hopper_mjx.randomize import Spec, check_engine_varies
+    from hopper_mjx.variation.spec import Spec, check_engine_varies
 
     try:
         spec = Spec.parse(text)
@@ -218,7 +219,7 @@ def check_delay(physics: Physics, duration: float | None, n: int = 1, seed: int 
         longest = physics.longest_delay(name) * physics.timestep
         if longest < duration:  # the distribution cannot draw so long a delay: no draws needed
             continue
-        from hopper_mjx.model.variation import draw_controls
+        from hopper_mjx.variation.draw import draw_controls
 
         drawn = draw_controls(physics.variation, physics.mj_model, n, seed)[name]
         i = int(np.argmax(drawn))
@@ -264,7 +265,7 @@ def check_physics(args, model_options: dict | None = None, *, engines: list[str]
     physics = Physics(urdf=args.urdf, model_options=dict(model_options or {}), ground=ground, variation=variation,
                       engine=args.engine, motor=args.motor, action_delay=args.action_delay / 1e3, push=push)
     if push is not None:
-        from hopper_mjx.pushes import Pushes
+        from hopper_mjx.hardware.pushes import Pushes
 
         try:
             Pushes.of(*push, physics.timestep)
@@ -274,7 +275,7 @@ def check_physics(args, model_options: dict | None = None, *, engines: list[str]
         raise ValueError(f"--action-delay must be a whole number of physics steps ({physics.timestep * 1e3:g} ms), "
                          f"got {args.action_delay:g} ms")
     if args.urdf is not None or physics.motor != registry.DEFAULT_MOTOR:
-        from hopper_mjx.model.checks import check_urdf  # MuJoCo's import waits for the cheap checks
+        from hopper_mjx.model.urdf_checks import check_urdf  # MuJoCo's import waits for the cheap checks
 
         leg = check_urdf(args.urdf)
         no_speed = [t.joint for t in leg.transmissions if not math.isfinite(t.velocity)]
@@ -282,11 +283,11 @@ def check_physics(args, model_options: dict | None = None, *, engines: list[str]
             raise ValueError(f"--motor dc: the URDF gives no <limit velocity> (the motor's no-load speed) for "
                              f"{', '.join(no_speed)}")
     if variation is not None:  # drawn once now (MuJoCo's compile, no JAX): a value out of its range is refused
-        from hopper_mjx.model import variation as draws
+        from hopper_mjx.variation import draw
 
         try:  # and a leg that cannot reach the floor
-            draws.stances(physics.mj_model, draws.draw(variation, physics.mj_model, n, seed))
-            draws.draw_controls(variation, physics.mj_model, n, seed)
+            draw.stances(physics.mj_model, draw.draw(variation, physics.mj_model, n, seed))
+            draw.draw_controls(variation, physics.mj_model, n, seed)
         except ValueError as err:
             raise ValueError(f"--randomize: {err}") from None
     return physics
@@ -381,7 +382,7 @@ def check_rates(flags: str, sensors, batch: Scenario, duration: float | None = N
 def check_whole_periods(option: str, steps: int, timestep: float) -> None:
     """`steps` (an option's value) holds a whole number of every default stream's period at `timestep`: a
     rollout records its streams over whole periods."""
-    from hopper_mjx.signals import SensorConfig  # here: it imports JAX
+    from hopper_mjx.hardware.signals import SensorConfig  # here: it imports JAX
 
     whole = SensorConfig().whole(timestep)
     if steps % whole:

@@ -99,15 +99,15 @@ class HopCounter:
         self.fallen = np.zeros(n, dtype=bool)
 
     def update(self, contact_flag: np.ndarray, qpos_end: np.ndarray, diverged: np.ndarray) -> tuple[str, ...]:
-        from hopper_mjx import metrics
+        from hopper_mjx.metrics import hops
 
         flags = np.asarray(contact_flag, bool)
         if self.last_flag is not None:
             flags = np.concatenate([self.last_flag[:, None], flags], axis=1)
-        landed, self.airborne = metrics.landings(flags, self.airborne)
+        landed, self.airborne = hops.landings(flags, self.airborne)
         self.hops += np.where(self.fallen, 0, landed)
         self.last_flag = flags[:, -1]
-        self.fallen |= metrics.fallen(qpos_end)
+        self.fallen |= hops.fallen(qpos_end)
         return tuple("diverged" if d else "fallen" if f else "hopping" if h else "standing"
                      for d, f, h in zip(diverged, self.fallen, self.hops > 0))
 
@@ -119,7 +119,7 @@ class LiveBatch:
                  variation: dict | None = None, instances: dict | None = None):
         """variation: each instance's robot ({model field: (N, ...)}); instances: its motors and sensors
         (`Sim.per_instance`), both kept over resets."""
-        from hopper_mjx import signals
+        from hopper_mjx.hardware import signals
         from hopper_mjx.sim import steps_for
 
         self.sim, self.controller, self.params = sim, controller, params

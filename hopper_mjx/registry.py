@@ -1,7 +1,7 @@
 """The names a user types, each defined once: controllers, engines, tasks, terrains, motors, varied parameters,
 the policy prefix.
 
-The factories (`control.make`, `engine.make`, `envs.make`, `model.variation.draw`) dispatch on
+The factories (`control.make`, `engine.make`, `envs.make`, `variation.draw.draw`) dispatch on
 these names, and every `--controller`, `--engine`, `--task` and `--randomize` choice, help text
 and error message is derived from them. This module imports only the standard library's `typing`,
 so that a command can refuse a bad name before JAX or MuJoCo is loaded.
@@ -74,7 +74,7 @@ TASK_REFERENCES = {
 
 class Parameter(NamedTuple):
     """A robot parameter drawn per instance (`--randomize NAME=...`): the MuJoCo model field it sets,
-    on which elements (model.variation resolves them), its unit and the range a drawn value must lie in."""
+    on which elements (variation.draw resolves them), its unit and the range a drawn value must lie in."""
 
     field: str
     elements: str  # bodies (every robot link), base, hip, thigh, shank, foot, joints, actuators, foot_pair, foot_geom

@@ -7,7 +7,7 @@ The still shows the robot in its initial stance (on a --terrain, from further, w
 ahead); the video (MP4 or GIF, by the
 file name) shows one instance simulated by the core. Headless machines render
 through EGL (software Mesa on a CPU-only box): importing `hopper_mjx` chooses it
-before MuJoCo is loaded, unless MUJOCO_GL is set (see `hopper_mjx.startup`).
+before MuJoCo is loaded, unless MUJOCO_GL is set (see `hopper_mjx.shell.startup`).
 """
 
 from __future__ import annotations
@@ -19,9 +19,10 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
-from hopper_mjx import cli, command, files, runtime
+from hopper_mjx import cli
 from hopper_mjx.model import robot, scene
 from hopper_mjx.scenario import Physics, Scenario
+from hopper_mjx.shell import files, jaxsetup, process
 
 VIDEO_SUFFIXES = (".mp4", ".gif")
 TRACK_HEIGHT = 0.45  # m: the camera looks at the leg's middle, not at the base
@@ -92,7 +93,7 @@ def robot_pixels(m: mujoco.MjModel, qpos, **size) -> np.ndarray:
 
 
 def video_sensors(args):
-    from hopper_mjx import signals
+    from hopper_mjx.hardware import signals
 
     return signals.SensorConfig.uniform(args.fps)
 
@@ -170,7 +171,7 @@ def main(argv=None) -> int:
             cli.check_writable("--still", args.still)
         batch = check_video(args) if args.video is not None else check_batch(args)
         physics = batch.physics
-        runtime.configure()
+        jaxsetup.configure()
         m = scene_model(physics)
         if args.still is not None:
             import imageio.v2 as imageio
@@ -190,4 +191,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(command.run(main))
+    sys.exit(process.run(main))

@@ -27,8 +27,8 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from hopper_mjx import registry
-from hopper_mjx.randomize import Spec
 from hopper_mjx.terrain import FLAT, Ground
+from hopper_mjx.variation.spec import Spec
 
 
 class Built(NamedTuple):
@@ -48,7 +48,7 @@ class Physics:
     ground: Ground = FLAT  # `terrain.parse` of a --terrain spec; under seed=each the model holds instance 0's
     variation: Spec | None = None  # per-instance robot parameters, drawn per instance (None: the URDF's robot)
     engine: str = registry.DEFAULT_ENGINE
-    motor: str = registry.DEFAULT_MOTOR  # a registry.MOTORS name: what the joints' motors are (hopper_mjx.actuators)
+    motor: str = registry.DEFAULT_MOTOR  # a registry.MOTORS name (hopper_mjx.hardware.actuators)
     action_delay: float = 0.0  # s from a command (torque, or a policy's targets) to the motors, whole steps
     push: tuple[float, float] | None = None  # (interval s, speed m/s) of random horizontal pushes during runs
 
@@ -79,8 +79,8 @@ class Physics:
         """The batched core (hopper_mjx.sim.Sim) on this physics' model and engine; `controls`: the drawn
         control parameters of the batch it will run (`Scenario.controls`), whose longest delays size its
         delay lines (without them, the distributions' largest values)."""
-        from hopper_mjx.pushes import Pushes
-        from hopper_mjx.sensing import FIGURES, Sensing
+        from hopper_mjx.hardware.pushes import Pushes
+        from hopper_mjx.hardware.sensor_noise import FIGURES, Sensing
         from hopper_mjx.sim import Sim
 
         pushes = None if self.push is None else Pushes.of(*self.push, self.timestep)
@@ -155,18 +155,18 @@ class Scenario:
         without a variation); raises ValueError naming a parameter that drew a value outside its range."""
         if not self.physics.variation:
             return {}
-        from hopper_mjx.model import variation
+        from hopper_mjx.variation import draw
 
-        return variation.draw(self.physics.variation, mj_model, self.n, self.seed)
+        return draw.draw(self.physics.variation, mj_model, self.n, self.seed)
 
     def controls(self, mj_model) -> dict[str, np.ndarray]:
         """{control parameter: (N,) or (N, 3)} of each instance's controller, motors and sensors, drawn with
-        the scenario's seed (`model.variation.draw_controls`; empty without any)."""
+        the scenario's seed (`variation.draw.draw_controls`; empty without any)."""
         if not self.physics.variation:
             return {}
-        from hopper_mjx.model import variation
+        from hopper_mjx.variation import draw
 
-        return variation.draw_controls(self.physics.variation, mj_model, self.n, self.seed)
+        return draw.draw_controls(self.physics.variation, mj_model, self.n, self.seed)
 
     def grounds(self) -> np.ndarray | None:
         """(N, nrow, ncol) m: each instance's own ground under a --terrain with seed=each (drawn with the
@@ -175,7 +175,7 @@ class Scenario:
 
     def varied(self, mj_model) -> dict[str, np.ndarray]:
         """`draws` and the constants MuJoCo derives from them, per instance: what `Sim.reset` takes."""
-        from hopper_mjx.model.variation import with_constants
+        from hopper_mjx.variation.draw import with_constants
 
         return with_constants(mj_model, self.draws(mj_model))
 
@@ -193,7 +193,7 @@ class Scenario:
                                           pd=pd)
             return policy.policy_controller(sim.mj_model, path), params
         from hopper_mjx import control
-        from hopper_mjx.model.variation import legs
+        from hopper_mjx.variation.draw import legs
 
         # Raibert models each drawn leg (the others take none): measured only for it, a few ms per distinct leg.
         own = legs(sim.mj_model, self.draws(sim.mj_model)) if self.controller == "raibert" else None

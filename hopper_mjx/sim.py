@@ -25,16 +25,17 @@ import numpy as np
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
 from hopper_mjx import engine as engines
-from hopper_mjx import registry, signals
-from hopper_mjx.actuators import Actuation, Drive, Motor
+from hopper_mjx import registry
 from hopper_mjx.control.base import Controller, CState, to_ctrl, zero_torque
-from hopper_mjx.model import variation as model_variation
+from hopper_mjx.hardware import signals
+from hopper_mjx.hardware.actuators import Actuation, Drive, Motor
+from hopper_mjx.hardware.pushes import Pushes, push
+from hopper_mjx.hardware.sensor_noise import FIGURES, Sensing, SensorState
+from hopper_mjx.hardware.sensor_noise import add_noise as sensor_noise
 from hopper_mjx.model import world
 from hopper_mjx.model.robot import Robot
-from hopper_mjx.pushes import Pushes, push
-from hopper_mjx.sensing import FIGURES, Sensing, SensorState
-from hopper_mjx.sensing import add_noise as sensor_noise
 from hopper_mjx.terrain import HFIELD, from_model
+from hopper_mjx.variation import draw
 
 gravity_vectors = world.gravity_vectors  # the gravity convention lives beside the world files
 
@@ -49,10 +50,10 @@ class State(NamedTuple):
     key: jax.Array  # (N, 2) uint32, per-instance PRNG key for sensor noise
     cstate: CState  # the controller's state (with its per-instance parameters)
     diverged: jax.Array  # (N,) bool, the instance's state went non-finite
-    drive: Drive | tuple = ()  # the motors' figures and state (hopper_mjx.actuators); () for ideal motors
+    drive: Drive | tuple = ()  # the motors' figures and state (hopper_mjx.hardware.actuators); () for ideal motors
     step: jax.Array | tuple = ()  # (N,) int32 physics steps taken, for the pushes and sensor noise; () without
-    sense: SensorState | tuple = ()  # the sensors' figures and delay line (hopper_mjx.sensing); () for exact ones
-    # Model field -> (N, ...) values of each instance's robot (`model.variation`); empty: every instance is
+    sense: SensorState | tuple = ()  # sensor figures, delay line (hopper_mjx.hardware.sensor_noise); () if exact
+    # Model field -> (N, ...) values of each instance's robot (`variation.draw`); empty: every instance is
     # the nominal robot, and the compiled step is the one without variation.
     variation: dict = {}
     # (N, nrow, ncol) m: each instance's own ground on the model's height-field grid; (): every instance on
@@ -154,13 +155,13 @@ class Sim:
         params: per-instance controller parameters (leading axis N) or None;
         motor: per-instance motor figures (`self.actuation.motor(N, ...)`), default the URDF's
         with the Sim's delay; variation: {model field: (N, ...)} of each instance's robot
-        (`model.variation.with_constants`); sensing: {"delay": (N,) steps, and `sensing.FIGURES`}
+        (`variation.draw.with_constants`); sensing: {"delay": (N,) steps, and `sensing.FIGURES`}
         of each instance's sensors (default prompt and exact); ground: (N, nrow, ncol) m, each instance's
         heights on the model's height-field grid (default: the model's own ground for every instance).
         """
         g = _check_gravity(gravity)
         n = g.shape[0]
-        own = None if qpos is not None or not variation else model_variation.stances(self.mj_model, variation)
+        own = None if qpos is not None or not variation else draw.stances(self.mj_model, variation)
         variation = self._check_variation(variation or {}, n)
         ground = () if ground is None else self._check_ground(ground, n)
         qpos = (self.robot.stance_qpos if own is None else own) if qpos is None else qpos
@@ -331,7 +332,7 @@ class Sim:
 
 def per_instance(controls: dict, actuation: Actuation, sensing: Sensing, timestep: float, delay_steps: int = 0) -> dict:
     """{"motor": `Motor`, "sensing": {"delay": steps, `sensing.FIGURES`...}} of N instances' drawn control
-    parameters ({name: (N, ...)}, `model.variation.draw_controls`; delays in ms, to whole steps of `timestep` s),
+    parameters ({name: (N, ...)}, `variation.draw.draw_controls`; delays in ms, to whole steps of `timestep` s),
     each only when drawn and its model adds something ({} when neither); `delay_steps`: the action delay of
     instances that draw none. The PD factors go to the controller (`control.base.pd_scale`)."""
     step_ms = timestep * 1e3

@@ -17,13 +17,14 @@ import sys
 
 import numpy as np
 
-from hopper_mjx import cli, command, runtime
-from hopper_mjx.files import atomic_write
+from hopper_mjx import cli
 from hopper_mjx.scenario import Scenario
+from hopper_mjx.shell import jaxsetup, process
+from hopper_mjx.shell.files import atomic_write
 
 
 def sensor_config(args):
-    from hopper_mjx import signals
+    from hopper_mjx.hardware import signals
 
     counts, spacing = cli.parse_scan(args.scan)
     return dataclasses.replace(signals.SensorConfig.uniform(args.rate, gyro_noise=args.gyro_noise,
@@ -34,7 +35,7 @@ def sensor_config(args):
 def arrays(traj, gravity, diverged, drive=(), push=None, drawn: dict | None = None,
            controls: dict | None = None, sensors=None) -> dict[str, np.ndarray]:
     """The arrays saved to the .npz file, from a trajectory of the batch (and the final motors' `drive`,
-    `hopper_mjx.actuators.Drive`: each instance's motor figures and the energy drawn; the pushes'
+    `hopper_mjx.hardware.actuators.Drive`: each instance's motor figures and the energy drawn; the pushes'
     (interval s, speed m/s); `drawn`: each instance's robot ({model field: (N, ...)}, `Scenario.draws`),
     saved as `model_<field>`; `controls`: its controller's, motors' and sensors' drawn parameters
     (`Scenario.controls`), saved under their names: `kp_scale`, `action_delay` (ms), ...); on a terrain,
@@ -131,7 +132,7 @@ def main(argv=None) -> int:
         batch = cli.check_batch(args)
         cli.check_rates("--rate", sensor_config(args), batch, args.duration)
         with foxglove.listening(args, live.spread(len(batch.gravity), live.SHOWN)) as stream:
-            runtime.configure()
+            jaxsetup.configure()
             saved = run(args, batch) if stream is None else run_live(args, batch, stream)
     except ValueError as err:  # includes URDFError and a busy --foxglove port
         return cli.fail(err)
@@ -143,4 +144,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(command.run(main))
+    sys.exit(process.run(main))

@@ -35,8 +35,9 @@ from contextlib import contextmanager
 import mujoco
 import numpy as np
 
-from hopper_mjx import cli, command, runtime
+from hopper_mjx import cli
 from hopper_mjx.live import CHUNK_TIME, HEIGHT_STEP, SHOWN, SPEED_STEP, LiveBatch, LiveRun, spread
+from hopper_mjx.shell import jaxsetup, process
 
 SPACING = 1.5  # m between neighbouring robots on the display grid
 GROUND_GAP = 0.5  # m between neighbouring copies of a terrain on the display grid
@@ -264,7 +265,7 @@ def main(argv=None) -> int:
             if why:
                 return cli.fail(f"view needs a display: {why}; for pictures and videos without one use "
                                 "python -m hopper_mjx.render")
-            runtime.configure()
+            jaxsetup.configure()
             batch = LiveBatch.build(checked)
             if stream is not None:
                 stream.attach(batch)
@@ -390,4 +391,4 @@ def watch(args, physics, batch, shown: list[int], stream) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(command.run(main))
+    sys.exit(process.run(main))

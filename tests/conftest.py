@@ -2,9 +2,9 @@
 
 import pytest
 
-from hopper_mjx import runtime
+from hopper_mjx.shell import jaxsetup
 
-runtime.configure()  # before any JAX computation: 2 host devices here, persistent compile cache
+jaxsetup.configure()  # before any JAX computation: 2 host devices here, persistent compile cache
 
 # The files that take longest with an empty compile cache, longest first: each file's setup, call and teardown times
 # summed from `make test`'s parallel phase run with `--durations=0` (28 Nov, 18:58-19:24 UTC, 2 cores). `make test`

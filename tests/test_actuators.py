@@ -9,9 +9,9 @@ import mujoco
 import numpy as np
 import pytest
 
-from hopper_mjx import signals
-from hopper_mjx.actuators import Actuation, envelope
 from hopper_mjx.control.base import HOLD_GAINS, Controller, hold
+from hopper_mjx.hardware import signals
+from hopper_mjx.hardware.actuators import Actuation, envelope
 from hopper_mjx.sim import Sim, gravity_vectors
 
 G = np.array([9.81, 1.62])
@@ -169,7 +169,7 @@ def test_pushes_change_the_base_velocity_by_their_speed_at_their_times(mj_model)
     where it jumps by exactly the push speed, every `interval`, in directions that differ by instance;
     the same seed gives the same pushes."""
     from hopper_mjx.control.base import zero_torque
-    from hopper_mjx.pushes import Pushes
+    from hopper_mjx.hardware.pushes import Pushes
 
     sim = Sim(mj_model, engine="chain", pushes=Pushes.of(0.05, 0.3, 1e-3))
     limp = zero_torque(sim.layout)

@@ -9,8 +9,8 @@ import mujoco
 import numpy as np
 import pytest
 
-from hopper_mjx import metrics
 from hopper_mjx.control import balance as bal
+from hopper_mjx.metrics import hops
 from hopper_mjx.model.layout import Layout
 from hopper_mjx.sim import gravity_vectors
 
@@ -72,7 +72,7 @@ def test_the_controller_holds_the_equilibrium_in_the_core(sim):
     start = np.stack([bal.equilibrium(sim.mj_model, g)[0] for g in GRAVITIES])
     _, traj = sim.run(gravity_vectors(np.array(GRAVITIES)), controller, params, duration=2.0, qpos=start)
     qpos = np.asarray(traj.qpos)
-    assert not metrics.fallen(qpos).any()
-    roll, pitch = metrics.roll_pitch(qpos[:, :, 3:7])
+    assert not hops.fallen(qpos).any()
+    roll, pitch = hops.roll_pitch(qpos[:, :, 3:7])
     assert np.abs(roll).max() < 1e-3 and np.abs(pitch).max() < 1e-3
     assert np.abs(qpos[:, :, 2] - start[:, None, 2]).max() < 1e-3

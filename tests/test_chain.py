@@ -20,8 +20,10 @@ import pytest
 from mujoco import mjx
 
 from hopper_mjx import model
-from hopper_mjx.engine import chain, chain_constraint, chain_smooth
-from hopper_mjx.engine.chain_model import NotChain, describe
+from hopper_mjx.engine import chain
+from hopper_mjx.engine.chain import constraint as chain_constraint
+from hopper_mjx.engine.chain import smooth as chain_smooth
+from hopper_mjx.engine.chain.model import NotChain, describe
 from hopper_mjx.engine.mjx import MjxEngine
 from hopper_mjx.model.robot import stance_qpos
 
@@ -396,15 +398,15 @@ CHAIN_ROBOT = ("body_mass=scale(0.7,1.3),body_inertia=scale(0.7,1.3),base_com=-0
 
 @pytest.mark.parametrize("text", ["foot_friction=0.3,dof_damping=0.02", CHAIN_ROBOT + ",dof_frictionloss=0..3"])
 def test_float64_stages_with_a_run_time_robot_match_mujoco_c(seed_model, text):
-    """The chain takes an instance's robot as run-time values (per-instance robots, hopper_mjx.model.variation):
+    """The chain takes an instance's robot as run-time values (per-instance robots, hopper_mjx.variation.draw):
     every stage agrees with MuJoCo C given a model holding those values, with mj_setConst's constants. Dry joint
     friction (half the states at rest): its rows, sticking and slipping, and what the solver makes of them."""
-    from hopper_mjx.model import variation
-    from hopper_mjx.randomize import Spec
+    from hopper_mjx.variation import draw
+    from hopper_mjx.variation.spec import Spec
 
     spec = Spec.parse(text)
-    values = variation.with_constants(seed_model, variation.draw(spec, seed_model, 1, seed=2))
-    varied = variation.instance_model(seed_model, values, 0)
+    values = draw.with_constants(seed_model, draw.draw(spec, seed_model, 1, seed=2))
+    varied = draw.instance_model(seed_model, values, 0)
     states = at_rest(random_states(varied, N_STATES, seed=7))  # contacts and limits of this robot
     c = mujoco_c(converged(varied, 50), *states)
     with jax.enable_x64(True):

@@ -22,8 +22,11 @@ import pytest
 from hfield_model import hfield_model
 from test_chain import HOLD_D, HOLD_P, STAGES, chain_stages, converged, mujoco_c
 
-from hopper_mjx import metrics
-from hopper_mjx.engine import chain, chain_constraint, chain_hfield, chain_smooth
+from hopper_mjx.engine import chain
+from hopper_mjx.engine.chain import constraint as chain_constraint
+from hopper_mjx.engine.chain import hfield as chain_hfield
+from hopper_mjx.engine.chain import smooth as chain_smooth
+from hopper_mjx.metrics import hops
 from hopper_mjx.model.robot import stance_qpos
 
 HALF = 1.0  # m: the terrains span 2 m x 2 m
@@ -310,7 +313,7 @@ def test_trajectories_on_terrain_match_mujoco_c(trajectories):
     cases, ours, theirs, touched = trajectories
     assert touched.any(axis=0).all(), "every run includes the touchdown"
     err = np.abs(ours[:, :, :3] - theirs[:, :, :3]).max(axis=(0, 2))
-    fell = metrics.fallen(theirs).any(axis=0)
+    fell = hops.fallen(theirs).any(axis=0)
     for name in TERRAINS:
         worst = max(e for (t, _, _), e in zip(cases, err) if t == name)
         falls = sum(f for (t, _, _), f in zip(cases, fell) if t == name)

@@ -21,8 +21,11 @@ import pytest
 from hfield_model import hfield_model
 from test_chain_terrain import GRAVITIES, HALF, TERRAINS, _first_contact_height, _step_fn, terrain
 
-from hopper_mjx.engine import chain, chain_constraint, chain_hfield_box, chain_smooth
-from hopper_mjx.engine.chain_hfield import block_start
+from hopper_mjx.engine import chain
+from hopper_mjx.engine.chain import constraint as chain_constraint
+from hopper_mjx.engine.chain import hfield_box as chain_hfield_box
+from hopper_mjx.engine.chain import smooth as chain_smooth
+from hopper_mjx.engine.chain.hfield import block_start
 from hopper_mjx.model.robot import stance_qpos
 
 TIGHT_CCD = 1e-14

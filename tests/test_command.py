@@ -1,4 +1,4 @@
-"""What a command's process sets up (hopper_mjx.command): stderr without XLA's false alarms, and only those.
+"""What a command's process sets up (hopper_mjx.shell.process): stderr without XLA's false alarms, and only those.
 
 A healthy run from a warm compile cache prints no error- or warning-level line: XLA:CPU checks the
 tuning preferences it compiled with (+prefer-no-gather, +prefer-no-scatter) as if they were CPU
@@ -13,7 +13,7 @@ import threading
 
 from test_bad_inputs import ENV
 
-from hopper_mjx import command
+from hopper_mjx.shell import process
 
 ALARM = re.compile(r"^[EWF]\d{4} |SIGILL", re.M)  # an XLA C++ log line of level warning and up, or the alarm
 FALSE = ("E1124 20:17:20.346371   10668 cpu_aot_loader.cc:220] Loading XLA:CPU AOT result. Target machine feature "
@@ -23,10 +23,10 @@ REAL = FALSE.replace("+prefer-no-gather", "+avx512f")  # compiled for an ISA thi
 
 
 def forwarded(text: bytes) -> bytes:
-    """What `command._forward` passes on of `text`, written in two pieces (a line split between reads)."""
+    """What `process._forward` passes on of `text`, written in two pieces (a line split between reads)."""
     read, write = os.pipe()
     out_read, out_write = os.pipe()
-    thread = threading.Thread(target=command._forward, args=(read, out_write))
+    thread = threading.Thread(target=process._forward, args=(read, out_write))
     thread.start()
     os.write(write, text[:50])
     os.write(write, text[50:])
@@ -69,11 +69,11 @@ def test_a_run_from_a_warm_cache_prints_no_alarm(tmp_path):
 def test_only_the_packages_commands_arm_the_signals(monkeypatch):
     """Importing the package from Python (here: pytest) changes no signal handler."""
     monkeypatch.setattr(sys, "orig_argv", [sys.executable, "-m", "hopper_mjx.sweep", "gravity"])
-    assert command.is_command()
+    assert process.is_command()
     monkeypatch.setattr(sys, "orig_argv", [sys.executable, "-m", "pytest", "-q"])
     monkeypatch.setattr(sys, "argv", ["pytest", "-q"])
-    assert not command.is_command()
-    monkeypatch.setattr(sys, "orig_argv", [sys.executable, str(command.PACKAGE_ROOT / "experiments" / "train.py")])
-    monkeypatch.setattr(sys, "argv", [str(command.PACKAGE_ROOT / "experiments" / "train.py")])
-    assert command.is_command()
-    assert not command._armed.is_set()  # this test process was never armed
+    assert not process.is_command()
+    monkeypatch.setattr(sys, "orig_argv", [sys.executable, str(process.PACKAGE_ROOT / "experiments" / "train.py")])
+    monkeypatch.setattr(sys, "argv", [str(process.PACKAGE_ROOT / "experiments" / "train.py")])
+    assert process.is_command()
+    assert not process._armed.is_set()  # this test process was never armed

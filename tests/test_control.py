@@ -13,8 +13,10 @@ import mujoco
 import numpy as np
 import pytest
 
-from hopper_mjx import metrics, model, signals
+from hopper_mjx import model
 from hopper_mjx.control import kinematics, pid, raibert
+from hopper_mjx.hardware import signals
+from hopper_mjx.metrics import hops
 from hopper_mjx.model.layout import Layout
 from hopper_mjx.model.robot import LegGeometry
 from hopper_mjx.sim import Sim, gravity_vectors
@@ -212,7 +214,7 @@ def _hop(sim, height=HEIGHT, commands=COMMANDS, qvel=None):
     state = sim.reset(gravity_vectors(gravity), controller=controller, params=params, qvel=qvel)
     sensors = signals.SensorConfig(state_rate=RATE, contact_rate=RATE)
     final, traj = sim.rollout(state, controller, steps=int(DURATION / sim.layout.timestep), sensors=sensors)
-    met = metrics.hop_metrics(traj, gravity, command_speed=speed, standing_height=sim.robot.standing_height,
+    met = hops.hop_metrics(traj, gravity, command_speed=speed, standing_height=sim.robot.standing_height,
                               work=final.cstate.work, mass=sim.layout.total_mass)
     return gravity, speed, final, traj, met
 
@@ -321,7 +323,7 @@ def test_survives_random_kicks_over_gravities(sim, mj_model):
     params = raibert.raibert_params(ROBUST_N, height=HEIGHT)
     state = sim.reset(gravity_vectors(gravity), controller=controller, params=params, qvel=qvel)
     final, traj = sim.rollout(state, controller, steps=int(ROBUST_SECONDS / sim.layout.timestep))
-    met = metrics.hop_metrics(traj, gravity, standing_height=sim.robot.standing_height)
+    met = hops.hop_metrics(traj, gravity, standing_height=sim.robot.standing_height)
     survived = np.mean(~met["fell"] & ~np.asarray(final.diverged))
     print(f"{survived:.1%} of {ROBUST_N} survived; fell at g = {np.round(np.sort(gravity[met['fell']]), 2)}")
     assert survived >= 0.95, f"{survived:.1%} survived; fell at g = {np.round(gravity[met['fell']], 2)}"
@@ -332,7 +334,8 @@ def test_every_task_has_a_reference_that_meets_its_threshold(sim):
     task redefined because standing still under kicks is ill-posed) keeps the kicked robots up, in place,
     hopping low: stand's threshold at Earth, Mars and Moon (4 kicked instances each, 20 s; the documented
     64-instance sweep is in docs/control.md). Same shapes as `hopping`: no new compile."""
-    from hopper_mjx import registry, thresholds
+    from hopper_mjx import registry
+    from hopper_mjx.metrics import thresholds
     from hopper_mjx.sweep.grid import SweepSpec, expand
 
     assert set(registry.TASK_REFERENCES) == set(registry.TASKS)

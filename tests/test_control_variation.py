@@ -9,12 +9,12 @@ import mujoco
 import numpy as np
 import pytest
 
-from hopper_mjx import signals
 from hopper_mjx.control.base import HOLD_GAINS, Controller, hold, pd_scale
-from hopper_mjx.model import variation
-from hopper_mjx.randomize import Spec
-from hopper_mjx.sensing import Sensing
+from hopper_mjx.hardware import signals
+from hopper_mjx.hardware.sensor_noise import Sensing
 from hopper_mjx.sim import Sim, gravity_vectors
+from hopper_mjx.variation import draw
+from hopper_mjx.variation.spec import Spec
 
 STEPS = 450  # 0.45 s: the drop from DROP lands at about 0.25 s, so 200 steps of stance follow
 DROP = 0.25  # m added to the stance's clearance
@@ -141,7 +141,7 @@ def test_control_parameters_draw_from_the_seed_and_land_where_they_say(mj_model)
     same seed the same values; adding them leaves the model fields' draws as they were."""
     spec = Spec.parse("foot_friction=0.4..1.0,kp_scale=scale(0.5,1.5),action_delay=0..10,gyro_bias=normal(0,0.01),"
                       "motor_stall_torque=scale(0.8,1.2)")
-    drawn = variation.draw_controls(spec, mj_model, 50, 4)
+    drawn = draw.draw_controls(spec, mj_model, 50, 4)
     assert {k: v.shape for k, v in drawn.items()} == {"kp_scale": (50, 3), "action_delay": (50,),
                                                       "gyro_bias": (50, 3), "motor_stall_torque": (50, 3)}
     assert drawn["kp_scale"].min() >= 0.5 and drawn["kp_scale"].max() <= 1.5 and drawn["kp_scale"].std() > 0.2
@@ -150,13 +150,13 @@ def test_control_parameters_draw_from_the_seed_and_land_where_they_say(mj_model)
     effort = np.asarray(sim_layout(mj_model).effort_limit)
     ratio = drawn["motor_stall_torque"] / effort
     assert ratio.min() >= 0.8 and ratio.max() <= 1.2
-    again = variation.draw_controls(spec, mj_model, 50, 4)
+    again = draw.draw_controls(spec, mj_model, 50, 4)
     for k in drawn:
         np.testing.assert_array_equal(drawn[k], again[k])
     alone = Spec.parse("foot_friction=0.4..1.0")
-    np.testing.assert_array_equal(variation.draw(spec, mj_model, 50, 4)["pair_friction"],
-                                  variation.draw(alone, mj_model, 50, 4)["pair_friction"])
-    assert set(variation.control_columns(drawn)) >= {"kp_scale_haa", "kp_scale_kfe", "action_delay", "gyro_bias_z"}
+    np.testing.assert_array_equal(draw.draw(spec, mj_model, 50, 4)["pair_friction"],
+                                  draw.draw(alone, mj_model, 50, 4)["pair_friction"])
+    assert set(draw.control_columns(drawn)) >= {"kp_scale_haa", "kp_scale_kfe", "action_delay", "gyro_bias_z"}
 
 
 def sim_layout(mj_model):
@@ -167,4 +167,4 @@ def sim_layout(mj_model):
 
 def test_a_drawn_negative_value_is_refused_naming_the_instance(mj_model):
     with pytest.raises(ValueError, match=r"action_delay drew a value of -[\d.]+ ms for instance \d+; it must be >= 0"):
-        variation.draw_controls(Spec.parse("action_delay=normal(1,5)"), mj_model, 20, 0)
+        draw.draw_controls(Spec.parse("action_delay=normal(1,5)"), mj_model, 20, 0)

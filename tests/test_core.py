@@ -9,8 +9,9 @@ import mujoco
 import numpy as np
 import pytest
 
-from hopper_mjx import signals, simulate
+from hopper_mjx import simulate
 from hopper_mjx.control.base import hold, zero_torque
+from hopper_mjx.hardware import signals
 from hopper_mjx.sim import gravity_vectors, split_rollout_key
 
 G = np.array([1.62, 3.71, 9.81])  # Moon, Mars, Earth, m/s²

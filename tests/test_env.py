@@ -374,17 +374,17 @@ def test_env_and_metrics_falls_are_different_measures(mj_model):
     """The env ends an episode on the angle of the base z axis from vertical; the metrics call a fall
     on |roll| or |pitch| each. A base rolled and pitched 0.7 rad each (1.0 rad from vertical) is
     fallen to the env and upright to the metrics; the two are named apart."""
-    from hopper_mjx import metrics
+    from hopper_mjx.metrics import hops
 
     roll = pitch = 0.7
     # ZYX Euler (yaw 0): q = q_y(pitch) * q_x(roll), [w, x, y, z]
     cr, sr, cp, sp = np.cos(roll / 2), np.sin(roll / 2), np.cos(pitch / 2), np.sin(pitch / 2)
     quat = (cp * cr, cp * sr, sp * cr, -sp * sr)
     d = _state(envs.make("hop", mj_model), height=1.0, quat=quat)
-    np.testing.assert_allclose(metrics.roll_pitch(np.asarray(quat)), (roll, pitch), atol=1e-6)
+    np.testing.assert_allclose(hops.roll_pitch(np.asarray(quat)), (roll, pitch), atol=1e-6)
     np.testing.assert_allclose(float(monoped.tilt_from_vertical(d)), np.arccos(np.cos(roll) * np.cos(pitch)),
                                atol=1e-5)
     assert bool(monoped.fallen(MonopedConfig(), d))
-    assert max(roll, pitch) < metrics.FALL_ROLL_PITCH
+    assert max(roll, pitch) < hops.FALL_ROLL_PITCH
 
 

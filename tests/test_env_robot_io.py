@@ -13,9 +13,9 @@ import numpy as np
 import pytest
 
 from hopper_mjx import envs
-from hopper_mjx.actuators import envelope
 from hopper_mjx.envs import monoped
 from hopper_mjx.envs.wrappers import wrap_for_training
+from hopper_mjx.hardware.actuators import envelope
 
 N = 4  # environments, a multiple of the 2 host devices
 STEPS = 34  # env (= physics) steps; the episode ends after EPISODE of them and a fresh one starts
@@ -97,7 +97,7 @@ def test_the_drivers_track_the_late_targets_on_the_joints_as_they_are_now(run):
 
 def _true_rows(env, states):
     """The policy observation's robot signals of the TRUE state at each t (no noise, no delay)."""
-    from hopper_mjx import signals
+    from hopper_mjx.hardware import signals
 
     def one(d, info, action):
         return monoped.observe(env.layout, env.config, signals.observe(env.engine, env.engine.model, d),

@@ -75,7 +75,7 @@ class Stopped(NamedTuple):
 
 
 def armed(pid: int) -> bool:
-    """The process has armed its signal handling: `hopper_mjx.command.arm` started the watcher thread, the
+    """The process has armed its signal handling: `hopper_mjx.shell.process.arm` started the watcher thread, the
     first thread besides the main one. Before that, the interpreter is still starting up (on a loaded
     machine this can outlast 0.5 s) and a signal ends it as Python's default handler does."""
     lines = Path(f"/proc/{pid}/status").read_text().splitlines()

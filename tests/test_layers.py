@@ -13,17 +13,15 @@ PACKAGE = "hopper_mjx"
 # controllers -> metrics -> the batched core -> environments -> command-line support -> live runs
 # and ROS I/O -> tools.
 LAYERS = (
-    ("registry", "files", "budget"),  # the names; file writes; sizes
-    ("command",),  # what a command's process sets up: interrupts, stderr
-    ("startup",),  # what precedes importing MuJoCo
-    ("checks", "runtime", "randomize"),  # the command line's value, path and name checks; variation specs
+    ("registry",),  # the names a user types
+    ("shell",),  # the process around a command: argument checks, start-up, the runner, files, sizes, JAX settings
     ("terrain",),  # height grids, their spec and their MuJoCo hfield; the height scan
     ("model",),
+    ("variation",),  # the --randomize spec and its draw into model fields
     ("engine",),
-    ("signals",),
-    ("control", "actuators", "pushes", "sensing"),  # what the controllers command; what the motors make of it;
-    # shoves; what the sensors make of the state
-    ("metrics", "thresholds"),  # thresholds: each task's bar on the metrics, and the ranking of checkpoints
+    ("hardware",),  # what the sensors read and add, what the motors make of a command, pushes
+    ("control",),
+    ("metrics",),  # hop metrics; each task's bar on them, and the ranking of checkpoints
     ("sim",),
     ("envs",),
     ("scenario",),  # the typed description of a batch, built once: robot, worlds, engine, controller

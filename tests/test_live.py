@@ -315,11 +315,11 @@ def wait_for_line(proc, prefix: str, timeout: float = 240.0) -> str:
 def test_simulate_streams_live_what_it_saves(tmp_path, batch, monkeypatch):
     """`simulate --foxglove` plays the batch live: every value a client receives is in the .npz.
     Run in this process on this module's compiled batch (the same arguments build the same one)."""
-    from hopper_mjx import runtime
     from hopper_mjx.scenario import Built, Scenario
+    from hopper_mjx.shell import jaxsetup
 
     monkeypatch.setattr(Scenario, "build", lambda self: Built(batch.sim, batch.controller, batch.params))
-    monkeypatch.setattr(runtime, "configure", lambda: None)  # done once for the test process
+    monkeypatch.setattr(jaxsetup, "configure", lambda: None)  # done once for the test process
     with socket.socket() as probe:
         probe.bind(("127.0.0.1", 0))
         port = probe.getsockname()[1]

@@ -5,7 +5,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from hopper_mjx import metrics
+from hopper_mjx.metrics import hops
 
 G = 9.81
 DT = 0.01  # s between samples
@@ -42,7 +42,7 @@ def _trajectory(n_samples=1000):
 def test_periodic_hops_are_measured_exactly():
     traj, t = _trajectory()
     work = np.full(4, 100.0)
-    m = metrics.hop_metrics(traj, np.full(4, G), command_speed=(SPEED, 0.0), standing_height=STAND,
+    m = hops.hop_metrics(traj, np.full(4, G), command_speed=(SPEED, 0.0), standing_height=STAND,
                             work=work, mass=6.8)
     rise = G * (FLIGHT * DT / 2) ** 2 / 2  # v²/2g with v = g·T_f/2
     assert m["apex_height"][0] == pytest.approx(rise, rel=1e-9)
@@ -61,7 +61,7 @@ def test_periodic_hops_are_measured_exactly():
 
 def test_no_hops_gives_nan_not_garbage():
     traj, _ = _trajectory()
-    m = metrics.hop_metrics(traj, np.full(4, G), standing_height=STAND)
+    m = hops.hop_metrics(traj, np.full(4, G), standing_height=STAND)
     assert m["hops"][1] == 0 and not m["fell"][1]
     for key in ("apex_height", "flight_time", "stance_time", "hop_period", "duty_factor", "cost_of_transport"):
         assert np.isnan(m[key][1]), key
@@ -70,7 +70,7 @@ def test_no_hops_gives_nan_not_garbage():
 
 def test_falls_stop_the_count():
     traj, _ = _trajectory()
-    m = metrics.hop_metrics(traj, np.stack([np.zeros(4), np.zeros(4), -np.full(4, G)], axis=1),
+    m = hops.hop_metrics(traj, np.stack([np.zeros(4), np.zeros(4), -np.full(4, G)], axis=1),
                             standing_height=STAND)
     assert m["fell"].tolist() == [False, False, True, True]
     np.testing.assert_allclose(m["fall_time"][2:], 5.0)
@@ -84,7 +84,7 @@ def test_falls_stop_the_count():
 def test_energy_per_hop_is_the_mean_power_over_one_period():
     traj, t = _trajectory()
     work = np.array([100.0, 50.0, 100.0, 100.0])
-    m = metrics.hop_metrics(traj, np.full(4, G), standing_height=STAND, work=work, mass=6.8)
+    m = hops.hop_metrics(traj, np.full(4, G), standing_height=STAND, work=work, mass=6.8)
     power = work / (6.8 * t[-1])  # W/kg over the whole record
     np.testing.assert_allclose(m["mechanical_power"], power)
     assert m["energy_per_hop"][0] == pytest.approx(power[0] * (STANCE + FLIGHT) * DT)
@@ -97,12 +97,12 @@ def test_zero_gravity_floats_and_divides_by_nothing():
     traj, _ = _trajectory()
     gravity = np.array([[0, 0, 0], [0, 0, 0], [3.0, 0, -G], [0, 0, -G]], dtype=float)
     with np.errstate(all="raise"):
-        m = metrics.hop_metrics(traj, gravity, standing_height=STAND, work=np.full(4, 100.0), mass=6.8)
+        m = hops.hop_metrics(traj, gravity, standing_height=STAND, work=np.full(4, 100.0), mass=6.8)
     assert m["floating"].tolist() == [True, True, False, False]
     assert np.isnan(m["ballistic_flight_time"][0]) and np.isnan(m["cost_of_transport"][0])
     assert m["apex_height"][0] == pytest.approx(G * (FLIGHT * DT / 2) ** 2 / 2)  # geometry needs no g
     # The tilted gravity (3 m/s² sideways) times the flight by its downward part, as the level floor sees it.
-    straight = metrics.hop_metrics(traj, gravity[[3, 3, 3, 3]], standing_height=STAND)
+    straight = hops.hop_metrics(traj, gravity[[3, 3, 3, 3]], standing_height=STAND)
     assert m["ballistic_flight_time"][2] == straight["ballistic_flight_time"][2]
     assert m["ballistic_flight_time"][3] == pytest.approx(FLIGHT * DT, rel=1e-9)
 
@@ -111,7 +111,7 @@ def test_every_metric_is_its_own_array():
     """No metric is another under a second name (an alias can never disagree, so a test comparing
     the two could never fail)."""
     traj, _ = _trajectory()
-    m = metrics.hop_metrics(traj, np.full(4, G), standing_height=STAND, work=np.full(4, 100.0), mass=6.8)
+    m = hops.hop_metrics(traj, np.full(4, G), standing_height=STAND, work=np.full(4, 100.0), mass=6.8)
     names = sorted(m)
     for i, a in enumerate(names):
         for b in names[i + 1:]:
@@ -121,9 +121,9 @@ def test_every_metric_is_its_own_array():
 def test_bad_arguments():
     traj, _ = _trajectory()
     with pytest.raises(ValueError, match="gravity"):
-        metrics.hop_metrics(traj, np.full(3, G), standing_height=STAND)
+        hops.hop_metrics(traj, np.full(3, G), standing_height=STAND)
     with pytest.raises(ValueError, match="mass"):
-        metrics.hop_metrics(traj, np.full(4, G), standing_height=STAND, work=np.ones(4))
+        hops.hop_metrics(traj, np.full(4, G), standing_height=STAND, work=np.ones(4))
 
 
 def test_standing_height_is_the_stance_with_the_foot_down(mj_model):
@@ -136,7 +136,7 @@ def test_terrain_metrics_distance_obstacles_and_where_the_falls_happened():
     """Instance 0 travels 3 m along +x; 2 falls at 5 s, having reached x = 1.5 m; 1 stands still."""
     traj, t = _trajectory()
     blocks = np.array([[0.6, 0.7, 0.15], [1.2, 1.3, 0.05], [2.5, 2.6, 0.3], [np.nan] * 3])
-    out = metrics.terrain_metrics(traj, command_speed=(SPEED, 0.0), obstacles=blocks)
+    out = hops.terrain_metrics(traj, command_speed=(SPEED, 0.0), obstacles=blocks)
     end = SPEED * t[-1]
     assert out["distance_made_good"][0] == pytest.approx(end)
     assert out["distance_made_good"][1] == 0.0
@@ -145,15 +145,15 @@ def test_terrain_metrics_distance_obstacles_and_where_the_falls_happened():
     # A base that passes a block while its foot stays before it (tripping forward) has not cleared it.
     tripped = SimpleNamespace(qpos=traj.qpos, time=traj.time, contact=SimpleNamespace(
         flag=traj.contact.flag, pos=np.where(traj.contact.pos[..., :1] > 0.65, 0.0, traj.contact.pos)))
-    assert metrics.terrain_metrics(tripped, obstacles=blocks)["obstacles_cleared"].tolist() == [0, 0, 0, 0]
+    assert hops.terrain_metrics(tripped, obstacles=blocks)["obstacles_cleared"].tolist() == [0, 0, 0, 0]
     assert out["highest_cleared"][0] == pytest.approx(0.3)
     assert out["highest_cleared"][2] == pytest.approx(0.15)
     assert np.isnan(out["highest_cleared"][1])
     np.testing.assert_allclose(out["fall_x"], [np.nan, np.nan, SPEED * 5.0, SPEED * 5.0])
     np.testing.assert_allclose(out["fall_y"], [np.nan, np.nan, 0.0, 0.0])
-    sideways = metrics.terrain_metrics(traj, command_speed=(0.0, SPEED))  # commanded +y, it went +x
+    sideways = hops.terrain_metrics(traj, command_speed=(0.0, SPEED))  # commanded +y, it went +x
     assert sideways["distance_made_good"][0] == pytest.approx(0.0)
-    still = metrics.terrain_metrics(traj)  # no command: the straight-line distance
+    still = hops.terrain_metrics(traj)  # no command: the straight-line distance
     assert still["distance_made_good"][0] == pytest.approx(end)
-    per_instance = metrics.terrain_metrics(traj, obstacles=np.broadcast_to(blocks[:1], (4, 1, 3)))
+    per_instance = hops.terrain_metrics(traj, obstacles=np.broadcast_to(blocks[:1], (4, 1, 3)))
     assert per_instance["obstacles_cleared"].tolist() == [1, 0, 1, 1]

@@ -310,9 +310,10 @@ def test_reading_a_policy_for_the_checks_leaves_jax_a_device_per_core(trained):
     out, _ = trained
     script = textwrap.dedent(f"""
         import os
-        from hopper_mjx import cli, runtime
+        from hopper_mjx import cli
+        from hopper_mjx.shell import jaxsetup
         cli.check_controller("policy:{out}", 0.1)
-        runtime.configure()
+        jaxsetup.configure()
         import jax
         print(len(jax.devices()), os.cpu_count())
     """)

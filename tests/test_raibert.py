@@ -11,8 +11,8 @@ import pytest
 
 from hopper_mjx.control import kinematics, raibert
 from hopper_mjx.control.raibert import COMPRESSION, FLIGHT, THRUST, UNLOADING
+from hopper_mjx.hardware.signals import Contact, Observation
 from hopper_mjx.model.robot import CLEARANCE, Robot
-from hopper_mjx.signals import Contact, Observation
 
 L0 = 0.64  # m, the default touchdown leg length
 
@@ -167,7 +167,7 @@ def test_flight_gains_are_the_shipped_position_controllers(robot):
 
 # -- on a terrain ---------------------------------------------------------------------
 def _ground(heights, size=(1.0, 1.0)):
-    from hopper_mjx.signals import Ground
+    from hopper_mjx.hardware.signals import Ground
 
     heights = jnp.asarray(heights, jnp.float32)
     return Ground(heights, jnp.zeros(25), jnp.zeros(3), size)
@@ -304,12 +304,12 @@ def test_each_instance_places_its_own_foot_with_its_own_leg(mj_model, robot):
     put through MuJoCo C's forward kinematics of that instance's model, put its foot v·T_s/2 ahead of its centre
     of mass on a virtual leg of its own touchdown length (the URDF's margin over its standing leg), to 1e-6 m in
     float64; the URDF's leg model would miss by centimetres. Its standing height is MuJoCo's."""
-    from hopper_mjx.model import variation
-    from hopper_mjx.randomize import Spec
+    from hopper_mjx.variation import draw
+    from hopper_mjx.variation.spec import Spec
 
-    drawn = [variation.draw(Spec.parse(f"shank_length={s}"), mj_model, 1, 0) for s in SHANKS]
+    drawn = [draw.draw(Spec.parse(f"shank_length={s}"), mj_model, 1, 0) for s in SHANKS]
     values = {"body_pos": np.concatenate([d["body_pos"] for d in drawn])}
-    own, stances = variation.legs(mj_model, values), variation.stances(mj_model, values)
+    own, stances = draw.legs(mj_model, values), draw.stances(mj_model, values)
     params = raibert.raibert_params(len(SHANKS), height=0.1, speed=(0.5, 0.0), leg=raibert.legs(robot, own))
     lay = robot.layout
     qvel = np.r_[0.5, np.zeros(lay.nv - 1)]
@@ -329,7 +329,7 @@ def test_each_instance_places_its_own_foot_with_its_own_leg(mj_model, robot):
         targets = dict(zip((False, True), map(np.asarray, both)))
     hfe_anchor = lambda d: d.xanchor[mj_model.joint("hfe_joint").id]
     for i, shank in enumerate(SHANKS):
-        m = variation.instance_model(mj_model, values, i)
+        m = draw.instance_model(mj_model, values, i)
         d = mujoco.MjData(m)
         d.qpos[:] = stances[i]
         mujoco.mj_kinematics(m, d)

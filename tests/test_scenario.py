@@ -57,7 +57,7 @@ def test_a_scenario_file_sets_options_and_the_command_line_wins(tmp_path):
 
 
 def test_a_randomize_block_is_the_same_variation_as_the_option(tmp_path):
-    from hopper_mjx.randomize import Spec
+    from hopper_mjx.variation.spec import Spec
 
     f = tmp_path / "rough.yaml"
     f.write_text("num: 4\nseed: 3\nrandomize:\n  foot_friction: uniform(0.4, 1.0)\n  base_mass: scale(0.9,1.1)\n"

@@ -226,10 +226,10 @@ def test_a_randomized_sweep_records_each_replicates_robot_the_same_at_every_grav
 def test_a_parameter_sweep_gives_each_value_its_own_robots_and_keeps_the_others_draws(mj_model):
     """`sweep param`: value x gravity x replicate; a swept parameter is fixed at its value after the other
     parameters' draws, which stay the replicate's at every value (common random numbers)."""
-    from hopper_mjx.randomize import Spec
     from hopper_mjx.scenario import Physics
     from hopper_mjx.sweep.grid import SweepSpec, expand
     from hopper_mjx.sweep.runner import robots
+    from hopper_mjx.variation.spec import Spec
 
     physics = Physics(variation=Spec.parse("foot_friction=0.4..1.0,kp_scale=0.9..1.1"))
     spec = SweepSpec(kind="param", param="action_delay", values=(0.0, 4.0, 10.0), gravity=(1.62, 9.81), num=3,

@@ -83,7 +83,7 @@ PATH_TOLERANCE = 3.5e-3  # m
 # three drops against C in one program. The other two were measured with every terrain listed here (numbers above).
 @pytest.mark.parametrize("name", ["steps"])
 def test_mjx_follows_mujoco_c_on_the_exported_terrain(name, tmp_path, capsys):
-    from hopper_mjx.signals import SensorConfig
+    from hopper_mjx.hardware.signals import SensorConfig
     from hopper_mjx.sim import Sim, gravity_vectors
 
     path = tmp_path / f"{name}.xml"
@@ -142,7 +142,7 @@ def test_chain_follows_mujoco_c_on_the_exported_terrains(tmp_path, capsys):
     """The chain engine (float32, the foot's and the box's contacts on the height field) against C on each
     exported model: the same limp drops, the three grounds given to one compiled batch as its instances'
     heights. Its paths through the touchdowns stay within 1e-3 m of C's."""
-    from hopper_mjx.signals import SensorConfig
+    from hopper_mjx.hardware.signals import SensorConfig
     from hopper_mjx.sim import Sim, gravity_vectors
 
     exported, starts, grounds = {}, {}, {}

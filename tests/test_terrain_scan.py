@@ -109,7 +109,7 @@ def test_the_normal_is_mujoco_cs_contact_normal_on_a_face():
 def test_the_observed_ground_is_the_scan_and_the_normal_under_the_contact():
     from types import SimpleNamespace
 
-    from hopper_mjx import signals
+    from hopper_mjx.hardware import signals
 
     x, y = terrain.vertices((1.0, 1.0), (21, 21))
     heights = jnp.asarray(0.2 * x)  # a slope rising along +x: normal (-0.2, 0, 1) / |.|

@@ -103,17 +103,17 @@ def test_ppo_tiny_run_changes_the_params_and_restores_its_checkpoint_identically
 
 def test_the_policy_records_the_robots_it_trained_on_and_runs_them_in_the_core(trained):
     """hopper_env.json holds the motors, delays, noise and pushes; the core runs the policy with them."""
-    from hopper_mjx import randomize
     from hopper_mjx.envs import policy
+    from hopper_mjx.hardware.signals import SensorConfig
     from hopper_mjx.scenario import Physics, Scenario
-    from hopper_mjx.signals import SensorConfig
     from hopper_mjx.sim import gravity_vectors
+    from hopper_mjx.variation import spec
 
     out, _ = trained
     config = policy.read(out / "policy")[3]
     assert (config.motor, config.push, config.action_delay) == ("dc", (0.2, 0.3), 0.0)
-    assert randomize.Spec.parse(config.randomize) == randomize.Spec.parse(ROBOT_IO[-1])
-    physics = Physics(motor="dc", push=(0.2, 0.3), variation=randomize.Spec.parse(config.randomize))
+    assert spec.Spec.parse(config.randomize) == spec.Spec.parse(ROBOT_IO[-1])
+    physics = Physics(motor="dc", push=(0.2, 0.3), variation=spec.Spec.parse(config.randomize))
     sim, final, traj = Scenario(gravity=gravity_vectors([9.81, 1.62]), physics=physics,
                                 controller=f"policy:{out}").run(0.3, SensorConfig())
     steps = np.asarray(final.step)  # the core counts its physics steps (pushes, noise), the policy its own
@@ -263,7 +263,7 @@ def _rows(**by_gravity):
 def test_the_best_checkpoint_is_ranked_on_the_thresholds_measures():
     """Most gravities at the threshold first, then the worst survival, then the worst error over the bounds;
     a later checkpoint that falls or misses the apex is not chosen over an earlier one that does not."""
-    from hopper_mjx import thresholds
+    from hopper_mjx.metrics import thresholds
 
     good = _rows(**{"9.81": (1.0, 0.101, 0.02), "1.62": (1.0, 0.095, 0.03)})  # worst: 5 % apex, 0.3 of 0.1 m/s
     better = _rows(**{"9.81": (1.0, 0.100, 0.01), "1.62": (1.0, 0.099, 0.02)})

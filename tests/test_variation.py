@@ -9,9 +9,9 @@ import pytest
 
 from hopper_mjx import cli, registry, simulate
 from hopper_mjx.control.base import HOLD_GAINS
-from hopper_mjx.model import variation
 from hopper_mjx.model.layout import Layout
-from hopper_mjx.randomize import Dist, Spec
+from hopper_mjx.variation import draw
+from hopper_mjx.variation.spec import Dist, Spec
 
 # Masses, inertias, centre of mass, friction, damping, dry joint friction, armature, motor strength and the leg's
 # morphology at once: what both engines take at run time.
@@ -56,8 +56,8 @@ def test_a_bad_spec_is_refused_naming_what_is_wrong(text, message):
 
 def test_draws_are_the_seeds_and_land_where_the_parameter_says(mj_model):
     spec = Spec.parse(EVERYTHING + ",base_mass=5.5")
-    a, b = variation.draw(spec, mj_model, 64, seed=3), variation.draw(spec, mj_model, 64, seed=3)
-    c = variation.draw(spec, mj_model, 64, seed=4)
+    a, b = draw.draw(spec, mj_model, 64, seed=3), draw.draw(spec, mj_model, 64, seed=3)
+    c = draw.draw(spec, mj_model, 64, seed=4)
     assert a.keys() == b.keys() == c.keys() == spec.fields
     for field in a:
         assert a[field].shape == (64, *np.shape(getattr(mj_model, field)))
@@ -95,39 +95,39 @@ def test_draws_are_the_seeds_and_land_where_the_parameter_says(mj_model):
     radius = a["geom_size"][:, lay.foot_geom]
     assert 0.02 <= radius[:, 0].min() and radius[:, 0].max() <= 0.04
     assert (radius[:, 1:] == m.geom_size[lay.foot_geom, 1:]).all()
-    assert variation.columns(spec, m, a)["shank_length"] == pytest.approx(-pos[:, foot, 2])
+    assert draw.columns(spec, m, a)["shank_length"] == pytest.approx(-pos[:, foot, 2])
 
 
 def test_adding_a_parameter_leaves_the_others_draws_as_they_were(mj_model):
-    one = variation.draw(Spec.parse("foot_friction=0.4..1"), mj_model, 16, seed=0)
-    two = variation.draw(Spec.parse("dof_damping=0..1,foot_friction=0.4..1"), mj_model, 16, seed=0)
+    one = draw.draw(Spec.parse("foot_friction=0.4..1"), mj_model, 16, seed=0)
+    two = draw.draw(Spec.parse("dof_damping=0..1,foot_friction=0.4..1"), mj_model, 16, seed=0)
     np.testing.assert_array_equal(one["pair_friction"], two["pair_friction"])
 
 
 def test_a_value_outside_the_parameters_range_is_refused_naming_the_instance(mj_model):
     with pytest.raises(ValueError, match=r"base_mass drew a value of -[\d.]+ kg for instance \d+; it must be > 0"):
-        variation.draw(Spec.parse("base_mass=normal(5,5)"), mj_model, 64, seed=0)
+        draw.draw(Spec.parse("base_mass=normal(5,5)"), mj_model, 64, seed=0)
     with pytest.raises(ValueError, match="foot_friction drew a value of 11 for instance 0; it must be >= 0 and <= "):
-        variation.draw(Spec.parse("foot_friction=11"), mj_model, 4, seed=0)
+        draw.draw(Spec.parse("foot_friction=11"), mj_model, 4, seed=0)
 
 
 def test_every_parameter_names_a_field_and_elements_of_the_model(mj_model):
     for name, par in registry.PARAMETERS.items():
         assert hasattr(mj_model, par.field), name
-        assert variation.rows(mj_model, par.elements), name
+        assert draw.rows(mj_model, par.elements), name
 
 
 def test_the_constants_are_mujocos_own_for_each_instance(mj_model):
     """with_constants gives what mj_setConst gives on the instance's model (and the nominal ones unvaried)."""
-    drawn = variation.draw(Spec.parse("body_mass=scale(0.5,2),dof_armature=0..0.05"), mj_model, 3, seed=1)
-    full = variation.with_constants(mj_model, drawn)
+    drawn = draw.draw(Spec.parse("body_mass=scale(0.5,2),dof_armature=0..0.05"), mj_model, 3, seed=1)
+    full = draw.with_constants(mj_model, drawn)
     for i in range(3):
-        m = variation.instance_model(mj_model, drawn, i)
-        for c in variation.CONSTANTS:
+        m = draw.instance_model(mj_model, drawn, i)
+        for c in draw.CONSTANTS:
             np.testing.assert_allclose(full[c][i], getattr(m, c), rtol=1e-12)
     # The masses do move the constraint's regularisation (what MJX's contact rows read).
     assert np.abs(full["body_invweight0"] / np.maximum(mj_model.body_invweight0, 1e-12) - 1).max() > 0.05
-    assert variation.with_constants(mj_model, {}) == {}
+    assert draw.with_constants(mj_model, {}) == {}
 
 
 def _c_path(m: mujoco.MjModel, gravity, qpos0, steps: int, lay: Layout, limp: bool = False) -> np.ndarray:
@@ -167,7 +167,7 @@ def _follows_mujoco_c(mj_model, f: dict, spec: str, engine: str) -> None:
     for i in range(len(f["gravity"])):
         touchdown = int(np.argmax(f["contact"][i]))
         assert f["contact"][i].any() and touchdown < steps - 100, "the comparison must include touchdown"
-        path = _c_path(variation.instance_model(mj_model, drawn, i), f["gravity"][i], f["qpos"][i, 0], steps, lay)
+        path = _c_path(draw.instance_model(mj_model, drawn, i), f["gravity"][i], f["qpos"][i, 0], steps, lay)
         err = np.abs(path - f["qpos"][i, :, :3]).max()
         assert err < 1e-3, f"instance {i}: {engine} and MuJoCo C differ by {err:.2e} m"
         nominal = _c_path(copy.deepcopy(mj_model), f["gravity"][i], f["qpos"][i, 0], steps, lay)
@@ -193,8 +193,8 @@ def test_same_seed_same_draws_and_results(recorded, tmp_path):
 
 
 def test_auto_keeps_the_chain_for_every_parameter_and_refuses_a_field_it_cannot_take(mj_model, capsys):
-    from hopper_mjx.randomize import check_engine_varies
     from hopper_mjx.sim import Sim
+    from hopper_mjx.variation.spec import check_engine_varies
 
     batch = cli.check_batch(simulate.parser().parse_args(["--randomize", "foot_friction=0.5,dof_frictionloss=0.1"]))
     sim = Sim(mj_model, engine=batch.physics.engine, varies=batch.physics.variation.fields)
@@ -206,12 +206,12 @@ def test_auto_keeps_the_chain_for_every_parameter_and_refuses_a_field_it_cannot_
 
 
 def test_friction_and_damping_leave_mujocos_constants_as_they_are(mj_model):
-    drawn = variation.draw(Spec.parse("foot_friction=0.4..1,dof_damping=0..1,dof_frictionloss=0..0.3"), mj_model, 4,
+    drawn = draw.draw(Spec.parse("foot_friction=0.4..1,dof_damping=0..1,dof_frictionloss=0..0.3"), mj_model, 4,
                            seed=0)
-    assert variation.with_constants(mj_model, drawn).keys() == drawn.keys()
+    assert draw.with_constants(mj_model, drawn).keys() == drawn.keys()
     for i in range(4):
-        m = variation.instance_model(mj_model, drawn, i)
-        for c in variation.CONSTANTS:
+        m = draw.instance_model(mj_model, drawn, i)
+        for c in draw.CONSTANTS:
             np.testing.assert_array_equal(getattr(m, c), getattr(mj_model, c), err_msg=c)
 
 
@@ -233,7 +233,7 @@ def test_the_varied_program_is_the_same_whatever_order_its_fields_come_in(mj_mod
     from hopper_mjx.engine import chain
 
     spec = Spec.parse(EVERYTHING)
-    values = variation.with_constants(mj_model, variation.draw(spec, mj_model, 1, seed=0))
+    values = draw.with_constants(mj_model, draw.draw(spec, mj_model, 1, seed=0))
     one = {field: v[0] for field, v in values.items()}
     engine = chain.make(mj_model, varies=spec.fields)
     traced = lambda: str(jax.make_jaxpr(lambda v: engine.vary(engine.model, v))(one))

@@ -4,8 +4,9 @@ import jax
 import numpy as np
 import pytest
 
-from hopper_mjx import model, signals
+from hopper_mjx import model
 from hopper_mjx.control.base import zero_torque
+from hopper_mjx.hardware import signals
 from hopper_mjx.model import world
 
 LOW_GRAVITY = world.LOW_GRAVITY_WORLD

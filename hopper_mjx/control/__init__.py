@@ -23,7 +23,7 @@ def make(name: str, robot: Robot, n: int, *, height: float = raibert.DEFAULT_HEI
     and `speed` (vx, vy) m/s; balance: stand on the foot, an LQR designed on `mj_model`
     (required) about its stance. pd: each instance's factors on the joint PD gains
     (`base.pd_scale`), for the controllers that have them (`registry.PD_CONTROLLERS`). legs: each
-    instance's robot facts when its leg is drawn (`model.variation.legs`): raibert models each instance's
+    instance's robot facts when its leg is drawn (`variation.draw.legs`): raibert models each instance's
     own leg; hold and pid hold each instance's own start (its own stance) anyway; balance keeps the
     URDF's design.
     """

@@ -38,9 +38,9 @@ import mujoco
 import numpy as np
 
 from hopper_mjx.control.base import Controller, saturate, to_ctrl
+from hopper_mjx.hardware.signals import Observation
 from hopper_mjx.model.layout import Layout
 from hopper_mjx.model.robot import Robot, standing_qpos
-from hopper_mjx.signals import Observation
 
 GRID = tuple(float(g) for g in np.geomspace(0.5, 12.0, 7))  # m/s², the gravities the gain is designed at
 # Bryson's rule: the deviation of each state (m, rad, m/s, rad/s) and torque (share of the

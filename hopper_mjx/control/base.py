@@ -29,8 +29,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from hopper_mjx.hardware.signals import Observation
 from hopper_mjx.model.layout import Layout
-from hopper_mjx.signals import Observation
 
 CState = Any  # a pytree of arrays, one instance's worth
 

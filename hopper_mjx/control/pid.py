@@ -23,10 +23,10 @@ import jax.numpy as jnp
 import numpy as np
 import yaml
 
-from hopper_mjx.checks import load_yaml
 from hopper_mjx.control.base import Controller, PDScale, clip_to_limits, joint_state, pd
 from hopper_mjx.model.layout import Layout
 from hopper_mjx.model.loader import JOINTS, read_text
+from hopper_mjx.shell.checks import load_yaml
 
 DEFAULT_GAINS = Path(__file__).with_name("monoped.yaml")
 SEED_GAINS_NAMES = ("monoped.yaml", "monoped.yml")

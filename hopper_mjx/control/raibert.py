@@ -77,9 +77,9 @@ from brax import math as bmath
 
 from hopper_mjx.control import kinematics
 from hopper_mjx.control.base import Commands, Controller, PDScale, joint_state, pd, saturate, scaled, to_ctrl
+from hopper_mjx.hardware.signals import Observation
 from hopper_mjx.model.robot import LegGeometry, Robot
 from hopper_mjx.model.world import EARTH_GRAVITY  # where the attitude stiffness holds as given
-from hopper_mjx.signals import Observation
 
 FLIGHT, COMPRESSION, THRUST, UNLOADING = 0, 1, 2, 3
 MIN_PHASE_TIME = 0.01  # s in flight / stance before contact may end it (debounce)
@@ -369,7 +369,7 @@ _inertias = jax.jit(jax.vmap(inertia_facts))  # one compile, not hundreds of sma
 
 
 def legs(robot: Robot, own: Sequence[Robot]) -> Leg:
-    """The `Leg`s (n, ...) of n instances whose robot facts are `own` (`model.variation.legs`), `robot`
+    """The `Leg`s (n, ...) of n instances whose robot facts are `own` (`variation.draw.legs`), `robot`
     the URDF's."""
     stack = lambda *v: np.asarray(v, np.float32)
     geometry = LegGeometry(**{f.name: stack(*(getattr(r.leg, f.name) for r in own))

@@ -8,7 +8,7 @@ Every engine has, per instance and pure (the core vmaps them):
   (data fields a diverged instance keeps from its last finite state) and `varies` (the model
   fields it takes per instance at run time);
 - `vary(model, values) -> model`: one instance's model, `values` {field: array} replacing
-  the nominal fields (`model.variation` draws them); `{}` returns `model` unchanged;
+  the nominal fields (`variation.draw` draws them); `{}` returns `model` unchanged;
 - `make_data(qpos, qvel) -> data` at time 0;
 - `forward(model, data, gravity) -> data`: uses `data.ctrl` (actuator order), sets `qacc`
   and the contacts;
@@ -37,10 +37,10 @@ import mujoco
 import numpy as np
 
 from hopper_mjx import registry
-from hopper_mjx.engine.chain_stage import BATCH_AXIS, batch_any
+from hopper_mjx.engine.chain.stage import BATCH_AXIS, batch_any
 from hopper_mjx.engine.mjx import MjxEngine
 from hopper_mjx.engine.xla import CPU_COMPILER_OPTIONS, FUSION_EMITTERS, WIDE_VECTORS
-from hopper_mjx.randomize import check_engine_varies
+from hopper_mjx.variation.spec import check_engine_varies
 
 
 @runtime_checkable

@@ -19,7 +19,7 @@ from mujoco.mjx._src import support  # contact_force: decodes MJX's pyramidal/el
 from hopper_mjx import registry
 from hopper_mjx.engine.xla import CPU_COMPILER_OPTIONS, trace_once
 from hopper_mjx.model.layout import Layout
-from hopper_mjx.model.variation import CONSTANTS
+from hopper_mjx.variation.draw import CONSTANTS
 
 _INTEGRATORS = {
     mujoco.mjtIntegrator.mjINT_EULER: mjx.euler,
@@ -30,7 +30,7 @@ _INTEGRATORS = {
 
 def without_sensors(mj_model: mujoco.MjModel) -> mujoco.MjModel:
     """A copy with MuJoCo's sensor stage off: the core measures its signals from the state
-    (hopper_mjx.signals), so the stage would be dead weight in every step."""
+    (hopper_mjx.hardware.signals), so the stage would be dead weight in every step."""
     m = copy.deepcopy(mj_model)
     m.opt.disableflags |= mujoco.mjtDisableBit.mjDSBL_SENSOR
     return m

@@ -52,19 +52,21 @@ import numpy as np
 from brax.envs.base import Env, State
 
 from hopper_mjx import engine as engines
-from hopper_mjx import metrics, registry, signals
 from hopper_mjx import model as hopper_model
-from hopper_mjx.actuators import Actuation, Drive, Motor
+from hopper_mjx import registry
 from hopper_mjx.control.base import PDScale, joint_state, pd, saturate, scaled, to_ctrl
+from hopper_mjx.hardware import signals
+from hopper_mjx.hardware.actuators import Actuation, Drive, Motor
+from hopper_mjx.hardware.pushes import Pushes, push
+from hopper_mjx.hardware.sensor_noise import FIGURES, Sensing, SensorState, reading
+from hopper_mjx.hardware.signals import Observation
+from hopper_mjx.metrics import hops
 from hopper_mjx.model import robot
 from hopper_mjx.model.layout import Layout
 from hopper_mjx.model.world import EARTH_GRAVITY
-from hopper_mjx.pushes import Pushes, push
-from hopper_mjx.randomize import Spec
-from hopper_mjx.sensing import FIGURES, Sensing, SensorState, reading
-from hopper_mjx.signals import Observation
 from hopper_mjx.sim import per_instance
 from hopper_mjx.terrain import scan as terrain_scan
+from hopper_mjx.variation.spec import Spec
 
 MAX_TILT_FROM_VERTICAL = 0.8  # rad between the base's z axis and the vertical that ends an episode
 # State.info keys a task owns; the resampling auto-reset replaces exactly these (wrappers.py).
@@ -129,7 +131,7 @@ class MonopedConfig:
     # A fall: the base's z axis this far from vertical (rad; not the metrics' per-axis roll/pitch
     # bound, see docs/learning.md), or its origin this low (m).
     max_tilt: float = MAX_TILT_FROM_VERTICAL
-    min_base_height: float = metrics.FALL_HEIGHT  # m
+    min_base_height: float = hops.FALL_HEIGHT  # m
     initial_clearance: tuple[float, float] = (0.0, 0.1)  # m, foot above the floor at reset
     initial_joint_noise: float = 0.05  # rad
     # Training physics: a 2 ms step (half the core's cost per simulated second; a policy
@@ -143,7 +145,7 @@ class MonopedConfig:
     # The robots episodes run: a --randomize spec ("" the URDF's robot), drawn once with randomize_seed.
     randomize: str = ""
     randomize_seed: int = 0
-    motor: str = registry.DEFAULT_MOTOR  # a registry.MOTORS name: the joints' motors (hopper_mjx.actuators)
+    motor: str = registry.DEFAULT_MOTOR  # a registry.MOTORS name: the joints' motors (hopper_mjx.hardware.actuators)
     action_delay: float = 0.0  # s from the PD torque to the motors', whole steps of `timestep`; a drawn one wins
     push: tuple[float, float] | None = None  # (interval s, speed m/s) of random horizontal pushes in an episode
     terrain: str = ""  # a --terrain spec with a fixed seed: the ground of every episode ("" the flat plane)
@@ -406,14 +408,14 @@ def speed_term(cfg: MonopedConfig, d, command_speed: jax.Array) -> jax.Array:
 def robot_pool(cfg: MonopedConfig, mj_model: mujoco.MjModel) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
     """({model field: (ROBOT_POOL, ...)}, {control parameter: (ROBOT_POOL, ...)}) of the robots a randomised
     task's episodes run: the model fields with the constants MuJoCo derives from them, the control parameters
-    as `model.variation.draw_controls` draws them (delays in ms); ({}, {}) without."""
+    as `variation.draw.draw_controls` draws them (delays in ms); ({}, {}) without."""
     spec = cfg.variation
     if not spec:
         return {}, {}
-    from hopper_mjx.model import variation
+    from hopper_mjx.variation import draw
 
-    fields = variation.with_constants(mj_model, variation.draw(spec, mj_model, ROBOT_POOL, cfg.randomize_seed))
-    return fields, variation.draw_controls(spec, mj_model, ROBOT_POOL, cfg.randomize_seed)
+    fields = draw.with_constants(mj_model, draw.draw(spec, mj_model, ROBOT_POOL, cfg.randomize_seed))
+    return fields, draw.draw_controls(spec, mj_model, ROBOT_POOL, cfg.randomize_seed)
 
 
 def same_ground(ground, mj_model: mujoco.MjModel, what: str):

@@ -34,9 +34,9 @@ from hopper_mjx import registry, terrain
 from hopper_mjx.control.base import Commands, Controller, PDScale, Servo, joint_state
 from hopper_mjx.engine import batch_any
 from hopper_mjx.envs import monoped, tasks
+from hopper_mjx.hardware.signals import Observation
 from hopper_mjx.model.layout import Layout
 from hopper_mjx.model.robot import Robot, standing_height, standing_qpos
-from hopper_mjx.signals import Observation
 
 ENV_CONFIG = "hopper_env.json"
 # Brax writes one of these beside the params: which agent's networks to rebuild.

@@ -17,9 +17,10 @@ import dataclasses
 import jax
 import jax.numpy as jnp
 
-from hopper_mjx import registry, thresholds
+from hopper_mjx import registry
 from hopper_mjx.envs.monoped import MonopedConfig, MonopedEnv, closeness, outside, predicted_apex, speed_term
 from hopper_mjx.envs.monoped import observation_size as monoped_observation_size
+from hopper_mjx.metrics import thresholds
 
 # The gravity range every task draws from by default, m/s², log-uniform.
 GRAVITY_RANGE = (0.5, 12.0)

@@ -7,9 +7,9 @@ the URDF the simulation loads, with colours and resolvable mesh paths, for a vie
 
 import sys
 
-from hopper_mjx import checks, command
-from hopper_mjx.files import atomic_write_text
-from hopper_mjx.model.checks import check_urdf
+from hopper_mjx.model.urdf_checks import check_urdf
+from hopper_mjx.shell import checks, process
+from hopper_mjx.shell.files import atomic_write_text
 from hopper_mjx.terrain.spec import check_terrain, terrain_help
 
 
@@ -62,4 +62,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(command.run(main))
+    sys.exit(process.run(main))

@@ -18,7 +18,7 @@ from pathlib import Path
 import mujoco
 
 from hopper_mjx import terrain as terrains
-from hopper_mjx.checks import MAX_TIMESTEP
+from hopper_mjx.shell.checks import MAX_TIMESTEP
 
 DEFAULT_URDF = Path(__file__).with_name("monoped.urdf")
 JOINTS = ("haa_joint", "hfe_joint", "kfe_joint")

@@ -31,8 +31,8 @@ from pathlib import Path
 
 import numpy as np
 
-from hopper_mjx.checks import MAX_TIMESTEP
 from hopper_mjx.model.loader import read_text
+from hopper_mjx.shell.checks import MAX_TIMESTEP
 
 EARTH_GRAVITY = 9.81  # m/s², the standard reference g every g-scaled quantity is measured against
 LOW_GRAVITY_WORLD = Path(__file__).with_name("low_gravity.world")  # the seed's, as an example

@@ -41,9 +41,10 @@ from pathlib import Path
 
 import numpy as np
 
-from hopper_mjx import budget, cli, command, registry, runtime
-from hopper_mjx.files import atomic_write, atomic_write_text
+from hopper_mjx import cli, registry
 from hopper_mjx.scenario import Physics
+from hopper_mjx.shell import budget, jaxsetup, process
+from hopper_mjx.shell.files import atomic_write, atomic_write_text
 
 DISTINCT_GRAVITIES = 64  # distinct values, tiled over the batch: one native MjModel each
 GRAVITY_SPAN = (1.62, 9.81)  # m/s², Moon to Earth
@@ -90,14 +91,14 @@ def native_hold_model(mj_model, layout, p: float, d: float):
 
 class NativeRollout:
     """`mujoco.rollout` of the batch with one thread per core and a model per gravity, or per instance
-    for per-instance robots (`robots`: {field: (N, ...)}, `model.variation.with_constants`)."""
+    for per-instance robots (`robots`: {field: (N, ...)}, `variation.draw.with_constants`)."""
 
     def __init__(self, mj_model, gravity: np.ndarray, qpos0: np.ndarray, ctrl: np.ndarray, threads: int,
                  robots: dict | None = None):
         import mujoco
         from mujoco import rollout
 
-        from hopper_mjx.model.variation import instance_model
+        from hopper_mjx.variation.draw import instance_model
 
         if robots:  # MuJoCo's rollout takes a sequence of models, one per initial state
             self.models = [instance_model(mj_model, robots, i) for i in range(len(gravity))]
@@ -206,8 +207,8 @@ def run(num: int, steps: int, *, controller: str = "hold", chunk: int = 256, rep
     import jax
     import mujoco
 
-    from hopper_mjx.model import variation
     from hopper_mjx.sim import gravity_vectors
+    from hopper_mjx.variation import draw
 
     if steps < 1 or repeat < 1:
         raise ValueError(f"--steps and --repeat must be >= 1, got {steps} and {repeat}")
@@ -216,9 +217,9 @@ def run(num: int, steps: int, *, controller: str = "hold", chunk: int = 256, rep
     sim = physics.sim(chunk=chunk)
     threads = threads or len(sim.devices)
     gravity = gravity_vectors(bench_gravities(num))
-    robots = {} if not physics.variation else variation.with_constants(  # each instance's robot, on both sides
-        sim.mj_model, variation.draw(physics.variation, sim.mj_model, num, seed=0))
-    stance = variation.stances(sim.mj_model, robots)
+    robots = {} if not physics.variation else draw.with_constants(  # each instance's robot, on both sides
+        sim.mj_model, draw.draw(physics.variation, sim.mj_model, num, seed=0))
+    stance = draw.stances(sim.mj_model, robots)
     core_controller, params, native_model, native_ctrl = controller_pair(controller, sim, gravity, stance)
     qpos0 = np.asarray(sim.robot.stance_qpos) if stance is None else stance
     state0 = sim.reset(gravity, key=0, controller=core_controller, params=params, qpos=qpos0, variation=robots)
@@ -425,7 +426,7 @@ def main(argv=None) -> int:
     args = parser().parse_args(argv)
     try:
         nums, physics = check(args)
-        runtime.configure()
+        jaxsetup.configure()
         if nums:
             passed = ["--controller", args.controller, "--chunk", str(args.chunk), "--repeat", str(args.repeat),
                       *physics.flags()] + (["--threads", str(args.threads)] if args.threads else [])
@@ -446,4 +447,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(command.run(main))
+    sys.exit(process.run(main))

@@ -38,8 +38,9 @@ import time
 import mujoco
 import numpy as np
 
-from hopper_mjx import cli, command, runtime
+from hopper_mjx import cli
 from hopper_mjx.scenario import Physics
+from hopper_mjx.shell import jaxsetup, process
 
 REPEATS = 5  # timed rollouts per variant; the best counts (noise only adds time)
 VARIANTS = (
@@ -97,7 +98,9 @@ def chain_cut(engine, depth: int):
     import jax
     import jax.numpy as jnp
 
-    from hopper_mjx.engine import chain, chain_constraint, chain_smooth
+    from hopper_mjx.engine import chain
+    from hopper_mjx.engine.chain import constraint as chain_constraint
+    from hopper_mjx.engine.chain import smooth as chain_smooth
 
     if depth >= len(CHAIN_STAGES) - 1:
         full = engine if depth == len(CHAIN_STAGES) else without_iterations(engine)
@@ -290,7 +293,7 @@ def main(argv=None) -> int:
         cli.check_whole_periods("--settle", args.settle, physics.timestep)  # the settling rollout records them
     except ValueError as err:
         return cli.fail(err)
-    runtime.configure()
+    jaxsetup.configure()
     try:
         record = measure(args.num, args.steps, args.settle, physics)
     except ValueError as err:
@@ -300,4 +303,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(command.run(main))
+    sys.exit(process.run(main))

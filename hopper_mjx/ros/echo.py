@@ -19,7 +19,8 @@ from typing import Iterator
 import numpy as np
 import yaml
 
-from hopper_mjx import cli, command
+from hopper_mjx import cli
+from hopper_mjx.shell import process
 
 TIME_TYPES = ("builtin_interfaces/msg/Time", "builtin_interfaces/msg/Duration")
 ROS2_METADATA = "metadata.yaml"  # what makes a folder a rosbag2 bag
@@ -147,4 +148,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(command.run(main))
+    sys.exit(process.run(main))

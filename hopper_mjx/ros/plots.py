@@ -15,9 +15,10 @@ from pathlib import Path
 
 import numpy as np
 
-from hopper_mjx import cli, command
-from hopper_mjx.files import atomic_write
+from hopper_mjx import cli
 from hopper_mjx.ros import echo, messages
+from hopper_mjx.shell import process
+from hopper_mjx.shell.files import atomic_write
 
 AXES = ("x", "y", "z")
 
@@ -134,4 +135,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(command.run(main))
+    sys.exit(process.run(main))

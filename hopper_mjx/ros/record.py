@@ -27,13 +27,14 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from hopper_mjx import cli, command, files, runtime
+from hopper_mjx import cli
 from hopper_mjx.ros import msgdefs
 from hopper_mjx.ros.messages import messages, typestore
 from hopper_mjx.scenario import Scenario
+from hopper_mjx.shell import files, jaxsetup, process
 
 if TYPE_CHECKING:
-    from hopper_mjx.signals import SensorConfig
+    from hopper_mjx.hardware.signals import SensorConfig
     from hopper_mjx.sim import Trajectory
 
 FORMATS = ("ros1", "mcap")
@@ -58,7 +59,7 @@ class Recording:
 # -- simulation --------------------------------------------------------------------------------
 def sensor_config(args):
     """Per-stream rates: each --<stream>-rate, else --rate (the seed's 50 Hz)."""
-    from hopper_mjx.signals import SensorConfig
+    from hopper_mjx.hardware.signals import SensorConfig
 
     rate = lambda own: args.rate if own is None else own
     return SensorConfig(
@@ -188,7 +189,7 @@ def main(argv=None) -> int:
         if args.instances is not None:
             cli.check_indices("--instances", args.instances, len(batch.gravity))
         cli.check_rates("--rate, --<stream>-rate", sensor_config(args), batch, args.duration)
-        runtime.configure()
+        jaxsetup.configure()
         rec = simulate_batch(args, batch)
         path = write(rec, out, args.format, args.instances)
     except ValueError as err:  # includes URDFError
@@ -199,4 +200,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(command.run(main))
+    sys.exit(process.run(main))

@@ -22,8 +22,9 @@ import time
 from datetime import datetime, timezone
 from pathlib import Path
 
-from hopper_mjx import budget, cli, command, registry, runtime
-from hopper_mjx.checks import DEFAULT_TIMESTEP, OutputError
+from hopper_mjx import cli, registry
+from hopper_mjx.shell import budget, jaxsetup, process
+from hopper_mjx.shell.checks import DEFAULT_TIMESTEP, OutputError
 from hopper_mjx.sweep import folder
 from hopper_mjx.sweep.grid import DEFAULT_GRAVITY, KICK, TERRAIN_KINDS
 
@@ -170,8 +171,8 @@ def check_robots(spec, duration: float) -> None:
     if not spec.sweeps_robot:
         cli.check_controls(spec.physics, spec.controller)
         return
-    from hopper_mjx.model import variation
-    from hopper_mjx.randomize import check_engine_varies
+    from hopper_mjx.variation import draw
+    from hopper_mjx.variation.spec import check_engine_varies
 
     physics = spec.robot_physics
     try:
@@ -181,8 +182,8 @@ def check_robots(spec, duration: float) -> None:
     cli.check_controls(physics, spec.controller)
     for robots in spec.robot_specs():
         try:
-            variation.draw(robots, physics.mj_model, spec.num, spec.seed)
-            drawn = variation.draw_controls(robots, physics.mj_model, spec.num, spec.seed)
+            draw.draw(robots, physics.mj_model, spec.num, spec.seed)
+            drawn = draw.draw_controls(robots, physics.mj_model, spec.num, spec.seed)
         except ValueError as err:
             raise ValueError(f"--values: {err}") from None
         for name in ("action_delay", "sensor_delay"):
@@ -251,7 +252,7 @@ def run_one(args, spec, folder: Path):
     from hopper_mjx.sweep import report, runner
 
     start = time.perf_counter()
-    command.on_stop(f"finished chunks are saved in {folder}; rerun the same command to resume")
+    process.on_stop(f"finished chunks are saved in {folder}; rerun the same command to resume")
     instances, table, facts = runner.run(spec, folder, progress=not args.no_progress)
     facts["total_wall_s"] = time.perf_counter() - start
     if facts["processes"] > 1 and args.process_id != 0:
@@ -270,7 +271,7 @@ def main(argv=None) -> int:
         specs, out = check(args)
     except ValueError as err:
         return cli.fail(err)
-    runtime.configure()
+    jaxsetup.configure()
     from hopper_mjx.sweep import report
     if args.coordinator:
         import jax
@@ -289,4 +290,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(command.run(main))
+    sys.exit(process.run(main))

@@ -16,8 +16,8 @@ from pathlib import Path
 
 import numpy as np
 
-from hopper_mjx.checks import make_folder
-from hopper_mjx.files import atomic_write, partial
+from hopper_mjx.shell.checks import make_folder
+from hopper_mjx.shell.files import atomic_write, partial
 from hopper_mjx.sweep.grid import SweepSpec
 
 MANIFEST = "manifest.json"

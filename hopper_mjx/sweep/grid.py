@@ -17,9 +17,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from hopper_mjx import checks, registry
-from hopper_mjx.randomize import NAMES, Dist, Spec
+from hopper_mjx import registry
 from hopper_mjx.scenario import Physics
+from hopper_mjx.shell import checks
+from hopper_mjx.variation.spec import NAMES, Dist, Spec
 
 PLANETS = {1.62: "Moon", 3.71: "Mars", 9.81: "Earth"}
 DEFAULT_GRAVITY = (0.5, 1.0, 1.62, 2.5, 3.71, 5.0, 7.5, 9.81, 12.0)  # m/s²

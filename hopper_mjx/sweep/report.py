@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from hopper_mjx.files import atomic_write, atomic_write_text
+from hopper_mjx.shell.files import atomic_write, atomic_write_text
 from hopper_mjx.sweep.grid import PLANETS, Instances, SweepSpec
 
 INTEGER_COLUMNS = {"replicate", "seed", "hops", "fell", "diverged", "obstacles_cleared"}

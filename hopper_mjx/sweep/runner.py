@@ -18,22 +18,24 @@ import jax
 import numpy as np
 from tqdm import tqdm
 
-from hopper_mjx import metrics, registry, signals, terrain
+from hopper_mjx import registry, terrain
 from hopper_mjx.control.balance import balance
 from hopper_mjx.control.base import pd_scale
 from hopper_mjx.control.raibert import GAINS, raibert, raibert_params
 from hopper_mjx.control.raibert import legs as raibert_legs
-from hopper_mjx.files import atomic_write
-from hopper_mjx.model import variation
+from hopper_mjx.hardware import signals
+from hopper_mjx.metrics import hops
+from hopper_mjx.shell.files import atomic_write
 from hopper_mjx.sim import Sim, gravity_vectors, steps_for
 from hopper_mjx.sweep.folder import chunk_path, claim, read_chunk
 from hopper_mjx.sweep.grid import Instances, SweepSpec, expand
+from hopper_mjx.variation import draw
 
 COLUMNS = ("apex_height", "flight_rise", "flight_time", "ballistic_flight_time", "stance_time", "hop_period",
            "duty_factor", "mean_speed", "tracking_error",
            "max_roll", "max_pitch", "hops", "fell", "diverged", "cost_of_transport",
            "energy_per_hop", "mechanical_power")
-# An obstacle or terrain sweep's extra columns (`metrics.terrain_metrics`).
+# An obstacle or terrain sweep's extra columns (`hops.terrain_metrics`).
 TERRAIN_COLUMNS = ("distance_made_good", "obstacles_cleared", "highest_cleared", "fall_x", "fall_y")
 # Contact and state at the physics rate: events, lift-off heights and apexes to the step (short flights too).
 SENSORS = signals.SensorConfig(imu_rate=100, odom_rate=100, contact_rate=1000, state_rate=1000)
@@ -48,12 +50,12 @@ class ChunkRunner:
     """One compiled rollout + metrics, applied to chunks of the grid."""
 
     def __init__(self, spec: SweepSpec, instances: Instances, sim: Sim, robots: dict, controls: dict):
-        """`robots`: {model field: (rows, ...)} each robot row's model (`variation.with_constants`), or {};
+        """`robots`: {model field: (rows, ...)} each robot row's model (`draw.with_constants`), or {};
         `controls`: {control parameter: (rows, ...)} its controller's, motors' and sensors' (`Instances.robot_row`
         says which row an instance runs)."""
         self.spec, self.instances, self.sim, self.robots, self.controls = spec, instances, sim, robots, controls
         # Each robot row's leg, when drawn: what Raibert models and where the apex rise counts from.
-        own = variation.legs(sim.mj_model, robots)
+        own = draw.legs(sim.mj_model, robots)
         self.legs = None if own is None or spec.controller != "raibert" else raibert_legs(sim.robot, own)
         self.standing = None if own is None else np.array([r.standing_height for r in own])
         self.policy = registry.policy_path(spec.controller) if registry.is_policy(spec.controller) else None
@@ -125,12 +127,12 @@ class ChunkRunner:
                                    qvel=inst.qvel[full], variation={f: v[row] for f, v in self.robots.items()},
                                    ground=heights,
                                    **self.sim.per_instance({k: v[row] for k, v in self.controls.items()}))
-        result = metrics.hop_metrics(traj, inst.gravity[full], command_speed=self.spec.speed,
+        result = hops.hop_metrics(traj, inst.gravity[full], command_speed=self.spec.speed,
                                      standing_height=self.standing_height(row),
                                      work=np.asarray(motor_energy(final)), mass=self.mass(full))
         result["diverged"] = np.asarray(final.diverged)
         if self.grounds:
-            result |= metrics.terrain_metrics(traj, command_speed=self.spec.speed, obstacles=obstacles)
+            result |= hops.terrain_metrics(traj, command_speed=self.spec.speed, obstacles=obstacles)
         return np.stack([np.asarray(result[c], dtype=np.float64) for c in self.columns], axis=1)[:n]
 
 
@@ -144,13 +146,13 @@ def robots(spec: SweepSpec, mj_model) -> tuple[dict, dict, dict]:
     """(model fields, control parameters, results.csv columns), each {name: (rows, ...)}: one robot per
     replicate, and with a swept parameter one per value and replicate (`Instances.robot_row`); raises
     ValueError for a value outside its parameter's range."""
-    parts = [(variation.draw(s, mj_model, spec.num, spec.seed), variation.draw_controls(s, mj_model, spec.num,
+    parts = [(draw.draw(s, mj_model, spec.num, spec.seed), draw.draw_controls(s, mj_model, spec.num,
                                                                                          spec.seed))
              for s in spec.robot_specs()]
     stack = lambda dicts: {k: np.concatenate([d[k] for d in dicts]) for k in dicts[0]}
     drawn, controls = stack([p[0] for p in parts]), stack([p[1] for p in parts])
     both = spec.robot_specs()[0]
-    columns = variation.columns(both, mj_model, drawn) | variation.control_columns(controls)
+    columns = draw.columns(both, mj_model, drawn) | draw.control_columns(controls)
     if spec.sweeps_robot:  # the swept value has its own column already
         columns = {k: v for k, v in columns.items() if k != spec.param}
     return drawn, controls, columns
@@ -171,7 +173,7 @@ def run(spec: SweepSpec, out: Path, *, progress: bool = True) -> tuple[Instances
     mine = list(range(me, len(chunks), procs))
     saved = {k: read_chunk(out, k, len(chunks[k]), len(columns(spec))) for k in mine}
     todo = [k for k in mine if saved[k] is None]  # missing, or damaged by a kill mid-write: (re)computed
-    runner = ChunkRunner(spec, instances, sim, variation.with_constants(sim.mj_model, drawn), controls) \
+    runner = ChunkRunner(spec, instances, sim, draw.with_constants(sim.mj_model, drawn), controls) \
         if todo else None
 
     start, simulated = time.perf_counter(), 0

@@ -7,7 +7,7 @@ NumPy only here, so that a command can check a spec before JAX or MuJoCo is impo
 height scan (JAX) is `hopper_mjx.terrain.scan`.
 """
 
-from hopper_mjx.terrain.grid import (
+from hopper_mjx.terrain.hfield import (
                                  BASE_DEPTH,
                                  FLAT_SPAN,
                                  HFIELD,

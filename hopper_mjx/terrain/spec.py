@@ -22,7 +22,7 @@ import numpy as np
 
 from hopper_mjx import registry
 from hopper_mjx.terrain import generators
-from hopper_mjx.terrain.grid import Terrain, vertices
+from hopper_mjx.terrain.hfield import Terrain, vertices
 
 DEFAULT_SIZE = (4.0, 4.0)  # m, full extents: a hopping robot stays on it for seconds (no contact off the grid)
 DEFAULT_CELL = 0.04  # m: a fifth of the foot's approach in a hop, and ~100 x 100 vertices on 4 m
@@ -290,7 +290,7 @@ def terrain_help(default: str = "flat") -> str:
 def check_terrain(text: str, n: int = 1) -> Ground:
     """--terrain parsed, and its grid checked to fit in memory for `n` instances (each may hold its own copy
     of the heights once terrain varies per instance); ValueError '--terrain: ...' in one line."""
-    from hopper_mjx import budget
+    from hopper_mjx.shell import budget
 
     try:
         ground = parse(text)

@@ -26,13 +26,15 @@ import jax.numpy as jnp
 import mujoco
 
 from hopper_mjx import registry
-from hopper_mjx.engine import chain_algebra as al
-from hopper_mjx.engine import chain_constraint, chain_smooth, chain_solver
-from hopper_mjx.engine.chain_hfield import TerrainParams
-from hopper_mjx.engine.chain_model import ChainModel, NotChain, derive, describe, entries, instance, terrain_heights
-from hopper_mjx.engine.chain_stage import BATCH_AXIS, stored
+from hopper_mjx.engine.chain import algebra as al
+from hopper_mjx.engine.chain import constraint as chain_constraint
+from hopper_mjx.engine.chain import smooth as chain_smooth
+from hopper_mjx.engine.chain import solver as chain_solver
+from hopper_mjx.engine.chain.hfield import TerrainParams
+from hopper_mjx.engine.chain.model import ChainModel, NotChain, derive, describe, entries, instance, terrain_heights
+from hopper_mjx.engine.chain.stage import BATCH_AXIS, stored
 from hopper_mjx.engine.xla import CPU_COMPILER_OPTIONS, FUSION_EMITTERS, WIDE_VECTORS, trace_once
-from hopper_mjx.model import variation
+from hopper_mjx.variation import draw
 
 __all__ = ["BATCH_AXIS", "ChainData", "ChainEngine", "ChainParams", "NotChain", "TerrainParams", "make",
            "make_for_tools", "terrain_heights"]
@@ -100,7 +102,7 @@ class ChainEngine:
     freeze_fields = ("qpos", "qvel", "qacc_warmstart")
     # The model's numbers are folded into the step at trace time, but for these and the constants MuJoCo
     # derives from them (of which the step reads the constraint weights), which `vary` makes run-time values.
-    varies = registry.CHAIN_VARIES | frozenset(variation.CONSTANTS)
+    varies = registry.CHAIN_VARIES | frozenset(draw.CONSTANTS)
 
     def __init__(self, mj_model: mujoco.MjModel, max_foot_contacts: int | None = None,
                  varies: frozenset[str] = frozenset()):
@@ -112,7 +114,7 @@ class ChainEngine:
         if "geom_size" in varies and self.chain.terrain is not None:  # the cell block is sized for one radius
             raise NotChain("not a chain model: a drawn foot radius on a heightfield floor is not written yet")
         self.source = mj_model  # the nominal model: `chain_model.instance` reads its frames and indices
-        self.settable = {f: variation.settable(mj_model, f) for f in registry.CHAIN_VARIES}
+        self.settable = {f: draw.settable(mj_model, f) for f in registry.CHAIN_VARIES}
         if max_foot_contacts is not None:
             if self.chain.terrain is None or max_foot_contacts < 1:
                 raise ValueError("max_foot_contacts needs a heightfield floor and must be >= 1")

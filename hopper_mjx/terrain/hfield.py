@@ -12,7 +12,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from hopper_mjx.files import atomic_write, atomic_write_text
+from hopper_mjx.shell.files import atomic_write, atomic_write_text
 
 HFIELD = "terrain"  # the hfield asset's name in the compiled model
 BASE_DEPTH = 0.1  # m of solid below the lowest vertex (MuJoCo's size[3]); contacts below it are missed

@@ -1,6 +1,6 @@
 """What a controller reads of its robot, per instance: its sensors' noise and bias, and their delay.
 
-Between the engine and the controller, as the motors (`hopper_mjx.actuators`) sit between the
+Between the engine and the controller, as the motors (`hopper_mjx.hardware.actuators`) sit between the
 controller and the engine, per instance and pure:
 
     observation -> [IMU and odometry noise, gyro bias] -> [delay line] -> the controller
@@ -27,7 +27,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from hopper_mjx.signals import Imu, Observation, Odometry
+from hopper_mjx.hardware.signals import Imu, Observation, Odometry
 
 NOISE_STREAM = 1  # folded into an instance's per-step key: its own stream beside the pushes' directions
 

@@ -1,7 +1,7 @@
 """Writing results so that a kill or a power cut leaves either the old file or the whole new one.
 
 An output still being written is listed (`partial`): a command stopped by a signal removes it
-(`hopper_mjx.command`), so an interrupted run leaves no half-written file behind.
+(`hopper_mjx.shell.process`), so an interrupted run leaves no half-written file behind.
 """
 
 from __future__ import annotations

@@ -33,7 +33,7 @@ import sys
 import threading
 from pathlib import Path
 
-from hopper_mjx import files
+from hopper_mjx.shell import files
 
 STOP_CODES = {signal.SIGINT: 130, signal.SIGTERM: 143}  # 128 + the signal's number, as a shell reports it
 PACKAGE_ROOT = Path(__file__).resolve().parents[1]

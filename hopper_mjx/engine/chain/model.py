@@ -19,8 +19,8 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
-from hopper_mjx.engine import chain_algebra as al
-from hopper_mjx.engine.chain_algebra import const_mat
+from hopper_mjx.engine.chain import algebra as al
+from hopper_mjx.engine.chain.algebra import const_mat
 from hopper_mjx.model.loader import FOOT_GEOM
 
 Sym6 = tuple  # symmetric 3x3 as (xx, yy, zz, xy, xz, yz)
@@ -391,7 +391,7 @@ def entries(cm: ChainModel, values: dict, settable: dict) -> dict:
     """One instance's numbers the chain reads from `values` ({model field: that field's array}): {"field[i, j]":
     scalar} of each entry `settable[field]` marks, and MuJoCo's derived constraint weights (`body_invweight0` of
     the bodies with a contact pair, `dof_invweight0` of the hinges with a limit or friction row:
-    model.variation.with_constants).
+    variation.draw.with_constants).
     Sliced once per rollout, so that the step reads scalars, not arrays; in field order, whatever the order of
     `settable` (a set's order changes with the process's string hashing, and with it the traced program and so its
     persistent-cache key: a program compiled afresh runs slower than one loaded, docs/performance.md)."""

@@ -25,7 +25,7 @@ from hopper_mjx import registry
 from hopper_mjx.model.layout import Layout
 from hopper_mjx.model.loader import JOINTS
 from hopper_mjx.model.robot import Robot, stance_qpos
-from hopper_mjx.randomize import Spec
+from hopper_mjx.variation.spec import Spec
 
 # Fields `mj_setConst` derives from masses, inertias, armature and gear that MJX's step reads (MJX reads
 # body_sameframe, which changes with a moved centre of mass, nowhere).

@@ -15,7 +15,7 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
-from hopper_mjx.engine.chain_algebra import is_const
+from hopper_mjx.engine.chain.algebra import is_const
 
 
 def stored(gate: jax.Array, fn, *args):

@@ -24,8 +24,8 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
-from hopper_mjx.engine.chain_hfield import Contact, TerrainParams, block_start
-from hopper_mjx.engine.chain_model import Terrain
+from hopper_mjx.engine.chain.hfield import Contact, TerrainParams, block_start
+from hopper_mjx.engine.chain.model import Terrain
 
 PARALLEL = 1e-6  # |cos| below which a box axis counts as lying in a face (its feature is an edge or a face)
 

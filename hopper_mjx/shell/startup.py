@@ -13,7 +13,7 @@
   two notices are dropped, any other line goes to stderr.
 
 - **Interrupts from the first import on.** A command (`python -m hopper_mjx...`, a script
-  of experiments/) arms `hopper_mjx.command`'s signal handling here, so that Ctrl-C while
+  of experiments/) arms `hopper_mjx.shell.process`'s signal handling here, so that Ctrl-C while
   its modules are still being imported is one line too, not a traceback.
 
 Nothing here imports MuJoCo or JAX, so that a command can refuse a bad argument
@@ -30,7 +30,7 @@ import os
 import platform
 import sys
 
-from hopper_mjx import command
+from hopper_mjx.shell import process
 
 WARP_MODULE = "mujoco.mjx.warp"  # prints the notices when it is executed
 # Printed by mujoco/mjx/warp/__init__.py when the optional Warp backend is absent.
@@ -75,7 +75,7 @@ class QuietWarpImport(importlib.abc.MetaPathFinder):
 
 
 def prepare() -> None:
-    command.arm_if_command()
+    process.arm_if_command()
     choose_gl_backend()
     if WARP_MODULE not in sys.modules and not any(isinstance(f, QuietWarpImport) for f in sys.meta_path):
         sys.meta_path.insert(0, QuietWarpImport())

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from hopper_mjx.checks import check_readable_file
 from hopper_mjx.model import loader
+from hopper_mjx.shell.checks import check_readable_file
 
 
 def check_urdf(path: str | Path | None) -> loader.LegDescription:

@@ -21,9 +21,9 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 
-from hopper_mjx.engine import chain_algebra as al
-from hopper_mjx.engine.chain_constraint import MINVAL, Rows
-from hopper_mjx.engine.chain_stage import batch_any, stored
+from hopper_mjx.engine.chain import algebra as al
+from hopper_mjx.engine.chain.constraint import MINVAL, Rows
+from hopper_mjx.engine.chain.stage import batch_any, stored
 
 FAR = 1e30  # the search's upper end before any point past the minimum is found
 # The line search's derivative and the Newton loop's gradient count as zero within this many rounding units

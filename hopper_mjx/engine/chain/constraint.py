@@ -23,11 +23,12 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 
-from hopper_mjx.engine import chain_algebra as al
-from hopper_mjx.engine import chain_hfield, chain_hfield_box
-from hopper_mjx.engine.chain_model import ChainModel, ContactPair, SolParams
-from hopper_mjx.engine.chain_smooth import Pose, dof_body
-from hopper_mjx.engine.chain_stage import batch_any, stored
+from hopper_mjx.engine.chain import algebra as al
+from hopper_mjx.engine.chain import hfield as chain_hfield
+from hopper_mjx.engine.chain import hfield_box as chain_hfield_box
+from hopper_mjx.engine.chain.model import ChainModel, ContactPair, SolParams
+from hopper_mjx.engine.chain.smooth import Pose, dof_body
+from hopper_mjx.engine.chain.stage import batch_any, stored
 
 MINVAL = 1e-15  # mujoco.mjMINVAL
 MINIMP, MAXIMP = 0.0001, 0.9999  # mujoco.mjMINIMP, mjMAXIMP

@@ -12,7 +12,7 @@
   supported on the host machine ... This could lead to execution errors such as
   SIGILL" (and which would crash if such an instruction ran). XLA prints the same
   alarm on the very CPU that compiled, for two tuning preferences it takes for
-  features: `hopper_mjx.command` drops exactly those lines from a command's stderr.
+  features: `hopper_mjx.shell.process` drops exactly those lines from a command's stderr.
 """
 
 from __future__ import annotations

@@ -13,9 +13,9 @@ from typing import NamedTuple
 
 import jax.numpy as jnp
 
-from hopper_mjx.engine import chain_algebra as al
-from hopper_mjx.engine.chain_model import ChainModel
-from hopper_mjx.engine.chain_stage import stored
+from hopper_mjx.engine.chain import algebra as al
+from hopper_mjx.engine.chain.model import ChainModel
+from hopper_mjx.engine.chain.stage import stored
 
 
 class Pose(NamedTuple):

@@ -6,7 +6,7 @@
 The parameter names are `registry.PARAMETERS`; a distribution is a fixed value, `uniform(a,b)`
 (or `a..b`), `loguniform(a,b)`, `normal(mu,sigma)` or `scale(a,b)` (the nominal value times
 uniform(a, b)). Pure Python and NumPy, so that the command line refuses a bad spec before MuJoCo
-or JAX is loaded; `model.variation` resolves the names to model fields and draws per instance.
+or JAX is loaded; `variation.draw` resolves the names to model fields and draws per instance.
 """
 
 from __future__ import annotations

@@ -31,9 +31,9 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 
-from hopper_mjx.engine import chain_algebra as al
-from hopper_mjx.engine.chain_model import Terrain
-from hopper_mjx.engine.chain_stage import stored
+from hopper_mjx.engine.chain import algebra as al
+from hopper_mjx.engine.chain.model import Terrain
+from hopper_mjx.engine.chain.stage import stored
 
 
 class TerrainParams(NamedTuple):
