@@ -34,7 +34,7 @@ from hopper_mjx.hardware.sensor_noise import FIGURES, Sensing, SensorState
 from hopper_mjx.hardware.sensor_noise import add_noise as sensor_noise
 from hopper_mjx.model import world
 from hopper_mjx.model.robot import Robot
-from hopper_mjx.terrain import HFIELD, from_model
+from hopper_mjx.terrain import from_model
 from hopper_mjx.variation import draw
 
 gravity_vectors = world.gravity_vectors  # the gravity convention lives beside the world files
@@ -234,7 +234,7 @@ class Sim:
         out = {}
         for field, values in variation.items():
             if field not in self.engine.varies:
-                raise ValueError(f"the {self.engine.name} engine cannot vary {field} per instance")
+                raise ValueError(f"this batch's engine cannot vary {field} per instance")
             nominal = np.shape(getattr(self.mj_model, field))
             values = np.asarray(values)
             if values.shape != (n, *nominal):
@@ -361,18 +361,6 @@ def _pad(state: State, size: int) -> State:
     )
 
 
-def on_ground(engine, mj_model: mujoco.MjModel, model, heights):
-    """The engine's model (one instance's) on the ground `heights` (nrow, ncol) m, on the grid of
-    `mj_model`'s height field."""
-    if engine.name == "chain":
-        return model._replace(terrain=engine.with_heights(heights).terrain)
-    # MJX: vertex height = floor geom's z + data · elevation range (static), whatever the data's range.
-    k = mujoco.mj_name2id(mj_model, mujoco.mjtObj.mjOBJ_HFIELD, HFIELD)
-    geom = int(np.flatnonzero((mj_model.geom_type == mujoco.mjtGeom.mjGEOM_HFIELD) & (mj_model.geom_dataid == k))[0])
-    data = (heights - mj_model.geom_pos[geom, 2]) / mj_model.hfield_size[k, 2]
-    return model.replace(hfield_data=data.ravel().astype(model.hfield_data.dtype))
-
-
 def _drive(actuation: Actuation, controller, command, cstate, drive, now, qvel, dt):
     """(ctrl, controller state, drive): a controller's command through the delay line and the motors. A torque
     controller's command is its torque; a servo's (a policy's) is joint targets, delayed on their way to the
@@ -449,7 +437,7 @@ def _instance_rollout(engine, actuation: Actuation, pushes: Pushes | None, sensi
         model = engine.vary(model, variation)  # this instance's robot: per instance only where varied
         if isinstance(state.ground, jax.Array):  # static: this instance's own ground, into its engine's model
             heights = state.ground
-            model = on_ground(engine, mj_model, model, heights)
+            model = engine.on_ground(model, heights)
         # The loop carries the robot once, in `model`, not its drawn fields again in the state.
         (_, _, _, state), sig = jax.lax.scan(one_tick, (model, heights, weights, state._replace(variation={})),
                                              None, length=steps // tick)

@@ -28,6 +28,7 @@ from hopper_mjx.engine.chain import hfield as chain_hfield
 from hopper_mjx.engine.chain import smooth as chain_smooth
 from hopper_mjx.metrics import hops
 from hopper_mjx.model.robot import stance_qpos
+from hopper_mjx.terrain import from_model
 
 HALF = 1.0  # m: the terrains span 2 m x 2 m
 GRID = 41  # vertices a side: 5 cm cells, so the 3 cm foot reaches up to 3 x 3 cells
@@ -172,7 +173,7 @@ def float64_contacts(models):
         engine = chain.make(converged(models["rough"], 20), chain.FOOT_CONTACTS)
         contacts, stages = chain_contacts_fn(engine), chain_stages(engine)
         for name, (states, default, c_tight, c_stages) in cases.items():
-            params = engine.with_heights(chain.terrain_heights(models[name]))
+            params = engine.with_heights(from_model(models[name]).heights)
             ours = chain_contacts(contacts, params, states[0], states[1])
             args = [jnp.asarray(x, jnp.float64) for x in states]
             ours_stages = {k: np.asarray(v) for k, v in stages(params, *args, jnp.zeros_like(args[1])).items()}
@@ -293,7 +294,7 @@ def trajectories(models, step64):
     ours, theirs, touched = [], [], []
     engine, step = step64
     with jax.enable_x64(True):
-        params = engine.with_heights(np.stack([chain.terrain_heights(models[name]) for name, _, _ in cases]))
+        params = engine.with_heights(np.stack([from_model(models[name]).heights for name, _, _ in cases]))
         for _ in range(TRAJ_STEPS):
             ctrl = np.where(hold[:, None], HOLD_P * (q0[7:] - qpos[:, 7:]) - HOLD_D * qvel[:, 6:], 0.0)
             out = step(params, *(jnp.asarray(x) for x in (qpos, qvel, ctrl, gravity, warm)))
@@ -328,7 +329,7 @@ def test_a_new_terrain_is_an_input_not_a_recompile(models, step64):
     own = chain.make(models["step"], chain.FOOT_CONTACTS)
     n = len(TERRAINS) * len(GRAVITIES) * 2  # the trajectories' batch: the same program
     states = [*terrain_states(models["step"], n, seed=5)]
-    heights = {name: np.stack([chain.terrain_heights(models[name])] * n) for name in ("rough", "step")}
+    heights = {name: np.stack([from_model(models[name]).heights] * n) for name in ("rough", "step")}
     t = own.chain.terrain
 
     with jax.enable_x64(True):  # the trajectories' float64 program
@@ -347,7 +348,7 @@ def _deep_states(m: mujoco.MjModel, n: int, seed: int) -> np.ndarray:
     foot radius: contacts on prism edges and walls, not only faces."""
     rng = np.random.default_rng(seed)
     x, y = _grid()
-    heights = chain.terrain_heights(m)
+    heights = from_model(m).heights
     radius = m.geom_size[m.geom("foot").id, 0]
     centres = []
     for _ in range(n):
@@ -393,7 +394,7 @@ def test_deep_contacts_within_ccd_tolerance(models):
             tight.opt.ccd_tolerance, tight.opt.ccd_iterations = TIGHT_CCD, 2000
             centres = _deep_states(m, 100, seed)
             exists, dist, pos, normal = (np.asarray(x) for x in fn(
-                jnp.asarray(centres), engine.with_heights(chain.terrain_heights(m))))
+                jnp.asarray(centres), engine.with_heights(from_model(m).heights)))
             for i, centre in enumerate(centres):
                 ours = [(dist[i, k], pos[i, k], normal[i, k]) for k in np.flatnonzero(exists[i])]
                 for reference, worst in ((_c_sphere_contacts(m, centre), err), (_c_sphere_contacts(tight, centre),

@@ -27,6 +27,7 @@ from hopper_mjx.engine.chain import hfield_box as chain_hfield_box
 from hopper_mjx.engine.chain import smooth as chain_smooth
 from hopper_mjx.engine.chain.hfield import block_start
 from hopper_mjx.model.robot import stance_qpos
+from hopper_mjx.terrain import from_model
 
 TIGHT_CCD = 1e-14
 N_POSES = 24
@@ -44,7 +45,7 @@ def box_poses(m: mujoco.MjModel, n: int, seed: int) -> np.ndarray:
     under it (at the nearest vertex)."""
     rng = np.random.default_rng(seed)
     d = mujoco.MjData(m)
-    heights = chain.terrain_heights(m)
+    heights = from_model(m).heights
     g = int(m.pair_geom2[0])
     cell = 2 * HALF / (heights.shape[0] - 1)
     out = []
@@ -91,7 +92,7 @@ def per_prism(rough):
     cm, t, pair = engine.chain, engine.chain.terrain, engine.chain.pairs[engine.chain.terrain.box]
     poses = box_poses(rough, N_POSES, seed=0)
     with jax.enable_x64(True):
-        params = engine.with_heights(chain.terrain_heights(rough))
+        params = engine.with_heights(from_model(rough).heights)
 
         def one(q):
             pose = chain_smooth.kinematics(cm, params.gate, tuple(q[i] for i in range(cm.nq)))
@@ -186,7 +187,7 @@ def falls():
     ours, theirs, box_down = [], [], []
     with jax.enable_x64(True):
         engine = chain.make_for_tools(models["rough"])
-        params = engine.with_heights(np.stack([chain.terrain_heights(models[name]) for name, _ in cases]))
+        params = engine.with_heights(np.stack([from_model(models[name]).heights for name, _ in cases]))
         step = _step_fn(engine, chain.BATCH_AXIS)
         for _ in range(DROP_STEPS):
             out = step(params, *(jnp.asarray(x) for x in (qpos, qvel, ctrl, gravity, warm)))
@@ -201,7 +202,7 @@ def falls():
         standing[2] += _first_contact_height(models["rough"], standing)
         batches = np.tile(standing, (2, n, 1))
         batches[1, -1] = box_poses(models["rough"], 1, seed=5)[0]
-        rough_params = engine.with_heights(np.stack([chain.terrain_heights(models["rough"])] * n))
+        rough_params = engine.with_heights(np.stack([from_model(models["rough"]).heights] * n))
         zeros = jnp.zeros((n, 9))
         beside = [jax.tree_util.tree_map(np.asarray, step(rough_params, jnp.asarray(q), zeros, jnp.zeros((n, 3)),
                                                           jnp.asarray(gravity), zeros)) for q in batches]

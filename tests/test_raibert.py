@@ -167,10 +167,10 @@ def test_flight_gains_are_the_shipped_position_controllers(robot):
 
 # -- on a terrain ---------------------------------------------------------------------
 def _ground(heights, size=(1.0, 1.0)):
-    from hopper_mjx.hardware.signals import Ground
+    from hopper_mjx.hardware.signals import SensedGround
 
     heights = jnp.asarray(heights, jnp.float32)
-    return Ground(heights, jnp.zeros(25), jnp.zeros(3), size)
+    return SensedGround(heights, jnp.zeros(25), jnp.zeros(3), size)
 
 
 def _step(x0=0.2, rise=0.05):

@@ -164,7 +164,7 @@ def test_a_gazebo_heightmap_is_the_ground_the_compiled_model_holds(tmp_path):
 
     from hopper_mjx import simulate
     from hopper_mjx.cli import check_batch
-    from hopper_mjx.engine.chain import terrain_heights
+    from hopper_mjx.terrain import from_model
 
     grey = np.add.outer(np.arange(9), 3 * np.arange(17)).astype(np.uint8) * 3  # 9 rows x 17 columns, distinct
     (tmp_path / "img").mkdir()
@@ -174,7 +174,7 @@ def test_a_gazebo_heightmap_is_the_ground_the_compiled_model_holds(tmp_path):
     assert w.terrain == f"heightmap:{tmp_path / 'img' / 'hills.png'},size=3x2,height=0.12"
     assert w.ground_friction == (0.6, 0.6)
     scenario = check_batch(simulate.parser().parse_args(["--world", str(world_file), "--engine", "mjx"]))
-    heights = terrain_heights(scenario.physics.mj_model)
+    heights = from_model(scenario.physics.mj_model).heights
     np.testing.assert_allclose(heights, 0.12 * grey[::-1] / 255.0, atol=1e-6)  # float32 hfield data
     hfield = scenario.physics.mj_model.hfield_size[0]
     assert tuple(hfield[:2]) == (1.5, 1.0)  # half extents

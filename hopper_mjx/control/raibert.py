@@ -418,7 +418,7 @@ def stance_torque(leg: LegGeometry, gains: RaibertConfig, phase, body: Body, spi
 def flight_torque(leg: LegGeometry, gains: RaibertConfig, body: Body, spin, speed: Speed, g,
                  inertia: Inertia, scale: PDScale | None = None, ground=None, base_xy=None) -> jax.Array:
     """Joint torques (3,) N·m in flight: PD to the joint angles that place the foot (part 2). On a
-    terrain (`ground`, `signals.Ground`; `base_xy` the base's world position) the time left to
+    terrain (`ground`, `signals.SensedGround`; `base_xy` the base's world position) the time left to
     touchdown is the foot's fall to the ground where it will land."""
     placement = body.v * speed.stance_time / 2 + speed.gain * speed.error + speed.offset
     placement = body.unturn[:2, :2] @ jnp.clip(placement, -MAX_PLACEMENT, MAX_PLACEMENT)

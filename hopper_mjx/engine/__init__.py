@@ -9,6 +9,9 @@ Every engine has, per instance and pure (the core vmaps them):
   fields it takes per instance at run time);
 - `vary(model, values) -> model`: one instance's model, `values` {field: array} replacing
   the nominal fields (`variation.draw` draws them); `{}` returns `model` unchanged;
+- `on_ground(model, heights) -> model`: one instance's model on its own ground, `heights` (nrow, ncol) m
+  on the grid of the model's height field (`terrain.from_model` decodes a model's, `terrain.to_model_data`
+  encodes them for MuJoCo's);
 - `make_data(qpos, qvel) -> data` at time 0;
 - `forward(model, data, gravity) -> data`: uses `data.ctrl` (actuator order), sets `qacc`
   and the contacts;
@@ -54,6 +57,8 @@ class Engine(Protocol):
     compiler_options: dict  # XLA:CPU options for a jit of this engine's step (engine/xla.py)
 
     def vary(self, model, values: dict) -> Any: ...
+
+    def on_ground(self, model, heights) -> Any: ...
 
     def make_data(self, qpos, qvel) -> Any: ...
 

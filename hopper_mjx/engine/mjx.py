@@ -19,6 +19,7 @@ from mujoco.mjx._src import support  # contact_force: decodes MJX's pyramidal/el
 from hopper_mjx import registry
 from hopper_mjx.engine.xla import CPU_COMPILER_OPTIONS, trace_once
 from hopper_mjx.model.layout import Layout
+from hopper_mjx.terrain import to_model_data
 from hopper_mjx.variation.draw import CONSTANTS
 
 _INTEGRATORS = {
@@ -89,6 +90,10 @@ class MjxEngine:
         """One instance's model: its values of the varied fields (and their derived constants) in place
         of the nominal ones; no values, the nominal model itself (the same compiled program)."""
         return model.replace(**{f: jnp.asarray(v, getattr(model, f).dtype) for f, v in values.items()})
+
+    def on_ground(self, model: mjx.Model, heights: jax.Array) -> mjx.Model:
+        """One instance's model on its own ground `heights` (nrow, ncol) m, encoded into MJX's hfield data."""
+        return model.replace(hfield_data=to_model_data(self.source, heights).astype(model.hfield_data.dtype))
 
     def make_data(self, qpos: jax.Array, qvel: jax.Array) -> mjx.Data:
         return mjx.make_data(self.source, device=self.device).replace(qpos=qpos, qvel=qvel)

@@ -50,7 +50,7 @@ class Contact(NamedTuple):
 
 @jax.tree_util.register_dataclass
 @dataclasses.dataclass(frozen=True)
-class Ground:
+class SensedGround:
     """The terrain as one instance senses it (on a height field; the flat plane has none)."""
 
     heights: jax.Array  # (nrow, ncol) m, world z: the instance's grid, as its engine collides with it
@@ -90,7 +90,7 @@ class Observation(NamedTuple):
     qpos: jax.Array  # (nq,)
     qvel: jax.Array  # (nv,)
     contact: Contact
-    ground: Ground | None = None  # on a height field; None on the flat plane (a controller's static branch)
+    ground: SensedGround | None = None  # on a height field; None on the flat plane (a controller's static branch)
 
 
 def imu(d: Any, gravity: jax.Array) -> Imu:
@@ -110,12 +110,12 @@ def contact(engine, model, d) -> Contact:
     return Contact(*engine.foot_contact(model, d))
 
 
-def ground(heights, size, points, d, touch: Contact) -> Ground:
+def ground(heights, size, points, d, touch: Contact) -> SensedGround:
     """The height scan around the base (its yaw frame) and the ground's normal under the foot's contact,
     read from the grid `heights` the engine steps on (half-extents `size`, scan `points` (K, 2))."""
     scan = terrain_scan.measured_heights(heights, size, d.qpos[:3], d.qpos[3:7], points)
     normal = terrain_scan.normal_at(heights, size, touch.pos[0], touch.pos[1])
-    return Ground(heights, scan, jnp.where(touch.flag, normal, 0.0), size)
+    return SensedGround(heights, scan, jnp.where(touch.flag, normal, 0.0), size)
 
 
 def measure(engine, model, d, gravity: jax.Array, terrain: tuple = ()) -> Signals:
@@ -133,7 +133,7 @@ def measure(engine, model, d, gravity: jax.Array, terrain: tuple = ()) -> Signal
 
 
 def observe(engine, model, d, terrain: tuple = ()) -> Observation:
-    """What a controller reads; `terrain` (heights, size, points) adds the `Ground`."""
+    """What a controller reads; `terrain` (heights, size, points) adds the `SensedGround`."""
     touch = contact(engine, model, d)
     return Observation(time=d.time, qpos=d.qpos, qvel=d.qvel, contact=touch,
                        ground=ground(*terrain, d, touch) if terrain else None)

@@ -15,6 +15,7 @@ from hopper_mjx.terrain.hfield import (
                                  Terrain,
                                  from_model,
                                  hfield,
+                                 to_model_data,
                                  to_spec,
                                  triangles,
                                  vertices,
@@ -23,4 +24,4 @@ from hopper_mjx.terrain.hfield import (
 from hopper_mjx.terrain.spec import FLAT, Ground, TerrainError, parse
 
 __all__ = ["BASE_DEPTH", "FLAT", "FLAT_SPAN", "HFIELD", "Ground", "HField", "Terrain", "TerrainError", "from_model",
-           "hfield", "parse", "to_spec", "triangles", "vertices", "write_mjcf"]
+           "hfield", "parse", "to_model_data", "to_spec", "triangles", "vertices", "write_mjcf"]

@@ -82,18 +82,35 @@ def to_spec(spec, geom, terrain: Terrain) -> None:
     geom.pos = [0.0, 0.0, f.z]
 
 
-def from_model(mj_model) -> Terrain | None:
-    """The terrain of a compiled model's hfield `HFIELD` (None without one), heights as MuJoCo holds them."""
+def _floor(mj_model) -> tuple[int, int] | None:
+    """(hfield id, its geom's id) of the compiled model's hfield `HFIELD`, or None without one."""
     import mujoco
 
     k = mujoco.mj_name2id(mj_model, mujoco.mjtObj.mjOBJ_HFIELD, HFIELD)
     if k < 0:
         return None
+    return k, int(np.flatnonzero((mj_model.geom_type == mujoco.mjtGeom.mjGEOM_HFIELD) & (mj_model.geom_dataid == k))[0])
+
+
+def from_model(mj_model) -> Terrain | None:
+    """The terrain of a compiled model's hfield `HFIELD` (None without one), heights as MuJoCo holds them:
+    vertex height = the geom's z + data * elevation range. The one decoder of a model's ground."""
+    found = _floor(mj_model)
+    if found is None:
+        return None
+    k, geom = found
     nrow, ncol = int(mj_model.hfield_nrow[k]), int(mj_model.hfield_ncol[k])
     adr, size = int(mj_model.hfield_adr[k]), mj_model.hfield_size[k]
-    geom = int(np.flatnonzero((mj_model.geom_type == mujoco.mjtGeom.mjGEOM_HFIELD) & (mj_model.geom_dataid == k))[0])
     data = np.asarray(mj_model.hfield_data[adr:adr + nrow * ncol], dtype=np.float64).reshape(nrow, ncol)
     return Terrain(mj_model.geom_pos[geom, 2] + data * size[2], (float(size[0]), float(size[1])))
+
+
+def to_model_data(mj_model, heights):
+    """`from_model`'s inverse on the compiled model's own grid: the hfield data (nrow * ncol,) that puts its
+    vertices at `heights` (nrow, ncol) m, with the geom's z and the elevation range as compiled (static),
+    whatever the data's range. NumPy or JAX arrays alike (an engine encodes traced per-instance heights)."""
+    k, geom = _floor(mj_model)
+    return ((heights - mj_model.geom_pos[geom, 2]) / mj_model.hfield_size[k, 2]).ravel()
 
 
 def _exact(values) -> str:

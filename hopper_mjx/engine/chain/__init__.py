@@ -31,13 +31,14 @@ from hopper_mjx.engine.chain import constraint as chain_constraint
 from hopper_mjx.engine.chain import smooth as chain_smooth
 from hopper_mjx.engine.chain import solver as chain_solver
 from hopper_mjx.engine.chain.hfield import TerrainParams
-from hopper_mjx.engine.chain.model import ChainModel, NotChain, derive, describe, entries, instance, terrain_heights
+from hopper_mjx.engine.chain.model import ChainModel, NotChain, derive, describe, entries, instance
 from hopper_mjx.engine.chain.stage import BATCH_AXIS, stored
 from hopper_mjx.engine.xla import CPU_COMPILER_OPTIONS, FUSION_EMITTERS, WIDE_VECTORS, trace_once
+from hopper_mjx.terrain import from_model
 from hopper_mjx.variation import draw
 
 __all__ = ["BATCH_AXIS", "ChainData", "ChainEngine", "ChainParams", "NotChain", "TerrainParams", "make",
-           "make_for_tools", "terrain_heights"]
+           "make_for_tools"]
 
 
 class ChainParams(NamedTuple):
@@ -128,7 +129,7 @@ class ChainEngine:
         self.model = ChainParams(gate=jnp.array(True))
         if self.chain.terrain is not None:
             t = self.chain.terrain
-            self.model = self.with_heights(terrain_heights(mj_model), t.origin[2] - t.base)
+            self.model = self.with_heights(from_model(mj_model).heights, t.origin[2] - t.base)
         trace_once(self)
 
     def with_heights(self, heights, bottom=None) -> ChainParams:
@@ -143,6 +144,10 @@ class ChainEngine:
             raise ValueError(f"heights must be ({t.nrow}, {t.ncol}) for this model, got {heights.shape}")
         bottom = jnp.min(heights, axis=(-2, -1)) - t.base if bottom is None else jnp.asarray(bottom, heights.dtype)
         return ChainParams(gate=jnp.array(True), terrain=TerrainParams(heights, bottom))
+
+    def on_ground(self, model: ChainParams, heights) -> ChainParams:
+        """One instance's model on its own ground `heights` (nrow, ncol) m, world, on this model's grid."""
+        return model._replace(terrain=self.with_heights(heights).terrain)
 
     def vary(self, model: ChainParams, values: dict) -> ChainParams:
         """One instance's model: its values of the varied fields as run-time values (`varies`; `engine.make`

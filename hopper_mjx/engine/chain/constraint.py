@@ -187,7 +187,7 @@ def _terrain_slots(cm: ChainModel, pair: ContactPair, pose: Pose, terrain, box_o
         keep = cm.terrain.box_keep
         collide = lambda c, r: chain_hfield_box.box_contacts(cm.terrain, terrain, c, r, pair.size, keep)
         dtype = centre.dtype
-        absent = lambda c, r: tuple(chain_hfield.Contact(jnp.zeros((), bool), jnp.zeros((), dtype),
+        absent = lambda c, r: tuple(chain_hfield.PrismContact(jnp.zeros((), bool), jnp.zeros((), dtype),
                                                          (jnp.zeros((), dtype),) * 3,
                                                          (jnp.zeros((), dtype),) * 2 + (jnp.ones((), dtype),))
                                     for _ in range(keep))

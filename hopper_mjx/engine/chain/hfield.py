@@ -20,7 +20,7 @@ vertical edges; its slanted top edge is a top edge).
 
 The grid is regular, so the cells the sphere can reach are a fixed block (its size known at
 trace time) whose corner follows the sphere: each of its 2 x rows x cols prisms is a contact
-slot, present when the sphere penetrates it (or, with `Terrain.max_contacts`, the deepest
+slot, present when the sphere penetrates it (or, with `HeightGrid.max_contacts`, the deepest
 few of them fill that many slots). The heights are a run-time input.
 """
 
@@ -32,7 +32,7 @@ import jax
 import jax.numpy as jnp
 
 from hopper_mjx.engine.chain import algebra as al
-from hopper_mjx.engine.chain.model import Terrain
+from hopper_mjx.engine.chain.model import HeightGrid
 from hopper_mjx.engine.chain.stage import stored
 
 
@@ -44,7 +44,7 @@ class TerrainParams(NamedTuple):
     bottom: jax.Array
 
 
-class Contact(NamedTuple):
+class PrismContact(NamedTuple):
     exists: object  # () bool: the sphere penetrates this prism
     dist: object  # -depth
     pos: tuple  # world
@@ -64,7 +64,7 @@ def _segment_point(p, a, b):
     return al.vadd(a, al.vscale(t, e)), t
 
 
-def _prism_contact(p, top, bottom, radius) -> Contact:
+def _prism_contact(p, top, bottom, radius) -> PrismContact:
     """The sphere (centre p, radius) against the prism under triangle `top` (3 vertices)."""
     v0, v1, v2 = top
     _, n = _safe_unit(al.cross(al.vsub(v1, v0), al.vsub(v2, v0)))
@@ -121,10 +121,10 @@ def _prism_contact(p, top, bottom, radius) -> Contact:
     # The midpoint of the prism's point (q = p - dist normal, or p + delta n) and the sphere's (p - r normal).
     shift = jnp.where(inside, 0.5 * (depth_in - radius), -0.5 * (dist_out + radius))
     pos = al.vadd(p, al.vscale(shift, normal))
-    return Contact(inside | (dist_out < radius), -depth, pos, normal)
+    return PrismContact(inside | (dist_out < radius), -depth, pos, normal)
 
 
-def block_start(t: Terrain, centre, radius, block):
+def block_start(t: HeightGrid, centre, radius, block):
     """The first (row, col) of a block of (rows, cols) cells around a body of bounding `radius`:
     the cell under its bounding box's low corner, clamped so the block lies in the grid (then it
     still covers every cell the box reaches)."""
@@ -136,9 +136,10 @@ def block_start(t: Terrain, centre, radius, block):
     return row, col
 
 
-def sphere_contacts(t: Terrain, terrain: TerrainParams, centre, radius: float, gate=None) -> tuple[Contact, ...]:
+def sphere_contacts(t: HeightGrid, terrain: TerrainParams, centre, radius: float,
+                    gate=None) -> tuple[PrismContact, ...]:
     """One contact slot per prism of the block around the sphere (world centre `centre`); with
-    `Terrain.max_contacts`, the deepest that many. The prisms' contacts are stored once behind `gate`
+    `HeightGrid.max_contacts`, the deepest that many. The prisms' contacts are stored once behind `gate`
     (chain_stage.stored): fused into the choice of the deepest, every prism's test ran once per slot kept."""
     rows, cols = t.block
     row, col = block_start(t, centre, radius, t.block)
@@ -165,7 +166,7 @@ def sphere_contacts(t: Terrain, terrain: TerrainParams, centre, radius: float, g
     return out
 
 
-def deepest(contacts: tuple[Contact, ...], keep: int) -> tuple[Contact, ...]:
+def deepest(contacts: tuple[PrismContact, ...], keep: int) -> tuple[PrismContact, ...]:
     """The `keep` deepest present contacts (absent slots where fewer exist), deepest first, the earlier
     slot first among equals: fewer constraint rows, the same contacts as C whenever at most `keep` exist."""
     depth = jnp.stack([jnp.where(c.exists, -c.dist, -jnp.inf) for c in contacts])
@@ -173,7 +174,8 @@ def deepest(contacts: tuple[Contact, ...], keep: int) -> tuple[Contact, ...]:
     top, idx = jax.lax.top_k(depth, keep)
     found = jnp.isfinite(top)
     picked = jnp.where(found[:, None], fields[idx], jnp.array([0.0, 0, 0, 0, 0, 0, 1], fields.dtype))
-    return tuple(Contact(found[k], picked[k, 0], tuple(picked[k, 1:4]), tuple(picked[k, 4:7])) for k in range(keep))
+    return tuple(PrismContact(found[k], picked[k, 0], tuple(picked[k, 1:4]), tuple(picked[k, 4:7]))
+                 for k in range(keep))
 
 
 def make_frame(normal) -> tuple:

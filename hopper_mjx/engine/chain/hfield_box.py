@@ -24,13 +24,13 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
-from hopper_mjx.engine.chain.hfield import Contact, TerrainParams, block_start
-from hopper_mjx.engine.chain.model import Terrain
+from hopper_mjx.engine.chain.hfield import PrismContact, TerrainParams, block_start
+from hopper_mjx.engine.chain.model import HeightGrid
 
 PARALLEL = 1e-6  # |cos| below which a box axis counts as lying in a face (its feature is an edge or a face)
 
 
-def _prisms(t: Terrain, terrain: TerrainParams, row, col, dtype):
+def _prisms(t: HeightGrid, terrain: TerrainParams, row, col, dtype):
     """The block's prisms' top triangles (P, 3, 3), in C's order: by row, by column, lower triangle first."""
     rows, cols = t.block_box
     block = jax.lax.dynamic_slice(terrain.heights, (row, col), (rows + 1, cols + 1))
@@ -131,7 +131,7 @@ def _contact_point(c, box, half, v, w, n, d, best):
     return pos
 
 
-def _box_prism(t: Terrain, centre, axes, half, tops, bottom):
+def _box_prism(t: HeightGrid, centre, axes, half, tops, bottom):
     """Per prism: (penetrates, depth, normal prism -> box, contact point), all (P, ...). Vectors are
     tuples of (P,) or (P, axes) components, so that the prisms (not x, y, z) are the arrays' minor axis."""
     dtype = tops.dtype
@@ -175,7 +175,7 @@ def _box_prism(t: Terrain, centre, axes, half, tops, bottom):
     return reaches & (d > 0), d, jnp.stack(n, -1), jnp.stack(pos, -1)
 
 
-def _candidates(t: Terrain, terrain: TerrainParams, row, col, centre, axes, half, count: int):
+def _candidates(t: HeightGrid, terrain: TerrainParams, row, col, centre, axes, half, count: int):
     """The block's `count` prisms most likely to hold a contact, and whether each may: the least overlap of
     the box and the prism along z and the box's three axes, an upper bound of the penetration (a prism
     separated along one of them holds none). The block's 2 x rows x cols prisms get this cheap test, only
@@ -210,7 +210,7 @@ def _candidates(t: Terrain, terrain: TerrainParams, row, col, centre, axes, half
     return tops[idx], best > 0
 
 
-def box_contacts(t: Terrain, terrain: TerrainParams, centre, rot, half, keep: int) -> tuple[Contact, ...]:
+def box_contacts(t: HeightGrid, terrain: TerrainParams, centre, rot, half, keep: int) -> tuple[PrismContact, ...]:
     """The deepest `keep` of the box's prism contacts (absent slots where fewer), deepest first.
     `centre` (3,) world, `rot` (3, 3) the box's axes as columns, `half` its half sizes."""
     centre, rot = jnp.asarray(centre), jnp.asarray(rot)
@@ -226,11 +226,11 @@ def box_contacts(t: Terrain, terrain: TerrainParams, centre, rot, half, keep: in
     up = jnp.array([0.0, 0.0, 1.0], dtype)
     normal = jnp.where(found[:, None], normal[idx], up)
     pos = jnp.where(found[:, None], pos[idx], 0.0)
-    return tuple(Contact(found[k], jnp.where(found[k], -top[k], 0.0), tuple(pos[k]), tuple(normal[k]))
+    return tuple(PrismContact(found[k], jnp.where(found[k], -top[k], 0.0), tuple(pos[k]), tuple(normal[k]))
                  for k in range(keep))
 
 
-def box_near(t: Terrain, terrain: TerrainParams, centre, rot, half):
+def box_near(t: HeightGrid, terrain: TerrainParams, centre, rot, half):
     """() bool: the box's lowest point is within reach of the highest vertex of its block (else it has
     no contact, and its prisms need not be collided)."""
     centre, rot = jnp.asarray(centre), jnp.asarray(rot)

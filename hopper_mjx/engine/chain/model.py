@@ -7,7 +7,7 @@ damping, dry friction on the hinges only, Newton on a pyramidal cone) and raises
 with one line saying why when the model is outside it. The result is a frozen dataclass of
 floats and tuples: the step reads it at trace time, so every axis, offset, inertia and
 solver parameter is a constant of the compiled function (a heightfield's heights are not:
-`terrain_heights`), and `instance` puts one instance's varied numbers (a per-instance robot)
+`terrain.from_model`), and `instance` puts one instance's varied numbers (a per-instance robot)
 in place of the constants.
 """
 
@@ -88,8 +88,8 @@ def pyramid_invweight(body_invweight, mu, impratio: float):
 
 
 @dataclass(frozen=True)
-class Terrain:
-    """A heightfield floor's grid (its heights are a run-time input, `terrain_heights`).
+class HeightGrid:
+    """A heightfield floor's grid (its heights are a run-time input, `terrain.from_model`).
 
     Vertex (r, c) lies at x = origin_x - hx + dx c, y = origin_y - hy + dy r; each cell is
     two triangles split along the diagonal (c, r)-(c + 1, r + 1), each the top of a prism
@@ -129,7 +129,7 @@ class ChainModel:
     floor_point: tuple[float, float, float]
     contact_frame: tuple  # 3x3 rows: normal, tangent 1, tangent 2 (MuJoCo's mju_makeFrame)
     pairs: tuple[ContactPair, ...]
-    terrain: Terrain | None  # None: the floor is the plane
+    terrain: HeightGrid | None  # None: the floor is the plane
     timestep: float
     iterations: int
     ls_iterations: int
@@ -298,7 +298,7 @@ def _floor(m: mujoco.MjModel) -> int:
     return planes[0]
 
 
-def _terrain(m: mujoco.MjModel, floor: int, pairs: tuple[ContactPair, ...]) -> Terrain | None:
+def _terrain(m: mujoco.MjModel, floor: int, pairs: tuple[ContactPair, ...]) -> HeightGrid | None:
     """The heightfield floor's grid, or None on a plane; `NotChain` for what is not written yet."""
     if m.geom_type[floor] != mujoco.mjtGeom.mjGEOM_HFIELD:
         return None
@@ -325,17 +325,8 @@ def _terrain(m: mujoco.MjModel, floor: int, pairs: tuple[ContactPair, ...]) -> T
         _require(nrow > rows and ncol > cols, f"the heightfield grid {nrow}x{ncol} is smaller than the base box")
         box = dict(box=others[0], box_radius=radius, block_box=(rows, cols), box_keep=BOX_CONTACTS,
                    box_candidates=min(BOX_CANDIDATES, 2 * rows * cols))
-    return Terrain(nrow=nrow, ncol=ncol, hx=hx, hy=hy, base=base, origin=_vec(m.geom_pos[floor]), dx=dx, dy=dy,
+    return HeightGrid(nrow=nrow, ncol=ncol, hx=hx, hy=hy, base=base, origin=_vec(m.geom_pos[floor]), dx=dx, dy=dy,
                    block=block, **box)
-
-
-def terrain_heights(m: mujoco.MjModel) -> np.ndarray:
-    """The heightfield floor's vertex heights (nrow, ncol), world m, as MuJoCo C reads them."""
-    floor = _floor(m)
-    h = int(m.geom_dataid[floor])
-    data = m.hfield_data[m.hfield_adr[h]:m.hfield_adr[h] + m.hfield_nrow[h] * m.hfield_ncol[h]]
-    grid = np.asarray(data, dtype=float).reshape(int(m.hfield_nrow[h]), int(m.hfield_ncol[h]))
-    return m.geom_pos[floor, 2] + grid * m.hfield_size[h, 2]
 
 
 def _actuators(m: mujoco.MjModel):
