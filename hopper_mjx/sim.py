@@ -26,21 +26,21 @@ from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
 from hopper_mjx import engine as engines
 from hopper_mjx import registry
-from hopper_mjx.control.base import Controller, CState, to_ctrl, zero_torque
+from hopper_mjx.control.base import Controller, CState, zero_torque
 from hopper_mjx.hardware import signals
 from hopper_mjx.hardware.actuators import Actuation, Drive, Motor
-from hopper_mjx.hardware.pushes import Pushes, push
+from hopper_mjx.hardware.pushes import Pushes
 from hopper_mjx.hardware.sensor_noise import FIGURES, Sensing, SensorState
 from hopper_mjx.hardware.sensor_noise import add_noise as sensor_noise
 from hopper_mjx.model import world
 from hopper_mjx.model.robot import Robot
+from hopper_mjx.step import Plant, actuate, advance
 from hopper_mjx.terrain import from_model
 from hopper_mjx.variation import draw
 
 gravity_vectors = world.gravity_vectors  # the gravity convention lives beside the world files
 
 AXIS = "instances"
-DIVERGED_SPEED = 1e6  # rad/s or m/s: beyond this a state is taken as diverged
 
 class State(NamedTuple):
     """The batch's state; every leaf has the instance axis first."""
@@ -361,59 +361,30 @@ def _pad(state: State, size: int) -> State:
     )
 
 
-def _drive(actuation: Actuation, controller, command, cstate, drive, now, qvel, dt):
-    """(ctrl, controller state, drive): a controller's command through the delay line and the motors. A torque
-    controller's command is its torque; a servo's (a policy's) is joint targets, delayed on their way to the
-    drivers, whose PD law reads the joints as they are `now`."""
-    if controller.servo is None:
-        if actuation.passthrough:  # static: ideal, prompt motors add nothing
-            return command, cstate, drive
-        ctrl, drive = actuation.apply(drive, command, qvel, dt)
-        return ctrl, cstate, drive
-    if actuation.depth > 1:
-        command, drive = actuation.delayed(drive, command)
-    torque, cstate = controller.servo.track(cstate, command, now)
-    if not actuation.passthrough:
-        torque, drive = actuation.motors(drive, torque, qvel, dt)
-    return to_ctrl(actuation.layout, torque), cstate, drive
-
-
 def _instance_rollout(engine, actuation: Actuation, pushes: Pushes | None, sensing: Sensing, controller, steps, tick,
                       periods, sensors, terrain=None, mj_model=None):
     """One instance's rollout: `steps` physics steps, a record every `tick` steps; on a height field
     (`terrain`, the model's grid) the observation and the record carry the ground."""
-    dt = actuation.layout.timestep
-    counts = pushes is not None or sensing.noisy
+    plant = Plant(engine, actuation, pushes, counts=pushes is not None or sensing.noisy)
     points = None if terrain is None else jnp.asarray(sensors.scan_points(), jnp.float32)
 
     def physics_step(model, sensed, act, state, record, previous):
         """One step; `record` is a traced, batch-wide flag: the signals are measured
         (after forward, before integrate) where it is true, else `previous` is passed on.
         `sensed`: (heights, size, scan points) of the instance's ground, or () on the plane."""
-        d, step, sense = state.data, state.step, state.sense
-        if pushes is not None:  # static: without pushes the step is today's
-            d = d.replace(qvel=push(pushes, state.key, step, d.qvel))  # `step` steps done: the time is step·dt
+        d, sense = state.data, state.sense
         now = obs = signals.observe(engine, model, d, sensed)
         if not sensing.passthrough:  # static: exact, prompt sensors add nothing
-            obs, sense = sensing.apply(sense, obs, state.key, step)
-        if counts:
-            step = step + 1
+            obs, sense = sensing.apply(sense, obs, state.key, state.step)
         command, cstate = act(state.cstate, obs, state.gravity)
-        ctrl, cstate, drive = _drive(actuation, controller, command, cstate, state.drive, now, d.qvel, dt)
-        d1 = engine.forward(model, d.replace(ctrl=ctrl), state.gravity)
-        measure = lambda: signals.measure(engine, model, d1, state.gravity, sensed)
+        ctrl, _, cstate, drive = actuate(plant, controller.servo, command, cstate, state.drive, now, d.qvel)
         # An unbatched predicate stays a real conditional under vmap: off-tick steps skip the signals.
-        sig = jax.lax.cond(record, measure, lambda: previous)
-        d1 = engine.integrate(model, d1, state.gravity)
-        finite = (
-            jnp.isfinite(d1.qpos).all()
-            & jnp.isfinite(d1.qvel).all()
-            & (jnp.abs(d1.qvel) < DIVERGED_SPEED).all()
-        )
-        bad = state.diverged | ~finite
+        measure = lambda d1: jax.lax.cond(record, lambda: signals.measure(engine, model, d1, state.gravity, sensed),
+                                          lambda: previous)
+        d1, step, sig, bad = advance(plant, model, d, state.gravity, ctrl, state.key, state.step, measure,
+                                     state.diverged)
         # A diverged instance is frozen at its last finite state; the others never see it.
         keep = lambda new, old: jnp.where(bad, old, new)
-        d1 = d1.replace(**{f: keep(getattr(d1, f), getattr(d, f)) for f in engine.freeze_fields})
         cstate, drive = jax.tree_util.tree_map(keep, (cstate, drive), (state.cstate, state.drive))
         return state._replace(data=d1, cstate=cstate, drive=drive, step=step, sense=sense, diverged=bad), sig
 

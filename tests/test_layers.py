@@ -22,6 +22,7 @@ LAYERS = (
     ("hardware",),  # what the sensors read and add, what the motors make of a command, pushes
     ("control",),
     ("metrics",),  # hop metrics; each task's bar on them, and the ranking of checkpoints
+    ("step",),  # the one physics step after a controller's output: the core's and the training env's
     ("sim",),
     ("envs",),
     ("scenario",),  # the typed description of a batch, built once: robot, worlds, engine, controller

@@ -54,10 +54,10 @@ from brax.envs.base import Env, State
 from hopper_mjx import engine as engines
 from hopper_mjx import model as hopper_model
 from hopper_mjx import registry
-from hopper_mjx.control.base import PDScale, joint_state, pd, saturate, scaled, to_ctrl
+from hopper_mjx.control.base import PDScale, Servo, joint_state, pd, saturate, scaled
 from hopper_mjx.hardware import signals
 from hopper_mjx.hardware.actuators import Actuation, Drive, Motor
-from hopper_mjx.hardware.pushes import Pushes, push
+from hopper_mjx.hardware.pushes import Pushes
 from hopper_mjx.hardware.sensor_noise import FIGURES, Sensing, SensorState, reading
 from hopper_mjx.hardware.signals import Observation
 from hopper_mjx.metrics import hops
@@ -65,6 +65,7 @@ from hopper_mjx.model import robot
 from hopper_mjx.model.layout import Layout
 from hopper_mjx.model.world import EARTH_GRAVITY
 from hopper_mjx.sim import per_instance
+from hopper_mjx.step import Plant, actuate, advance
 from hopper_mjx.terrain import scan as terrain_scan
 from hopper_mjx.variation.spec import Spec
 
@@ -613,25 +614,19 @@ class MonopedEnv(Env):
         the step counted, the push due, and the new state into the sensors. The joints' drivers run the PD
         law on the targets the delay line gives them and on the joints as they are now: the sensors' delay and
         noise are the policy's, not the drivers' (the core's policy controller does the same)."""
-        cfg, lay, engine = self.config, self.layout, self.engine
+        cfg, lay = self.config, self.layout
         limit = jnp.asarray(lay.effort_limit)
+        plant = Plant(self.engine, self.actuation, self.pushes, self.counts_steps)
+        # The joints' drivers, as the core's policy controller's (`control.base.Servo`): the PD law on the targets
+        # the delay line gives them and on the joints as they are now.
+        servo = Servo(track=lambda cs, late, now: (pd_torque(lay, cfg, late, now, scale), cs), first=None)
 
         def one_physics_step(carry, _):
             d, effort, ep = carry
-            if self.motors is None:  # static: ideal, prompt motors add nothing
-                torque = pd_torque(lay, cfg, target, d, scale)
-            else:  # as the core's policy controller (`control.base.Servo`): late targets, a prompt PD loop
-                late, drive = self.actuation.delayed(ep.drive, target)
-                torque, drive = self.actuation.motors(drive, pd_torque(lay, cfg, late, d, scale), d.qvel,
-                                                      lay.timestep)
-                ep = ep._replace(drive=drive)
-            d = engine.forward(model, d.replace(ctrl=to_ctrl(lay, torque)), gravity)
-            d, effort = engine.integrate(model, d, gravity), effort + jnp.mean((torque / limit) ** 2)
-            if self.counts_steps:
-                ep = ep._replace(steps=ep.steps + 1)
-            if self.pushes is not None:  # `steps` done: the push due now, before anything reads the state
-                d = d.replace(qvel=push(self.pushes, key, ep.steps, d.qvel))
-            if self.sensors is not None:
+            ctrl, torque, _, drive = actuate(plant, servo, target, (), ep.drive, d, d.qvel)
+            d, steps, _, _ = advance(plant, model, d, gravity, ctrl, key, ep.steps)
+            ep, effort = ep._replace(drive=drive, steps=steps), effort + jnp.mean((torque / limit) ** 2)
+            if self.sensors is not None:  # the new state into the sensors, as the core's next step reads it
                 ep = ep._replace(sense=self.sensing.apply(ep.sense, self.observe_signals(model, d), key,
                                                           ep.steps)[1])
             return (d, effort, ep), None
