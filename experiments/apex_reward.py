@@ -25,17 +25,17 @@ def judged(qpos: np.ndarray, qvel: np.ndarray, contact: np.ndarray, g: float, st
     """(predicted, flight) apex (T,) m of one instance's states, by the environment's own rules."""
     import jax.numpy as jnp
 
-    from hopper_mjx.envs import monoped
+    from hopper_mjx.envs.terms import DROPPING, flight_apex, predicted_apex
 
     class State:  # what `predicted_apex` reads
         def __init__(self, q, v):
             self.qpos, self.qvel = q, v
 
-    predicted = np.asarray([float(monoped.predicted_apex(State(q, v), jnp.float32(g))) for q, v in zip(qpos, qvel)])
-    info = {"apex": jnp.float32(standing), "flight_top": jnp.float32(monoped.DROPPING)}
+    predicted = np.asarray([float(predicted_apex(State(q, v), jnp.float32(g))) for q, v in zip(qpos, qvel)])
+    info = {"apex": jnp.float32(standing), "flight_top": jnp.float32(DROPPING)}
     flight = []
     for apex, touching in zip(predicted, contact):
-        value, carried = monoped.flight_apex(jnp.float32(apex), jnp.asarray(not touching), info)
+        value, carried = flight_apex(jnp.float32(apex), jnp.asarray(not touching), info)
         info = {**info, **carried}
         flight.append(float(value))
     return predicted, np.asarray(flight)

@@ -248,10 +248,11 @@ def check(args):
         raise ValueError("--no-eval is for --algo ppo (Brax's SAC evaluates at every checkpoint)")
     resume = latest_checkpoint(Path(args.out))
     if resume:  # a folder of another task or algorithm cannot be resumed into this one
-        from hopper_mjx.envs import monoped, policy
+        from hopper_mjx.envs import policy
+        from hopper_mjx.envs.terms import observation_size
 
         _, algo, net, config = policy.read(resume[0])
-        size = monoped.observation_size(envs.tasks.task_class(args.task).command_size, args.observe_gravity,
+        size = observation_size(envs.tasks.task_class(args.task).command_size, args.observe_gravity,
                                         not physics.ground.is_flat)
         if algo != args.algo or config.task != args.task or net["observation_size"] != size:
             raise ValueError(f"--out {args.out} holds a {algo} policy of task {config.task!r} with "
@@ -272,7 +273,8 @@ def check_task_physics(args, physics) -> None:
     """The motors' delay and the pushes in whole steps of the task's own physics step (2 ms, not the core's
     1 ms), and every delay the robot pool of each seed draws shorter than an episode."""
     from hopper_mjx import envs
-    from hopper_mjx.envs.monoped import ROBOT_POOL, steps_per_action
+    from hopper_mjx.envs.monoped import ROBOT_POOL
+    from hopper_mjx.envs.task_config import steps_per_action
     from hopper_mjx.hardware.pushes import Pushes
 
     config = envs.default_config(args.task)

@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from hopper_mjx import registry
+from hopper_mjx.envs.task_config import same_robot
 from hopper_mjx.scenario import Physics, Scenario
 from hopper_mjx.shell import budget, jaxsetup
 from hopper_mjx.shell.checks import (  # noqa: F401  re-exported: the tools use them beside the options
@@ -53,14 +54,14 @@ def check_controller(text: str, height: float = 0.0, speed=(0.0, 0.0), physics: 
     path = Path(registry.policy_path(text))
     if not path.is_dir():
         raise ValueError(f"--controller {text}: {path} is not a trained policy: no such folder")
-    from hopper_mjx.envs import monoped, policy
+    from hopper_mjx.envs import policy
     from hopper_mjx.model.robot import standing_height
 
     physics = physics or Physics()
     jaxsetup.configure()  # reading the policy is the command's first JAX computation
     try:
         config = policy.load(path)[1]  # the parameters too: a damaged copy is refused before any compile
-        monoped.same_robot(config.robot, physics.mj_model, f"the policy {path}")
+        same_robot(config.robot, physics.mj_model, f"the policy {path}")
     except ValueError as err:
         raise ValueError(f"--controller: {err}") from None
     policy.check_command(config, standing_height(physics.mj_model), height, speed)

@@ -16,6 +16,7 @@ import pytest
 
 from hopper_mjx import envs, registry
 from hopper_mjx.envs import MonopedConfig, monoped, tasks
+from hopper_mjx.envs.terms import DROPPING, SCAN, fallen, flight_apex, observe, tilt_from_vertical
 from hopper_mjx.envs.wrappers import wrap_for_training
 
 N = 4  # environments, a multiple of the 2 host devices
@@ -38,7 +39,7 @@ def test_registry_names_defaults_and_overrides(mj_model):
 
 
 def test_hop_terrain_observes_the_base_height_over_the_ground_mujoco_c_casts(tmp_path):
-    """hop_terrain's observation ends with the height scan: at each point of `monoped.SCAN` (turned with the
+    """hop_terrain's observation ends with the height scan: at each point of `terms.SCAN` (turned with the
     base's yaw), the base's height over the ground. MuJoCo C's ray cast down onto the same model's height field
     gives the ground; they agree to float32 rounding at reset poses spread over the ground."""
     import mujoco
@@ -47,7 +48,7 @@ def test_hop_terrain_observes_the_base_height_over_the_ground_mujoco_c_casts(tmp
     from hopper_mjx.terrain import scan as terrain_scan
 
     env = envs.make("hop_terrain", observe_gravity=True)
-    assert env.config.terrain == tasks.HOP_TERRAIN and env.observation_size == 28 + len(monoped.SCAN) == 53
+    assert env.config.terrain == tasks.HOP_TERRAIN and env.observation_size == 28 + len(SCAN) == 53
     m, rng = hopper_model.load(terrain=env.config.ground.terrain()), np.random.default_rng(0)
     d = mujoco.MjData(m)
     d.qpos[:2] = 100.0  # the robot far off the ground, out of the rays' way
@@ -60,12 +61,12 @@ def test_hop_terrain_observes_the_base_height_over_the_ground_mujoco_c_casts(tmp
         qpos = state.pipeline_state.qpos.at[:2].set(xy).at[3:7].set(
             jnp.array([np.cos(psi / 2), 0, 0, np.sin(psi / 2)]))
         obs = env.observe_signals(env.engine.model, state.pipeline_state.replace(qpos=qpos))
-        features = monoped.observe(env.layout, env.config, obs, state.info["gravity"], state.info["command"],
+        features = observe(env.layout, env.config, obs, state.info["gravity"], state.info["command"],
                                    jnp.zeros(3))
-        scan = np.asarray(features[-len(monoped.SCAN):])
+        scan = np.asarray(features[-len(SCAN):])
         assert float(terrain_scan.yaw(qpos[3:7])) == pytest.approx(psi, abs=1e-5)
         c, s = np.cos(psi), np.sin(psi)
-        for (px, py), height_over in zip(monoped.SCAN, scan):
+        for (px, py), height_over in zip(SCAN, scan):
             start = np.array([xy[0] + c * px - s * py, xy[1] + s * px + c * py, 5.0])
             geomid = np.array([-1], np.int32)
             distance = mujoco.mj_ray(m, d, start, np.array([0.0, 0.0, -1.0]), None, 1, -1, geomid)
@@ -198,7 +199,7 @@ def _state(env, *, height, quat=(1.0, 0.0, 0.0, 0.0), vz=0.0, vx=0.0):
 
 def _reward(env, d, command, g=9.81):
     zero = jnp.zeros(3)
-    fell = monoped.fallen(env.config, d)
+    fell = fallen(env.config, d)
     terms = env.reward_terms(d, jnp.float32(g), jnp.asarray(command, jnp.float32), zero, zero,
                              jnp.float32(0.0), fell)
     return float(sum(terms.values())), bool(fell)
@@ -253,7 +254,7 @@ def _mean_reward(env, states, g):
     batch = jax.tree_util.tree_map(lambda *x: jnp.stack(x), *states)
     zero = jnp.zeros(3)
     reward = lambda d: sum(env.reward_terms(d, jnp.float32(g), jnp.zeros(0), zero, zero, jnp.float32(0.0),
-                                            monoped.fallen(env.config, d)).values())
+                                            fallen(env.config, d)).values())
     return float(jnp.mean(jax.jit(jax.vmap(reward))(batch)))
 
 
@@ -308,14 +309,14 @@ def test_the_flight_apex_is_each_hops_apex_held_through_the_stance_after_it():
     from a lift-off on, the flight's highest predicted apex, at once (its ballistic apex), held through the
     following stance until the next lift-off."""
     stand = 0.882
-    info = {"apex": jnp.float32(stand), "flight_top": jnp.float32(monoped.DROPPING)}
+    info = {"apex": jnp.float32(stand), "flight_top": jnp.float32(DROPPING)}
     # (predicted apex m, flying): a 5 cm drop, a stance, a 0.98 m hop rising then falling, a stance, a 0.93 m hop.
     steps = [(0.93, True), (0.90, True), (0.88, False), (0.87, False), (0.98, True), (0.98, True), (0.95, True),
              (0.90, True), (0.86, False), (0.85, False), (0.93, True), (0.91, True), (0.88, False)]
     want = [stand, stand, stand, stand, 0.98, 0.98, 0.98, 0.98, 0.98, 0.98, 0.93, 0.93, 0.93]
     judged = []
     for apex, flying in steps:
-        value, carried = monoped.flight_apex(jnp.float32(apex), jnp.asarray(flying), info)
+        value, carried = flight_apex(jnp.float32(apex), jnp.asarray(flying), info)
         info = {**info, **carried}
         judged.append(float(value))
     np.testing.assert_allclose(judged, want, atol=1e-6)
@@ -382,9 +383,9 @@ def test_env_and_metrics_falls_are_different_measures(mj_model):
     quat = (cp * cr, cp * sr, sp * cr, -sp * sr)
     d = _state(envs.make("hop", mj_model), height=1.0, quat=quat)
     np.testing.assert_allclose(hops.roll_pitch(np.asarray(quat)), (roll, pitch), atol=1e-6)
-    np.testing.assert_allclose(float(monoped.tilt_from_vertical(d)), np.arccos(np.cos(roll) * np.cos(pitch)),
+    np.testing.assert_allclose(float(tilt_from_vertical(d)), np.arccos(np.cos(roll) * np.cos(pitch)),
                                atol=1e-5)
-    assert bool(monoped.fallen(MonopedConfig(), d))
+    assert bool(fallen(MonopedConfig(), d))
     assert max(roll, pitch) < hops.FALL_ROLL_PITCH
 
 

@@ -14,6 +14,8 @@ import pytest
 
 from hopper_mjx import envs
 from hopper_mjx.envs import monoped
+from hopper_mjx.envs.task_config import training_model
+from hopper_mjx.envs.terms import observe
 from hopper_mjx.envs.wrappers import wrap_for_training
 from hopper_mjx.hardware.actuators import envelope
 
@@ -25,7 +27,7 @@ RANDOMIZE = ("sensor_delay=2..10,gyro_noise=0.02..0.05,gyro_bias=normal(0,0.02),
              "odom_vel_noise=0.02..0.04,action_delay=0..6,motor_stall_torque=scale(0.4,0.7)")
 CONFIG = dict(motor="dc", push=PUSH, randomize=RANDOMIZE, randomize_seed=3, policy_rate=500.0,
               gravity_range=(1.0, 1.0), initial_clearance=(0.5, 0.5), initial_joint_noise=0.0)
-# The observation's slices (monoped.ROBOT_SIGNALS): what the noise touches, and what it leaves exact.
+# The observation's slices (ROBOT_SIGNALS): what the noise touches, and what it leaves exact.
 RATE, HEIGHT, VELOCITY, EXACT = slice(4, 7), 7, slice(8, 11), np.r_[0:4, 11:21]
 # m/s: the centre of mass's horizontal velocity drifts by up to ~3e-3 per 2 ms step in flight with the legs
 # swinging at full torque (the discrete step conserves momentum only to first order); a push is 0.3.
@@ -100,7 +102,7 @@ def _true_rows(env, states):
     from hopper_mjx.hardware import signals
 
     def one(d, info, action):
-        return monoped.observe(env.layout, env.config, signals.observe(env.engine, env.engine.model, d),
+        return observe(env.layout, env.config, signals.observe(env.engine, env.engine.model, d),
                                info["gravity"], info["command"], action)
 
     return np.asarray(jax.vmap(jax.vmap(one))(states.pipeline_state, states.info, states.info["last_action"]))
@@ -134,7 +136,7 @@ def test_the_reward_reads_the_true_state(run):
 
 def _momentum(env, mj_model, qpos, qvel):
     """(T, N, 2) horizontal velocity of the robot's centre of mass, MuJoCo C in float64."""
-    m = monoped.training_model(mj_model, env.config)
+    m = training_model(mj_model, env.config)
     d = mujoco.MjData(m)
     out = np.zeros((*qpos.shape[:2], 2))
     for idx in np.ndindex(qpos.shape[:2]):

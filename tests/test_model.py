@@ -239,13 +239,13 @@ def test_reversed_transmissions_clip_each_joint_at_its_own_limit(tmp_path):
 def test_the_robot_fingerprint_tells_robots_apart_and_not_worlds():
     """A policy records the robot it learnt on: another timestep or floor is the same robot, a longer
     shank is another one, and running a policy on it is refused in one line."""
-    from hopper_mjx.envs import monoped
+    from hopper_mjx.envs.task_config import same_robot
     from hopper_mjx.model.robot import fingerprint
 
     seed, other = model.load(), model.load("tests/data/long_shin_hopper.urdf")
     assert fingerprint(seed) == fingerprint(model.load(timestep=0.002, friction=(0.5, 0.5)))
     assert fingerprint(seed) != fingerprint(other)
-    assert monoped.same_robot("", other, "a policy") == fingerprint(other)  # unrecorded: accepted
+    assert same_robot("", other, "a policy") == fingerprint(other)  # unrecorded: accepted
     with pytest.raises(ValueError, match=r"^the policy p is for another robot \(fingerprint \w{16}\) than the one "
                                          r"given \(\w{16}\): give the --urdf it was trained with$"):
-        monoped.same_robot(fingerprint(other), seed, "the policy p")
+        same_robot(fingerprint(other), seed, "the policy p")

@@ -9,6 +9,8 @@ import numpy as np
 from hopper_mjx import model as hopper_model
 from hopper_mjx.control.base import Controller, Servo
 from hopper_mjx.envs import monoped, tasks
+from hopper_mjx.envs.task_config import training_model
+from hopper_mjx.envs.terms import pd_torque
 from hopper_mjx.hardware.signals import SensorConfig
 from hopper_mjx.sim import Sim
 from hopper_mjx.step import Plant, advance
@@ -21,11 +23,11 @@ def test_the_env_and_the_core_step_the_same_physics():
     assert env.config.delay_steps == 2 and env.pushes.every == 15
     lay, cfg = env.layout, env.config
     target = env.targets(jnp.array([0.4, -0.6, 0.9]))  # a crouch held for the whole run: the leg moves, pushes land
-    servo = Servo(track=lambda cs, late, now: (monoped.pd_torque(lay, cfg, late, now), cs), first=lambda cs: target)
+    servo = Servo(track=lambda cs, late, now: (pd_torque(lay, cfg, late, now), cs), first=lambda cs: target)
     hold = Controller("targets", init=lambda obs, params: jnp.zeros(()), act=lambda cs, obs, g: (target, cs),
                       servo=servo)
     # The core on the training configuration: the env's model (2 ms, the solver capped), its motors, delay, pushes.
-    sim = Sim(monoped.training_model(hopper_model.load(), cfg), engine="chain", motor=cfg.motor,
+    sim = Sim(training_model(hopper_model.load(), cfg), engine="chain", motor=cfg.motor,
               delay_steps=cfg.delay_steps, pushes=env.pushes)
     qpos = np.asarray(env.standing_qpos).copy()
     qpos[2] += 0.05

@@ -484,7 +484,7 @@ def test_robustness_passes_a_refused_sweeps_one_line_on(tmp_path, monkeypatch, c
 def test_a_policy_rate_sets_the_tasks_physics_steps_per_action_and_the_policy_keeps_it(tmp_path):
     """--policy-rate 100: 5 of the training's 2 ms steps per action (10 at the default 50 Hz), saved in the task's
     config, from which the policy controller in the core takes 10 of its 1 ms steps per action."""
-    from hopper_mjx.envs import monoped
+    from hopper_mjx.envs.task_config import MonopedConfig, decimation
     from hopper_mjx.model.layout import Layout
 
     frames = {}
@@ -493,6 +493,6 @@ def test_a_policy_rate_sets_the_tasks_physics_steps_per_action_and_the_policy_ke
                                                  *(["--policy-rate", rate] if rate else [])])
         physics = train_script.check(args)
         env = train_script.task_config(args, physics)
-        frames[rate] = env.n_frames, monoped.decimation(Layout.of(physics.mj_model), env.config)
-        assert monoped.MonopedConfig.from_dict(env.config.to_dict()) == env.config
+        frames[rate] = env.n_frames, decimation(Layout.of(physics.mj_model), env.config)
+        assert MonopedConfig.from_dict(env.config.to_dict()) == env.config
     assert frames == {None: (10, 20), "100": (5, 10)}

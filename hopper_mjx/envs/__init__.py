@@ -6,7 +6,8 @@
     envs.default_config("hop")                     # a task's defaults, in one place
 """
 
-from hopper_mjx.envs.monoped import MonopedConfig, MonopedEnv
+from hopper_mjx.envs.monoped import MonopedEnv
+from hopper_mjx.envs.task_config import MonopedConfig
 from hopper_mjx.envs.tasks import default_config, from_config, make, names
 
 __all__ = ["MonopedConfig", "MonopedEnv", "default_config", "from_config", "make", "names"]

@@ -33,7 +33,9 @@ from brax.training.agents.sac import networks as sac_networks
 from hopper_mjx import registry, terrain
 from hopper_mjx.control.base import Commands, Controller, PDScale, Servo, joint_state
 from hopper_mjx.engine import batch_any
-from hopper_mjx.envs import monoped, tasks
+from hopper_mjx.envs import tasks
+from hopper_mjx.envs.task_config import MonopedConfig, decimation, same_robot
+from hopper_mjx.envs.terms import joint_targets, observe, pd_torque
 from hopper_mjx.hardware.signals import Observation
 from hopper_mjx.model.layout import Layout
 from hopper_mjx.model.robot import Robot, standing_height, standing_qpos
@@ -52,7 +54,7 @@ class PolicyState(NamedTuple):
     pd: PDScale | None = None  # factors on the PD law's gains; None: as trained
 
 
-def write_env_config(path, env_config: monoped.MonopedConfig) -> Path:
+def write_env_config(path, env_config: MonopedConfig) -> Path:
     """Puts the task's config beside a Brax checkpoint at `path`: it makes the folder a policy."""
     path = Path(path)
     (path / ENV_CONFIG).write_text(json.dumps(env_config.to_dict(), indent=1))
@@ -94,12 +96,12 @@ def _json_object(file: Path) -> dict:
     return value
 
 
-def read(path) -> tuple[Path, str, dict, monoped.MonopedConfig]:
+def read(path) -> tuple[Path, str, dict, MonopedConfig]:
     """(checkpoint path, algorithm, network config, task config) of a saved policy, checked: the
     network's input size must be the observation size of the task it names. Reads JSON only."""
     path = resolve(path)
     try:
-        config = monoped.MonopedConfig.from_dict(_json_object(path / ENV_CONFIG))
+        config = MonopedConfig.from_dict(_json_object(path / ENV_CONFIG))
         expected = tasks.observation_size(config)
     except (TypeError, ValueError) as err:  # an unknown task or field, a value of the wrong type
         raise ValueError(f"{path / ENV_CONFIG}: {err}" if str(path) not in str(err) else str(err)) from None
@@ -181,14 +183,14 @@ class PolicyParams:
     pd: PDScale | None = None  # (n, 3) factors on the PD law's kp and kd (`base.pd_scale`); None: as trained
 
 
-def default_command(config: monoped.MonopedConfig) -> jnp.ndarray:
+def default_command(config: MonopedConfig) -> jnp.ndarray:
     """Mid-range apex height, standing still (nothing for stand)."""
     if tasks.task_class(config.task).command_size == 0:
         return jnp.zeros(0)
     return jnp.array([0.5 * sum(config.apex_range), 0.0, 0.0])
 
 
-def check_command(config: monoped.MonopedConfig, standing_height: float, height: float, speed) -> None:
+def check_command(config: MonopedConfig, standing_height: float, height: float, speed) -> None:
     """Raises ValueError if (apex rise, speed) lies outside what the policy was trained on."""
     if tasks.task_class(config.task).command_size == 0:
         return
@@ -217,13 +219,13 @@ def policy_params(robot: Robot, n: int, *, height: float, speed=(0.0, 0.0), conf
 def policy_controller(mj_model: mujoco.MjModel, path) -> Controller:
     """The trained policy as a core `Controller`; params: per-instance (3,) commands or None."""
     cfg = read(path)[3]  # JSON only: its robot and ground are checked before the network is built
-    monoped.same_robot(cfg.robot, mj_model, f"the policy {path}")
+    same_robot(cfg.robot, mj_model, f"the policy {path}")
     if cfg.terrain and terrain.from_model(mj_model) is None:
         raise ValueError(f"the policy {path} reads a height scan (trained on --terrain {cfg.terrain}): run it on a "
                          "--terrain other than flat")
     apply, weights, cfg = load_network(path)
     layout = Layout.of(mj_model)
-    every = monoped.decimation(layout, cfg)  # raises if the policy rate does not divide the physics rate
+    every = decimation(layout, cfg)  # raises if the policy rate does not divide the physics rate
     stance = jnp.asarray(standing_qpos(mj_model)[list(layout.joint_qpos)], jnp.float32)
 
     def init(obs, params: PolicyParams | None):
@@ -234,19 +236,19 @@ def policy_controller(mj_model: mujoco.MjModel, path) -> Controller:
     def act_with(weights):
         def act(cs: PolicyState, obs: Observation, gravity):
             """The joint targets: new ones every `every` physics steps (the policy rate), held between."""
-            features = monoped.observe(layout, cfg, obs, gravity, cs.command, cs.last_action)
+            features = observe(layout, cfg, obs, gravity, cs.command, cs.last_action)
             decide = cs.tick % every == 0
             # The network only on the steps some instance of the core's chunk decides (a real branch there, not a
             # select): at a 1 kHz core and a 50 Hz policy it would otherwise run 20 times per decision.
             action = jax.lax.cond(batch_any(decide), lambda f: jnp.where(decide, apply(weights, f), cs.last_action),
                                   lambda f: cs.last_action, features)
-            target = jnp.where(decide, monoped.joint_targets(layout, cfg, stance, action), cs.target)
+            target = jnp.where(decide, joint_targets(layout, cfg, stance, action), cs.target)
             return target, cs._replace(target=target, last_action=action, tick=cs.tick + 1)
         return act
 
     def track(cs: PolicyState, target, obs: Observation):
         """The drivers' PD law on `target` (late by the action delay) and the joints as they are now."""
-        torque = monoped.pd_torque(layout, cfg, target, obs, cs.pd)
+        torque = pd_torque(layout, cfg, target, obs, cs.pd)
         power = jnp.abs(torque * joint_state(layout, obs)[1]).sum()
         return torque, cs._replace(work=cs.work + power * layout.timestep)
 

@@ -7,7 +7,7 @@
 | `hop_velocity` | apex height and (vx, vy) | apex (ballistic), speed (to the command) |
 | `hop_terrain` | apex height and (vx, vy), on rough ground | as `hop_velocity`; the height scan is observed |
 
-Every task also pays `monoped.posture_terms` (upright, effort, smoothness, spin, fall).
+Every task also pays `terms.posture_terms` (upright, effort, smoothness, spin, fall).
 """
 
 from __future__ import annotations
@@ -18,8 +18,10 @@ import jax
 import jax.numpy as jnp
 
 from hopper_mjx import registry
-from hopper_mjx.envs.monoped import MonopedConfig, MonopedEnv, closeness, outside, predicted_apex, speed_term
-from hopper_mjx.envs.monoped import observation_size as monoped_observation_size
+from hopper_mjx.envs.monoped import MonopedEnv
+from hopper_mjx.envs.task_config import MonopedConfig
+from hopper_mjx.envs.terms import closeness, outside, predicted_apex, speed_term
+from hopper_mjx.envs.terms import observation_size as monoped_observation_size
 from hopper_mjx.metrics import thresholds
 
 # The gravity range every task draws from by default, m/s², log-uniform.
@@ -108,7 +110,7 @@ HOP_TERRAIN = "rough:amp=0.02,wavelength=0.4,seed=1,size=24x24"
 
 class HopTerrain(HopVelocity):
     """`hop_velocity` over rough ground, reading the ground's height around the base (the height scan,
-    `monoped.SCAN`). The apex is the base's height in the world, as the evaluation measures it."""
+    `terms.SCAN`). The apex is the base's height in the world, as the evaluation measures it."""
 
     @classmethod
     def default_config(cls) -> MonopedConfig:
@@ -129,7 +131,7 @@ def task_class(name: str) -> type[MonopedEnv]:
 
 
 def observation_size(config: MonopedConfig) -> int:
-    """The observations a policy of `config` takes (`monoped.observation_size`)."""
+    """The observations a policy of `config` takes (`terms.observation_size`)."""
     return monoped_observation_size(task_class(config.task).command_size, config.observe_gravity, bool(config.terrain))
 
 
