@@ -9,7 +9,7 @@ import mujoco
 import numpy as np
 import pytest
 
-from hopper_mjx.control import kinematics, raibert
+from hopper_mjx.control import foothold, kinematics, raibert
 from hopper_mjx.control.raibert import COMPRESSION, FLIGHT, THRUST, UNLOADING
 from hopper_mjx.hardware.signals import Contact, Observation
 from hopper_mjx.model.robot import CLEARANCE, Robot
@@ -207,7 +207,7 @@ def test_the_landing_floor_is_the_step_ahead(robot):
     ground = _ground(_step(x0=0.2))
     obs = lambda vx: _obs(robot, qvel=np.r_[vx, np.zeros(8)])
     speed = raibert.speed_update(_state(), _events(), jnp.zeros(2), jnp.float32(0.3), 9.81)
-    floor = lambda vx: float(raibert.landing_floor(robot.leg, raibert.sense(robot, obs(vx)), ground,
+    floor = lambda vx: float(foothold.landing_floor(robot.leg, raibert.sense(robot, obs(vx)), ground,
                                                    jnp.zeros(2), speed, jnp.float32(0.1), 9.81))
     assert floor(0.6) == pytest.approx(0.05)  # ahead by v·(T_s + T_f) ≈ 0.6·0.43 m: on the step
     assert floor(0.0) == pytest.approx(0.0)
@@ -257,12 +257,12 @@ def test_a_foothold_on_a_riser_is_moved_clear_of_it(robot):
     and on gentle rough ground the placement is left exactly as it was."""
     leg = robot.leg
     body = raibert.sense(robot, _obs(robot))  # at rest in the air: it lands where the placement puts it
-    com_x = float(raibert.foothold(leg, body, jnp.zeros(2), jnp.zeros(2))[0])
+    com_x = float(foothold.foothold(leg, body, jnp.zeros(2), jnp.zeros(2))[0])
     placement = jnp.zeros(2)
     step = _ground(_fine_step())
     for want in np.arange(0.10, 0.27, 0.005):  # the landing point, world x
         base_xy = jnp.array([want - com_x, 0.0])
-        moved = raibert.clear_of_edges(leg, body, step, base_xy, placement, jnp.float32(0.1), 9.81)
+        moved = foothold.clear_of_edges(leg, body, step, base_xy, placement, jnp.float32(0.1), 9.81)
         lands = want + float(moved[0])
         assert lands <= 0.14 + 1e-6 or lands >= 0.22 - 1e-6, f"aimed at {want:.3f}, lands at {lands:.3f}"
         assert abs(lands - want) <= 0.05 + 1e-6  # at most EDGE_SHIFTS steps
@@ -271,7 +271,7 @@ def test_a_foothold_on_a_riser_is_moved_clear_of_it(robot):
     rough = 0.02 * np.sin(2 * np.pi * xs / 0.4)[None, :] * np.cos(2 * np.pi * xs / 0.4)[:, None]
     for heights in (np.zeros((51, 51)), rough):
         for want in (0.0, 0.13, 0.31):
-            moved = raibert.clear_of_edges(leg, body, _ground(heights), jnp.array([want - com_x, 0.0]), placement,
+            moved = foothold.clear_of_edges(leg, body, _ground(heights), jnp.array([want - com_x, 0.0]), placement,
                                            jnp.float32(0.1), 9.81)
             assert np.asarray(moved).tolist() == [0.0, 0.0]
 

@@ -77,6 +77,7 @@ from brax import math as bmath
 
 from hopper_mjx.control import kinematics
 from hopper_mjx.control.base import Commands, Controller, PDScale, joint_state, pd, saturate, scaled, to_ctrl
+from hopper_mjx.control.foothold import clear_of_edges, foothold, landing_floor
 from hopper_mjx.hardware.signals import Observation
 from hopper_mjx.model.robot import LegGeometry, Robot
 from hopper_mjx.model.world import EARTH_GRAVITY  # where the attitude stiffness holds as given
@@ -92,15 +93,6 @@ MAX_HEIGHT_BIAS = 0.3  # m, bound on the adapted apex-target bias
 MAX_SPEED_OFFSET = 0.1  # m, bound on the integral part of the foot placement
 MAX_RETRACT = 0.15  # m, bound on the leg's shortening in a rising flight towards higher ground
 MIN_SQUEEZE = 0.02  # m, floor under the remaining thrust stroke the extra force is spread over
-# The foothold kept off terrain edges (`clear_of_edges`): the ground is sampled every EDGE_STEP m along the travel
-# direction; an edge is a kink (a second difference above EDGE_KINK m: a step's riser, a ramp across one 4 cm cell,
-# gives up to 12 mm at its ends; rough ground's curvature, 0.5 mm on amp=0.02 at wavelength 0.4, passes) or ground
-# steeper than EDGE_SLOPE (the ramp between its kinks; that rough ground's steepest is 0.31). The foot's centre
-# lands with no edge sample within EDGE_MARGIN (so no edge within 2 cm: a 3 cm sphere that close to a 51° riser's
-# foot stands on the ground; on top of a step it stands on the top), the foothold moving at most EDGE_SHIFTS steps to
-# find that. Windows reaching 10 cm ahead with shifts of up to 10 cm tilted the body at touchdown and took the
-# Moon's step from 66 % cleared to 53 % (docs/control.md).
-EDGE_STEP, EDGE_KINK, EDGE_SLOPE, EDGE_MARGIN, EDGE_SHIFTS = 0.01, 0.003, 0.6, 0.01, 5
 # m: a flight towards ground higher than under the foot by more than RISER holds the foot where it is (relative to
 # the COM) until its bottom is SWING_CLEARANCE above the ground it lands on, so that its swing does not catch the riser.
 RISER, SWING_CLEARANCE = 0.02, 0.02
@@ -445,61 +437,6 @@ def flight_torque(leg: LegGeometry, gains: RaibertConfig, body: Body, spin, spee
     target = _placement_angles(leg, body.level, placement, flight_length, body.com)
     leg_rate = body.qd + jnp.concatenate([body.gyro[:2], jnp.zeros(1)])  # the leg's rate in the world
     return pd(*scaled(jnp.asarray(FLIGHT_KP), jnp.asarray(FLIGHT_KD), scale), target - body.q, leg_rate)
-
-
-def foothold(leg: LegGeometry, body: Body, base_xy, placement) -> tuple[jax.Array, jax.Array]:
-    """World (x, y) where the foot lands if placed `placement` (heading frame, m) from the COM."""
-    com = base_xy + (body.rot @ (body.com - jnp.array([0.0, 0.0, leg.haa_below_base])))[:2]
-    there = com + body.unturn[:2, :2].T @ placement
-    return there[0], there[1]
-
-
-def _edge_windows() -> tuple[np.ndarray, np.ndarray]:
-    """(sample offsets (S,) m along the travel direction, (2 EDGE_SHIFTS + 1, S - 2) which edge samples each candidate
-    shift's landing window holds), constants of `clear_of_edges`."""
-    back = front = round(EDGE_MARGIN / EDGE_STEP)
-    first = -EDGE_SHIFTS - back - 1
-    offsets = np.arange(first, EDGE_SHIFTS + front + 2) * EDGE_STEP
-    kinks = np.arange(first + 1, EDGE_SHIFTS + front + 1)  # the sample each second difference is centred on
-    shifts = np.arange(-EDGE_SHIFTS, EDGE_SHIFTS + 1)[:, None]
-    return offsets, ((kinks >= shifts - back) & (kinks <= shifts + front)).astype(np.float32)
-
-
-def clear_of_edges(leg: LegGeometry, body: Body, ground, base_xy, placement, foot_height, g):
-    """`placement` (heading frame, m from the COM) moved along the travel direction, by the least whole number of
-    EDGE_STEPs (at most EDGE_SHIFTS; forward first among equals), so that the foot lands clear of terrain edges
-    (the EDGE_ constants): a foot set down on a step's edge is thrown off it. Unchanged where the ground has no edge
-    there, or no shift clears it. The landing point is predicted from the ballistic flight: the COM moves v·t more
-    before the foot (its bottom `foot_height` m up, world z) comes down to the ground."""
-    offsets, windows = _edge_windows()
-    speed = jnp.linalg.norm(body.v)
-    # The travel direction, heading frame; hopping in place, the heading.
-    along = jnp.where(speed > 0.05, body.unturn[:2, :2] @ body.v / jnp.maximum(speed, 1e-6), jnp.array([1.0, 0.0]))
-    x, y = foothold(leg, body, base_xy, placement)
-    drop = jnp.maximum(foot_height - ground.height(x, y), 0.0)
-    fall = (body.zdot + jnp.sqrt(body.zdot**2 + 2.0 * g * drop)) / g
-    world_along = body.unturn[:2, :2].T @ along
-    lands = jnp.stack([x, y]) + body.v * fall
-    samples = lands[:, None] + world_along[:, None] * jnp.asarray(offsets)[None, :]
-    h = ground.height(samples[0], samples[1])
-    kink = jnp.abs(h[2:] - 2.0 * h[1:-1] + h[:-2]) > EDGE_KINK
-    steep = jnp.abs(h[2:] - h[:-2]) > 2.0 * EDGE_STEP * EDGE_SLOPE  # a riser's ramp is straight between its kinks
-    blocked = jnp.asarray(windows) @ (kink | steep).astype(jnp.float32) > 0
-    steps = np.arange(-EDGE_SHIFTS, EDGE_SHIFTS + 1)
-    order = jnp.asarray(np.abs(steps) + 0.5 * (steps < 0))  # nearest first, forward before back
-    best = jnp.argmin(jnp.where(blocked, jnp.inf, order))
-    shift = jnp.where(blocked.all(), 0.0, jnp.asarray(steps * EDGE_STEP)[best])
-    return placement + shift * along
-
-
-def landing_floor(leg: LegGeometry, body: Body, ground, base_xy, speed: Speed, height, g):
-    """m: the ground the next hop is aimed above: the higher of the ground under the foot now and where
-    the foot lands a hop ahead (the COM travels about v·(T_s + T_f) by then, T_f the commanded flight),
-    so that a hop up a step is given the energy to climb it."""
-    foot = base_xy + (body.rot @ (body.foot - jnp.array([0.0, 0.0, leg.haa_below_base])))[:2]
-    flight = 2.0 * jnp.sqrt(2.0 * jnp.maximum(height, 0.0) / g)
-    ahead = foothold(leg, body, base_xy, body.unturn[:2, :2] @ (body.v * (speed.stance_time + flight)))
-    return jnp.maximum(ground.height(foot[0], foot[1]), ground.height(*ahead))
 
 
 def initial_state(params: RaibertParams, obs: Observation) -> RaibertState:
