@@ -146,3 +146,24 @@ def test_the_check_sees_an_upstream_import_and_a_cycle():
     assert cycles(graph) == ["hopper_mjx.control.raibert -> hopper_mjx.sim -> hopper_mjx.control.raibert"]
     assert layer_of("view") == layer_of("simulate") == layer_of("perf") == TOOL_LAYER
     assert layer_of("cli") < layer_of("ros") == layer_of("live") < TOOL_LAYER
+
+
+MAX_TOP_LEVEL = 12  # modules directly in hopper_mjx/: the entry points, the core and the registry
+MAX_LINES = 600  # one idea per file
+
+
+def test_the_top_level_holds_few_modules_and_no_file_holds_several_ideas():
+    top = sorted(p.name for p in (ROOT / PACKAGE).glob("*.py"))
+    assert len(top) <= MAX_TOP_LEVEL, f"{len(top)} modules at hopper_mjx/'s top level: {top}"
+    long = {str(p.relative_to(ROOT)): n for p in sources().values()
+            if (n := len(p.read_text().splitlines())) > MAX_LINES}
+    assert not long, f"files over {MAX_LINES} lines: {long}"
+
+
+def test_only_the_engines_know_how_a_model_holds_its_ground():
+    """The core never asks which engine it drives, and a model's heights are decoded in one place
+    (`terrain.hfield`): any other reader of MuJoCo's hfield arrays would be a second decoder."""
+    sim = (ROOT / PACKAGE / "sim.py").read_text()
+    assert "engine.name" not in sim
+    readers = sorted(str(p.relative_to(ROOT)) for p in sources().values() if "hfield_data[" in p.read_text())
+    assert readers == ["hopper_mjx/terrain/hfield.py"], readers
