@@ -492,6 +492,7 @@ def train(args, physics=None) -> dict:
             run(args, env, factory, remaining, start_step, resume, progress, save_checkpoint)
         except OutOfTime:
             print(f"stopped: {args.minutes:g} min of training (--minutes)", flush=True)
+    board.close()
     final = latest_checkpoint(out)
     if final is None:
         raise ValueError(f"no checkpoint was written under {out / 'checkpoints'}")
