@@ -5,7 +5,7 @@ checked against the JAX policy on observations from real rollouts in the core.
     python experiments/export_onnx.py runs/hop-ppo/checkpoints/000020000000 --out hop.onnx --num 64 --seconds 2
 
 POLICY is a training run's folder (its policy/) or one of its checkpoints, as `--controller policy:PATH` takes.
-The file maps `observation`, (batch, observation size) float32, the features `hopper_mjx.envs.monoped.observe`
+The file maps `observation`, (batch, observation size) float32, the features `hopper_mjx.envs.terms.observe`
 builds, to `action`, (batch, 3) in [-1, 1]: the policy's deterministic action (the tanh of the Gaussian's mean,
 as Brax's policy gives it), the observation normalisation included. A robot turns the action into joint targets
 (stance + action_scale · action, within the joint ranges) that its drivers track with kp and kd, at policy_rate:
@@ -21,7 +21,7 @@ controller sent. Above --tolerance nothing is written (exit 1).
 
 from __future__ import annotations
 
-# First, so that Ctrl-C during the imports below is already one line (hopper_mjx.startup arms it).
+# First, so that Ctrl-C during the imports below is already one line (hopper_mjx.shell.startup arms it).
 import hopper_mjx  # noqa: F401  # isort: skip
 
 import argparse
@@ -32,8 +32,9 @@ from pathlib import Path
 
 import numpy as np
 
-from hopper_mjx import cli, command, registry
-from hopper_mjx.files import atomic_write
+from hopper_mjx import cli, registry
+from hopper_mjx.shell import process
+from hopper_mjx.shell.files import atomic_write
 
 OPSET = 17  # ONNX's operator set: Gemm, Sub, Div, Tanh and the activations, in runtimes from 2022 on
 # Brax's activation names (brax.training.networks.ACTIVATION) and the ONNX nodes that compute the same function.
@@ -69,7 +70,8 @@ def parser() -> argparse.ArgumentParser:
 def check(args):
     """(policy path, algorithm, network config, task config, physics of the check's rollouts), or ValueError
     naming the first bad argument. Reads JSON and compiles the MuJoCo model only."""
-    from hopper_mjx.envs import monoped, policy
+    from hopper_mjx.envs import policy
+    from hopper_mjx.envs.task_config import decimation, same_robot
     from hopper_mjx.model.layout import Layout
 
     if args.out.suffix != ".onnx":
@@ -102,20 +104,21 @@ def check(args):
     physics = cli.check_physics(argparse.Namespace(
         urdf=args.urdf, engine=registry.DEFAULT_ENGINE, terrain=config.terrain or "flat", randomize=None,
         motor=config.motor, action_delay=config.action_delay * 1e3, push=None))
-    monoped.same_robot(config.robot, physics.mj_model, f"the policy {path}")
-    monoped.decimation(Layout.of(physics.mj_model), config)  # the policy rate must divide the core's 1 kHz
+    same_robot(config.robot, physics.mj_model, f"the policy {path}")
+    decimation(Layout.of(physics.mj_model), config)  # the policy rate must divide the core's 1 kHz
     return path, algo, net, config, physics
 
 
 def observation_layout(config) -> list[tuple[str, int]]:
-    """The observation's parts in order, (name, size), as `monoped.observe` concatenates them."""
-    from hopper_mjx.envs import monoped, tasks
+    """The observation's parts in order, (name, size), as `terms.observe` concatenates them."""
+    from hopper_mjx.envs import tasks
+    from hopper_mjx.envs.terms import ROBOT_SIGNALS, SCAN
 
-    parts = [*monoped.ROBOT_SIGNALS, ("command", tasks.task_class(config.task).command_size), ("last action", 3)]
+    parts = [*ROBOT_SIGNALS, ("command", tasks.task_class(config.task).command_size), ("last action", 3)]
     if config.observe_gravity:
         parts.append(("gravity / 9.81", 1))
     if config.terrain:
-        parts.append(("base height over the scan points", len(monoped.SCAN)))
+        parts.append(("base height over the scan points", len(SCAN)))
     return [(name, size) for name, size in parts if size]
 
 
@@ -175,14 +178,16 @@ def rollout_observations(path, config, physics, *, num: int, seconds: float, see
     import jax
     import jax.numpy as jnp
 
-    from hopper_mjx.envs import monoped, policy, tasks
-    from hopper_mjx.signals import SensorConfig
+    from hopper_mjx.envs import policy, tasks
+    from hopper_mjx.envs.task_config import decimation
+    from hopper_mjx.envs.terms import observe
+    from hopper_mjx.hardware.signals import SensorConfig
     from hopper_mjx.sim import gravity_vectors
     from hopper_mjx.sweep.grid import DEFAULT_GRAVITY, SweepSpec, expand
 
     sim = physics.sim()
     controller = policy.policy_controller(physics.mj_model, path)
-    every = monoped.decimation(sim.layout, config)
+    every = decimation(sim.layout, config)
     per_gravity = -(-num // len(DEFAULT_GRAVITY))
     spec = SweepSpec(kind="gravity", gravity=DEFAULT_GRAVITY, num=per_gravity, duration=seconds, height=0.0,
                      speed=(0.0, 0.0), seed=seed)
@@ -197,7 +202,7 @@ def rollout_observations(path, config, physics, *, num: int, seconds: float, see
         commands = np.zeros((num, 0))
     params = policy.PolicyParams(jnp.asarray(commands, jnp.float32))
     state = sim.reset(gravity_vectors(g), key=seed, controller=controller, params=params, qvel=kick)
-    features = jax.jit(jax.vmap(lambda obs, gravity, cs: monoped.observe(sim.layout, config, obs, gravity, cs.command,
+    features = jax.jit(jax.vmap(lambda obs, gravity, cs: observe(sim.layout, config, obs, gravity, cs.command,
                                                                          cs.last_action)))
     sensors = SensorConfig.uniform(config.policy_rate)  # one record per policy step: a rollout of `every` steps
     observations, actions = [], []
@@ -216,9 +221,9 @@ def main(argv=None) -> int:
         path, _, net, config, physics = check(args)
     except ValueError as err:
         return cli.fail(err)
-    from hopper_mjx import runtime
+    from hopper_mjx.shell import jaxsetup
 
-    runtime.configure()
+    jaxsetup.configure()
     import onnxruntime
 
     from hopper_mjx.envs import policy
@@ -247,4 +252,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(command.run(main))
+    sys.exit(process.run(main))
