@@ -14,6 +14,8 @@ import numpy as np
 import pytest
 from test_tfevents import read_scalars
 
+from training import evaluation, learners
+
 
 def _load_script(name):
     path = Path(__file__).resolve().parents[1] / "experiments" / f"{name}.py"
@@ -23,7 +25,7 @@ def _load_script(name):
     return module
 
 
-train_script = _load_script("train")
+train_script = _load_script("train")  # experiments/ is on pytest's path (pyproject.toml): its training package too
 # 40 environment steps per PPO update (batch 4 x 2 minibatches x unroll 5): two updates, a checkpoint after each.
 TINY = ["--timesteps", "80", "--num-envs", "4", "--batch-size", "4", "--num-minibatches", "2",
         "--unroll-length", "5", "--updates-per-batch", "1", "--episode-length", "20", "--eval-every", "40",
@@ -55,9 +57,9 @@ def _ppo_start_params(out, resume):
     """The params Brax's PPO starts from (its step-0 `policy_params_fn` call) when restoring the
     checkpoint `resume`. The same tiny run as `trained`, so the same compiled program."""
     args = train_script.parser().parse_args([*TINY, *PPO, "--out", str(out)])
-    factory, _ = train_script.networks(args)
+    factory, _ = learners.networks(args)
     seen = {}
-    train_script.run_ppo(args, train_script.task_config(args, train_script.check(args)), factory, args.timesteps, 0,
+    learners.run_ppo(args, learners.task_config(args, train_script.check(args)), factory, args.timesteps, 0,
                          (resume, 0), progress=lambda *_: None,
                          save_checkpoint=lambda step, params: seen.setdefault(int(step), params))
     return seen[0]
@@ -228,7 +230,7 @@ def test_evaluation_kicks_are_the_sweeps():
     """The evaluation claims the sweep's kicks: replicate r gets the sweep's kick for replicate r."""
     from hopper_mjx.sweep.grid import KICK, SweepSpec, expand
 
-    g, qvel = train_script.evaluation_batch([9.81, 1.62], 3, seed=4, nv=9)
+    g, qvel = evaluation.evaluation_batch([9.81, 1.62], 3, seed=4, nv=9)
     sweep = expand(SweepSpec(kind="gravity", gravity=(9.81, 1.62), num=3, duration=10.0, height=0.1,
                              speed=(0.0, 0.0), seed=4), 9)
     np.testing.assert_array_equal(g, sweep.gravity)
@@ -241,7 +243,7 @@ def test_each_task_has_its_threshold():
     """--scan-checkpoints' bar: stand survives in place, hopping low if at all; hop and hop_velocity also hop
     to the apex, without drift (hop) or at the commanded speed (hop_velocity)."""
     row = {"survival": 1.0, "min_hops": 5, "apex_height": 0.086, "tracking_error": 0.1}
-    meets = lambda task, **change: train_script.meets_threshold(task, {**row, **change}, height=0.10)
+    meets = lambda task, **change: evaluation.meets_threshold(task, {**row, **change}, height=0.10)
     assert all(meets(task) for task in ("stand", "hop", "hop_velocity"))
     assert not any(meets(task, survival=63 / 64) for task in ("stand", "hop", "hop_velocity"))
     assert meets("stand", min_hops=0) and not meets("hop", min_hops=4) and not meets("hop_velocity", min_hops=4)
@@ -295,10 +297,10 @@ def test_the_selected_checkpoint_becomes_the_policy_and_the_choice_is_recorded(t
     rows = {first: _rows(**{"9.81": (1.0, 0.100, 0.01)}), last: _rows(**{"9.81": (0.5, 0.100, 0.01)})}
     args = train_script.parser().parse_args([*TINY, *PPO, "--out", str(out), "--eval-height", "0.10",
                                              "--select-gravity", "9.81"])
-    chosen = train_script.select_policy(args, [{"step": s, "wall_time": 1.0, "evaluation": rows[s]}
+    chosen = evaluation.select_policy(args, [{"step": s, "wall_time": 1.0, "evaluation": rows[s]}
                                                for s in (first, last)])
     assert chosen["step"] == first and chosen["meets"]
-    record = json.loads((out / train_script.SELECTION).read_text())
+    record = json.loads((out / evaluation.SELECTION).read_text())
     assert record["step"] == first and record["evaluation"]["9.81"]["survival"] == 1.0
     assert record["rank"] == [1, 1.0, pytest.approx(-0.1)]
     source = out / "checkpoints" / f"{first:012d}"
@@ -322,11 +324,11 @@ def test_the_threshold_is_met_at_the_evaluation_gravities_and_the_policy_chosen_
     options = [*TINY, *PPO, "--out", str(out), "--eval-height", "0.10", "--eval-gravity", "9.81"]
     args = train_script.parser().parse_args(options)
     assert args.select_gravity == "0.5,1,1.62,2.5,3.71,5,7.5,9.81,12"
-    assert train_script.first_at_threshold("hop", scanned, 0.10, args.eval_gravity)["step"] == first
-    assert train_script.first_at_threshold("hop", scanned, 0.10, "0.5")["step"] == last
+    assert evaluation.first_at_threshold("hop", scanned, 0.10, args.eval_gravity)["step"] == first
+    assert evaluation.first_at_threshold("hop", scanned, 0.10, "0.5")["step"] == last
     for select, kept in (("9.81,0.5", last), ("9.81", first)):  # at 9.81 alone the earlier, closer one wins
         args = train_script.parser().parse_args([*options, "--select-gravity", select])
-        chosen = train_script.select_policy(args, scanned)
+        chosen = evaluation.select_policy(args, scanned)
         assert chosen["step"] == kept and chosen["gravities"] == select.split(",") and chosen["meets"]
 
 
@@ -493,7 +495,7 @@ def test_a_policy_rate_sets_the_tasks_physics_steps_per_action_and_the_policy_ke
         args = train_script.parser().parse_args(["--task", "hop", "--out", str(tmp_path / "run"),
                                                  *(["--policy-rate", rate] if rate else [])])
         physics = train_script.check(args)
-        env = train_script.task_config(args, physics)
+        env = learners.task_config(args, physics)
         frames[rate] = env.n_frames, decimation(Layout.of(physics.mj_model), env.config)
         assert MonopedConfig.from_dict(env.config.to_dict()) == env.config
     assert frames == {None: (10, 20), "100": (5, 10)}

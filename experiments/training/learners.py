@@ -1,0 +1,135 @@
+"""The task a run trains on (`task_config`) and Brax's PPO and SAC set up from the options (`run_ppo`, `run_sac`,
+`networks`)."""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import math
+from pathlib import Path
+
+from hopper_mjx.metrics.thresholds import APEX_TOLERANCE, MIN_HOPS, SPEED_TOLERANCE  # noqa: F401 (one definition)
+from training.options import OWNED_FIELDS, parse_layers, parse_pair
+
+
+def task_config(args, physics):
+    from hopper_mjx import envs
+
+    overrides = {"observe_gravity": args.observe_gravity, "engine": physics.engine, "motor": physics.motor,
+                 "action_delay": physics.action_delay, "push": physics.push,
+                 "terrain": "" if physics.ground.is_flat else str(physics.ground)}
+    if physics.variation:  # the robots episodes run: drawn once, with the run's seed
+        overrides |= {"randomize": str(physics.variation), "randomize_seed": args.seed}
+    if args.gravity_range is not None:
+        overrides["gravity_range"] = parse_pair(args.gravity_range, "--gravity-range")
+    if args.policy_rate is not None:
+        overrides["policy_rate"] = args.policy_rate
+    config = envs.default_config(args.task).overridden(args.config, OWNED_FIELDS)
+    return envs.from_config(dataclasses.replace(config, **overrides), physics.mj_model)
+
+
+
+REWARD_SCALING = {"ppo": 0.1, "sac": 1.0}  # --reward-scaling's defaults
+
+
+REWARD_SCALING = {"ppo": 0.1, "sac": 1.0}  # --reward-scaling's defaults
+LEARNING_RATE = {"ppo": 6e-4, "sac": 3e-4}  # --learning-rate's defaults
+
+
+
+def learner_settings(args) -> dict:
+    """The learning rate, reward scaling and (PPO) gradient clip a run uses, its algorithm's defaults filled in."""
+    rate = LEARNING_RATE[args.algo] if args.learning_rate is None else args.learning_rate
+    scaling = REWARD_SCALING[args.algo] if args.reward_scaling is None else args.reward_scaling
+    clip = {} if args.algo != "ppo" else {"max_grad_norm": 1.0 if args.max_grad_norm is None else args.max_grad_norm}
+    return {"learning_rate": rate, "reward_scaling": scaling, **clip}
+
+
+
+def _shared(args, env, factory, remaining: int, start_step: int, resume, per_train_step: int) -> dict:
+    """The keyword arguments Brax's PPO and SAC `train` both take, from ours."""
+    from hopper_mjx.envs.wrappers import wrap_for_training
+
+    settings = learner_settings(args)
+    return dict(
+        environment=env,
+        num_timesteps=remaining,
+        num_evals=max(1, math.ceil(remaining / max(args.eval_every, per_train_step))) + 1,
+        episode_length=args.episode_length,
+        num_envs=args.num_envs,
+        num_eval_envs=args.num_eval_envs,
+        deterministic_eval=True,
+        wrap_env_fn=wrap_for_training,  # a fresh gravity and command every episode
+        learning_rate=settings["learning_rate"],
+        discounting=args.discounting,
+        reward_scaling=settings["reward_scaling"],
+        batch_size=args.batch_size,
+        normalize_observations=True,
+        network_factory=factory,
+        seed=args.seed + start_step,  # a resumed run draws fresh environments
+        restore_checkpoint_path=str(resume[0]) if resume else None,
+    )
+
+
+
+def run_ppo(args, env, factory, remaining: int, start_step: int, resume, progress, save_checkpoint) -> None:
+    """Brax PPO for the `remaining` environment steps, resuming from `resume` (path, step) if given."""
+    from brax.training.agents.ppo import train as ppo
+
+    per_train_step = args.batch_size * args.num_minibatches * args.unroll_length
+    ppo.train(
+        **_shared(args, env, factory, remaining, start_step, resume, per_train_step),
+        unroll_length=args.unroll_length,
+        num_minibatches=args.num_minibatches,
+        num_updates_per_batch=args.updates_per_batch,
+        entropy_cost=args.entropy_cost,
+        gae_lambda=0.95,
+        clipping_epsilon=0.2,
+        max_grad_norm=learner_settings(args)["max_grad_norm"] or None,
+        **({} if args.desired_kl is None else {"learning_rate_schedule": "ADAPTIVE_KL", "desired_kl": args.desired_kl}),
+        progress_fn=progress,
+        run_evals=not args.no_eval,
+        policy_params_fn=lambda step, make_policy, params: save_checkpoint(step, params),
+    )
+
+
+
+def run_sac(args, env, factory, remaining: int, start_step: int, resume, progress, save_checkpoint) -> None:
+    """Brax SAC for the `remaining` environment steps; Brax saves its checkpoints before each
+    evaluation into a scratch folder, from where `progress` files them under the global step."""
+    import tempfile
+
+    from brax.training import checkpoint as brax_checkpoint
+    from brax.training.agents.sac import train as sac
+
+    from hopper_mjx.envs.replay import ring_replay_in_sac
+
+    # The ring replay: Brax's own copies the whole replay on every insert once full (hopper_mjx.envs.replay).
+    with tempfile.TemporaryDirectory(dir=Path(args.out).resolve()) as scratch, ring_replay_in_sac():
+        def progress_and_file(step, metrics):
+            if step > 0:
+                save_checkpoint(step, brax_checkpoint.load(Path(scratch) / f"{int(step):012d}"))
+            progress(step, metrics)
+
+        sac.train(
+            **_shared(args, env, factory, remaining, start_step, resume, args.num_envs),
+            min_replay_size=min(args.sac_min_replay, remaining - 1),
+            max_replay_size=args.sac_replay,
+            grad_updates_per_step=args.sac_grad_updates,
+            checkpoint_logdir=scratch,
+            progress_fn=progress_and_file,
+        )
+
+
+
+def networks(args):
+    """(network factory, Brax checkpoint module) of the algorithm."""
+    if args.algo == "ppo":
+        from brax.training.agents.ppo import checkpoint, networks
+
+        return functools.partial(networks.make_ppo_networks, policy_hidden_layer_sizes=parse_layers(args.policy_layers),
+                                 value_hidden_layer_sizes=parse_layers(args.value_layers)), checkpoint
+    from brax.training.agents.sac import checkpoint, networks
+
+    factory = functools.partial(networks.make_sac_networks, hidden_layer_sizes=parse_layers(args.policy_layers))
+    return factory, checkpoint

@@ -1,0 +1,133 @@
+"""One training run: resume from the latest checkpoint, train, record every evaluation (metrics.json, TensorBoard),
+copy the final policy, plot the reward curve (`train`)."""
+
+from __future__ import annotations
+
+import json
+import math
+import shutil
+import time
+from pathlib import Path
+
+from hopper_mjx import cli
+from hopper_mjx.metrics.thresholds import APEX_TOLERANCE, MIN_HOPS, SPEED_TOLERANCE  # noqa: F401 (one definition)
+from hopper_mjx.shell import files, process
+from hopper_mjx.shell.files import atomic_write_text
+from training.learners import learner_settings, networks, run_ppo, run_sac, task_config
+from training.options import check, latest_checkpoint
+
+HISTORY = "metrics.json"
+
+
+
+class OutOfTime(Exception):
+    """The --minutes budget is spent: training stops after the evaluation that found it so."""
+
+
+
+def read_history(path: Path) -> dict:
+    """A run's metrics record; one cut short (a kill mid-write, before writes were atomic) is refused in one line."""
+    try:
+        record = json.loads(path.read_text())
+    except (json.JSONDecodeError, UnicodeDecodeError):
+        raise ValueError(f"--out: {path} is damaged (cut short?); move it away to train from the checkpoints "
+                         "without the old history, or use another --out") from None
+    if not isinstance(record, dict) or not isinstance(record.get("history"), list):
+        raise ValueError(f"--out: {path} is not a training record (no history list)")
+    return record
+
+
+
+def train(args, physics=None) -> dict:
+    """Trains (or resumes) as the arguments say on `physics` (`check`'s, checked here when not given);
+    returns the metrics record also saved to metrics.json."""
+    import jax
+
+    from hopper_mjx.envs import policy, tfevents
+
+    physics = check(args) if physics is None else physics
+    out = Path(args.out).resolve()  # orbax writes checkpoints to absolute paths only
+    devices = jax.local_device_count()
+    if args.num_envs % devices:
+        raise ValueError(f"--num-envs={args.num_envs} must be a multiple of the {devices} local devices")
+    if args.algo == "ppo" and (args.batch_size * args.num_minibatches) % args.num_envs:
+        raise ValueError("--batch-size x --num-minibatches must be a multiple of --num-envs")
+    cli.make_folder("--out", out)
+    process.on_stop(f"the checkpoints are saved in {out / 'checkpoints'}; rerun the same command to resume")
+    env = task_config(args, physics)
+    config = env.config
+    factory, checkpoint = networks(args)
+    network_config = checkpoint.network_config(env.observation_size, env.action_size, True, factory)
+
+    record_path = out / HISTORY
+    record = read_history(record_path) if record_path.exists() else {"history": [], "wall_time": 0.0}
+    record.update(args={**vars(args), **learner_settings(args)}, env_config=config.to_dict())
+    resume = latest_checkpoint(out)
+    start_step = resume[1] if resume else 0
+    remaining = args.timesteps - start_step
+    if resume:
+        print(f"resuming from {resume[0]} (step {start_step:,})", flush=True)
+    started, wall_before = time.perf_counter(), record["wall_time"]
+    board = tfevents.EventWriter(out / "tensorboard")  # the same curves for TensorBoard: tensorboard --logdir OUT
+
+    def progress(step, metrics):
+        row = {"step": start_step + int(step), "wall_time": wall_before + time.perf_counter() - started,
+               **{k: float(v) for k, v in metrics.items() if k.startswith(("eval/", "training/sps"))}}
+        record["history"].append(row)
+        board.scalars(row["step"], {k: v for k, v in row.items() if k not in ("step", "wall_time")})
+        record["wall_time"] = row["wall_time"]
+        atomic_write_text(record_path, json.dumps(record, indent=1))
+        print(f"step {row['step']:>10,} | reward {row.get('eval/episode_reward', math.nan):8.1f} | "
+              f"episode {row.get('eval/avg_episode_length', math.nan):5.0f} steps | "
+              f"{row.get('training/sps', math.nan):6.0f} steps/s | {row['wall_time'] / 60:5.1f} min", flush=True)
+        # Brax files an evaluation's checkpoint before reporting it, so stopping here keeps it.
+        if args.minutes is not None and step > 0 and row["wall_time"] >= 60 * args.minutes:
+            raise OutOfTime
+
+    def save_checkpoint(step, params):
+        if step > 0:
+            step = start_step + int(step)
+            folder = out / "checkpoints" / f"{step:012d}"
+            if folder.exists() and not (folder / policy.ENV_CONFIG).exists():
+                shutil.rmtree(folder)  # an earlier run was stopped while saving it
+            with files.partial(folder):  # complete once its task config is beside it (latest_checkpoint)
+                checkpoint.save(out / "checkpoints", step, params, network_config)
+                policy.write_env_config(folder, config)
+
+    out_of_time = args.minutes is not None and record["wall_time"] >= 60 * args.minutes
+    if remaining > 0 and not out_of_time:
+        run = run_ppo if args.algo == "ppo" else run_sac
+        try:
+            run(args, env, factory, remaining, start_step, resume, progress, save_checkpoint)
+        except OutOfTime:
+            print(f"stopped: {args.minutes:g} min of training (--minutes)", flush=True)
+    board.close()
+    final = latest_checkpoint(out)
+    if final is None:
+        raise ValueError(f"no checkpoint was written under {out / 'checkpoints'}")
+    with files.partial(out / "policy"):
+        shutil.rmtree(out / "policy", ignore_errors=True)
+        shutil.copytree(final[0], out / "policy")
+    record["final_step"] = final[1]
+    atomic_write_text(record_path, json.dumps(record, indent=1))
+    plot_rewards(record["history"], out / "reward_curve.png", f"{args.algo.upper()} on {args.task}")
+    return record
+
+
+
+def plot_rewards(history: list[dict], path: Path, title: str) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    rows = [r for r in history if "eval/episode_reward" in r]
+    fig, ax = plt.subplots(figsize=(6, 3.5))
+    ax.plot([r["step"] for r in rows], [r["eval/episode_reward"] for r in rows], "o-")
+    ax.set_xlabel("environment steps (50 Hz policy steps)")
+    ax.set_ylabel("evaluation episode reward")
+    ax.set_title(f"{title}, the batched monoped")
+    ax.grid(alpha=0.3)
+    fig.tight_layout()
+    files.atomic_write(path, lambda f: fig.savefig(f, dpi=120, format=Path(path).suffix[1:] or None))
+    plt.close(fig)
