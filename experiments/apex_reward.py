@@ -18,6 +18,8 @@ from pathlib import Path
 
 import numpy as np
 
+from hopper_mjx.shell.checks import check_readable_file
+
 POLICY_RATE = 50.0  # Hz, the tasks' default
 
 
@@ -46,10 +48,13 @@ def main(argv=None) -> int:
     p.add_argument("runs", nargs="+", help="simulate --out .npz files")
     p.add_argument("--command", type=float, default=0.10, help="commanded apex rise above standing, m")
     p.add_argument("--scale", type=float, default=0.1, help="the apex kernel's width, m (hop's)")
+    p.add_argument("--urdf", default=None, help="the robot the runs were made with (default: the shipped seed monoped)")
     args = p.parse_args(argv)
     try:  # every input read before anything is computed
         if not (np.isfinite(args.command) and args.command > 0 and np.isfinite(args.scale) and args.scale > 0):
             raise ValueError(f"--command and --scale must be > 0, got {args.command}, {args.scale}")
+        if args.urdf is not None:
+            check_readable_file("--urdf", args.urdf)
         runs = []
         for name in args.runs:
             with np.load(name) as f:
@@ -60,7 +65,7 @@ def main(argv=None) -> int:
     from hopper_mjx import model
     from hopper_mjx.model import robot
 
-    standing = float(robot.standing_qpos(model.load())[2])
+    standing = float(robot.standing_qpos(model.load(args.urdf or model.DEFAULT_URDF))[2])
     print(f"apex term per policy step, hop's kernel exp(-|apex - command| / {args.scale:g} m), command "
           f"{args.command:g} m above standing ({standing:.3f} m); the last half of each run at {POLICY_RATE:g} Hz\n")
     print("| run | g m/s² | measured rise m | predicted | flight |")

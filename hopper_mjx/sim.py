@@ -31,7 +31,6 @@ from hopper_mjx.hardware import signals
 from hopper_mjx.hardware.actuators import Actuation, Drive, Motor
 from hopper_mjx.hardware.pushes import Pushes
 from hopper_mjx.hardware.sensor_noise import FIGURES, Sensing, SensorState
-from hopper_mjx.hardware.sensor_noise import add_noise as sensor_noise
 from hopper_mjx.model import world
 from hopper_mjx.model.robot import Robot
 from hopper_mjx.step import Plant, actuate, advance
@@ -416,9 +415,9 @@ def _instance_rollout(engine, actuation: Actuation, pushes: Pushes | None, sensi
         every = {k: p // tick for k, p in periods.items()}
         decimate = lambda tree, stream: jax.tree_util.tree_map(lambda x: x[:: every[stream]], tree)
         noise_key, next_key = split_rollout_key(state.key)
-        imu, odom = signals.add_noise(sensors, noise_key, decimate(sig.imu, "imu"), decimate(sig.odom, "odom"))
-        if sensing.noisy:  # each instance's own sensors, on a stream of their own
-            imu, odom = sensor_noise(state.sense, jax.random.fold_in(noise_key, 1), imu, odom)
+        # The streams' noise and each instance's own sensors' (static: where it has noisy ones), in one pass.
+        imu, odom = signals.add_noise(sensors, noise_key, decimate(sig.imu, "imu"), decimate(sig.odom, "odom"),
+                                      state.sense if sensing.noisy else None)
         contact = decimate(sig.contact, "contact")
         traj = (imu, odom, contact, sig.qpos[:: every["state"]], sig.qvel[:: every["state"]],
                 decimate(sig.ground, "contact"))

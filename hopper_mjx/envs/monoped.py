@@ -147,7 +147,8 @@ class MonopedEnv(Env):
 
     def __init__(self, config: MonopedConfig, mj_model: mujoco.MjModel | None = None):
         ground = config.ground
-        mj_model = mj_model if mj_model is not None else hopper_model.load(terrain=ground.terrain())
+        if mj_model is None:  # a config names no URDF: the shipped robot, held to the config's fingerprint below
+            mj_model = hopper_model.load(hopper_model.DEFAULT_URDF, terrain=ground.terrain())
         config = dataclasses.replace(config, robot=same_robot(config.robot, mj_model, "this task's config"))
         self.terrain = same_ground(ground, mj_model, "this task's config")
         trained = training_model(mj_model, config)

@@ -8,8 +8,8 @@ controller and the engine, per instance and pure:
 - Noise: each physics step the IMU's angular rate (the base's body-frame rate, qvel[3:6]) gets
   its bias plus Gaussian noise of its std, the odometry's position (qpos[:3]) and linear velocity
   (qvel[:3]) theirs; joint encoders and the contact stay exact. The recorded IMU and odometry
-  streams get the same per-instance std and bias (`add_noise`); the accelerometer only there
-  (no controller reads it).
+  streams get the same per-instance std and bias (`signals.add_noise`, in one pass with the streams' own
+  noise); the accelerometer only there (no controller reads it).
 - Delay: the controller reads the observation `delay` physics steps old (its time, joints and
   contact as they were then); before that many steps have passed it reads the first one.
 
@@ -27,7 +27,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from hopper_mjx.hardware.signals import Imu, Observation, Odometry
+from hopper_mjx.hardware.signals import Observation
 
 NOISE_STREAM = 1  # folded into an instance's per-step key: its own stream beside the pushes' directions
 
@@ -104,14 +104,3 @@ def noisy(s: SensorState, obs: Observation, key: jax.Array) -> Observation:
     pos = obs.qpos[:3] + gauss(k[1], s.odom_pos_noise, obs.qpos[:3])
     vel = obs.qvel[:3] + gauss(k[2], s.odom_vel_noise, obs.qvel[:3])
     return obs._replace(qpos=obs.qpos.at[:3].set(pos), qvel=obs.qvel.at[:3].set(vel).at[3:6].set(rate))
-
-
-def add_noise(s: SensorState, key: jax.Array, imu: Imu, odom: Odometry) -> tuple[Imu, Odometry]:
-    """One instance's recorded IMU and odometry streams ((T, ...) each) with its own noise and bias."""
-    k = jax.random.split(key, 5)
-    gauss = lambda k, std, x: x + std * jax.random.normal(k, x.shape, x.dtype)
-    imu = imu._replace(gyro=gauss(k[0], s.gyro_noise, imu.gyro) + s.gyro_bias,
-                       accel=gauss(k[1], s.accel_noise, imu.accel))
-    odom = odom._replace(pos=gauss(k[2], s.odom_pos_noise, odom.pos), linvel=gauss(k[3], s.odom_vel_noise, odom.linvel),
-                         angvel=gauss(k[4], s.odom_vel_noise, odom.angvel))
-    return imu, odom

@@ -213,17 +213,27 @@ def noise_keys(key: jax.Array) -> jax.Array:
     return jax.random.split(key, 6)
 
 
-def add_noise(cfg: SensorConfig, key: jax.Array, imu_: Imu, odom: Odometry) -> tuple[Imu, Odometry]:
-    """Measurement noise for one instance's recorded streams; exact when every std is 0."""
+def add_noise(cfg: SensorConfig, key: jax.Array, imu_: Imu, odom: Odometry, own=None) -> tuple[Imu, Odometry]:
+    """Measurement noise for one instance's recorded streams, in one pass: the streams' stds (`cfg`) and, with
+    `own` (its `sensor_noise.SensorState`), the instance's own sensors' std and gyro bias. The two are independent
+    Gaussians, so each reading draws once, with their combined std; exact when every std is 0."""
     k = noise_keys(key)
+    if own is None:  # static: the streams' stds alone, each skipped where 0
+        gauss = lambda k, x, std, _: _gauss(k, x, std)
+        pick = lambda name: 0.0
+    else:
+        gauss = lambda k, x, std, own_std: x + jnp.sqrt(std**2 + own_std**2) * jax.random.normal(k, x.shape, x.dtype)
+        pick = lambda name: getattr(own, name)
     imu_ = Imu(
         quat=_perturb_quat(k[0], imu_.quat, cfg.orientation_noise),
-        gyro=_gauss(k[1], imu_.gyro, cfg.gyro_noise),
-        accel=_gauss(k[2], imu_.accel, cfg.accel_noise),
+        gyro=gauss(k[1], imu_.gyro, cfg.gyro_noise, pick("gyro_noise")),
+        accel=gauss(k[2], imu_.accel, cfg.accel_noise, pick("accel_noise")),
     )
     odom = odom._replace(
-        pos=_gauss(k[3], odom.pos, cfg.odom_pos_noise),
-        linvel=_gauss(k[4], odom.linvel, cfg.odom_vel_noise),
-        angvel=_gauss(k[5], odom.angvel, cfg.odom_vel_noise),
+        pos=gauss(k[3], odom.pos, cfg.odom_pos_noise, pick("odom_pos_noise")),
+        linvel=gauss(k[4], odom.linvel, cfg.odom_vel_noise, pick("odom_vel_noise")),
+        angvel=gauss(k[5], odom.angvel, cfg.odom_vel_noise, pick("odom_vel_noise")),
     )
+    if own is not None:  # the instance's gyro is biased
+        imu_ = imu_._replace(gyro=imu_.gyro + own.gyro_bias)
     return imu_, odom
