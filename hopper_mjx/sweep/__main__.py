@@ -268,8 +268,10 @@ def run_one(args, spec, folder: Path):
     facts["total_wall_s"] = time.perf_counter() - start
     if facts["processes"] > 1 and args.process_id != 0:
         return None
-    text = report.write(folder, spec, instances, table, runner.columns(spec), facts)
+    text, notes = report.write(folder, spec, instances, table, runner.columns(spec), facts)
     print(text if args.kind != "compare" else f"{label(spec.controller)}: outputs in {folder}/")
+    for line in notes:  # why robots fell, or a figure that means less than it seems
+        print(line)
     rate = f", {facts['steps_per_s']:,.0f} steps/s" if facts["steps_per_s"] else " (all chunks were already done)"
     print(f"\n{len(instances)} instances x {spec.duration:g} s in {facts['total_wall_s']:.0f} s{rate}; "
           f"outputs in {folder}/")
