@@ -134,10 +134,11 @@ def notes(spec: SweepSpec, inst: Instances, table: np.ndarray, columns: tuple[st
     far = [g for g in groups if g.get("tracking_error") is not None and g["tracking_error"] > SPEED_TOLERANCE]
     if far:
         speeds = [g["mean_speed"] for g in far]
-        where = (f"every grid point ({min(speeds):+.2f} to {max(speeds):+.2f} m/s)" if len(far) == len(groups) else
-                 f"{len(far)} of {len(groups)} grid points (" + ", ".join(
-                     f"{_point(spec, g)}: {g['mean_speed']:+.2f} m/s" for g in far[:4]) + (", ..." if len(far) > 4
-                                                                                          else "") + ")")
+        if len(far) == len(groups):
+            where = f"every grid point ({min(speeds):+.2f} to {max(speeds):+.2f} m/s)"
+        else:
+            listed = ", ".join(f"{_point(spec, g)}: {g['mean_speed']:+.2f} m/s" for g in far[:4])
+            where = f"{len(far)} of {len(groups)} grid points ({listed}{', ...' if len(far) > 4 else ''})"
         out.append(f"warning: the speed is more than {SPEED_TOLERANCE:g} m/s from its command "
                    f"({commanded[0]:+.2f},{commanded[1]:+.2f} m/s) at {where}: the survivors' mean vx over their "
                    "last 5 s")
