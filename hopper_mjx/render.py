@@ -104,7 +104,9 @@ def caption(image: np.ndarray, text: str) -> np.ndarray:
 
     picture = Image.fromarray(image)
     draw = ImageDraw.Draw(picture)
-    font = ImageFont.load_default(size=max(10, image.shape[0] // 24))
+    from matplotlib import get_data_path  # its DejaVu Sans has the ² that Pillow's own font lacks
+
+    font = ImageFont.truetype(str(Path(get_data_path()) / "fonts/ttf/DejaVuSans.ttf"), max(10, image.shape[0] // 24))
     left, top, right, bottom = draw.textbbox((6, 4), text, font=font)
     draw.rectangle((left - 4, top - 3, right + 4, bottom + 3), fill=(255, 255, 255))
     draw.text((6, 4), text, fill=(20, 20, 20), font=font)

@@ -211,7 +211,7 @@ def test_gravity_figure_shows_energy_per_hop_in_place_and_cot_with_a_speed_comma
     assert survival.get_ylabel() == "survival (% of replicates)" and list(survival.lines[0].get_ydata()) == [100] * 3
     assert "mean ± std over survivors" in in_place.axes[0].get_legend_handles_labels()[1]
     assert "± 1 standard deviation" in in_place.get_supxlabel()
-    assert "ideal motors, no delay or pushes" in in_place.get_suptitle()
+    assert "ideal motors; no delay; no pushes; the URDF's robot; flat ground" in in_place.get_suptitle()
 
 
 def test_a_plots_title_carries_every_physics_option_the_run_changed():
@@ -226,7 +226,10 @@ def test_a_plots_title_carries_every_physics_option_the_run_changed():
     for part in ("dc motors", "action delay 5 ms", "pushes of 0.3 m/s every 2 s", "randomised foot_friction",
                  "terrain rough:amp=0.02", "kick std 0.3", "speed 0.3,0 m/s"):
         assert part in title, (part, title)
-    assert "ideal motors" not in title
+    assert "ideal motors" not in title and "no delay" not in title
+    # What the sweep varies is its axis, not a setting: an action delay sweep's title claims no delay.
+    delays = report.physics_label(_spec(kind="param", param="action_delay", values=(0.0, 5.0)))
+    assert "delay" not in delays and "ideal motors; no pushes; the URDF's robot; flat ground" in delays
 
 
 def test_a_randomized_sweep_records_each_replicates_robot_the_same_at_every_gravity(tmp_path, capsys):
