@@ -257,7 +257,11 @@ def check_indices(name: str, indices, n: int) -> None:
 
 
 def fail(err: Exception | str) -> int:
-    print(f"error: {err}", file=sys.stderr)
+    text = str(err)
+    flag, sep, rest = text.partition(": ")
+    if sep and flag.startswith("-") and rest.startswith(flag + " "):  # a wrapper naming the option its message names
+        text = rest
+    print(f"error: {text}", file=sys.stderr)
     return 2
 
 

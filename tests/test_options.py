@@ -146,3 +146,20 @@ def test_a_sweep_takes_every_physics_option_it_lists(parsers, kind, tmp_path):
         args = sweep.parser().parse_args([kind, *REQUIRED.get(kind, []), flag, SAMPLES[flag], "--num", "2",
                                           "--duration", "1", "--out", str(tmp_path / "out")])
         sweep.check(args)  # raises ValueError on a refusal
+
+
+def test_an_error_names_the_option_once(parsers, capsys):
+    """argparse's "argument --values: --values must be ..." and a check's "--values: --values must ..." say the
+    option once; an alias's type error names both of its names."""
+    from hopper_mjx import checks
+
+    with pytest.raises(SystemExit):
+        parsers["-m hopper_mjx.sweep param"].parse_args(["--param", "kp_scale", "--values", "1,y"])
+    assert capsys.readouterr().err.startswith("error: --values must be comma-separated numbers, got '1,y' (see ")
+    with pytest.raises(SystemExit):
+        parsers["-m hopper_mjx.sweep gravity"].parse_args(["--values", "1,y"])
+    assert capsys.readouterr().err.startswith("error: --gravity/--values must be comma-separated numbers")
+    assert checks.fail(ValueError("--values: --values must be one or more finite numbers")) == 2
+    assert capsys.readouterr().err == "error: --values must be one or more finite numbers\n"
+    checks.fail(ValueError("--values: kp_scale drew a value of -1"))
+    assert capsys.readouterr().err == "error: --values: kp_scale drew a value of -1\n"
