@@ -31,7 +31,8 @@ def parser():
     p.add_argument("--policies", nargs="+", required=True, metavar="NAME=PATH",
                    help="row groups: a name and a training run or --seeds parent")
     p.add_argument("--out", type=Path, required=True, help="folder of the sweeps and robustness.md")
-    p.add_argument("--values", default="9.81,3.71,1.62", help="gravities m/s² (default Earth, Mars, Moon)")
+    p.add_argument("--gravity", "--values", dest="gravity", default="9.81,3.71,1.62", metavar="G,...",
+                   help="gravities m/s² (default Earth, Mars, Moon); --values is the same option, its older name")
     p.add_argument("--num", type=int, default=64, help="instances per gravity (default 64)")
     p.add_argument("--duration", type=float, default=20.0, help="seconds per instance (default 20)")
     p.add_argument("--height", type=float, default=0.10, help="commanded apex rise m (default 0.10)")
@@ -68,7 +69,7 @@ def groups(args) -> dict[str, list[str]]:
 
 def sweep_args(args, controllers: list[str], column: str, folder: Path) -> list[str]:
     extra = ["--randomize", args.randomize] if column == "randomized" else []
-    return ["compare", "--controllers", ",".join(controllers), "--values", args.values, "--num", str(args.num),
+    return ["compare", "--controllers", ",".join(controllers), "--gravity", args.gravity, "--num", str(args.num),
             "--duration", repr(args.duration), "--height", repr(args.height), "--push", args.push, *extra,
             "--no-progress", "--out", str(folder)]
 
@@ -133,7 +134,7 @@ def table(args, found: dict[str, list[str]], done: dict) -> str:
             "\\|apex err\\| m |\n|---|---|---|---|---|---|---|\n")
     rows = []
     for name in found:
-        for g in (float(v) for v in args.values.split(",")):
+        for g in (float(v) for v in args.gravity.split(",")):
             cells = []
             for column in COLUMNS:
                 at = [row for row in done[column, name]["groups"] if abs(row["gravity"] - g) < 1e-9]

@@ -154,13 +154,6 @@ def check_push(values) -> tuple[float, float] | None:
     return float(values[0]), float(values[1])
 
 
-def refuse_terrain(ground, tool: str) -> None:
-    """For a tool that cannot honour a terrain yet: a ground (`terrain.Ground`) other than flat, refused in
-    one line."""
-    if not ground.is_flat:
-        raise ValueError(f"--terrain: {tool} runs on the flat ground only, for now; drop --terrain {ground}")
-
-
 def refuse_each(ground, tool: str) -> None:
     """For a tool that puts every instance on the model's one ground: seed=each refused in one line."""
     if ground.each:
@@ -197,13 +190,6 @@ def check_randomize(text: str | None, engines):
         except ValueError as err:
             raise ValueError(f"--randomize: {err}; use --engine mjx or auto") from None
     return spec
-
-
-def check_ideal_motors(physics: Physics, tool: str) -> None:
-    """Refuses a motor model or delay in a tool that does not run them yet (rather than ignore them)."""
-    if physics.motor != registry.DEFAULT_MOTOR or physics.action_delay or physics.push:
-        raise ValueError(f"--motor {physics.motor} / --action-delay / --push: {tool} runs ideal motors, without "
-                         "delay or pushes, only, for now")
 
 
 def check_delay(physics: Physics, duration: float | None, n: int = 1, seed: int = 0, *,
@@ -366,14 +352,21 @@ def check_batch(args) -> Scenario:
 STREAM_FLOATS = {"state": 19, "imu": 10, "odom": 13, "contact": 7}
 
 
-def check_rates(flags: str, sensors, batch: Scenario, duration: float | None = None) -> None:
-    """Every stream's rate divides the batch's physics rate (SensorConfig.periods says which does not);
-    `flags` names the options that set the rates. With a `duration`, the run must fit: its steps in one
-    compiled loop, its recording in this machine's memory (`budget`)."""
-    try:
-        periods = sensors.periods(batch.timestep)
-    except ValueError as err:
-        raise ValueError(f"{flags}: {err}") from None
+def check_rates(flags: str | dict, sensors, batch: Scenario, duration: float | None = None) -> None:
+    """Every stream's rate divides the batch's physics rate; `flags` names the option that set the rates (one for
+    all streams), or {stream: option} (imu, odom, contact, state), so that a refusal names what the user typed
+    and the rates that would work. With a `duration`, the run must fit: its steps in one compiled loop, its
+    recording in this machine's memory (`budget`)."""
+    rate = round(1 / batch.timestep)
+    for stream in STREAM_FLOATS:
+        hz = getattr(sensors, f"{stream}_rate")
+        steps = rate / hz if hz > 0 else 0.0
+        if not (steps >= 1 - 1e-9 and abs(steps - round(steps)) < 1e-6):
+            flag = flags if isinstance(flags, str) else flags[stream]
+            works = [rate // k for k in range(rate, 0, -1) if rate % k == 0 and 5 <= rate // k <= 100]
+            raise ValueError(f"{flag} {hz:g} must divide the physics rate {rate} Hz (a sample every whole number of "
+                             f"steps), e.g. {', '.join(map(str, works))}")
+    periods = sensors.periods(batch.timestep)
     if duration is not None:
         steps = budget.check_steps("--duration", duration, batch.timestep)
         recorded = sum(STREAM_FLOATS[s] * steps / p for s, p in periods.items())

@@ -3,9 +3,10 @@
     python -m hopper_mjx.render --still docs/img/monoped.png
     python -m hopper_mjx.render --video hop.mp4 --gravity 1.62 --controller hold --duration 2
 
-The still shows the robot in its initial stance (on a --terrain, from further, with the ground
-ahead); the video (MP4 or GIF, by the
-file name) shows one instance simulated by the core. Headless machines render
+The still shows the robot in its initial stance (on a --terrain, from the side, framing the robot and the
+ground it faces: the first block, step or trench, else a metre of it); the video (MP4 or GIF, by the
+file name) shows one instance simulated by the core, its time and gravity written in the corner (on a terrain,
+from the side, with the ground ahead in view). Headless machines render
 through EGL (software Mesa on a CPU-only box): importing `hopper_mjx` chooses it
 before MuJoCo is loaded, unless MUJOCO_GL is set (see `hopper_mjx.shell.startup`).
 """
@@ -43,12 +44,29 @@ def camera(base_pos, distance: float = 2.0, azimuth: float = 135.0, elevation: f
     return cam
 
 
-def ground_camera() -> mujoco.MjvCamera:
-    """A still camera for a terrain: from the side (+x to the right), above, over the ground ahead."""
+def ahead(ground) -> float:
+    """m along +x a picture of `ground` (a `terrain.Ground`) must show past the start: the far end of its first
+    band (a block, a step, a trench), else a metre of ground."""
+    bands = ground.obstacles()
+    return float(min(bands[0, 1], ground.size[0] / 2)) if len(bands) else 1.0
+
+
+def ground_camera(ground) -> mujoco.MjvCamera:
+    """A still camera for a terrain: from the side (+x to the right), a little above, framing the robot at the
+    start and the ground it faces (`ahead`) between them, neither at the picture's edge."""
+    reach = ahead(ground)
     cam = mujoco.MjvCamera()
     cam.type = mujoco.mjtCamera.mjCAMERA_FREE
-    cam.lookat[:] = (0.8, 0.0, 0.1)
-    cam.distance, cam.azimuth, cam.elevation = 3.2, 90.0, -24.0
+    cam.lookat[:] = (reach / 2, 0.0, 0.35)  # the robot's base stands 0.7 m high: all of it in the picture
+    # 45° of height at 4:3: about 1.1 x the distance wide; the span and 0.5 m either side fill two thirds.
+    cam.distance, cam.azimuth, cam.elevation = max(2.7, (reach + 1.0) / 0.7), 90.0, -18.0
+    return cam
+
+
+def side_camera(base_pos, lead: float = 0.4) -> mujoco.MjvCamera:
+    """A video's camera on a terrain: from the side, following the base with `lead` m of the ground ahead in
+    view, so that what the robot faces enters the picture well before it reaches it."""
+    cam = camera((base_pos[0] + lead, base_pos[1], base_pos[2]), distance=2.6, azimuth=90.0, elevation=-15.0)
     return cam
 
 
@@ -58,8 +76,9 @@ def _check_size(width: int, height: int) -> None:
 
 
 def frames(m: mujoco.MjModel, qpos_sequence, *, width: int = 640, height: int = 480, segmentation: bool = False,
-           fixed: mujoco.MjvCamera | None = None):
-    """Yields one (height, width, 3) uint8 image per qpos (nq,), the camera following the base (or `fixed`).
+           fixed: mujoco.MjvCamera | None = None, follow=camera, captions=None):
+    """Yields one (height, width, 3) uint8 image per qpos (nq,), the camera following the base (`follow`, given
+    the base position) or `fixed`; `captions`: a line of text per image, written in its top-left corner.
 
     With `segmentation`, each image is instead (height, width, 2) int32 of (object id, object type)
     per pixel, as MuJoCo's segmentation rendering gives it (-1 where nothing is drawn).
@@ -70,13 +89,29 @@ def frames(m: mujoco.MjModel, qpos_sequence, *, width: int = 640, height: int = 
     try:
         if segmentation:
             renderer.enable_segmentation_rendering()
-        for qpos in qpos_sequence:
+        for k, qpos in enumerate(qpos_sequence):
             d.qpos[:] = qpos
             mujoco.mj_kinematics(m, d)
-            renderer.update_scene(d, camera=fixed or camera(d.qpos[:3]))
-            yield renderer.render().copy()
+            renderer.update_scene(d, camera=fixed or follow(d.qpos[:3]))
+            image = renderer.render().copy()
+            yield image if captions is None else caption(image, captions[k])
     finally:
         renderer.close()  # free the GL context now, not in a destructor at interpreter exit
+
+
+def caption(image: np.ndarray, text: str) -> np.ndarray:
+    """`image` with `text` in its top-left corner, dark on a pale band (legible over sky and floor alike)."""
+    from PIL import Image, ImageDraw, ImageFont
+
+    picture = Image.fromarray(image)
+    draw = ImageDraw.Draw(picture)
+    from matplotlib import get_data_path  # its DejaVu Sans has the ² that Pillow's own font lacks
+
+    font = ImageFont.truetype(str(Path(get_data_path()) / "fonts/ttf/DejaVuSans.ttf"), max(10, image.shape[0] // 24))
+    left, top, right, bottom = draw.textbbox((6, 4), text, font=font)
+    draw.rectangle((left - 4, top - 3, right + 4, bottom + 3), fill=(255, 255, 255))
+    draw.text((6, 4), text, fill=(20, 20, 20), font=font)
+    return np.asarray(picture)
 
 
 def still(m: mujoco.MjModel, qpos, **options) -> np.ndarray:
@@ -98,13 +133,14 @@ def video_sensors(args):
     return signals.SensorConfig.uniform(args.fps)
 
 
-def simulate_qpos(args, batch: Scenario | None = None) -> np.ndarray:
-    """(T, nq) poses of instance --instance, simulated on the one batch-run path, at --fps.
+def simulate_qpos(args, batch: Scenario | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """(T, nq) poses of instance --instance, simulated on the one batch-run path, at --fps, and (T,) their
+    times, s.
 
     The core runs the simulation model (`model.load`); the pictures' model adds only visuals."""
     batch = batch or check_video(args)
     _, _, traj = batch.run(args.duration, video_sensors(args))
-    return traj.qpos[args.instance]
+    return traj.qpos[args.instance], np.asarray(traj.time["state"], dtype=float)
 
 
 def check_video(args) -> Scenario:
@@ -176,14 +212,17 @@ def main(argv=None) -> int:
         if args.still is not None:
             import imageio.v2 as imageio
 
-            view = None if physics.ground.is_flat else ground_camera()  # on a terrain, the still shows the ground
+            view = None if physics.ground.is_flat else ground_camera(physics.ground)  # the ground it faces too
             with files.partial(args.still):  # a stopped run leaves no half-written image
                 imageio.imwrite(args.still, still(m, robot.stance_qpos(physics.mj_model), fixed=view, **size))
             print(f"wrote {args.still}")
         if args.video is not None:
-            qpos = simulate_qpos(args, batch)
+            qpos, times = simulate_qpos(args, batch)
+            g = np.linalg.norm(batch.gravity[args.instance])
+            captions = [f"t = {t:.2f} s   g = {g:.2f} m/s²" for t in times]
+            follow = camera if physics.ground.is_flat else side_camera
             with files.partial(args.video):
-                write_video(args.video, frames(m, qpos, **size), args.fps)
+                write_video(args.video, frames(m, qpos, follow=follow, captions=captions, **size), args.fps)
             print(f"wrote {args.video}: {len(qpos)} frames at {args.fps:g} fps")
     except ValueError as err:
         return cli.fail(err)

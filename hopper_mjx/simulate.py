@@ -18,6 +18,7 @@ import sys
 import numpy as np
 
 from hopper_mjx import cli
+from hopper_mjx.metrics import hops
 from hopper_mjx.scenario import Scenario
 from hopper_mjx.shell import jaxsetup, process
 from hopper_mjx.shell.files import atomic_write
@@ -139,7 +140,11 @@ def main(argv=None) -> int:
     # A file object, so numpy writes the exact name given (no ".npz" added); whole or not at all.
     atomic_write(args.out, lambda f: np.savez_compressed(f, **saved))
     cli.warn_diverged(saved["diverged"])
-    print(f"wrote {args.out}: {saved['qpos'].shape[0]} instances x {saved['time'].size} samples")
+    down = hops.fallen(saved["qpos"]).any(axis=1)  # the sweeps' fall test, at the saved rate
+    fell = (f"{down.sum()} fell (base below {hops.FALL_HEIGHT:g} m or tilted past {hops.FALL_ROLL_PITCH:g} "
+            f"rad): {np.flatnonzero(down)[:10].tolist()}")
+    print(f"wrote {args.out}: {saved['qpos'].shape[0]} instances x {saved['time'].size} samples; "
+          f"{fell if down.any() else 'all up to the end'}")
     return 0
 
 

@@ -49,8 +49,12 @@ CASES = [
     ("simulate", ["--num", "abc"], "argument --num: invalid int value: 'abc'"),
     ("simulate", ["--controller", "jump"], "--controller: unknown controller 'jump'; choose from: none, hold, pid, "
                                              "raibert, balance, policy:PATH"),
-    ("simulate", ["--rate", "7"], "--rate: imu_rate=7.0 Hz must divide the physics rate 1000 Hz"),
-    ("render", ["--video", "h.gif", "--fps", "30"], "--fps: imu_rate=30.0 Hz must divide the physics rate"),
+    ("simulate", ["--rate", "7"], "--rate 7 must divide the physics rate 1000 Hz (a sample every whole number of "
+                                  "steps), e.g. 5, 8, 10, 20, 25, 40, 50, 100"),
+    ("render", ["--video", "h.gif", "--fps", "15"], "--fps 15 must divide the physics rate 1000 Hz"),
+    ("ros.record", ["--rate", "100", "--odom-rate", "30", "--out", "r.bag"], "--odom-rate 30 must divide the physics"),
+    ("sweep", ["gravity", "--gravity", "1,x", "--out", "s"], "--gravity/--values must be comma-separated numbers, "
+                                                              "got '1,x'"),
     ("simulate", ["--timestep", "0.5"], "--timestep must be finite and > 0 and <= 0.01, got 0.5"),
     ("simulate", ["--urdf", "binary.urdf"], "--urdf: binary.urdf is not a text (UTF-8) URDF file"),
     ("simulate", ["--world", "missing.world"], "--world missing.world: no such file"),
@@ -104,7 +108,7 @@ CASES = [
     ("simulate", ["--action-delay", "0.5"], "--action-delay must be a whole number of physics steps (1 ms)"),
     ("sweep", ["gravity", "--action-delay", "20000", "--out", "s"], "--action-delay 20000 ms is not shorter than"),
     ("simulate", ["--motor", "dc", "--urdf", "no_speed.urdf"], "--motor dc: the URDF gives no <limit velocity>"),
-    ("perf.bench", ["--motor", "dc"], "perf.bench (native MuJoCo has no twin of them) runs ideal motors"),
+    ("perf.bench", ["--motor", "dc"], "--motor: perf.bench times ideal motors without delay or pushes"),
     ("simulate", ["--push", "2"], "--push takes INTERVAL,SPEED (s, m/s), got 1 value(s)"),
     ("simulate", ["--push", "0,0.3"], "--push interval must be finite and > 0, got 0"),
     ("simulate", ["--push", "0.0005,0.3"], "--push: the push interval must be a whole number (>= 1) of physics"),
@@ -137,14 +141,14 @@ CASES = [
                                                                        "instances would need about"),
     ("simulate", ["--terrain", "rough:cell=0.0001"], "--terrain: a 40001 x 40001 grid has 1,600,080,001 vertices"),
     ("sweep", ["gains", "--param", "speed_gain", "--values", "1,2", "--terrain", "rough", "--out", "s"],
-     "--terrain: a gains sweep (a gravity, obstacle or terrain sweep takes terrain) runs on the flat ground only"),
+     "--terrain: a gains sweep runs on the flat ground only, for now; a gravity, obstacle or terrain sweep takes"),
     ("sweep", ["gravity", "--terrain", "rough:seed=each", "--out", "s"], "a gravity sweep puts every instance on one "
      "ground; give a fixed seed"),
     ("sweep", ["obstacle", "--heights", "0.1,-0.05", "--out", "s"], "--terrain: height=-0.05 must be >= 0 m"),
     ("sweep", ["obstacle", "--heights", "0.3", "--x", "0", "--out", "s"], "the ground within 0.1 m of the start "
      "rises to 0.300 m"),
     ("sweep", ["terrain", "--terrain", "rough", "--out", "s"], "--terrain: a terrain sweep makes its own ground per "
-     "value; drop --terrain"),
+     "value (--amps); drop --terrain"),
     ("sweep", ["terrain", "--amps", "0.01,0.01", "--out", "s"], "--amps must be one or more different values"),
     ("perf.bench", ["--terrain", "rough:seed=each"], "--terrain rough:amp=0.03,wavelength=0.4,seed=each,size=4x4,"
      "cell=0.04: perf.bench puts every instance on one ground; give a fixed seed"),

@@ -79,9 +79,10 @@ def test_a_still_on_a_terrain_draws_the_ground(tmp_path):
     changed = np.abs(images[0] - images[1]).max(axis=-1) > 30
     assert changed.mean() > 0.01
     cols = np.nonzero(changed)[1]
-    # +x is to the right: the robot (x = 0) stands at about a quarter of the width, the camera looks at
-    # x = 0.8, and the block (x = 0.6..0.7) is drawn just left of the middle.
-    assert 0.35 * WIDTH < np.median(cols) < 0.5 * WIDTH
+    # +x is to the right: the camera looks at the middle of the robot (x = 0) and the block's far end (x = 0.7),
+    # so the block is drawn right of the middle, well inside the picture, and the robot left of it.
+    assert 0.5 * WIDTH < np.median(cols) < 0.75 * WIDTH
+    assert cols.min() > 0.05 * WIDTH and cols.max() < 0.95 * WIDTH
 
 
 def test_video_cli_without_display_or_gl_variable(tmp_path):
@@ -94,6 +95,10 @@ def test_video_cli_without_display_or_gl_variable(tmp_path):
     frames = np.stack(list(iio.imiter(path)))[..., :3]
     assert len(frames) == 4  # 0.4 s at 10 fps
     assert np.abs(frames[-1].astype(int) - frames[0].astype(int)).mean() > 0.5
+    # The caption (time and gravity) sits in a white band in the top-left corner, and its time changes.
+    corner = frames[:, 2:14, 3:60].astype(int)
+    assert (corner.min(axis=-1) > 235).mean() > 0.4
+    assert np.abs(corner[-1] - corner[0]).max() > 100
 
 
 def test_robot_pixels_differ_from_the_background():

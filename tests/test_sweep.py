@@ -170,8 +170,9 @@ def _spec(**kw):
 
 
 def test_gains_heatmap_reads_at_a_glance():
-    """Survival on a fixed 0-1 scale (all survived is the top colour, not the middle of 0.9-1.1),
-    labels dark on pale cells and light on dark ones, both axes ascending."""
+    """Survival in % on a fixed 0-100 scale, as the table prints it (all survived is the top colour, not the middle
+    of 90-110), labels dark on pale cells and light on dark ones, both axes ascending, each with its unit, each
+    colour bar labelled."""
     from hopper_mjx.sweep import report
 
     spec = _spec(kind="gains", param="speed_gain", values=(0.6, 0.1))
@@ -179,7 +180,10 @@ def test_gains_heatmap_reads_at_a_glance():
               for g in spec.gravity]
     fig = report.gains_figure(spec, groups)
     survival, tracking = fig.axes[0], fig.axes[1]
-    assert survival.images[0].get_clim() == (0.0, 1.0)
+    assert survival.images[0].get_clim() == (0.0, 100.0)
+    assert {t.get_text() for t in survival.texts} == {"100 %"}
+    assert survival.get_xlabel() == "gravity g (m/s²)" and survival.get_ylabel() == "speed_gain (1)"
+    assert [a.get_ylabel() for a in fig.axes[2:]] == ["survival (% of replicates)", "speed tracking error (m/s)"]
     assert [t.get_text() for t in survival.get_xticklabels()] == ["1.62", "3.71", "9.81"]
     assert [t.get_text() for t in survival.get_yticklabels()] == ["0.1", "0.6"]
     assert {t.get_color() for t in survival.texts} == {"k"}  # every cell pale yellow (viridis at 1)
@@ -200,8 +204,32 @@ def test_gravity_figure_shows_energy_per_hop_in_place_and_cot_with_a_speed_comma
     assert list(x) == [1.62, 3.71, 9.81] and np.allclose(y, [0.648, 1.484, 3.924])  # ascending g, values follow
     report.save(in_place, "/dev/null")
     moving = report.gravity_figure(_spec(speed=(0.5, 0.0)), groups)
-    assert moving.axes[5].get_ylabel() == "cost of transport"
+    assert moving.axes[5].get_ylabel() == "cost of transport (work / (m·g·distance), 1)"
     report.save(moving, "/dev/null")
+    # Survival in % as the table prints it; the bars named; the defaults said, so that runs never look alike.
+    survival = in_place.axes[4]
+    assert survival.get_ylabel() == "survival (% of replicates)" and list(survival.lines[0].get_ydata()) == [100] * 3
+    assert "mean ± std over survivors" in in_place.axes[0].get_legend_handles_labels()[1]
+    assert "± 1 standard deviation" in in_place.get_supxlabel()
+    assert "ideal motors; no delay; no pushes; the URDF's robot; flat ground" in in_place.get_suptitle()
+
+
+def test_a_plots_title_carries_every_physics_option_the_run_changed():
+    from hopper_mjx import terrain
+    from hopper_mjx.scenario import Physics
+    from hopper_mjx.sweep import report
+    from hopper_mjx.variation.spec import Spec
+
+    physics = Physics(motor="dc", action_delay=0.005, push=(2.0, 0.3), variation=Spec.parse("foot_friction=0.4..1"),
+                      ground=terrain.parse("rough:amp=0.02,seed=1"))
+    title = report.physics_label(_spec(physics=physics, speed=(0.3, 0.0), kick=0.3))
+    for part in ("dc motors", "action delay 5 ms", "pushes of 0.3 m/s every 2 s", "randomised foot_friction",
+                 "terrain rough:amp=0.02", "kick std 0.3", "speed 0.3,0 m/s"):
+        assert part in title, (part, title)
+    assert "ideal motors" not in title and "no delay" not in title
+    # What the sweep varies is its axis, not a setting: an action delay sweep's title claims no delay.
+    delays = report.physics_label(_spec(kind="param", param="action_delay", values=(0.0, 5.0)))
+    assert "delay" not in delays and "ideal motors; no pushes; the URDF's robot; flat ground" in delays
 
 
 def test_a_randomized_sweep_records_each_replicates_robot_the_same_at_every_gravity(tmp_path, capsys):
@@ -260,13 +288,74 @@ def test_an_obstacle_sweeps_figure_shows_the_share_cleared_and_each_ground():
     spec = _spec(kind="obstacle", param="obstacle_height", values=(0.05, 0.2), speed=(0.3, 0.0), grounds=grounds,
                  physics=Physics(ground=terrain.parse(grounds[0])))
     assert spec.to_json()["grounds"] == grounds and "grounds" not in _spec().to_json()
-    groups = [{"obstacle_height": v, "gravity": g, "survival": 1.0, "cleared": 0.5} for v in spec.values
-              for g in spec.gravity]
+    groups = [{"obstacle_height": v, "gravity": g, "survival": 1.0, "cleared": 0.5, "distance_made_good": 0.2,
+               "mean_speed": 0.06} for v in spec.values for g in spec.gravity]
     fig = report.terrain_figure(spec, groups)
     cleared, ground = fig.axes[1], fig.axes[2]
-    assert cleared.get_title() == "share that cleared the obstacle" and cleared.images[0].get_clim() == (0.0, 1.0)
-    profiles = [line.get_ydata() for line in ground.lines]
+    assert cleared.get_title() == "cleared the block (% of replicates)" and cleared.images[0].get_clim() == (0, 100)
+    assert cleared.get_ylabel() == "obstacle_height (m)"
+    # The approach: commanded, and as measured (where each gravity's robots got, at what speed).
+    assert "0.3 m/s commanded, 0.06-0.06 m/s measured" in ground.get_title()
+    assert "g 9.81: made 0.20 m good at 0.06 m/s" in ground.get_legend_handles_labels()[1]
+    profiles = [line.get_ydata() for line in ground.lines[:2]]  # then where the robots got, dotted
     assert [p.max() for p in profiles] == pytest.approx([0.05, 0.2])  # each value's block, at y = 0
     x = ground.lines[1].get_xdata()
     assert x[profiles[1] > 0].min() == pytest.approx(0.6, abs=0.04)  # where the block starts
     report.save(fig, "/dev/null")
+
+
+def _table(spec, inst, **values):
+    from hopper_mjx.sweep.runner import columns
+
+    cols = columns(spec)
+    table = np.zeros((len(inst), len(cols)))
+    for name, value in values.items():
+        table[:, cols.index(name)] = value
+    return table, cols
+
+
+def test_a_sweep_says_why_its_robots_fell_past_the_delay_raibert_takes():
+    """The README's delay sweeps fall at 5 and 10 ms: the output says so, with the measured figure and where it
+    comes from; falls at a delay Raibert takes get no such excuse."""
+    from hopper_mjx.sweep import report
+    from hopper_mjx.sweep.grid import expand
+
+    spec = _spec(kind="param", param="action_delay", values=(0.0, 2.0, 5.0, 10.0), gravity=(9.81,), num=2)
+    inst = expand(spec, 9)
+    table, cols = _table(spec, inst, fell=inst.value >= 5)
+    said = report.notes(spec, inst, table, cols, report.group_summary(spec, inst, table, cols))
+    assert said == [f"note: 4 of the 4 fallen robots ran 5-10 ms of action delay; {report.RAIBERT_DELAY_FIGURE}"]
+    assert "docs/variation.md" in said[0] and "none from 6 ms" in said[0]
+    table, cols = _table(spec, inst, fell=inst.value < 2)
+    assert report.notes(spec, inst, table, cols, report.group_summary(spec, inst, table, cols)) == []
+
+
+def test_an_obstacle_no_robot_reached_is_a_warning_with_the_duration_that_would():
+    """The issue's run: 4 s at 0.3 m/s commanded, 0.23 m made good at 0.06 m/s, the block at 0.6-0.7 m."""
+    from hopper_mjx import terrain
+    from hopper_mjx.scenario import Physics
+    from hopper_mjx.sweep import report
+    from hopper_mjx.sweep.grid import expand
+
+    grounds = tuple(str(terrain.parse(f"obstacle:height={h},x=0.6,size=4x4")) for h in (0.05, 0.15))
+    spec = _spec(kind="obstacle", param="obstacle_height", values=(0.05, 0.15), speed=(0.3, 0.0), grounds=grounds,
+                 physics=Physics(ground=terrain.parse(grounds[0])), duration=4.0, gravity=(1.62, 9.81))
+    inst = expand(spec, 9)
+    table, cols = _table(spec, inst, distance_made_good=0.23, mean_speed=0.06, tracking_error=0.24)
+    groups = report.group_summary(spec, inst, table, cols)
+    assert {g["reached"] for g in groups} == {0.0} and {g["cleared"] for g in groups} == {0.0}
+    said = report.notes(spec, inst, table, cols, groups)
+    # 4 s + (0.7 m far end + 0.1 m - 0.23 m made good) / 0.06 m/s = 13.5 s
+    assert said[0] == ("warning: no replicate reached the block at x = 0.6 m at any grid point: 'cleared' there means "
+                       "nothing; they made 0.23 m good at 0.06 m/s against 0.3 commanded; --duration 14 would carry "
+                       "them past it at that speed")
+    assert said[1] == ("warning: the speed is more than 0.1 m/s from its command (+0.30,+0.00 m/s) at every grid "
+                       "point (+0.06 to +0.06 m/s): the survivors' mean vx over their last 5 s")
+    assert "reached" in report.table_text(spec, groups).splitlines()[0]
+    # Robots that got within 0.1 m of the block reached it (the foot lands ahead of the base): no warning.
+    table, cols = _table(spec, inst, distance_made_good=np.where(inst.gravity == 9.81, 0.55, 0.1), mean_speed=0.3)
+    groups = report.group_summary(spec, inst, table, cols)
+    said = report.notes(spec, inst, table, cols, groups)
+    assert said == ["warning: no replicate reached the block at x = 0.6 m at g=1.62 obstacle_height=0.05, g=1.62 "
+                    "obstacle_height=0.15: 'cleared' there means nothing; they made 0.10 m good at 0.30 m/s against "
+                    "0.3 commanded; --duration 7 would carry them past it at that speed"]

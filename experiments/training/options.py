@@ -63,7 +63,7 @@ def parser() -> argparse.ArgumentParser:
                    help="policy steps per second (default: the task's, 50); must divide the training's physics rate "
                         "(500 Hz). --episode-length counts policy steps at this rate")
     p.add_argument("--config", action="append", default=[], metavar="KEY=VALUE",
-                   help="set a field of the task's config (hopper_mjx.envs.monoped.MonopedConfig: reward weights and "
+                   help="set a field of the task's config (envs.task_config.MonopedConfig: reward weights and "
                         "kernels, command ranges, ...; a pair as low,high), e.g. --config apex_reward=flight; "
                         "repeatable. Saved with the policy")
     cli.add_physics_options(p, terrain=None, terrain_default="the task's own: hop_terrain's rough ground, flat for "

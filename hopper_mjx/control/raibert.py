@@ -124,6 +124,9 @@ class RaibertConfig:
 
 
 GAINS = tuple(f.name for f in dataclasses.fields(RaibertConfig))
+# Each gain's unit, as its comment above gives it (the others are ratios, unit 1): for plots' axes.
+GAIN_UNITS = {"leg_length": "m", "retract": "m", "sag": "m", "speed_step": "m/s", "pitch_kp": "N·m/rad",
+              "pitch_kd": "N·m·s/rad", "roll_kp": "N·m/rad", "roll_kd": "N·m·s/rad", "tilt_budget": "rad"}
 DEFAULT_HEIGHT = 0.10  # m, commanded apex rise over the standing height when none is given
 
 

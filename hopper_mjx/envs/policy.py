@@ -5,9 +5,9 @@ or ``sac_network_config.json``) with the task's ``hopper_env.json`` beside it
 (`write_env_config`; experiments/train.py saves every checkpoint and the final ``policy/`` this way).
 
 The controller replays the environment's control loop: every
-``n_frames`` physics steps it builds the same observation (`envs.monoped.observe`)
+``n_frames`` physics steps it builds the same observation (`envs.terms.observe`)
 and asks the deterministic policy for new joint targets; at every physics step
-the same PD law (`envs.monoped.pd_torque`) turns them into torques. Only the physics
+the same PD law (`envs.terms.pd_torque`) turns them into torques. Only the physics
 differs: the core's own timestep (1 ms) and full constraint solve instead of the
 training's 2 ms and capped solve; the policy rate stays the same.
 """

@@ -378,6 +378,9 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--chunk", type=int, default=256, help="instances per vmapped chunk on a device")
     # with --scaling, --engine takes a comma-separated list (e.g. chain,mjx), run side by side
     cli.add_physics_options(p, engine_help="; with --scaling, several (chain,mjx) side by side")
+    for flag in ("--motor", "--action-delay", "--push"):  # timed against MuJoCo C, which has no twin of them
+        p.refuse(flag, "perf.bench times ideal motors without delay or pushes (native MuJoCo has no twin of them); "
+                 f"drop {flag}")
     p.add_argument("--repeat", type=int, default=2, help="timed runs per side; the best counts")
     p.add_argument("--threads", type=int, default=None, help="native threads (default: one per device)")
     p.add_argument("--timestep", type=float, default=1e-3, help="physics step, s")
@@ -409,7 +412,6 @@ def check(args) -> tuple[list[int] | None, Physics]:
     sizes = [args.num] + (cli.parse_indices(args.scaling, "--scaling") if args.scaling else [])
     physics = cli.check_physics(argparse.Namespace(**vars(args) | {"engine": engines[0]}),
                                 {"timestep": args.timestep}, engines=engines, n=2 * max(sizes))  # both sides' heights
-    cli.check_ideal_motors(physics, "perf.bench (native MuJoCo has no twin of them)")
     cli.refuse_each(physics.ground, "perf.bench")
     if args.plot and not args.scaling:
         raise ValueError("--plot draws the --scaling records: give --scaling N1,N2,... too")

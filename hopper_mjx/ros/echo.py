@@ -1,6 +1,7 @@
 """python -m hopper_mjx.ros.echo BAG TOPIC: print a topic's messages laid out as `rostopic echo` does.
 
-    python -m hopper_mjx.ros.echo monoped.bag /monoped/imu/data -n 1
+    python -m hopper_mjx.ros.echo monoped.bag /monoped/imu/data -n 1     # a bag of one robot
+    python -m hopper_mjx.ros.echo drop.bag /monoped_0/imu/data -n 1      # robot 0 of a bag of several
     python -m hopper_mjx.ros.echo monoped_mcap /odom
 
 BAG is a ROS 1 .bag file or a ROS 2 bag folder (or the .mcap file inside it).
@@ -131,7 +132,8 @@ def echo(path: str | Path, topic: str, count: int | None = None, out=None) -> in
 def parser() -> argparse.ArgumentParser:
     p = cli.parser("python -m hopper_mjx.ros.echo", __doc__)
     p.add_argument("bag", help="a ROS 1 .bag file or a ROS 2 bag folder")
-    p.add_argument("topic", help="e.g. /monoped/imu/data")
+    p.add_argument("topic", help="e.g. /monoped/imu/data in a bag of one robot; in a bag of several, robot i's "
+                                 "topics are /monoped_<i>/..., e.g. /monoped_0/imu/data")
     p.add_argument("-n", dest="count", type=int, default=None, help="print only the first COUNT messages")
     return p
 

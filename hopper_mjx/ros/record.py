@@ -57,6 +57,12 @@ class Recording:
 
 
 # -- simulation --------------------------------------------------------------------------------
+def rate_flags(args) -> dict[str, str]:
+    """The option that set each stream's rate: its own --<stream>-rate, else --rate."""
+    own = {"imu": "imu", "odom": "odom", "contact": "contact", "state": "joint"}
+    return {s: f"--{o}-rate" if getattr(args, f"{o}_rate") is not None else "--rate" for s, o in own.items()}
+
+
 def sensor_config(args):
     """Per-stream rates: each --<stream>-rate, else --rate (the seed's 50 Hz)."""
     from hopper_mjx.hardware.signals import SensorConfig
@@ -188,7 +194,7 @@ def main(argv=None) -> int:
         batch = cli.check_batch(args)
         if args.instances is not None:
             cli.check_indices("--instances", args.instances, len(batch.gravity))
-        cli.check_rates("--rate, --<stream>-rate", sensor_config(args), batch, args.duration)
+        cli.check_rates(rate_flags(args), sensor_config(args), batch, args.duration)
         jaxsetup.configure()
         rec = simulate_batch(args, batch)
         path = write(rec, out, args.format, args.instances)

@@ -33,18 +33,36 @@ class ArgumentParser(argparse.ArgumentParser):
     on the command line wins over the file."""
 
     def error(self, message: str):
+        # argparse puts "argument --x: " before a type's own message, which names the option already.
+        names, sep, rest = message.partition(": ")
+        names = names.removeprefix("argument ")
+        named = [n for n in names.split("/") if rest.startswith(n + " ")] if sep and message.startswith("argument ") \
+            else []
+        if named:
+            message = names + rest[len(named[0]):]
         self.exit(2, f"error: {message} (see {self.prog} --help)\n")
+
+    def refuse(self, flag: str, why: str) -> None:
+        """An option of a shared set (`cli.add_physics_options`) that this command cannot honour: left out of
+        --help, so that the help lists only what the command takes, and refused in one line, `flag: why`,
+        when given (on the command line or by a scenario file)."""
+        action = self._option_string_actions[flag]
+        action.help = argparse.SUPPRESS
+        self.refused = {**getattr(self, "refused", {}), action.dest: (flag, action.default, why)}
 
     def parse_known_args(self, args=None, namespace=None):
         known, rest = super().parse_known_args(args, namespace)
         path = getattr(known, "scenario", None)
-        if path is None or namespace is not None:
-            return known, rest
-        try:
-            self.set_defaults(**read_scenario(path, self))
-        except ValueError as err:
-            self.error(str(err))
-        return super().parse_known_args(args, namespace)
+        if path is not None and namespace is None:
+            try:
+                self.set_defaults(**read_scenario(path, self))
+            except ValueError as err:
+                self.error(str(err))
+            known, rest = super().parse_known_args(args, namespace)
+        for dest, (flag, default, why) in getattr(self, "refused", {}).items():
+            if getattr(known, dest, default) != default:
+                self.error(f"{flag}: {why}")
+        return known, rest
 
 
 def read_scenario(path, p: argparse.ArgumentParser) -> dict:
@@ -239,7 +257,11 @@ def check_indices(name: str, indices, n: int) -> None:
 
 
 def fail(err: Exception | str) -> int:
-    print(f"error: {err}", file=sys.stderr)
+    text = str(err)
+    flag, sep, rest = text.partition(": ")
+    if sep and flag.startswith("-") and rest.startswith(flag + " "):  # a wrapper naming the option its message names
+        text = rest
+    print(f"error: {text}", file=sys.stderr)
     return 2
 
 

@@ -29,6 +29,13 @@ from hopper_mjx.sweep import folder
 from hopper_mjx.sweep.grid import DEFAULT_GRAVITY, KICK, TERRAIN_KINDS
 
 PARAM = {"obstacle": "obstacle_height", "terrain": "roughness"}  # the value column of a terrain sweep
+VALUES = {"gains": "--values", "param": "--values", "obstacle": "--heights", "terrain": "--amps"}  # the swept values
+
+
+def swept_values(args) -> list[float]:
+    """The values a sweep's second axis takes (its option in VALUES), or [] for a gravity sweep."""
+    flag = VALUES.get(args.kind)
+    return list(getattr(args, flag[2:])) if flag else []
 
 
 def parser() -> argparse.ArgumentParser:
@@ -43,12 +50,15 @@ def parser() -> argparse.ArgumentParser:
              "terrain": "survival and speed tracking: rough ground's amplitude x gravity, each replicate its own draw"}
     for kind, gravity, num, duration in kinds:
         s = sub.add_parser(kind, help=helps.get(kind, f"sweep {kind}"))
-        flag = "--gravity" if kind in ("gains", "param", *TERRAIN_KINDS) else "--values"
-        s.add_argument(flag, dest="gravity", type=cli.floats(flag), default=None,
-                       help=f"gravity values in m/s² (default: {','.join(map(str, gravity))})")
+        # --gravity, as in every command; a gravity or compare sweep took its gravities as --values before, and
+        # still does (gains and param sweeps' --values are the swept parameter's).
+        names = ("--gravity", "--values") if kind in ("gravity", "compare") else ("--gravity",)
+        s.add_argument(*names, dest="gravity", type=cli.floats("--gravity"), default=None, metavar="G,...",
+                       help=f"gravity values in m/s² (default: {','.join(map(str, gravity))})"
+                            + ("; --values is the same option, its older name" if len(names) > 1 else ""))
         s.add_argument("--world", type=Path, nargs="+", default=None, metavar="FILE.world",
-                       help=f"Gazebo world files instead of {flag}: their (vertical, non-zero) gravity")
-        s.set_defaults(default_gravity=list(gravity), gravity_flag=flag)
+                       help="Gazebo world files instead of --gravity: their (vertical, non-zero) gravity")
+        s.set_defaults(default_gravity=list(gravity))
         if kind == "gains":
             s.add_argument("--param", required=True, help="Raibert gain to sweep (a RaibertConfig field)")
             s.add_argument("--values", type=cli.floats("--values"), required=True, help="its values")
@@ -60,12 +70,12 @@ def parser() -> argparse.ArgumentParser:
                            help="its values, in the parameter's unit (docs/variation.md); every instance of a "
                                 "value gets it")
         if kind == "obstacle":
-            s.add_argument("--heights", dest="values", type=cli.floats("--heights"), default=[0.05, 0.1, 0.15, 0.2],
+            s.add_argument("--heights", type=cli.floats("--heights"), default=[0.05, 0.1, 0.15, 0.2],
                            help="block heights, m (default 0.05,0.1,0.15,0.2)")
             s.add_argument("--x", type=float, default=0.6, help="the block's near edge, m ahead of the start")
             s.add_argument("--length", type=float, default=0.1, help="the block's length along +x, m")
         if kind == "terrain":
-            s.add_argument("--amps", dest="values", type=cli.floats("--amps"), default=[0.0, 0.01, 0.02, 0.03],
+            s.add_argument("--amps", type=cli.floats("--amps"), default=[0.0, 0.01, 0.02, 0.03],
                            help="rough ground's peak |height|, m (default 0,0.01,0.02,0.03)")
             s.add_argument("--wavelength", type=float, default=0.4, help="rough ground's wavelength, m")
         if kind in TERRAIN_KINDS:
@@ -87,6 +97,12 @@ def parser() -> argparse.ArgumentParser:
         s.add_argument("--seed", type=int, default=0)
         s.add_argument("--chunk", type=int, default=256, help="instances per compiled call")
         cli.add_physics_options(s)
+        if kind in TERRAIN_KINDS:
+            s.refuse("--terrain", f"{'an' if kind == 'obstacle' else 'a'} {kind} sweep makes its own ground per value "
+                     f"({VALUES[kind]}); drop --terrain")
+        elif kind in ("gains", "param"):
+            s.refuse("--terrain", f"a {kind} sweep runs on the flat ground only, for now; a gravity, obstacle or "
+                     "terrain sweep takes terrain")
         s.add_argument("--out", type=Path, default=None, help="output folder (default runs/<kind>-<UTC time>)")
         s.add_argument("--no-progress", action="store_true")
         s.add_argument("--coordinator", default=None, help="HOST:PORT of process 0, for a multi-process sweep")
@@ -100,7 +116,7 @@ def gravity_from_worlds(args) -> tuple[float, ...]:
     non-zero, and the worlds must leave the physics at the sweep's (the default timestep and friction)."""
     from hopper_mjx.model import loader
 
-    worlds = cli.read_worlds(args.world, args.gravity_flag if args.gravity is not None else None)
+    worlds = cli.read_worlds(args.world, "--gravity" if args.gravity is not None else None)
     default = {"timestep": loader.DEFAULT_TIMESTEP, "friction": (loader.FOOT_FRICTION, loader.FOOT_FRICTION)}
     changed = [key for key, value in worlds.model_options(loader.FOOT_FRICTION).items() if value != default[key]]
     if changed:
@@ -130,10 +146,8 @@ def check(args):
         grounds = [str(cli.check_ground(g, n=n)) for g in grounds]  # as the manifest keeps them
         args.terrain = grounds[0]
     physics = cli.check_physics(args, n=args.num, seed=args.seed)  # one robot per replicate, drawn now
-    if not grounds and args.kind in ("gravity", "compare"):  # every instance on the one ground --terrain gives
+    if not grounds:  # every instance on the one ground --terrain gives (the parser refuses it where it cannot)
         cli.refuse_each(physics.ground, f"a {args.kind} sweep")
-    elif not grounds:
-        cli.refuse_terrain(physics.ground, f"a {args.kind} sweep (a gravity, obstacle or terrain sweep takes terrain)")
     cli.check_delay(physics, args.duration, args.num, args.seed)
     names = args.controllers.split(",") if args.kind == "compare" else [getattr(args, "controller", "raibert")]
     if len(set(names)) != len(names):
@@ -145,7 +159,7 @@ def check(args):
         spec = SweepSpec(kind=kind, gravity=gravity, num=args.num, duration=args.duration, height=args.height,
                          speed=tuple(args.speed), seed=args.seed, kick=args.kick, chunk=chunk, physics=physics,
                          param=PARAM.get(kind, getattr(args, "param", None)), controller=name,
-                         values=tuple(args.values) if kind in ("gains", "param", *TERRAIN_KINDS) else (),
+                         values=tuple(swept_values(args)),
                          grounds=tuple(grounds))
         check_robots(spec, args.duration)
         specs.append(spec)
@@ -203,7 +217,7 @@ def check_size(args, gravities: int) -> int:
     cannot run here, before the grid is even expanded."""
     if args.num < 1 or args.chunk < 1:
         return args.chunk  # SweepSpec names the bad one
-    n = gravities * args.num * (len(args.values) if args.kind in ("gains", "param", *TERRAIN_KINDS) else 1)
+    n = gravities * args.num * max(1, len(swept_values(args)))
     budget.check_steps("--duration", args.duration, DEFAULT_TIMESTEP)
     budget.check_memory("--num", n, KEPT)
     chunk = min(args.chunk, n)  # a chunk is padded to its size: never beyond the grid
@@ -215,20 +229,18 @@ def terrain_grounds(args) -> list[str]:
     """An obstacle or terrain sweep's --terrain spec per value (checked with the rest), else []."""
     if args.kind not in TERRAIN_KINDS:
         return []
-    if args.terrain != "flat":
-        raise ValueError(f"--terrain: a {args.kind} sweep makes its own ground per value; drop --terrain")
-    if not args.values or len(set(args.values)) != len(args.values):
-        raise ValueError(f"--{'heights' if args.kind == 'obstacle' else 'amps'} must be one or more different "
-                         "values")
+    values = swept_values(args)
+    if not values or len(set(values)) != len(values):
+        raise ValueError(f"{VALUES[args.kind]} must be one or more different values")
     cli.check_range("--duration", args.duration, low=0, open_low=True)
     reach = math.hypot(*args.speed) * args.duration + 1.0  # m the robot may travel, and a margin
     size = args.size or f"{max(4.0, 2 * math.ceil(reach * 2) / 2):g}x4"
     if args.kind == "obstacle":
         cli.check_range("--length", args.length, low=0, open_low=True)
         cli.check_range("--x", args.x)
-        return [f"obstacle:height={h!r},x={args.x!r},length={args.length!r},size={size}" for h in args.values]
+        return [f"obstacle:height={h!r},x={args.x!r},length={args.length!r},size={size}" for h in values]
     cli.check_range("--wavelength", args.wavelength, low=0, open_low=True)
-    return [f"rough:amp={a!r},wavelength={args.wavelength!r},seed=each,size={size}" for a in args.values]
+    return [f"rough:amp={a!r},wavelength={args.wavelength!r},seed=each,size={size}" for a in values]
 
 
 def folder_of(args, out: Path, spec) -> Path:
@@ -257,8 +269,10 @@ def run_one(args, spec, folder: Path):
     facts["total_wall_s"] = time.perf_counter() - start
     if facts["processes"] > 1 and args.process_id != 0:
         return None
-    text = report.write(folder, spec, instances, table, runner.columns(spec), facts)
+    text, notes = report.write(folder, spec, instances, table, runner.columns(spec), facts)
     print(text if args.kind != "compare" else f"{label(spec.controller)}: outputs in {folder}/")
+    for line in notes:  # why robots fell, or a figure that means less than it seems
+        print(line)
     rate = f", {facts['steps_per_s']:,.0f} steps/s" if facts["steps_per_s"] else " (all chunks were already done)"
     print(f"\n{len(instances)} instances x {spec.duration:g} s in {facts['total_wall_s']:.0f} s{rate}; "
           f"outputs in {folder}/")

@@ -57,9 +57,9 @@ class SweepSpec:
             raise ValueError("no gravity values given")
         bad = [g for g in self.gravity if not (math.isfinite(g) and g > 0)]
         if bad:
-            raise ValueError(f"gravity values must be finite and > 0 m/s², got {bad}")
+            raise ValueError(f"--gravity values must be finite and > 0 m/s², got {bad}")
         if len(set(self.gravity)) != len(self.gravity):  # a grid point twice would be counted twice
-            raise ValueError(f"gravity values must differ, got {list(self.gravity)}")
+            raise ValueError(f"--gravity values must differ, got {list(self.gravity)}")
         checks.check_seed(self.seed)
         if self.num < 1:
             raise ValueError(f"--num must be >= 1, got {self.num}")

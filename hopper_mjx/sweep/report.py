@@ -11,10 +11,20 @@ from pathlib import Path
 
 import numpy as np
 
+from hopper_mjx import registry
+from hopper_mjx.metrics.thresholds import SPEED_TOLERANCE
 from hopper_mjx.shell.files import atomic_write, atomic_write_text
-from hopper_mjx.sweep.grid import PLANETS, Instances, SweepSpec
+from hopper_mjx.sweep.grid import KICK, PLANETS, Instances, SweepSpec
 
 INTEGER_COLUMNS = {"replicate", "seed", "hops", "fell", "diverged", "obstacles_cleared"}
+# The action delay Raibert stops taking: docs/variation.md measured it (`sweep param --param action_delay --values
+# 0,2,4,6,8,10 --gravity 9.81,3.71,1.62 --num 16 --duration 20`): the first falls at 2 ms (the Moon), none up from 6.
+RAIBERT_DELAY_LIMIT_MS = 2.0
+RAIBERT_DELAY_FIGURE = ("Raibert keeps every robot up at 0 ms, Earth and Mars at 2 ms (the Moon 31 %), 0-12 % at 4 ms "
+                        "and none from 6 ms: its stance servo was tuned for prompt torques (docs/variation.md, 16 "
+                        "robots per cell at Earth, Mars and Moon, 20 s)")
+REACH = 0.1  # m: a base this close to an obstacle's near edge has reached it (its foot lands ahead of it)
+UNITS = {"obstacle_height": "m", "roughness": "m, peak |height|"}  # a terrain sweep's value
 
 
 def rows(spec: SweepSpec, inst: Instances, table: np.ndarray, columns: tuple[str, ...]) -> tuple[list[str], list[list]]:
@@ -63,6 +73,7 @@ def group_summary(spec: SweepSpec, inst: Instances, table: np.ndarray, columns: 
                           diverged=int(table[sel, columns.index("diverged")].sum()))
             if "obstacles_cleared" in columns:  # over every replicate, as survival: a fall before it is a miss
                 record["cleared"] = float((table[sel, columns.index("obstacles_cleared")] > 0).mean())
+                record["reached"] = float(reached(spec, table[sel], columns).mean())
             # Hop metrics describe steady hopping: the survivors' (a fallen run's last hops are its collapse).
             steady = sel & alive
             error = np.abs(table[steady, columns.index("apex_height")] - spec.height)
@@ -75,6 +86,81 @@ def group_summary(spec: SweepSpec, inst: Instances, table: np.ndarray, columns: 
                 record[f"{name}_std"] = float(finite.std()) if finite.size > 1 else None
             groups.append(record)
     return groups
+
+
+def obstacle_band(spec: SweepSpec) -> tuple[float, float] | None:
+    """m, the near and far edge of an obstacle sweep's block along +x (every value's is there), else None."""
+    if spec.kind != "obstacle":
+        return None
+    from hopper_mjx.terrain import parse
+
+    bands = parse(spec.grounds[0]).obstacles()
+    return (float(bands[0, 0]), float(bands[0, 1])) if len(bands) else None
+
+
+def reached(spec: SweepSpec, table: np.ndarray, columns: tuple[str, ...]) -> np.ndarray:
+    """(n,) bool: each row's robot came within REACH of the obstacle (or cleared it) before the end or its fall."""
+    x = obstacle_band(spec)[0]
+    made_good = table[:, columns.index("distance_made_good")]
+    return (table[:, columns.index("obstacles_cleared")] > 0) | (made_good >= x - REACH)
+
+
+def action_delays(spec: SweepSpec, inst: Instances) -> np.ndarray:
+    """(n,) ms, each instance's action delay: drawn (--randomize), swept (--param action_delay) or --action-delay."""
+    if "action_delay" in inst.robot:
+        return np.asarray(inst.robot["action_delay"], dtype=float)
+    if spec.param == "action_delay":
+        return np.asarray(inst.value, dtype=float)
+    return np.full(len(inst), spec.physics.action_delay * 1e3)
+
+
+def notes(spec: SweepSpec, inst: Instances, table: np.ndarray, columns: tuple[str, ...],
+          groups: list[dict]) -> list[str]:
+    """One line per figure the table prints that means less than it seems, or per fall with a known cause:
+    a delay past what the controller takes, an obstacle no replicate reached, a speed far from its command."""
+    out = []
+    fell = ~survived(table, columns)
+    late = fell & (action_delays(spec, inst) >= RAIBERT_DELAY_LIMIT_MS)
+    if spec.controller == "raibert" and late.any():
+        delays = action_delays(spec, inst)[late]
+        span = f"{delays.min():g}" + (f"-{delays.max():g}" if delays.max() > delays.min() else "")
+        out.append(f"note: {late.sum()} of the {fell.sum()} fallen robots ran {span} ms of action delay; "
+                   f"{RAIBERT_DELAY_FIGURE}")
+    band = obstacle_band(spec)
+    missed = [g for g in groups if g.get("reached") == 0]
+    if band is not None and missed:
+        out.append(_not_reached(spec, band, missed, len(missed) == len(groups)))
+    commanded = np.array(spec.speed)
+    far = [g for g in groups if g.get("tracking_error") is not None and g["tracking_error"] > SPEED_TOLERANCE]
+    if far:
+        speeds = [g["mean_speed"] for g in far]
+        if len(far) == len(groups):
+            where = f"every grid point ({min(speeds):+.2f} to {max(speeds):+.2f} m/s)"
+        else:
+            listed = ", ".join(f"{_point(spec, g)}: {g['mean_speed']:+.2f} m/s" for g in far[:4])
+            where = f"{len(far)} of {len(groups)} grid points ({listed}{', ...' if len(far) > 4 else ''})"
+        out.append(f"warning: the speed is more than {SPEED_TOLERANCE:g} m/s from its command "
+                   f"({commanded[0]:+.2f},{commanded[1]:+.2f} m/s) at {where}: the survivors' mean vx over their "
+                   "last 5 s")
+    return out
+
+
+def _point(spec: SweepSpec, g: dict) -> str:
+    return f"g={g['gravity']:g}" + (f" {spec.param}={g[spec.param]:g}" if spec.swept else "")
+
+
+def _not_reached(spec: SweepSpec, band: tuple[float, float], missed: list[dict], everywhere: bool) -> str:
+    """The warning for grid points whose replicates all stopped short of the obstacle, with the --duration that
+    would reach it at the speed they measured (after the run's own, at their last 5 s's speed)."""
+    made = np.nanmean([np.nan if g.get("distance_made_good") is None else g["distance_made_good"] for g in missed])
+    speed = np.nanmean([np.nan if g.get("mean_speed") is None else g["mean_speed"] for g in missed])
+    where = "at any grid point" if everywhere else "at " + ", ".join(_point(spec, g) for g in missed)
+    line = (f"warning: no replicate reached the block at x = {band[0]:g} m {where}: 'cleared' there means nothing; "
+            f"they made {made:.2f} m good at {speed:.2f} m/s against {spec.speed[0]:g} commanded")
+    if np.isfinite(speed) and speed > 0.01 and np.isfinite(made):
+        need = math.ceil(spec.duration + (band[1] + REACH - made) / speed)
+        return line + f"; --duration {need} would carry them past it at that speed"
+    return line + "; they hardly moved forward: raise --speed or lower the block"
 
 
 def versions() -> dict:
@@ -92,7 +178,7 @@ def table_text(spec: SweepSpec, groups: list[dict], label: str | None = None) ->
         cols.insert(0, (spec.param, spec.param, "{:g}"))
     if spec.grounds:  # a terrain sweep's own figures: over all replicates (cleared), and the survivors' travel
         cols += [("made good m", "distance_made_good", "{:+.2f}")]
-        cols += [("cleared", "cleared", "{:.0%}")] if spec.kind == "obstacle" else []
+        cols += [("reached", "reached", "{:.0%}"), ("cleared", "cleared", "{:.0%}")] if spec.kind == "obstacle" else []
     if label:
         cols.insert(0, ("controller", "controller", "{}"))
     cells = [[h for h, _, _ in cols]]
@@ -117,6 +203,35 @@ def save(fig, path: Path) -> None:
     _pyplot().close(fig)
 
 
+def physics_label(spec: SweepSpec) -> str:
+    """The run's command (apex rise, speed) and physics in words (a plot's subtitle): the motors, delay, pushes,
+    robot and ground always, and any other setting that differs from a sweep's defaults, so that two different
+    experiments never look alike. What the sweep varies is left to its axis."""
+    ph = spec.physics
+    parts = [f"command: apex rise {spec.height:g} m, speed {spec.speed[0]:g},{spec.speed[1]:g} m/s",
+             f"{ph.motor} motors"]
+    if spec.param != "action_delay":
+        parts.append(f"action delay {ph.action_delay * 1e3:g} ms" if ph.action_delay else "no delay")
+    parts.append(f"pushes of {ph.push[1]:g} m/s every {ph.push[0]:g} s" if ph.push else "no pushes")
+    robot = f"randomised {ph.variation}" if ph.variation else "the URDF's robot"
+    parts.append(robot + (f" but its {spec.param}" if spec.sweeps_robot and spec.param != "action_delay" else ""))
+    if not spec.grounds:  # a terrain sweep's ground is its axis
+        parts.append("flat ground" if ph.ground.is_flat else f"terrain {ph.ground}")
+    parts += [f"URDF {Path(ph.urdf).name}"] if ph.urdf else []
+    parts += [f"engine {ph.engine}"] if ph.engine != registry.DEFAULT_ENGINE else []
+    parts += [f"kick std {spec.kick:g}"] if spec.kick != KICK else []
+    return "; ".join(parts)
+
+
+def param_label(name: str) -> str:
+    """A swept value's axis label with its unit."""
+    from hopper_mjx.control.raibert import GAIN_UNITS
+
+    known = registry.PARAMETERS.get(name) or registry.CONTROL_PARAMETERS.get(name)
+    unit = known.unit if known else UNITS.get(name, GAIN_UNITS.get(name, "1"))
+    return f"{name} ({unit})"
+
+
 def _column(groups: list[dict], key: str) -> np.ndarray:
     return np.array([np.nan if r.get(key) is None else r[key] for r in groups])
 
@@ -129,14 +244,16 @@ def gravity_figure(spec: SweepSpec, groups: list[dict], series: list | None = No
     series = [(name, sorted(rows_, key=lambda r: r["gravity"])) for name, rows_ in (series or [("measured", groups)])]
     # Hopping in place travels (almost) nowhere, so work / (m·g·distance) is empty or noise there;
     # the energy of one hop is meaningful either way.
-    energy = (("cost_of_transport", "cost of transport") if any(spec.speed)
+    energy = (("cost_of_transport", "cost of transport (work / (m·g·distance), 1)") if any(spec.speed)
               else ("energy_per_hop", "motor work per hop (J/kg)"))
     panels = [("apex_height", "apex rise (m)"), ("flight_time", "flight time (s)"), ("hop_period", "hop period (s)"),
-              ("duty_factor", "duty factor"), ("survival", "survival"), energy]
+              ("duty_factor", "duty factor (stance / period, 1)"), ("survival", "survival (% of replicates)"), energy]
     fig, axes = plt.subplots(2, 3, figsize=(13, 7), constrained_layout=True)
     for ax, (key, label) in zip(axes.flat, panels):
         for name, rows_ in series:
-            ax.errorbar(_column(rows_, "gravity"), _column(rows_, key), fmt="o-", capsize=3, label=name,
+            scale = 100.0 if key == "survival" else 1.0  # the table prints survival in %
+            ax.errorbar(_column(rows_, "gravity"), scale * _column(rows_, key), fmt="o-", capsize=3,
+                        label=f"{'mean' if name == 'measured' else name} ± std over survivors",
                         yerr=None if key == "survival" else _column(rows_, f"{key}_std"))
         ax.set_xlabel("gravity g (m/s²)")
         ax.set_ylabel(label)
@@ -151,12 +268,15 @@ def gravity_figure(spec: SweepSpec, groups: list[dict], series: list | None = No
                         label="ballistic 2√(2h/g), h = each hop's measured rise")
     axes[0, 0].legend(fontsize=8)
     axes[0, 1].legend(fontsize=8)
-    axes[1, 1].set_ylim(-0.05, 1.05)
+    axes[1, 1].set_ylim(-5, 105)
     if len(series) > 1:
         who = " vs ".join(name for name, _ in series)
     else:
         who = "Raibert" if spec.controller == "raibert" else spec.controller
-    fig.suptitle(f"{who} hopping vs gravity: {spec.num} replicates per g, {spec.duration:g} s each")
+    fig.suptitle(f"{who} hopping vs gravity: {spec.num} replicates per g, {spec.duration:g} s each\n"
+                 f"{physics_label(spec)}", fontsize=11)
+    fig.supxlabel("points: the mean over the replicates still up at the end; bars: ± 1 standard deviation over them; "
+                  "survival: the share of all replicates up at the end", fontsize=8, color="0.3")
     return fig
 
 
@@ -174,21 +294,26 @@ def gains_figure(spec: SweepSpec, groups: list[dict], second=None, panels: int =
     gravity, values = sorted(spec.gravity), sorted(spec.values)  # both axes ascend
     at = {(r[spec.param], r["gravity"]): r for r in groups}
     fig, axes = plt.subplots(1, panels, figsize=(6 * panels, 4.5), constrained_layout=True)
-    # Survival is a fraction: a fixed 0-1 scale, so that all-survived reads as the top colour.
+    # Shares are in % as the table prints them, on a fixed 0-100 scale, so that all-survived reads as the top colour.
     second = second or ("tracking_error", "speed tracking error (m/s)", "magma_r", (None, None))
-    heatmaps = ((axes[0], "survival", "survival", "viridis", (0.0, 1.0)), (axes[1], *second))
+    heatmaps = ((axes[0], "survival", "survival (% of replicates)", "viridis", (0.0, 100.0)), (axes[1], *second))
     for ax, key, label, cmap, limits in heatmaps:
-        grid = np.array([[np.nan if at[v, g].get(key) is None else at[v, g][key] for g in gravity] for v in values])
+        scale = 100.0 if limits[1] == 100.0 else 1.0
+        grid = np.array([[np.nan if at[v, g].get(key) is None else scale * at[v, g][key] for g in gravity]
+                         for v in values])
         im = ax.imshow(grid, origin="lower", aspect="auto", cmap=cmap, vmin=limits[0], vmax=limits[1])
         ax.set_xticks(range(len(gravity)), [f"{g:g}" for g in gravity])
         ax.set_yticks(range(len(values)), [f"{v:g}" for v in values])
         ax.set_xlabel("gravity g (m/s²)")
-        ax.set_ylabel(spec.param)
+        ax.set_ylabel(param_label(spec.param))
         ax.set_title(label)
         for (r, c), v in np.ndenumerate(grid):
-            ax.text(c, r, "-" if np.isnan(v) else f"{v:.2f}", ha="center", va="center", fontsize=8,
+            text = "-" if np.isnan(v) else f"{v:.0f} %" if scale == 100.0 else f"{v:.2f}"
+            ax.text(c, r, text, ha="center", va="center", fontsize=8,
                     color="k" if np.isnan(v) else _label_colour(im.cmap(im.norm(v))))
-        fig.colorbar(im, ax=ax)
+        fig.colorbar(im, ax=ax, label=label)
+    fig.suptitle(f"{spec.kind} sweep: {spec.param} x gravity, {spec.num} replicates per cell, {spec.duration:g} s "
+                 f"each\n{physics_label(spec)}", fontsize=11)
     return fig
 
 
@@ -197,34 +322,57 @@ def terrain_figure(spec: SweepSpec, groups: list[dict]):
     cleared the obstacle (or the speed tracking error), and the ground of every value along +x at y = 0."""
     from hopper_mjx.terrain import parse
 
-    fig = gains_figure(spec, groups, second=("cleared", "share that cleared the obstacle", "viridis", (0.0, 1.0))
-                       if spec.kind == "obstacle" else None, panels=3)
+    fig = gains_figure(spec, groups, second=("cleared", "cleared the block (% of replicates)", "viridis",
+                                             (0.0, 100.0)) if spec.kind == "obstacle" else None, panels=3)
     ax = fig.axes[2]
     for value, text in sorted(zip(spec.values, spec.grounds)):
         t = parse(text).instance(spec.seed, 0).terrain()  # a seed=each sweep: replicate 0's draw
         xs, _ = t.axes()
-        ax.plot(xs, t.heights[t.heights.shape[0] // 2], label=f"{spec.param} {value:g}")
-    ax.set_xlabel("x (m), the start at 0" + (", approached at {:g} m/s".format(spec.speed[0]) if spec.speed[0] else ""))
+        ax.plot(xs, t.heights[t.heights.shape[0] // 2], label=f"{spec.param} {value:g} m")
+    # Where the robots got, per gravity: the survivors' mean travel, at the speed they measured.
+    for k, g in enumerate(sorted(spec.gravity)):
+        made = _column([r for r in groups if r["gravity"] == g], "distance_made_good")
+        speed = _column([r for r in groups if r["gravity"] == g], "mean_speed")
+        if np.isfinite(made).any():
+            ax.axvline(np.nanmean(made), color=f"C{k + 3}", ls=":", lw=1.2,
+                       label=f"g {g:g}: made {np.nanmean(made):.2f} m good at {np.nanmean(speed):.2f} m/s")
+    measured = _column(groups, "mean_speed")
+    measured = (f"{np.nanmin(measured):.2f}-{np.nanmax(measured):.2f} m/s measured" if np.isfinite(measured).any()
+                else "none measured")
+    commanded = f"{spec.speed[0]:g} m/s commanded" if spec.speed[0] else "no speed commanded"
+    ax.set_xlabel("x (m), the start at 0")
     ax.set_ylabel("ground height at y = 0 (m)")
-    ax.set_title("the ground" + (" (replicate 0's draw)" if spec.kind == "terrain" else ""))
+    ax.set_title(f"the ground{' (replicate 0' + chr(39) + 's draw)' if spec.kind == 'terrain' else ''}; where the "
+                 f"robots got (dotted)\napproach: {commanded}, {measured}", fontsize=10)
+    band = obstacle_band(spec)
+    if band is not None:  # the block and the way to it, not the whole ground
+        ax.set_xlim(-0.5, band[1] + 0.8)
+        # A cell no replicate reached says so: its 0 % cleared is no measurement of the block.
+        gravity, values = sorted(spec.gravity), sorted(spec.values)
+        at = {(r[spec.param], r["gravity"]): r for r in groups}
+        for text, (v, g) in zip(fig.axes[1].texts, [(v, g) for v in values for g in gravity]):
+            if at[v, g].get("reached") == 0:
+                text.set_text("not reached")
     ax.legend(fontsize=7)
     ax.grid(alpha=0.3)
     return fig
 
 
-def write(out: Path, spec: SweepSpec, inst: Instances, table: np.ndarray, columns: tuple[str, ...], facts: dict) -> str:
-    """Writes every output into OUT and returns the terminal table."""
+def write(out: Path, spec: SweepSpec, inst: Instances, table: np.ndarray, columns: tuple[str, ...],
+          facts: dict) -> tuple[str, list[str]]:
+    """Writes every output into OUT; returns the terminal table and its notes (`notes`, in table.txt below it)."""
     header, body = rows(spec, inst, table, columns)
     write_csv(out / "results.csv", header, body)
     groups = group_summary(spec, inst, table, columns)
+    said = notes(spec, inst, table, columns, groups)
     summary = {"groups": groups, "note": "survival over all replicates; every other aggregate over the survivors",
-               "arguments": spec.to_json(), "versions": versions(), "run": facts}
+               "notes": said, "arguments": spec.to_json(), "versions": versions(), "run": facts}
     atomic_write_text(out / "summary.json", json.dumps(summary, indent=1))
     figure = {"gravity": gravity_figure, "gains": gains_figure, "param": gains_figure}.get(spec.kind, terrain_figure)
     save(figure(spec, groups), out / f"{spec.kind}.png")
     text = table_text(spec, groups)
-    atomic_write_text(out / "table.txt", text + "\n")
-    return text
+    atomic_write_text(out / "table.txt", "\n".join([text, *said]) + "\n")
+    return text, said
 
 
 def write_comparison(out: Path, spec: SweepSpec, results: list[tuple[str, list[dict]]]) -> str:
