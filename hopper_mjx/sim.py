@@ -33,6 +33,7 @@ from hopper_mjx.hardware.pushes import Pushes
 from hopper_mjx.hardware.sensor_noise import FIGURES, Sensing, SensorState
 from hopper_mjx.model import world
 from hopper_mjx.model.robot import Robot
+from hopper_mjx.shell import programs
 from hopper_mjx.step import Plant, actuate, advance
 from hopper_mjx.terrain import from_model
 from hopper_mjx.variation import draw
@@ -325,8 +326,21 @@ class Sim:
                 check_vma=False,
             )
             options = self.engine.compiler_options if all(d.platform == "cpu" for d in self.devices) else None
-            self._compiled[cache_key] = jax.jit(sharded, compiler_options=options)
+            if controller.key is None:  # it cannot say what it closed over: traced in this process
+                self._compiled[cache_key] = jax.jit(sharded, compiler_options=options)
+            else:  # traced once per configuration, then read back by later processes (`shell.programs`)
+                self._compiled[cache_key] = programs.Stored(sharded, self._program_key(controller, steps, sensors,
+                                                                                       chunk), options)
         return self._compiled[cache_key]
+
+    def _program_key(self, controller, steps, sensors, chunk) -> str:
+        """Everything a rollout's trace closes over besides its arguments: the model (every number), the engine
+        made from it, the motors, pushes and sensors, the controller's own key, the steps and the record."""
+        chain = getattr(self.engine, "chain", None)
+        engine = (type(self.engine).__name__, sorted(self.engine.varies), sorted(self.engine.compiler_options.items()),
+                  None if chain is None or chain.terrain is None else chain.terrain.max_contacts)
+        return repr((programs.model_digest(self.mj_model), engine, self.actuation.kind, self.actuation.depth,
+                     self.pushes, self.sensing.depth, self.sensing.noisy, controller.key, steps, sensors, chunk))
 
 
 def per_instance(controls: dict, actuation: Actuation, sensing: Sensing, timestep: float, delay_steps: int = 0) -> dict:

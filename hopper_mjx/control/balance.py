@@ -41,6 +41,7 @@ from hopper_mjx.control.base import Controller, saturate, to_ctrl
 from hopper_mjx.hardware.signals import Observation
 from hopper_mjx.model.layout import Layout
 from hopper_mjx.model.robot import Robot, standing_qpos
+from hopper_mjx.shell.programs import model_digest
 
 GRID = tuple(float(g) for g in np.geomspace(0.5, 12.0, 7))  # m/s², the gravities the gain is designed at
 # Bryson's rule: the deviation of each state (m, rad, m/s, rad/s) and torque (share of the
@@ -309,4 +310,5 @@ def balance(robot: Robot, mj_model: mujoco.MjModel, grid=GRID) -> Controller:
         work = s.work + jnp.abs(torque * obs.qvel[joint_dof]).sum() * layout.timestep
         return to_ctrl(layout, torque), BalanceState(work=work)
 
-    return Controller(name="balance", init=lambda obs, params: BalanceState(work=jnp.zeros(())), act=act)
+    return Controller(name="balance", init=lambda obs, params: BalanceState(work=jnp.zeros(())), act=act,
+                      key=f"balance|{grid!r}|{robot!r}|{model_digest(mj_model)}")

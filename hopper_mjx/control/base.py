@@ -68,6 +68,9 @@ class Controller:
     # checkpoint of the run) reuses that program rather than compiling one with its numbers folded in.
     weights: Any = None
     act_with: Callable[[Any], Callable] | None = None
+    # Everything the functions above closed over besides the robot's model, as a string: the core keeps its traced
+    # program on disk under it (`shell.programs`). None (a controller built by hand): traced in every process.
+    key: str | None = None
 
     def __post_init__(self):
         # The core passes `weights` to `act_with` inside its compiled rollout; without it they would reach no one.
@@ -144,6 +147,7 @@ def zero_torque(layout: Layout) -> Controller:
         name="none",
         init=lambda obs, params: (),
         act=lambda cstate, obs, gravity: (jnp.zeros(layout.nu), cstate),
+        key=f"none|{layout!r}",
     )
 
 
@@ -163,4 +167,4 @@ def hold(layout: Layout, p: float = HOLD_GAINS["p"], d: float = HOLD_GAINS["d"])
         target = joint_state(layout, obs)[0]
         return target if params is None else (target, params)
 
-    return Controller(name="hold", init=init, act=act)
+    return Controller(name="hold", init=init, act=act, key=f"hold|{p!r}|{d!r}|{layout!r}")

@@ -186,4 +186,4 @@ def pid(layout: Layout, gains: dict[str, dict[str, float]] | None = None) -> Con
         torque, i_term = effort(state.gains, target - q, qd, state.i_term, layout.timestep)
         return clip_to_limits(layout, torque), state._replace(i_term=i_term)
 
-    return Controller(name="pid", init=init, act=act)
+    return Controller(name="pid", init=init, act=act, key=f"pid|{shared!r}|{layout!r}")

@@ -511,7 +511,8 @@ def raibert(robot: Robot, config: RaibertConfig | None = None) -> Controller:
         return ctrl, state
 
     return Controller(name="raibert", init=lambda obs, params: initial_state(
-        defaults if params is None else params, obs), act=act, commands=COMMANDS)
+        defaults if params is None else params, obs), act=act, commands=COMMANDS,
+                      key=f"raibert|{config!r}|{robot!r}")
 def _within_tilt_budget(wanted: jax.Array, now: jax.Array, drift: jax.Array, swing_tilt: jax.Array,
                         budget: jax.Array, length: jax.Array) -> jax.Array:
     """The placement `wanted` moved, if need be, so that the body lands tilted <= `budget`.

@@ -32,17 +32,16 @@ on stderr saying why.
 
 from __future__ import annotations
 
-import hashlib
 import sys
 from typing import Any, Protocol, runtime_checkable
 
 import mujoco
-import numpy as np
 
 from hopper_mjx import registry
 from hopper_mjx.engine.chain.stage import BATCH_AXIS, batch_any
 from hopper_mjx.engine.mjx import MjxEngine
 from hopper_mjx.engine.xla import CPU_COMPILER_OPTIONS, FUSION_EMITTERS, WIDE_VECTORS
+from hopper_mjx.shell.programs import model_digest
 from hopper_mjx.variation.spec import check_engine_varies
 
 
@@ -81,13 +80,6 @@ _BUILT: dict = {}
 _KEEP = 8  # engines kept; the oldest goes first
 
 
-def _model_key(mj_model: mujoco.MjModel) -> bytes:
-    """A digest of the whole compiled model (MuJoCo's own binary form of it)."""
-    buffer = np.empty(mujoco.mj_sizeModel(mj_model), np.uint8)
-    mujoco.mj_saveModel(mj_model, None, buffer)
-    return hashlib.sha256(buffer).digest()
-
-
 def make(name: str, mj_model: mujoco.MjModel, varies: frozenset[str] = frozenset()):
     """The engine called `name` for a compiled monoped whose model `varies` these fields per instance;
     "chain" raises `NotChain` (a ValueError) for a model outside its topology and ValueError for a
@@ -95,7 +87,7 @@ def make(name: str, mj_model: mujoco.MjModel, varies: frozenset[str] = frozenset
     engine already built."""
     check_name(name)
     check_engine_varies(name, varies)
-    varies, digest = frozenset(varies), _model_key(mj_model)
+    varies, digest = frozenset(varies), model_digest(mj_model)
     # "auto" that resolves to the chain is the chain engine: one build for both names.
     keys = [(name, digest, varies)] + ([("chain", digest, varies)] if name == "auto" else [])
     found = next((k for k in keys if k in _BUILT), None)

@@ -218,7 +218,7 @@ def policy_params(robot: Robot, n: int, *, height: float, speed=(0.0, 0.0), conf
 
 def policy_controller(mj_model: mujoco.MjModel, path) -> Controller:
     """The trained policy as a core `Controller`; params: per-instance (3,) commands or None."""
-    cfg = read(path)[3]  # JSON only: its robot and ground are checked before the network is built
+    _, algo, net, cfg = read(path)  # JSON only: its robot and ground are checked before the network is built
     same_robot(cfg.robot, mj_model, f"the policy {path}")
     if cfg.terrain and terrain.from_model(mj_model) is None:
         raise ValueError(f"the policy {path} reads a height scan (trained on --terrain {cfg.terrain}): run it on a "
@@ -264,5 +264,8 @@ def policy_controller(mj_model: mujoco.MjModel, path) -> Controller:
             return cs._replace(command=jnp.broadcast_to(row, cs.command.shape))
 
         commands = Commands(read=read_command, write=write_command)
+    # What the functions above fold in: the network's form and the task's config (the weights are an argument).
+    key = f"policy|{algo}|{json.dumps(net, sort_keys=True)}|{json.dumps(cfg.to_dict(), sort_keys=True)}|{layout!r}"
     return Controller(name=f"{registry.POLICY_PREFIX}{path}", init=init, act=act_with(weights), commands=commands,
-                      servo=Servo(track=track, first=lambda cs: cs.target), weights=weights, act_with=act_with)
+                      servo=Servo(track=track, first=lambda cs: cs.target), weights=weights, act_with=act_with,
+                      key=key)
