@@ -15,6 +15,7 @@ jax 0.10.2). The batch is padded to a whole number of chunks per device.
 
 from __future__ import annotations
 
+import functools
 import math
 from typing import Any, NamedTuple
 
@@ -270,7 +271,8 @@ class Sim:
         fn = self._compiled_rollout(controller, steps, tick, periods, sensors, chunk)
         padded_state = jax.device_put(_pad(state, padded), NamedSharding(self.mesh, PartitionSpec(AXIS)))
         final, traj = fn(self.model, self.heights, padded_state, controller.weights)
-        final, traj = jax.tree_util.tree_map(lambda x: x[:n], (final, traj))
+        if n < padded:  # one program for every leaf (eagerly, each leaf's slice would compile its own)
+            final, traj = _head((final, traj), n)
         t0 = float(state.data.time[0])
         dt = self.layout.timestep
         times = {k: t0 + dt * np.arange(0, steps, p) for k, p in periods.items()}
@@ -365,13 +367,22 @@ def per_instance(controls: dict, actuation: Actuation, sensing: Sensing, timeste
     return out
 
 
+@functools.partial(jax.jit, static_argnums=1)
+def _head(tree, n: int):
+    """Every leaf's first `n` rows."""
+    return jax.tree_util.tree_map(lambda x: x[:n], tree)
+
+
 def _pad(state: State, size: int) -> State:
+    """The state padded to `size` instances with copies of the first (one program for every leaf)."""
+    return state if state.gravity.shape[0] == size else _padded(state, size)
+
+
+@functools.partial(jax.jit, static_argnums=1)
+def _padded(state: State, size: int) -> State:
     n = state.gravity.shape[0]
-    if n == size:
-        return state
-    return jax.tree_util.tree_map(
-        lambda x: jnp.concatenate([x, jnp.broadcast_to(x[:1], (size - n,) + x.shape[1:])]), state
-    )
+    return jax.tree_util.tree_map(lambda x: jnp.concatenate([x, jnp.broadcast_to(x[:1], (size - n,) + x.shape[1:])]),
+                                  state)
 
 
 def _instance_rollout(engine, actuation: Actuation, pushes: Pushes | None, sensing: Sensing, controller, steps, tick,
