@@ -85,6 +85,16 @@ def _no_params(folder: Path) -> None:
             shutil.rmtree(path) if path.is_dir() else path.unlink()
 
 
+def _cut(file: Path) -> None:
+    """Cuts a file to half its length, as an interrupted copy leaves it."""
+    data = file.read_bytes()
+    file.write_bytes(data[: len(data) // 2])
+
+
+def _cut_params(folder: Path) -> None:
+    _cut(max((p for p in (folder / "d").iterdir()), key=lambda p: p.stat().st_size))  # the parameters' data
+
+
 # Policy folders a user copied and then edited or cut short: name -> damage.
 POLICIES = {
     "pol_empty_env": lambda f: _env(f, ""),
@@ -93,6 +103,9 @@ POLICIES = {
     "pol_net_list": lambda f: (f / "ppo_network_config.json").write_text("[]"),
     "pol_obs": lambda f: _observations(f, 7),
     "pol_no_params": _no_params,
+    # cut short: orbax failed inside its event loop and printed ~100 lines of tracebacks at exit
+    "pol_cut_params": _cut_params,
+    "pol_cut_manifest": lambda f: _cut(f / "manifest.ocdbt"),
 }
 POLICY = []  # the intact policy folder, once the fixture made it
 
@@ -115,6 +128,11 @@ def prepare_hostile(folder: Path) -> None:
     listed = folder / "list_sweep"  # a manifest that is JSON but not a sweep's
     listed.mkdir()
     (listed / "manifest.json").write_text("[1, 2, 3]")
+    tagged = folder / "tagged_bag"  # a ROS 2 bag folder whose metadata would run a command if it were obeyed
+    tagged.mkdir()
+    (tagged / "metadata.yaml").write_text("rosbag2_bagfile_information: !!python/object/apply:os.system "
+                                          "['touch obeyed']\n")
+    (tagged / "tagged_bag_0.mcap").write_bytes(b"\x89MCAP0\r\n")
     run = folder / "run"  # a training run whose metrics.json was cut short
     (run / "checkpoints").mkdir(parents=True)
     (run / "metrics.json").write_text('{"history": [{"step": 1')
@@ -194,6 +212,11 @@ CASES = [
     ("ros.record", ["--controller", "policy:pol_obs", "--out", "r.bag"], "the policy takes 7 observations"),
     ("simulate", ["--controller", "policy:pol_no_params", *SIM], "its parameters cannot be read"),
     ("render", ["--video", "h.gif", "--controller", "policy:a_file"], "is not a trained policy"),
+    ("simulate", ["--controller", "policy:pol_cut_params", *SIM], "its parameters cannot be read (OUT_OF_RANGE"),
+    ("sweep", ["gravity", "--controller", "policy:pol_cut_manifest", "--out", "s"], "its parameters cannot be read"),
+    # a bag's metadata with a Python tag: refused (never obeyed) in one line
+    ("ros.echo", ["tagged_bag", "/odom"], "could not determine a constructor for the tag"),
+    ("ros.plots", ["tagged_bag"], "tagged_bag/metadata.yaml: could not determine a constructor"),
 ]
 
 
