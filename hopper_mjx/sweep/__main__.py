@@ -245,22 +245,24 @@ def label(controller: str) -> str:
     return "policy-" + Path(registry.policy_path(controller)).name
 
 
-def run_one(args, spec, folder: Path):
-    """Runs one controller's sweep into `folder` and prints its report: (label, group summary), or None
+def run_one(args, spec, out: Path):
+    """Runs one controller's sweep into `out` and prints its report: (label, group summary), or None
     on a process other than 0."""
     from hopper_mjx.sweep import report, runner
 
     start = time.perf_counter()
-    command.on_stop(f"finished chunks are saved in {folder}; rerun the same command to resume")
-    instances, table, facts = runner.run(spec, folder, progress=not args.no_progress)
-    facts["total_wall_s"] = time.perf_counter() - start
-    if facts["processes"] > 1 and args.process_id != 0:
-        return None
-    text = report.write(folder, spec, instances, table, runner.columns(spec), facts)
-    print(text if args.kind != "compare" else f"{label(spec.controller)}: outputs in {folder}/")
+    folder.claim(out, spec)
+    command.on_stop(f"finished chunks are saved in {out}; rerun the same command to resume")
+    with folder.hold(out, args.process_id):  # a second live run of this folder refuses: never mixed rows
+        instances, table, facts = runner.run(spec, out, progress=not args.no_progress)
+        facts["total_wall_s"] = time.perf_counter() - start
+        if facts["processes"] > 1 and args.process_id != 0:
+            return None
+        text = report.write(out, spec, instances, table, runner.columns(spec), facts)
+    print(text if args.kind != "compare" else f"{label(spec.controller)}: outputs in {out}/")
     rate = f", {facts['steps_per_s']:,.0f} steps/s" if facts["steps_per_s"] else " (all chunks were already done)"
     print(f"\n{len(instances)} instances x {spec.duration:g} s in {facts['total_wall_s']:.0f} s{rate}; "
-          f"outputs in {folder}/")
+          f"outputs in {out}/")
     return label(spec.controller), report.group_summary(spec, instances, table, runner.columns(spec))
 
 
@@ -281,7 +283,7 @@ def main(argv=None) -> int:
         for spec in specs:
             result = run_one(args, spec, folder_of(args, out, spec))
             results += [result] if result else []
-    except OutputError as err:  # the folder refused after the checks passed (a pseudo-filesystem)
+    except OutputError as err:  # the folder refused after the checks passed (a pseudo-filesystem), or in use
         return cli.fail(err)
     if args.kind == "compare" and results:
         print(report.write_comparison(out, specs[0], results))
