@@ -160,3 +160,22 @@ def test_a_taken_foxglove_port_is_one_line_before_anything_is_built(tool, tmp_pa
     assert err.splitlines() == [f"error: --foxglove cannot listen on 127.0.0.1:{port}: Failed to bind port: "
                                 "Address already in use (os error 98)"]
     assert not list(tmp_path.iterdir())
+
+
+def test_an_output_that_is_a_device_is_written_into_never_replaced(tmp_path):
+    """`--out /dev/null`: renaming the temporary file over it (as root) left a plain file where the device was;
+    a named pipe stands in for the device here."""
+    import stat
+    import threading
+
+    from hopper_mjx.files import atomic_write
+
+    pipe = tmp_path / "pipe"
+    os.mkfifo(pipe)
+    got = []
+    reader = threading.Thread(target=lambda: got.append(pipe.read_bytes()))
+    reader.start()
+    atomic_write(pipe, lambda f: f.write(b"results"))
+    reader.join(timeout=10)
+    assert got == [b"results"] and stat.S_ISFIFO(pipe.stat().st_mode)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["pipe"]

@@ -134,6 +134,7 @@ def check(args):
     elif not grounds:
         cli.refuse_terrain(physics.ground, f"a {args.kind} sweep (a gravity, obstacle or terrain sweep takes terrain)")
     cli.check_delay(physics, args.duration, args.num, args.seed)
+    check_standing(args.gravity_flag, gravity, physics.mj_model)
     names = args.controllers.split(",") if args.kind == "compare" else [getattr(args, "controller", "raibert")]
     if len(set(names)) != len(names):
         raise ValueError(f"--controllers lists one twice: {args.controllers}")
@@ -179,16 +180,34 @@ def check_robots(spec, duration: float) -> None:
     except ValueError as err:
         raise ValueError(f"--param {spec.param}: {err}; use --engine mjx or auto") from None
     cli.check_controls(physics, spec.controller)
-    for robots in spec.robot_specs():
+    for value, robots in zip(spec.values, spec.robot_specs()):
         try:
-            variation.draw(robots, physics.mj_model, spec.num, spec.seed)
+            fields = variation.draw(robots, physics.mj_model, spec.num, spec.seed)
             drawn = variation.draw_controls(robots, physics.mj_model, spec.num, spec.seed)
         except ValueError as err:
             raise ValueError(f"--values: {err}") from None
+        if fields:  # a robot of other masses or legs: replicate 0's must stand at every gravity of the sweep
+            check_standing(f"--values {spec.param}={value:g}:", spec.gravity,
+                           variation.instance_model(physics.mj_model, fields, 0))
         for name in ("action_delay", "sensor_delay"):
             if name in drawn and drawn[name].max() * 1e-3 >= duration:
                 raise ValueError(f"--values: {name} {drawn[name].max():g} ms is not shorter than the run's "
                                  f"--duration {duration:g} s")
+
+
+def check_standing(flag: str, gravity, mj_model) -> None:
+    """Every gravity of the grid one under which the robot's motors can hold it standing (`max_standing_gravity`):
+    beyond it every instance only falls, and the sweep would measure nothing."""
+    from hopper_mjx.model.layout import Layout
+    from hopper_mjx.model.loader import JOINTS
+    from hopper_mjx.model.robot import max_standing_gravity
+
+    top, k = max_standing_gravity(mj_model)
+    over = [g for g in gravity if g > top]
+    if over:
+        effort = Layout.of(mj_model).effort_limit[k]
+        raise ValueError(f"{flag} {max(over):g} m/s²: the robot cannot stand there; its {JOINTS[k]} motor "
+                         f"({effort:g} N·m) holds the standing pose up to {top:.3g} m/s²")
 
 
 # Values a swept instance records per simulated second at the sweep's rates (contact and state at 1 kHz,

@@ -233,10 +233,18 @@ def parse(text: str) -> Ground:
     if name == "gaps" and dict(filled)["width"] >= dict(filled)["spacing"]:
         raise TerrainError(f"gaps: width={dict(filled)['width']:g} must be less than spacing="
                            f"{dict(filled)['spacing']:g}")
-    nrow, ncol = ground.shape
+    # Counted in floats first: size=1e308 would overflow the integer rounding of `shape`.
+    nrow, ncol = png_header(path)[1::-1] if path else (size[1] / cell + 1, size[0] / cell + 1)
     if nrow * ncol > MAX_VERTICES:
-        raise TerrainError(f"a {nrow} x {ncol} grid has {nrow * ncol:,} vertices; at most {MAX_VERTICES:,} "
-                           "(a larger cell or a smaller image)")
+        from hopper_mjx.budget import size as in_bytes
+
+        def count(v: float, sep: str = ",") -> str:
+            return f"{v:{sep}.0f}" if v < 1e15 else f"{v:.3g}" if math.isfinite(v) else ">1e308"
+
+        raise TerrainError(f"a {count(nrow, '')} x {count(ncol, '')} grid has {count(nrow * ncol)} vertices, about "
+                           f"{in_bytes(8.0 * nrow * ncol) if nrow * ncol < 1e30 else '>1e18 TiB'} of heights; "
+                           f"at most {MAX_VERTICES:,} ({in_bytes(8 * MAX_VERTICES)}): a larger cell or a smaller image")
+    nrow, ncol = ground.shape
     if path and (nrow < 2 or ncol < 2):
         raise TerrainError(f"{path} is {ncol} x {nrow} pixels; a height field needs at least 2 x 2")
     return ground
