@@ -2,7 +2,7 @@
 
 The bottom layer of the command line: values, paths and names are checked here before any
 model is built or compiled (and before JAX or MuJoCo is imported); nothing here imports a
-module of the package but `registry`. `ArgumentParser` gives argparse's own refusals the
+module of the package but `registry` and `files`. `ArgumentParser` gives argparse's own refusals the
 same one-line form.
 """
 
@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from hopper_mjx import registry
+from hopper_mjx.files import is_device
 
 MAX_TIMESTEP = 0.01  # s, the longest physics step model.load and a world file may set
 DEFAULT_TIMESTEP = 1e-3  # s, model.DEFAULT_TIMESTEP (checked equal by a test; importing model loads MuJoCo)
@@ -213,8 +214,7 @@ def check_writable(name: str, path: str | Path, *, folder: bool = False, may_exi
     if path.exists() and path.is_dir() != folder:
         wanted, found = ("folder", "file") if folder else ("file", "folder")
         raise ValueError(f"{name} {path} is a {found}; give a {wanted}")
-    device = path.exists() and not path.is_file() and not path.is_dir()
-    if suffixes and not device and path.suffix.lower() not in suffixes:
+    if suffixes and not is_device(path) and path.suffix.lower() not in suffixes:
         raise ValueError(f"{name} {path}: this tool writes {' or '.join(suffixes)} files; give a name ending in "
                          f"{suffixes[0]}")
     if not os.access(parent, os.W_OK):

@@ -41,12 +41,17 @@ def remove_partial() -> None:
 NO_ROOM = (errno.ENOSPC, errno.EDQUOT, errno.EFBIG)
 
 
+def is_device(path: Path) -> bool:
+    """`path` is /dev/null (even where it was replaced by a plain file), another device, or a pipe."""
+    return str(path) == os.devnull or (path.exists() and not path.is_file() and not path.is_dir())
+
+
 def atomic_write(path: str | Path, write) -> None:
     """Calls `write(f)` on a binary temporary file beside `path`, then renames it into place; on failure the
     temporary file is removed and `path` left as it was (an OSError then names `path`)."""
     path = Path(path)
-    if path.exists() and not path.is_file() and not path.is_dir():  # a device or a pipe (/dev/null): written into,
-        with open(path, "wb") as f:  # never replaced (a rename over /dev/null, as root, made it a plain file)
+    if is_device(path):  # written into, never replaced (a rename over /dev/null, as root, made it a plain file)
+        with open(path, "wb") as f:
             write(f)
         return
     tmp = path.with_name(path.name + ".tmp")
