@@ -245,6 +245,8 @@ CASES = [
     ("simulate", ["--terrain", "rough:size=1e308"], "--terrain: a >1e308 x >1e308 grid has >1e308 vertices"),
     ("simulate", ["--terrain", "rough:size=1e6"], "625,000,050,000,001 vertices, about 4547.5 TiB of heights; at most"),
     ("simulate", ["--terrain", "rough:ampl=0.02"], "--terrain: rough has no key 'ampl'; it takes amp,"),
+    ("simulate", ["--terrain", "rough:wavelength=1e-300"], "--terrain: rough: wavelength=1e-300 m is shorter than two "
+                                                           "cells (0.08 m)"),
     ("sweep", [*SWEEP, "--terrain", "obstacle:height=inf"], "--terrain: height=inf must be finite"),
     ("render", ["--still", "m.png", "--terrain", "heightmap:huge.png"], "--terrain: a 100000 x 100000 grid has "
                                                                          "10,000,000,000 vertices, about 74.5 GiB"),

@@ -230,6 +230,9 @@ def parse(text: str) -> Ground:
         for extent in size:
             if cell > extent:
                 raise TerrainError(f"cell={cell:g} m is larger than the grid's extent {extent:g} m")
+    if name == "rough" and dict(filled)["wavelength"] < 2 * cell:  # (1e-300 made every height NaN)
+        raise TerrainError(f"rough: wavelength={dict(filled)['wavelength']:g} m is shorter than two cells "
+                           f"({2 * cell:g} m): the grid cannot hold such waves; raise wavelength or lower cell")
     if name == "gaps" and dict(filled)["width"] >= dict(filled)["spacing"]:
         raise TerrainError(f"gaps: width={dict(filled)['width']:g} must be less than spacing="
                            f"{dict(filled)['spacing']:g}")
