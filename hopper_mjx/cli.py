@@ -22,6 +22,7 @@ from hopper_mjx.shell import budget, jaxsetup
 from hopper_mjx.shell.checks import (  # noqa: F401  re-exported: the tools use them beside the options
     DEFAULT_TIMESTEP,
     MAX_TIMESTEP,
+    PLOT_SUFFIXES,
     ArgumentParser,
     check_engine,
     check_indices,
@@ -143,14 +144,17 @@ def add_physics_options(p: argparse.ArgumentParser, *, engine_help: str = "", te
                         "by SPEED m/s in a direction of its own")
 
 
+MAX_PUSH_SPEED = 340.0  # m/s, the speed of sound: a shove, not a shot (1e300 would be inf in the float32 core)
+
+
 def check_push(values) -> tuple[float, float] | None:
-    """--push INTERVAL,SPEED: a positive finite interval in s and a speed >= 0 in m/s."""
+    """--push INTERVAL,SPEED: a positive finite interval in s and a speed in 0..MAX_PUSH_SPEED m/s."""
     if values is None:
         return None
     if len(values) != 2:
         raise ValueError(f"--push takes INTERVAL,SPEED (s, m/s), got {len(values)} value(s)")
     check_range("--push interval", values[0], low=0, open_low=True)
-    check_range("--push speed", values[1], low=0)
+    check_range("--push speed", values[1], low=0, high=MAX_PUSH_SPEED)
     return float(values[0]), float(values[1])
 
 
@@ -168,7 +172,8 @@ def check_ground(text: str, n: int = 1):
     ground = check_terrain(text, n)
     top = ground.start_height()  # every instance starts with its foot CLEARANCE above z = 0 at the origin
     if top >= CLEARANCE:
-        raise ValueError(f"--terrain {text}: the ground within 0.1 m of the start rises to {top:.3f} m, and the foot "
+        shown = f"{top:.3f}" if top < 1e6 else f"{top:.3g}"  # amp=1e300: not 300 digits
+        raise ValueError(f"--terrain {text}: the ground within 0.1 m of the start rises to {shown} m, and the foot "
                          f"starts {CLEARANCE:g} m above z = 0; move the shape away from the origin or lower it")
     return ground
 

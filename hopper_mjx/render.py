@@ -204,7 +204,7 @@ def main(argv=None) -> int:
     try:
         _check_size(**size)
         if args.still is not None:
-            cli.check_writable("--still", args.still)
+            cli.check_writable("--still", args.still, suffixes=(".png", ".jpg", ".jpeg"))
         batch = check_video(args) if args.video is not None else check_batch(args)
         physics = batch.physics
         jaxsetup.configure()

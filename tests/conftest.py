@@ -11,7 +11,8 @@ jaxsetup.configure()  # before any JAX computation: 2 host devices here, persist
 # hands whole files to two processes in collection order (`--dist loadfile --no-loadscope-reorder`): a long file
 # handed out last would leave the other process idle at the end.
 LONGEST_FIRST = ("test_chain_terrain.py", "test_train.py", "test_terrain_physics.py", "test_chain.py",
-                 "test_control.py", "test_core.py", "test_actuators.py", "test_sweep.py", "test_policy.py",
+                 "test_control.py", "test_core.py", "test_actuators.py", "test_sweep.py", "test_faults.py",
+                 "test_policy.py",
                  "test_chain_terrain_box.py", "test_train_sac.py", "test_command.py", "test_env.py", "test_hostile.py",
                  "test_bad_inputs.py")
 

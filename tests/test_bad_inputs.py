@@ -112,7 +112,8 @@ CASES = [
     ("simulate", ["--push", "2"], "--push takes INTERVAL,SPEED (s, m/s), got 1 value(s)"),
     ("simulate", ["--push", "0,0.3"], "--push interval must be finite and > 0, got 0"),
     ("simulate", ["--push", "0.0005,0.3"], "--push: the push interval must be a whole number (>= 1) of physics"),
-    ("sweep", ["gravity", "--push", "1,-0.2", "--out", "s"], "--push speed must be finite and >= 0, got -0.2"),
+    ("sweep", ["gravity", "--push", "1,-0.2", "--out", "s"],
+     "--push speed must be finite and >= 0 and <= 340, got -0.2"),
     # Per-instance controller, motor, delay and sensor parameters, and the parameter sweep.
     ("simulate", ["--randomize", "kp=1"], "--randomize: unknown parameter 'kp'; choose from: body_mass,"),
     ("simulate", ["--randomize", "motor_stall_torque=scale(0.8,1.2)"], "motor_stall_torque is a dc motor's figure; "

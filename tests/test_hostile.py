@@ -8,6 +8,8 @@ tests/test_interrupt.py's.
 
 import json
 import shutil
+import struct
+import zlib
 from pathlib import Path
 
 import pytest
@@ -25,6 +27,19 @@ PID = """{name}_position_controller:
   pid: {{p: 100.0, i: 0.01, d: 10.0}}
 """
 GAINS = "".join(PID.format(name=j) for j in ("haa_joint", "hfe_joint", "kfe_joint"))
+
+
+def png_header(width: int, height: int) -> bytes:
+    """A PNG's signature and IHDR chunk (8-bit grey) declaring `width` x `height` pixels, and no pixels."""
+    ihdr = b"IHDR" + struct.pack(">IIBBBBB", width, height, 8, 0, 0, 0, 0)
+    return b"\x89PNG\r\n\x1a\n" + struct.pack(">I", 13) + ihdr + struct.pack(">I", zlib.crc32(ihdr))
+
+
+def laughs(levels: int = 9) -> str:
+    """A scenario whose gravity list nests aliases nine deep: 9^9 values once expanded ("billion laughs")."""
+    items = ["&a0 [" + ",".join(["9.81"] * 9) + "]"]
+    items += [f"&a{i} [" + ",".join([f"*a{i - 1}"] * 9) + "]" for i in range(1, levels)]
+    return f"gravity: [{', '.join(items)}]\n"
 
 
 def urdf(old: str, new: str, count: int = 1) -> str:
@@ -62,6 +77,13 @@ FILES = {
     "gravity_inf.world": world("<gravity>0 0 -9.81<", "<gravity>0 0 -inf<"),
     "gravity_two.world": world("<gravity>0 0 -9.81<", "<gravity>0 -9.81<"),
     "nested.world": "<sdf>" * 2000 + "</sdf>" * 2000,
+    # scenario files
+    "typo.yaml": "gravity: 9.81\nnumm: 3\n",
+    "tag.yaml": "gravity: !!python/object/apply:os.system ['touch obeyed']\n",
+    "laughs.yaml": laughs(),
+    "itself.yaml": "gravity: &a [9.81, *a]\n",
+    # a heightmap that is a JPEG renamed
+    "photo.png": "\xff\xd8\xff\xe0 JFIF",
 }
 
 
@@ -85,6 +107,16 @@ def _no_params(folder: Path) -> None:
             shutil.rmtree(path) if path.is_dir() else path.unlink()
 
 
+def _cut(file: Path) -> None:
+    """Cuts a file to half its length, as an interrupted copy leaves it."""
+    data = file.read_bytes()
+    file.write_bytes(data[: len(data) // 2])
+
+
+def _cut_params(folder: Path) -> None:
+    _cut(max((p for p in (folder / "d").iterdir()), key=lambda p: p.stat().st_size))  # the parameters' data
+
+
 # Policy folders a user copied and then edited or cut short: name -> damage.
 POLICIES = {
     "pol_empty_env": lambda f: _env(f, ""),
@@ -93,6 +125,9 @@ POLICIES = {
     "pol_net_list": lambda f: (f / "ppo_network_config.json").write_text("[]"),
     "pol_obs": lambda f: _observations(f, 7),
     "pol_no_params": _no_params,
+    # cut short: orbax failed inside its event loop and printed ~100 lines of tracebacks at exit
+    "pol_cut_params": _cut_params,
+    "pol_cut_manifest": lambda f: _cut(f / "manifest.ocdbt"),
 }
 POLICY = []  # the intact policy folder, once the fixture made it
 
@@ -104,6 +139,8 @@ def prepare_hostile(folder: Path) -> None:
         damage(folder / name)
     for name, text in FILES.items():
         (folder / name).write_text(text)
+    (folder / "huge.png").write_bytes(png_header(100_000, 100_000))  # 10^10 pixels declared, none there
+    (folder / "scenario.yaml").mkdir()  # a folder named as a scenario file
     (folder / "unrelated").mkdir()  # a folder of the user's, holding a results.csv of theirs
     (folder / "unrelated" / "results.csv").write_text("mine\n")
     (folder / "empty").mkdir()  # made by the user, not by a sweep
@@ -115,6 +152,11 @@ def prepare_hostile(folder: Path) -> None:
     listed = folder / "list_sweep"  # a manifest that is JSON but not a sweep's
     listed.mkdir()
     (listed / "manifest.json").write_text("[1, 2, 3]")
+    tagged = folder / "tagged_bag"  # a ROS 2 bag folder whose metadata would run a command if it were obeyed
+    tagged.mkdir()
+    (tagged / "metadata.yaml").write_text("rosbag2_bagfile_information: !!python/object/apply:os.system "
+                                          "['touch obeyed']\n")
+    (tagged / "tagged_bag_0.mcap").write_bytes(b"\x89MCAP0\r\n")
     run = folder / "run"  # a training run whose metrics.json was cut short
     (run / "checkpoints").mkdir(parents=True)
     (run / "metrics.json").write_text('{"history": [{"step": 1')
@@ -194,6 +236,46 @@ CASES = [
     ("ros.record", ["--controller", "policy:pol_obs", "--out", "r.bag"], "the policy takes 7 observations"),
     ("simulate", ["--controller", "policy:pol_no_params", *SIM], "its parameters cannot be read"),
     ("render", ["--video", "h.gif", "--controller", "policy:a_file"], "is not a trained policy"),
+    ("simulate", ["--controller", "policy:pol_cut_params", *SIM], "its parameters cannot be read (OUT_OF_RANGE"),
+    ("sweep", ["gravity", "--controller", "policy:pol_cut_manifest", "--out", "s"], "its parameters cannot be read"),
+    # a bag's metadata with a Python tag: refused (never obeyed) in one line
+    ("ros.echo", ["tagged_bag", "/odom"], "could not determine a constructor for the tag"),
+    ("ros.plots", ["tagged_bag"], "tagged_bag/metadata.yaml: could not determine a constructor"),
+    # terrain specs and heightmaps
+    ("simulate", ["--terrain", "rough:size=1e308"], "--terrain: a >1e308 x >1e308 grid has >1e308 vertices"),
+    ("simulate", ["--terrain", "rough:size=1e6"], "625,000,050,000,001 vertices, about 4547.5 TiB of heights; at most"),
+    ("simulate", ["--terrain", "rough:ampl=0.02"], "--terrain: rough has no key 'ampl'; it takes amp,"),
+    ("simulate", ["--terrain", "rough:wavelength=1e-300"], "--terrain: rough: wavelength=1e-300 m is shorter than two "
+                                                           "cells (0.08 m)"),
+    ("sweep", [*SWEEP, "--terrain", "obstacle:height=inf"], "--terrain: height=inf must be finite"),
+    ("render", ["--still", "m.png", "--terrain", "heightmap:huge.png"], "--terrain: a 100000 x 100000 grid has "
+                                                                         "10,000,000,000 vertices, about 74.5 GiB"),
+    ("simulate", ["--terrain", "heightmap:photo.png"], "--terrain: photo.png is not a PNG image"),
+    # scenario files
+    ("simulate", ["--scenario", "typo.yaml", *SIM], "--scenario typo.yaml: unknown option(s) numm; known:"),
+    ("simulate", ["--scenario", "tag.yaml", *SIM], "--scenario tag.yaml: not YAML (could not determine a constructor"),
+    ("simulate", ["--scenario", "laughs.yaml", *SIM], "--scenario laughs.yaml: not YAML (it expands to over 100,000"),
+    ("ros.record", ["--scenario", "itself.yaml", "--out", "r.bag"], "--scenario itself.yaml: not YAML (it expands"),
+    ("simulate", ["--scenario", "scenario.yaml", *SIM], "--scenario scenario.yaml: is a folder, not a file"),
+    # randomisation, motors, delays and pushes
+    ("simulate", ["--randomize", "base_mass=1e300", *SIM], "--randomize: base_mass drew a value of 1e+300 kg for "
+                                                           "instance 0; it must be > 0 (and within ±3.4e+38"),
+    ("simulate", ["--randomize", "body_mas=scale(0.9,1.1)", *SIM], "--randomize: unknown parameter 'body_mas'"),
+    ("simulate", ["--randomize", "foot_friction=uniform(nan,1)", *SIM], "uniform(nan,1) has a non-finite bound"),
+    ("simulate", ["--push", "1,1e300", *SIM], "--push speed must be finite and >= 0 and <= 340, got 1e+300"),
+    ("simulate", ["--push", "nan,0.3", *SIM], "--push interval must be finite and > 0, got nan"),
+    ("simulate", ["--action-delay", "nan", *SIM], "--action-delay must be finite and >= 0, got nan"),
+    # sweep values the robot cannot stand at
+    ("sweep", ["gravity", "--values", "9.81,1e6", "--out", "s"],
+     "--values 1e+06 m/s²: the robot cannot stand there; its kfe_joint motor (80 N·m) holds the standing pose"),
+    ("sweep", ["param", "--param", "base_mass", "--values", "5,50", "--out", "s"],
+     "--values base_mass=50: 9.81 m/s²: the robot cannot stand there"),
+    # outputs of a type the tool cannot write
+    ("simulate", ["--out", "o.txt"], "--out o.txt: this tool writes .npz files; give a name ending in .npz"),
+    ("render", ["--still", "m.txt"], "--still m.txt: this tool writes .png or .jpg or .jpeg files"),
+    ("ros.record", ["--out", "r.txt"], "--out r.txt: this tool writes .bag files"),
+    ("model", ["--export", "m.obj"], "--export m.obj: this tool writes .xml files"),
+    ("perf.bench", ["--json", "b.csv"], "--json b.csv: this tool writes .json files"),
 ]
 
 

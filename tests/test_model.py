@@ -249,3 +249,31 @@ def test_the_robot_fingerprint_tells_robots_apart_and_not_worlds():
     with pytest.raises(ValueError, match=r"^the policy p is for another robot \(fingerprint \w{16}\) than the one "
                                          r"given \(\w{16}\): give the --urdf it was trained with$"):
         same_robot(fingerprint(other), seed, "the policy p")
+
+
+def test_the_holding_torque_balances_the_robot_as_mujoco_weighs_it():
+    """The joint torques that hold the standing pose: with them and a force at the foot alone, MuJoCo's own
+    gravity forces (qfrc_bias at rest, from its recursive Newton-Euler) balance in every degree of freedom; the
+    knee carries the load (the centre of mass is above the foot, so the hip almost none), and the strongest
+    gravity the robot stands under is the knee's effort limit over its torque per m/s²."""
+    from hopper_mjx.model.robot import holding_torque, max_standing_gravity, standing_qpos
+
+    m = model.load()
+    lay = Layout.of(m)
+    per_g = holding_torque(m)
+    d = mujoco.MjData(m)
+    d.qpos[:] = standing_qpos(m)
+    mujoco.mj_forward(m, d)
+    g = -m.opt.gravity[2]
+    foot = d.geom_xpos[lay.foot_geom] - [0.0, 0.0, m.geom_size[lay.foot_geom, 0]]
+    jac = np.zeros((3, m.nv))
+    mujoco.mj_jac(m, d, jac, None, foot, m.geom_bodyid[lay.foot_geom])
+    applied = np.zeros(m.nv)
+    applied[list(lay.joint_dof)] = per_g * g
+    # qfrc_bias = applied + J^T f: solved for f over all nine rows, the residual is zero
+    force, *_ = np.linalg.lstsq(jac.T, d.qfrc_bias - applied, rcond=None)
+    np.testing.assert_allclose(jac.T @ force + applied, d.qfrc_bias, atol=1e-9)
+    np.testing.assert_allclose(force, [0.0, 0.0, m.body_mass.sum() * g], atol=1e-9)  # the floor carries the weight
+    assert abs(per_g[2]) > 0.5 and abs(per_g[1]) < 1e-9
+    top, joint = max_standing_gravity(m)
+    assert joint == 2 and top == pytest.approx(lay.effort_limit[2] / abs(per_g[2]))

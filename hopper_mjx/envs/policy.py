@@ -17,6 +17,7 @@ from __future__ import annotations
 import json
 import logging
 import math
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 from typing import NamedTuple
@@ -139,15 +140,35 @@ def _network(algo: str, net: dict):
     return sac_networks.make_inference_fn(network)
 
 
+def check_stored(path: Path) -> None:
+    """Reads every entry of the checkpoint's OCDBT store synchronously (tensorstore, as orbax stores it), so that a
+    file cut short or missing is refused here: orbax would fail on it inside its asyncio loop, and its reads still
+    in flight then print dozens of "Event loop is closed" tracebacks as the process ends."""
+    import tensorstore as ts
+
+    if not (path / "manifest.ocdbt").is_file():
+        return  # not an OCDBT checkpoint: orbax reads it (and refuses it) alone
+    try:
+        store = ts.KvStore.open({"driver": "ocdbt", "base": f"file://{path}/"}).result()
+        for key in store.list().result():
+            store.read(key).result()
+    except Exception as err:  # tensorstore's ValueError (OUT_OF_RANGE, DATA_LOSS, NOT_FOUND, ...)
+        why = str(err).split(":")[0] if str(err) else type(err).__name__
+        raise ValueError(f"{path}: its parameters cannot be read ({why}; a copy cut short?)") from None
+
+
 def load_network(path):
     """(apply(weights, obs) -> deterministic action, weights, MonopedConfig) of a saved PPO or SAC policy, checked:
     the saved parameters must be readable and fit the network its config describes (traced, not compiled)."""
     path, algo, net, config = read(path)
-    absl = logging.getLogger("absl")  # orbax logs its findings in a damaged folder before it fails
+    check_stored(path)
+    absl = logging.getLogger("absl")  # orbax logs (even at error level) what it finds damaged, then goes on or fails
     level = absl.level
-    absl.setLevel(logging.ERROR)
+    absl.setLevel(logging.CRITICAL)
     try:
-        params = brax_checkpoint.load(path)
+        with warnings.catch_warnings():  # orbax warns that it reads the sharding from the checkpoint itself
+            warnings.simplefilter("ignore")
+            params = brax_checkpoint.load(path)
     except Exception as err:  # orbax's many ways of failing on a damaged checkpoint
         raise ValueError(f"{path}: its parameters cannot be read ({type(err).__name__}; a copy cut short?)") from None
     finally:

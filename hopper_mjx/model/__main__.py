@@ -41,10 +41,10 @@ def main(argv=None) -> int:
             if args.terrain != "flat":
                 raise ValueError("--terrain goes with --export; a URDF holds the robot, not the ground")
             if args.export_urdf != "-":
-                checks.check_writable("--export-urdf", args.export_urdf)
+                checks.check_writable("--export-urdf", args.export_urdf, suffixes=(".urdf",))
             check_urdf(args.urdf)
             return export_urdf(args)
-        checks.check_writable("--export", args.export)
+        checks.check_writable("--export", args.export, suffixes=(".xml",))
         checks.check_range("--timestep", args.timestep, low=0, high=checks.MAX_TIMESTEP, open_low=True)
         ground = check_terrain(args.terrain)
         check_urdf(args.urdf)

@@ -60,6 +60,37 @@ def standing_height(mj_model: mujoco.MjModel) -> float:
     return float(standing_qpos(mj_model)[2])
 
 
+def holding_torque(mj_model: mujoco.MjModel) -> np.ndarray:
+    """(3,) N·m per m/s² of gravity: the joint torques (haa, hfe, kfe) that hold the robot still in its standing
+    pose, its whole weight on the foot (static balance: each link's weight against the foot's contact force)."""
+    m, lay = mj_model, Layout.of(mj_model)
+    d = mujoco.MjData(m)
+    d.qpos[:] = standing_qpos(m)
+    mujoco.mj_kinematics(m, d)
+    mujoco.mj_comPos(m, d)
+    weight = np.zeros(m.nv)  # generalised force of each link's weight under 1 m/s² of gravity
+    jac = np.zeros((3, m.nv))
+    for body in range(1, m.nbody):
+        mujoco.mj_jacBodyCom(m, d, jac, None, body)
+        weight -= jac.T @ np.array([0.0, 0.0, m.body_mass[body]])
+    contact = d.geom_xpos[lay.foot_geom] - [0.0, 0.0, m.geom_size[lay.foot_geom, 0]]  # the sphere's lowest point
+    mujoco.mj_jac(m, d, jac, None, contact, m.geom_bodyid[lay.foot_geom])
+    joints = list(lay.joint_dof)
+    base = [i for i in range(m.nv) if i not in joints]
+    force = np.linalg.lstsq(jac[:, base].T, -weight[base], rcond=None)[0]  # the floor's push that balances the base
+    return -(weight[joints] + jac[:, joints].T @ force)
+
+
+def max_standing_gravity(mj_model: mujoco.MjModel) -> tuple[float, int]:
+    """(m/s², joint index): the strongest gravity under which the motors can still hold the standing pose, and the
+    joint whose effort limit sets it."""
+    per_g = np.abs(holding_torque(mj_model))
+    limits = np.asarray(Layout.of(mj_model).effort_limit)
+    ratios = np.where(per_g > 0, limits / np.maximum(per_g, 1e-300), np.inf)
+    k = int(np.argmin(ratios))
+    return float(ratios[k]), k
+
+
 # What makes the robot this robot: its bodies, inertias, joints, limits, motors and geoms,
 # not the world it stands in (timestep, gravity, floor, friction).
 _FINGERPRINT_FIELDS = ("body_pos", "body_quat", "body_mass", "body_inertia", "body_ipos", "body_iquat", "jnt_type",

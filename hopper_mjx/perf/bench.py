@@ -408,7 +408,7 @@ def check(args) -> tuple[list[int] | None, Physics]:
     except ValueError as err:
         raise ValueError(f"--controller: {err}") from None
     if args.json:
-        cli.check_writable("--json", args.json)
+        cli.check_writable("--json", args.json, suffixes=(".json",))
     sizes = [args.num] + (cli.parse_indices(args.scaling, "--scaling") if args.scaling else [])
     physics = cli.check_physics(argparse.Namespace(**vars(args) | {"engine": engines[0]}),
                                 {"timestep": args.timestep}, engines=engines, n=2 * max(sizes))  # both sides' heights
@@ -416,7 +416,7 @@ def check(args) -> tuple[list[int] | None, Physics]:
     if args.plot and not args.scaling:
         raise ValueError("--plot draws the --scaling records: give --scaling N1,N2,... too")
     if args.plot:
-        cli.check_writable("--plot", args.plot)
+        cli.check_writable("--plot", args.plot, suffixes=cli.PLOT_SUFFIXES)
     nums = cli.parse_indices(args.scaling, "--scaling") if args.scaling else None
     if nums is not None and (not nums or min(nums) < 1):
         raise ValueError(f"--scaling needs instance counts >= 1, got {args.scaling!r}")

@@ -50,8 +50,9 @@ def open_bag(path: str | Path):
     try:
         reader = AnyReader([bag_path(path)])
         reader.open()
-    except (AnyReaderError, OSError) as err:
-        raise ValueError(f"cannot read {path} as a ROS bag: {err}") from None
+    except (AnyReaderError, OSError) as err:  # rosbags' YAML errors run to several lines: the first says what
+        raise ValueError(f"cannot read {path} as a ROS bag: {str(err).splitlines()[0] if str(err) else err}") \
+            from None
     try:
         yield reader
     finally:

@@ -123,7 +123,7 @@ def parser() -> argparse.ArgumentParser:
 def main(argv=None) -> int:
     args = parser().parse_args(argv)
     try:
-        cli.check_writable("--out", args.out)
+        cli.check_writable("--out", args.out, suffixes=cli.PLOT_SUFFIXES)
         if args.dpi < 1:
             raise ValueError(f"--dpi must be >= 1, got {args.dpi}")
         echo.bag_path(args.bag)  # exists and is a bag (folder), before anything is read

@@ -130,7 +130,8 @@ def definition(store, msgtype: str, ros1: bool) -> dict:
 
 def check_output(out: str | Path, fmt: str) -> Path:
     """--out: new, in an existing folder; for mcap a folder name (rosbag2 writes a folder)."""
-    out = cli.check_writable("--out", out, folder=fmt == "mcap", may_exist=False)
+    out = cli.check_writable("--out", out, folder=fmt == "mcap", may_exist=False,
+                             suffixes=() if fmt == "mcap" else (".bag",))
     if fmt == "mcap" and out.suffix == ".mcap":
         raise ValueError(f"--format mcap writes a ROS 2 bag folder (holding the .mcap file): "
                          f"give a folder name such as {out.stem}_mcap, not {out.name}")

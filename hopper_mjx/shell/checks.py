@@ -2,7 +2,7 @@
 
 The bottom layer of the command line: values, paths and names are checked here before any
 model is built or compiled (and before JAX or MuJoCo is imported); nothing here imports a
-module of the package but `registry`. `ArgumentParser` gives argparse's own refusals the
+module of the package but `registry` and `files`. `ArgumentParser` gives argparse's own refusals the
 same one-line form.
 """
 
@@ -17,12 +17,15 @@ from pathlib import Path
 import numpy as np
 
 from hopper_mjx import registry
+from hopper_mjx.shell.files import is_device
 
 MAX_TIMESTEP = 0.01  # s, the longest physics step model.load and a world file may set
 DEFAULT_TIMESTEP = 1e-3  # s, model.DEFAULT_TIMESTEP (checked equal by a test; importing model loads MuJoCo)
 
 
+PLOT_SUFFIXES = (".png", ".pdf", ".svg")  # what a plot is saved as (matplotlib, by the name's suffix)
 SCENARIO_BYTES = 1 << 20  # a scenario file is a page of settings; more is not one
+MAX_YAML_VALUES = 100_000  # values a YAML file of settings (a scenario, gains) may expand to
 
 
 class ArgumentParser(argparse.ArgumentParser):
@@ -113,7 +116,19 @@ def load_yaml(text):
                 seen[key] = key_node.start_mark.line
             return super().construct_mapping(node, deep=deep)
 
-    return yaml.load(text, Loader=Loader)
+    value = yaml.load(text, Loader=Loader)  # aliases share one object: loading never expands them
+    count, todo = 0, [value]
+    while todo:  # ... but whatever reads the values would ("billion laughs"): counted here, as they would expand
+        item = todo.pop()
+        count += 1
+        if count > MAX_YAML_VALUES:
+            raise yaml.YAMLError(f"it expands to over {MAX_YAML_VALUES:,} values (anchors & repeated by aliases * "
+                                 "within each other); a settings file holds a few hundred")
+        if isinstance(item, dict):
+            todo += [*item.keys(), *item.values()]
+        elif isinstance(item, list):
+            todo += item
+    return value
 
 
 def _typed(action: argparse.Action, value, path, key):
@@ -200,10 +215,11 @@ def check_range(name: str, value: float, *, low: float | None = None, high: floa
 
 
 def check_writable(name: str, path: str | Path, *, folder: bool = False, may_exist: bool = True,
-                   make_parents: bool = False) -> Path:
+                   make_parents: bool = False, suffixes: tuple[str, ...] = ()) -> Path:
     """An output path that can be written, checked without creating anything: its parent exists and is a
     folder (with `make_parents`, its nearest existing ancestor); a file output is not a folder (a folder
-    output not a file); with `may_exist` False it must be new."""
+    output not a file); with `may_exist` False it must be new; with `suffixes`, a file's name ends in one of
+    them (the formats the tool writes; a device such as /dev/null is taken as it is)."""
     path = Path(path)
     parent = path.parent
     while make_parents and not parent.exists() and parent != parent.parent:
@@ -216,6 +232,9 @@ def check_writable(name: str, path: str | Path, *, folder: bool = False, may_exi
     if path.exists() and path.is_dir() != folder:
         wanted, found = ("folder", "file") if folder else ("file", "folder")
         raise ValueError(f"{name} {path} is a {found}; give a {wanted}")
+    if suffixes and not is_device(path) and path.suffix.lower() not in suffixes:
+        raise ValueError(f"{name} {path}: this tool writes {' or '.join(suffixes)} files; give a name ending in "
+                         f"{suffixes[0]}")
     if not os.access(parent, os.W_OK):
         raise ValueError(f"{name} {path}: cannot write in {parent}")
     return path

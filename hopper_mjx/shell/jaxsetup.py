@@ -13,6 +13,10 @@
   SIGILL" (and which would crash if such an instruction ran). XLA prints the same
   alarm on the very CPU that compiled, for two tuning preferences it takes for
   features: `hopper_mjx.shell.process` drops exactly those lines from a command's stderr.
+- The cache is an optimisation, never a failure: a folder that cannot be created or
+  written is one warning line and the run compiles without it; entries JAX cannot read
+  (damaged, cut short) or write (a full disk) are compiled afresh, and JAX's own warning
+  for them (two lines each, one per program) becomes one line per process.
 """
 
 from __future__ import annotations
@@ -20,6 +24,10 @@ from __future__ import annotations
 import hashlib
 import os
 import platform
+import re
+import sys
+import tempfile
+import warnings
 from pathlib import Path
 
 CACHE_DIR = Path(os.environ.get("HOPPER_MJX_CACHE", Path.home() / ".cache" / "hopper_mjx" / "jax"))
@@ -42,6 +50,37 @@ def cpu_cache_dir(base: Path | str) -> Path:
     return Path(base) / f"cpu-{hashlib.sha256(cpu_features().encode()).hexdigest()[:12]}"
 
 
+# JAX's warning when a cache entry cannot be read or written (jax/_src/compiler.py); it then compiles afresh.
+CACHE_WARNING = re.compile(r"Error (reading|writing) persistent compilation cache entry")
+
+
+def cache_problem(folder: Path) -> str | None:
+    """Why `folder` cannot hold the compile cache (it is created if need be), or None when it can."""
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        with tempfile.TemporaryFile(dir=folder):
+            pass
+    except OSError as err:
+        return err.strerror or type(err).__name__
+    return None
+
+
+def _cache_warnings_in_one_line() -> None:
+    """JAX's cache warnings (a line and its source line each, again for every program) as one line per process."""
+    show, said = warnings.showwarning, []
+
+    def showwarning(message, category, filename, lineno, file=None, line=None):
+        if not CACHE_WARNING.search(str(message)):
+            return show(message, category, filename, lineno, file, line)
+        if not said:
+            said.append(True)
+            first = str(message).splitlines()[0] if str(message) else category.__name__
+            print(f"warning: compile cache: {first[:300]}; compiling instead (the cache only saves time)",
+                  file=sys.stderr)
+
+    warnings.showwarning = showwarning
+
+
 _configured: list = []  # set by the first `configure`: JAX takes the device count only before its first computation
 
 
@@ -58,8 +97,13 @@ def configure(*, devices: int | None = None, cache_dir: Path | str | None = CACH
 
     if "xla_force_host_platform_device_count" not in os.environ.get("XLA_FLAGS", ""):
         jax.config.update("jax_num_cpu_devices", devices or os.cpu_count() or 1)
-    if cache_dir is not None:
+    problem = None if cache_dir is None else cache_problem(cpu_cache_dir(cache_dir))
+    if problem is not None:
+        print(f"warning: compile cache {cache_dir}: cannot use it ({problem}); compiling without it (set "
+              "HOPPER_MJX_CACHE to a writable folder)", file=sys.stderr)
+    elif cache_dir is not None:
         jax.config.update("jax_compilation_cache_dir", str(cpu_cache_dir(cache_dir)))
         jax.config.update("jax_persistent_cache_min_compile_time_secs", 1.0)
+        _cache_warnings_in_one_line()
     # gloo lets jax.distributed run collectives between CPU processes.
     jax.config.update("jax_cpu_collectives_implementation", "gloo")

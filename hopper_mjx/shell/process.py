@@ -22,6 +22,9 @@
   version compatibility". `run` passes the process's stderr (file descriptor 2, where XLA's
   C++ logs) through a thread that drops exactly those lines; every other line, a real
   missing ISA feature included, goes through. TF_CPP_MIN_LOG_LEVEL=0 turns the filter off.
+- **A full disk is one line.** A write refused for want of room (`files.NO_ROOM`: ENOSPC,
+  EDQUOT, or EFBIG under a file-size limit) ends the command with `error: cannot write FILE:
+  ...` and what was kept, exit code 1; the half-written file is gone (`files.atomic_write`).
 """
 
 from __future__ import annotations
@@ -158,6 +161,13 @@ def run(main) -> int:
     filter_stderr()
     try:
         return main()
+    except OSError as err:
+        if err.errno not in files.NO_ROOM:
+            raise
+        files.remove_partial()
+        print(f"error: cannot write {err.filename or 'an output'}: {err.strerror} (the disk is full, or a "
+              f"file-size limit is met); {_said[0]}", file=sys.stderr)
+        return 1
     finally:
         for stream in (sys.stdout, sys.stderr):
             stream.flush()

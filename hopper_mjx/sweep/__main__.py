@@ -149,6 +149,7 @@ def check(args):
     if not grounds:  # every instance on the one ground --terrain gives (the parser refuses it where it cannot)
         cli.refuse_each(physics.ground, f"a {args.kind} sweep")
     cli.check_delay(physics, args.duration, args.num, args.seed)
+    check_standing(args.gravity_flag, gravity, physics.mj_model)
     names = args.controllers.split(",") if args.kind == "compare" else [getattr(args, "controller", "raibert")]
     if len(set(names)) != len(names):
         raise ValueError(f"--controllers lists one twice: {args.controllers}")
@@ -194,16 +195,34 @@ def check_robots(spec, duration: float) -> None:
     except ValueError as err:
         raise ValueError(f"--param {spec.param}: {err}; use --engine mjx or auto") from None
     cli.check_controls(physics, spec.controller)
-    for robots in spec.robot_specs():
+    for value, robots in zip(spec.values, spec.robot_specs()):
         try:
-            draw.draw(robots, physics.mj_model, spec.num, spec.seed)
+            fields = draw.draw(robots, physics.mj_model, spec.num, spec.seed)
             drawn = draw.draw_controls(robots, physics.mj_model, spec.num, spec.seed)
         except ValueError as err:
             raise ValueError(f"--values: {err}") from None
+        if fields:  # a robot of other masses or legs: replicate 0's must stand at every gravity of the sweep
+            check_standing(f"--values {spec.param}={value:g}:", spec.gravity,
+                           draw.instance_model(physics.mj_model, fields, 0))
         for name in ("action_delay", "sensor_delay"):
             if name in drawn and drawn[name].max() * 1e-3 >= duration:
                 raise ValueError(f"--values: {name} {drawn[name].max():g} ms is not shorter than the run's "
                                  f"--duration {duration:g} s")
+
+
+def check_standing(flag: str, gravity, mj_model) -> None:
+    """Every gravity of the grid one under which the robot's motors can hold it standing (`max_standing_gravity`):
+    beyond it every instance only falls, and the sweep would measure nothing."""
+    from hopper_mjx.model.layout import Layout
+    from hopper_mjx.model.loader import JOINTS
+    from hopper_mjx.model.robot import max_standing_gravity
+
+    top, k = max_standing_gravity(mj_model)
+    over = [g for g in gravity if g > top]
+    if over:
+        effort = Layout.of(mj_model).effort_limit[k]
+        raise ValueError(f"{flag} {max(over):g} m/s²: the robot cannot stand there; its {JOINTS[k]} motor "
+                         f"({effort:g} N·m) holds the standing pose up to {top:.3g} m/s²")
 
 
 # Values a swept instance records per simulated second at the sweep's rates (contact and state at 1 kHz,
@@ -258,24 +277,26 @@ def label(controller: str) -> str:
     return "policy-" + Path(registry.policy_path(controller)).name
 
 
-def run_one(args, spec, folder: Path):
-    """Runs one controller's sweep into `folder` and prints its report: (label, group summary), or None
+def run_one(args, spec, out: Path):
+    """Runs one controller's sweep into `out` and prints its report: (label, group summary), or None
     on a process other than 0."""
     from hopper_mjx.sweep import report, runner
 
     start = time.perf_counter()
-    process.on_stop(f"finished chunks are saved in {folder}; rerun the same command to resume")
-    instances, table, facts = runner.run(spec, folder, progress=not args.no_progress)
-    facts["total_wall_s"] = time.perf_counter() - start
-    if facts["processes"] > 1 and args.process_id != 0:
-        return None
-    text, notes = report.write(folder, spec, instances, table, runner.columns(spec), facts)
-    print(text if args.kind != "compare" else f"{label(spec.controller)}: outputs in {folder}/")
+    folder.claim(out, spec)
+    process.on_stop(f"finished chunks are saved in {out}; rerun the same command to resume")
+    with folder.hold(out, args.process_id):  # a second live run of this folder refuses: never mixed rows
+        instances, table, facts = runner.run(spec, out, progress=not args.no_progress)
+        facts["total_wall_s"] = time.perf_counter() - start
+        if facts["processes"] > 1 and args.process_id != 0:
+            return None
+        text, notes = report.write(out, spec, instances, table, runner.columns(spec), facts)
+    print(text if args.kind != "compare" else f"{label(spec.controller)}: outputs in {out}/")
     for line in notes:  # why robots fell, or a figure that means less than it seems
         print(line)
     rate = f", {facts['steps_per_s']:,.0f} steps/s" if facts["steps_per_s"] else " (all chunks were already done)"
     print(f"\n{len(instances)} instances x {spec.duration:g} s in {facts['total_wall_s']:.0f} s{rate}; "
-          f"outputs in {folder}/")
+          f"outputs in {out}/")
     return label(spec.controller), report.group_summary(spec, instances, table, runner.columns(spec))
 
 
@@ -296,7 +317,7 @@ def main(argv=None) -> int:
         for spec in specs:
             result = run_one(args, spec, folder_of(args, out, spec))
             results += [result] if result else []
-    except OutputError as err:  # the folder refused after the checks passed (a pseudo-filesystem)
+    except OutputError as err:  # the folder refused after the checks passed (a pseudo-filesystem), or in use
         return cli.fail(err)
     if args.kind == "compare" and results:
         print(report.write_comparison(out, specs[0], results))

@@ -230,13 +230,24 @@ def parse(text: str) -> Ground:
         for extent in size:
             if cell > extent:
                 raise TerrainError(f"cell={cell:g} m is larger than the grid's extent {extent:g} m")
+    if name == "rough" and dict(filled)["wavelength"] < 2 * cell:  # (1e-300 made every height NaN)
+        raise TerrainError(f"rough: wavelength={dict(filled)['wavelength']:g} m is shorter than two cells "
+                           f"({2 * cell:g} m): the grid cannot hold such waves; raise wavelength or lower cell")
     if name == "gaps" and dict(filled)["width"] >= dict(filled)["spacing"]:
         raise TerrainError(f"gaps: width={dict(filled)['width']:g} must be less than spacing="
                            f"{dict(filled)['spacing']:g}")
-    nrow, ncol = ground.shape
+    # Counted in floats first: size=1e308 would overflow the integer rounding of `shape`.
+    nrow, ncol = png_header(path)[1::-1] if path else (size[1] / cell + 1, size[0] / cell + 1)
     if nrow * ncol > MAX_VERTICES:
-        raise TerrainError(f"a {nrow} x {ncol} grid has {nrow * ncol:,} vertices; at most {MAX_VERTICES:,} "
-                           "(a larger cell or a smaller image)")
+        from hopper_mjx.shell.budget import size as in_bytes
+
+        def count(v: float, sep: str = ",") -> str:
+            return f"{v:{sep}.0f}" if v < 1e15 else f"{v:.3g}" if math.isfinite(v) else ">1e308"
+
+        raise TerrainError(f"a {count(nrow, '')} x {count(ncol, '')} grid has {count(nrow * ncol)} vertices, about "
+                           f"{in_bytes(8.0 * nrow * ncol) if nrow * ncol < 1e30 else '>1e18 TiB'} of heights; "
+                           f"at most {MAX_VERTICES:,} ({in_bytes(8 * MAX_VERTICES)}): a larger cell or a smaller image")
+    nrow, ncol = ground.shape
     if path and (nrow < 2 or ncol < 2):
         raise TerrainError(f"{path} is {ncol} x {nrow} pixels; a height field needs at least 2 x 2")
     return ground

@@ -17,6 +17,7 @@ with MuJoCo C, so an engine given `with_constants` steps each instance as MuJoCo
 from __future__ import annotations
 
 import copy
+import math
 
 import mujoco
 import numpy as np
@@ -184,14 +185,20 @@ def _labels(m: mujoco.MjModel, elements: str, at: list[int]) -> list[str]:
     return [elements] * len(at)
 
 
+FLOAT32_MAX = float(np.finfo(np.float32).max)
+
+
 def _check_range(name: str, par: registry.Parameter | registry.ControlParameter, drawn: np.ndarray) -> None:
+    high = min(par.high, FLOAT32_MAX)  # the core computes in float32: a larger value would be inf there
     low_bad = drawn <= par.low if par.open_low else drawn < par.low
-    bad = low_bad | (drawn > par.high) | ~np.isfinite(drawn)
+    bad = low_bad | (drawn > high) | ~np.isfinite(drawn) | (drawn < -FLOAT32_MAX)
     if bad.any():
         i = int(np.argwhere(bad)[0][0])
         value = float(drawn[bad][0])
         lower = f"{'>' if par.open_low else '>='} {par.low:g}"
         upper = "" if par.high == float("inf") else f" and <= {par.high:g}"
+        if math.isfinite(value) and abs(value) > FLOAT32_MAX:
+            upper += f" (and within ±{FLOAT32_MAX:.3g}: the core computes in float32)"
         kind = "an offset" if par.offset else "a value"
         unit = "" if par.unit == "1" else f" {par.unit}"  # a factor or a friction coefficient has none
         raise ValueError(f"{name} drew {kind} of {value:g}{unit} for instance {i}; it must be {lower}{upper}")
