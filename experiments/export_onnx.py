@@ -82,7 +82,10 @@ def check(args):
     if not args.policy.is_dir():
         raise ValueError(f"{args.policy} is not a trained policy: no such folder")
     if args.task is not None:
-        registry.check("task", registry.TASKS, args.task)
+        try:
+            registry.check("task", registry.TASKS, args.task)
+        except ValueError as err:
+            raise ValueError(f"--task: {err}") from None
     path, algo, net, config = policy.read(args.policy)
     if args.task is not None and config.task != args.task:
         raise ValueError(f"{path} is a {config.task} policy, not {args.task} (--task)")
