@@ -72,6 +72,11 @@ def check(args):
     from hopper_mjx.envs import monoped, policy
     from hopper_mjx.model.layout import Layout
 
+    try:  # the `export` extra's packages
+        import onnx  # noqa: F401
+        import onnxruntime  # noqa: F401
+    except ImportError as err:
+        raise ValueError(f"{err.name} is not installed: pip install -e '.[export]'") from None
     if args.out.suffix != ".onnx":
         raise ValueError(f"--out {args.out}: give a file ending in .onnx")
     cli.check_writable("--out", args.out)
