@@ -238,6 +238,10 @@ def main(argv=None) -> int:
         return cli.fail(err)
     observations, sent = rollout_observations(path, config, physics, num=args.num, seconds=args.seconds,
                                               seed=args.seed)
+    if len(observations) < MIN_OBSERVATIONS:  # robots whose physics diverged were dropped
+        print(f"error: only {len(observations)} observations from robots that did not diverge; raise --num or "
+              "--seconds; nothing written", file=sys.stderr)
+        return 1
     session = onnxruntime.InferenceSession(model.SerializeToString(), providers=["CPUExecutionProvider"])
     exported = session.run(["action"], {"observation": observations.astype(np.float32)})[0]
     difference = float(np.abs(exported - sent).max())
