@@ -74,6 +74,11 @@ def check(args):
     from hopper_mjx.envs.task_config import decimation, same_robot
     from hopper_mjx.model.layout import Layout
 
+    try:  # the `export` extra's packages
+        import onnx  # noqa: F401
+        import onnxruntime  # noqa: F401
+    except ImportError as err:
+        raise ValueError(f"{err.name} is not installed: pip install -e '.[export]'") from None
     if args.out.suffix != ".onnx":
         raise ValueError(f"--out {args.out}: give a file ending in .onnx")
     cli.check_writable("--out", args.out)
@@ -84,7 +89,10 @@ def check(args):
     if not args.policy.is_dir():
         raise ValueError(f"{args.policy} is not a trained policy: no such folder")
     if args.task is not None:
-        registry.check("task", registry.TASKS, args.task)
+        try:
+            registry.check("task", registry.TASKS, args.task)
+        except ValueError as err:
+            raise ValueError(f"--task: {err}") from None
     path, algo, net, config = policy.read(args.policy)
     if args.task is not None and config.task != args.task:
         raise ValueError(f"{path} is a {config.task} policy, not {args.task} (--task)")
@@ -235,6 +243,10 @@ def main(argv=None) -> int:
         return cli.fail(err)
     observations, sent = rollout_observations(path, config, physics, num=args.num, seconds=args.seconds,
                                               seed=args.seed)
+    if len(observations) < MIN_OBSERVATIONS:  # robots whose physics diverged were dropped
+        print(f"error: only {len(observations)} observations from robots that did not diverge; raise --num or "
+              "--seconds; nothing written", file=sys.stderr)
+        return 1
     session = onnxruntime.InferenceSession(model.SerializeToString(), providers=["CPUExecutionProvider"])
     exported = session.run(["action"], {"observation": observations.astype(np.float32)})[0]
     difference = float(np.abs(exported - sent).max())

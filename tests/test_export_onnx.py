@@ -128,6 +128,8 @@ BAD = {
     "missing checkpoint": (lambda f, t: [_damaged(f, t), "--out", t / "p.onnx"], "parameters cannot be read"),
     "another task asked": (lambda f, t: [f, "--task", "hop_velocity", "--out", t / "p.onnx"],
                            "is a hop policy, not hop_velocity"),
+    "an unknown task asked": (lambda f, t: [f, "--task", "jump", "--out", t / "p.onnx"],
+                              "--task: unknown task 'jump'; choose from: stand, hop"),
     "another task recorded": (lambda f, t: [_edited(f, t, task="stand"), "--out", t / "p.onnx"],
                               "takes 27 observations but task 'stand'"),
     "another robot": (lambda f, t: [_edited(f, t, robot="0123456789ab"), "--out", t / "p.onnx"],

@@ -34,21 +34,21 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--batch-size", type=int, default=128)
     p.add_argument("--num-minibatches", type=int, default=8)
     # 8 epochs over each batch and a value MLP as small as the policy's: seed 1 of hop met its threshold at 5.7 M
-    # steps (3.4 min) where 4 epochs and a 128-128-128 value MLP needed 16.0 M (6.9 min; docs/learning.md).
+    # steps (3.4 min) where 4 epochs and a 128-128-128 value MLP needed 16.0 M (6.9 min; docs/learning-notebook.md).
     p.add_argument("--updates-per-batch", type=int, default=8, help="PPO: epochs over each batch (default 8)")
     # PPO at 6e-4: hop's three seeds met the honest threshold at a median 4.9 M steps where 3e-4 took 7.4 M, and
-    # every seed's policy kept all its robots up at the nine sweep gravities (docs/learning.md).
+    # every seed's policy kept all its robots up at the nine sweep gravities (docs/learning-notebook.md).
     p.add_argument("--learning-rate", type=float, default=None,
                    help="Adam's step (PPO: the first one with --desired-kl; default 6e-4 for ppo, 3e-4 for sac)")
     p.add_argument("--desired-kl", type=float, default=None, metavar="KL",
                    help="PPO: adapt the learning rate after each update to keep the policy's KL step near KL "
                         "(x1.5 below KL/2, /1.5 above 2 KL, as legged_gym's PPO does); default: a fixed rate")
     # 1e-3, not Brax's usual 1e-2: on hop the 1e-2 exploration kept knocking the robot over (evaluation reward
-    # collapsing 623 -> 100 and back), and no seed met the honest threshold in 8 M steps (docs/learning.md).
+    # collapsing 623 -> 100 and back), and no seed met the honest threshold in 8 M steps (docs/learning-notebook.md).
     p.add_argument("--entropy-cost", type=float, default=1e-3, help="PPO's entropy bonus (default 0.001)")
     p.add_argument("--discounting", type=float, default=0.99)
     # PPO at 0.1: hop's returns are some 200 at 1, and seeds 0 and 2 met the honest threshold at 10.6 M and 4.9 M
-    # steps where 1 took 16.8 M and 12.3 M (0.02 left seed 0 hopping 70 % low; docs/learning.md).
+    # steps where 1 took 16.8 M and 12.3 M (0.02 left seed 0 hopping 70 % low; docs/learning-notebook.md).
     p.add_argument("--reward-scaling", type=float, default=None,
                    help="factor on the rewards the learner sees (its value targets scale with it; "
                         "default 0.1 for ppo, 1 for sac)")

@@ -3,7 +3,7 @@
 Brax's queue keeps the newest `max_replay_size` transitions by rolling the whole buffer on every insert
 once it is full (`jnp.roll` inside the training step): a copy of the entire replay per batch of env steps.
 Measured inside a scan as Brax runs it, for a 1 M replay over 2 devices (500 000 rows of 62 floats each):
-112 ms per insert against 0.07 ms for a ring write (load 17; docs/learning.md), where a whole SAC training
+112 ms per insert against 0.07 ms for a ring write (load 17; docs/learning-notebook.md), where a whole SAC training
 step took ~100 ms: SAC's env steps/s halved once its replay filled. The ring overwrites the oldest rows in
 place and samples uniformly over the filled rows: the same transitions kept, drawn from the same
 distribution; only their order in memory differs.

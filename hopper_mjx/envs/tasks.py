@@ -97,7 +97,7 @@ class HopVelocity(Hop):
         # Apex 0.93-1.03 m: a rise of 0.048-0.148 m over the 0.882 m standing height. The apex
         # kernel is narrower and weighs more than hop's: a hop's speed swings through every stance,
         # so shuffling forward on 1-2 cm hops earns more speed reward than hopping does, and with
-        # hop's 0.1 m kernel that gain outweighed the apex reward it lost (docs/learning.md).
+        # hop's 0.1 m kernel that gain outweighed the apex reward it lost (docs/learning-notebook.md).
         return MonopedConfig(task="hop_velocity", gravity_range=GRAVITY_RANGE, apex_range=(0.93, 1.03),
                              speed_range=(-0.5, 0.5), lateral_speed_range=(-0.3, 0.3), w_speed=1.0,
                              w_apex=2.0, apex_scale=0.04)

@@ -149,7 +149,7 @@ def check(args):
     if not grounds:  # every instance on the one ground --terrain gives (the parser refuses it where it cannot)
         cli.refuse_each(physics.ground, f"a {args.kind} sweep")
     cli.check_delay(physics, args.duration, args.num, args.seed)
-    check_standing(args.gravity_flag, gravity, physics.mj_model)
+    check_standing("--gravity", gravity, physics.mj_model)
     names = args.controllers.split(",") if args.kind == "compare" else [getattr(args, "controller", "raibert")]
     if len(set(names)) != len(names):
         raise ValueError(f"--controllers lists one twice: {args.controllers}")
