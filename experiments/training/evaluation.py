@@ -59,7 +59,7 @@ def evaluate(policy_path, physics, *, gravities, duration: float, height: float,
     from hopper_mjx.envs import policy
     from hopper_mjx.metrics import hops
     from hopper_mjx.sim import gravity_vectors
-    from hopper_mjx.sweep.runner import SENSORS
+    from hopper_mjx.sweep.runner import recorded
 
     mj_model = physics.mj_model
     reuse = {} if reuse is None else reuse
@@ -67,7 +67,7 @@ def evaluate(policy_path, physics, *, gravities, duration: float, height: float,
         reuse["sim"] = dataclasses.replace(physics, variation=None).sim()
     sim = reuse["sim"]
     g, kick = evaluation_batch(gravities, num, seed, sim.layout.nv)
-    sensors = SENSORS  # the sweep's streams and kicks: the numbers compare with a sweep's
+    sensors = recorded(sim.layout.timestep)  # the sweep's streams and kicks: the numbers compare with a sweep's
     _, _, net, config = policy.read(policy_path)
     same = (json.dumps(net, sort_keys=True), json.dumps(config.to_dict(), sort_keys=True))
     if reuse.get("network") == same:

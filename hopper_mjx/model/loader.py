@@ -23,6 +23,7 @@ from hopper_mjx.shell.checks import MAX_TIMESTEP
 DEFAULT_URDF = Path(__file__).with_name("monoped.urdf")
 JOINTS = ("haa_joint", "hfe_joint", "kfe_joint")
 DEFAULT_TIMESTEP = 1e-3  # s; the Gazebo original ran its physics at 1 kHz
+SOLVER_ITERATIONS = 4  # the constraint solver's Newton and line-search caps (see build_spec)
 
 # Names of the elements the loader adds; downstream code finds them by name.
 ROOT_JOINT = "root"
@@ -273,16 +274,21 @@ def _add_floor(spec: mujoco.MjSpec, terrain: terrains.Terrain | None) -> None:
 
 def build_spec(urdf: str | os.PathLike | None = None, *, timestep: float = DEFAULT_TIMESTEP,
                friction: tuple[float, float] = (FOOT_FRICTION, FOOT_FRICTION),
-               terrain: terrains.Terrain | None = None) -> mujoco.MjSpec:
+               terrain: terrains.Terrain | None = None, iterations: int = SOLVER_ITERATIONS,
+               ls_iterations: int = SOLVER_ITERATIONS) -> mujoco.MjSpec:
     """The monoped as an editable `MjSpec`, with everything the simulation adds. `friction`: the foot-floor
     contact's two sliding coefficients (Gazebo's mu, mu2), which a world file sets (`hopper_mjx.model.world`).
     `terrain`: a height grid the floor becomes (`terrain.to_spec`), keeping its name and contact pairs;
-    None keeps the plane."""
+    None keeps the plane. `iterations`, `ls_iterations`: the constraint solver's caps (a policy's training
+    physics asks for fewer, `envs.task_config.training_model`)."""
     path = Path(urdf) if urdf is not None else DEFAULT_URDF
     if not (isinstance(timestep, (int, float)) and math.isfinite(timestep) and 0 < timestep <= MAX_TIMESTEP):
         raise ValueError(f"timestep must be in (0, {MAX_TIMESTEP:g}] s, got {timestep!r}")
     if len(friction) != 2 or not all(math.isfinite(mu) and mu >= 0 for mu in friction):
         raise ValueError(f"friction must be two finite coefficients >= 0, got {friction!r}")
+    for name, cap in (("iterations", iterations), ("ls_iterations", ls_iterations)):
+        if not (isinstance(cap, int) and not isinstance(cap, bool) and 1 <= cap <= 1000):
+            raise ValueError(f"{name} must be a whole number in 1..1000, got {cap!r}")
     leg = describe(read_text(path, "URDF file", URDFError), str(path))
     try:
         spec = mujoco.MjSpec.from_file(str(path))
@@ -293,12 +299,12 @@ def build_spec(urdf: str | os.PathLike | None = None, *, timestep: float = DEFAU
     spec.compiler.discardvisual = False  # keep the non-colliding link geoms for pictures
     spec.option.timestep = timestep
     spec.option.integrator = mujoco.mjtIntegrator.mjINT_EULER  # semi-implicit, as Gazebo/ODE
-    # Batched MJX pays for every line-search iteration of every instance (a fixed-length
+    # (SOLVER_ITERATIONS) Batched MJX pays for every line-search iteration of every instance (a fixed-length
     # scan), so MuJoCo's 50 made the solver ~2/3 of a step in contact. Newton on <= 2
     # contacts converges in 1-2 iterations with 4 line-search steps: MJX's error against
     # MuJoCo C with the defaults stays at 1.3e-4 m over a landing (docs/performance.md).
-    spec.option.iterations = 4
-    spec.option.ls_iterations = 4
+    spec.option.iterations = iterations
+    spec.option.ls_iterations = ls_iterations
 
     base = spec.body(leg.base_link)
     base.add_freejoint(name=ROOT_JOINT)
@@ -355,10 +361,12 @@ def build_spec(urdf: str | os.PathLike | None = None, *, timestep: float = DEFAU
 
 def load(urdf: str | os.PathLike | None = None, *, timestep: float = DEFAULT_TIMESTEP,
          friction: tuple[float, float] = (FOOT_FRICTION, FOOT_FRICTION),
-         terrain: terrains.Terrain | None = None) -> mujoco.MjModel:
+         terrain: terrains.Terrain | None = None, iterations: int = SOLVER_ITERATIONS,
+         ls_iterations: int = SOLVER_ITERATIONS) -> mujoco.MjModel:
     """Compiles a monoped URDF (default: the shipped seed monoped) to an `MjModel`, on `terrain` (a
-    `hopper_mjx.terrain.Terrain`; None: the flat plane)."""
-    spec = build_spec(urdf, timestep=timestep, friction=friction, terrain=terrain)
+    `hopper_mjx.terrain.Terrain`; None: the flat plane), its solver capped at `iterations` and `ls_iterations`."""
+    spec = build_spec(urdf, timestep=timestep, friction=friction, terrain=terrain, iterations=iterations,
+                      ls_iterations=ls_iterations)
     try:
         return spec.compile()
     except ValueError as err:

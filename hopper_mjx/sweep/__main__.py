@@ -16,6 +16,7 @@ Several processes (hosts) share one sweep with --coordinator HOST:PORT --num-pro
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import math
 import sys
 import time
@@ -88,6 +89,10 @@ def parser() -> argparse.ArgumentParser:
             s.add_argument("--controllers", required=True,
                            help="comma-separated: raibert, balance and/or policy:PATH, each swept with the "
                            "same kicks")
+        if kind in ("gravity", "compare"):
+            s.add_argument("--as-trained", action="store_true",
+                           help="policies only: run on the physics they were trained on (their config's timestep "
+                                "and solver caps) instead of the core's, to measure what changes between the two")
         s.add_argument("--num", type=int, default=num, help=f"replicates per grid point (default {num})")
         s.add_argument("--duration", type=float, default=duration, help="simulated seconds per instance")
         s.add_argument("--height", type=float, default=0.10, help="commanded apex rise over standing height, m")
@@ -146,6 +151,9 @@ def check(args):
         grounds = [str(cli.check_ground(g, n=n)) for g in grounds]  # as the manifest keeps them
         args.terrain = grounds[0]
     physics = cli.check_physics(args, n=args.num, seed=args.seed)  # one robot per replicate, drawn now
+    names = args.controllers.split(",") if args.kind == "compare" else [getattr(args, "controller", "raibert")]
+    if getattr(args, "as_trained", False):
+        physics = as_trained(physics, names)
     if not grounds:  # every instance on the one ground --terrain gives (the parser refuses it where it cannot)
         cli.refuse_each(physics.ground, f"a {args.kind} sweep")
     cli.check_delay(physics, args.duration, args.num, args.seed)
@@ -178,6 +186,27 @@ def check(args):
     if args.coordinator is not None and not _host_port(args.coordinator):
         raise ValueError(f"--coordinator must be HOST:PORT, got {args.coordinator!r}")
     return specs, out
+
+
+def as_trained(physics, controllers: list[str]):
+    """`physics` on the timestep and solver caps the policies among `controllers` were trained on (their
+    configs'; `envs.task_config.training_model`), which every one of them must share."""
+    from hopper_mjx.envs import policy
+
+    if not all(c.startswith(registry.POLICY_PREFIX) for c in controllers):
+        raise ValueError(f"--as-trained runs policies on their training physics; {', '.join(controllers)} is not "
+                         f"all {registry.POLICY_PREFIX}PATH")
+    found = set()
+    for name in controllers:
+        config = policy.read(registry.policy_path(name))[3]  # JSON only
+        found.add((config.timestep, config.solver_iterations, config.ls_iterations))
+    if len(found) > 1:
+        raise ValueError(f"--as-trained: the policies were trained on different physics {sorted(found)}; "
+                         "sweep them apart")
+    timestep, iterations, ls_iterations = found.pop()
+    options = {**physics.model_options, "timestep": timestep, "iterations": iterations,
+               "ls_iterations": ls_iterations}
+    return dataclasses.replace(physics, model_options=options)
 
 
 def check_robots(spec, duration: float) -> None:
@@ -226,7 +255,7 @@ def check_standing(flag: str, gravity, mj_model) -> None:
 
 
 # Values a swept instance records per simulated second at the sweep's rates (contact and state at 1 kHz,
-# IMU and odometry at 100 Hz: runner.SENSORS), and keeps per instance (its row of metrics, its kick).
+# IMU and odometry at 100 Hz: runner.recorded), and keeps per instance (its row of metrics, its kick).
 RECORDED_PER_S = 1000 * (19 + 7) + 100 * (10 + 13)
 KEPT = 64
 

@@ -37,8 +37,11 @@ COLUMNS = ("apex_height", "flight_rise", "flight_time", "ballistic_flight_time",
            "energy_per_hop", "mechanical_power")
 # An obstacle or terrain sweep's extra columns (`hops.terrain_metrics`).
 TERRAIN_COLUMNS = ("distance_made_good", "obstacles_cleared", "highest_cleared", "fall_x", "fall_y")
-# Contact and state at the physics rate: events, lift-off heights and apexes to the step (short flights too).
-SENSORS = signals.SensorConfig(imu_rate=100, odom_rate=100, contact_rate=1000, state_rate=1000)
+def recorded(timestep: float) -> signals.SensorConfig:
+    """The streams a sweep records: contact and state at the physics rate (events, lift-off heights and apexes to
+    the step, short flights too), the IMU and odometry at 100 Hz."""
+    rate = 1.0 / timestep
+    return signals.SensorConfig(imu_rate=100, odom_rate=100, contact_rate=rate, state_rate=rate)
 
 
 def columns(spec: SweepSpec) -> tuple[str, ...]:
@@ -68,7 +71,8 @@ class ChunkRunner:
 
             self.controller = policy_controller(sim.mj_model, self.policy)
             self.policy_config = read(self.policy)[3]  # once, not per chunk
-        self.steps = steps_for(spec.duration, sim.layout.timestep, SENSORS)
+        self.sensors = recorded(sim.layout.timestep)
+        self.steps = steps_for(spec.duration, sim.layout.timestep, self.sensors)
         self.columns = columns(spec)
         self.grounds = [terrain.parse(g) for g in spec.grounds]  # one per value, all on the model's grid
         self._heights = {}
@@ -123,7 +127,7 @@ class ChunkRunner:
         row = inst.robot_row[full]
         heights, obstacles = self.ground(full)
         final, traj = self.sim.run(gravity_vectors(inst.gravity[full]), self.controller, self.params(full),
-                                   duration=self.spec.duration, sensors=SENSORS, key=self.spec.seed,
+                                   duration=self.spec.duration, sensors=self.sensors, key=self.spec.seed,
                                    qvel=inst.qvel[full], variation={f: v[row] for f, v in self.robots.items()},
                                    ground=heights,
                                    **self.sim.per_instance({k: v[row] for k, v in self.controls.items()}))
