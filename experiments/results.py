@@ -3,19 +3,20 @@
     python experiments/results.py runs/hop-ppo runs/stand-sac --out results.md          # tables from the folders
     python experiments/results.py runs/hop-ppo --out results.md --sweep                 # also run the sweeps
 
-A RUN folder is one training run, or a `--seeds` parent holding seed-<s>/ runs. Per task x algorithm,
-over its seeds, the median and [min-max] of: minutes of training and env steps to the task's threshold
-(threshold.json of --scan-checkpoints; `hopper_mjx.metrics.thresholds`), env steps/s (Brax's, the median over the run's
-evaluations), and on the kicked gravity sweep of the run's policy (RUN/sweep/: `python -m hopper_mjx.sweep
-gravity --controller policy:RUN`, nine default gravities, the default kick) the worst gravity's survival,
-apex error |rise/command - 1| and speed error. Each task's reference controller (`registry.TASK_REFERENCES`:
-Raibert at the runs' command for the hopping tasks, Raibert at a 5 cm apex for stand) is swept the same way
-(OUT's folder, reference-<task>/). Every sweep runs on the run's own ground (`--terrain`: hop_terrain's rough
-ground; flat for the others). Stand's apex column is its reference's error against its own command.
-With --sweep the missing sweeps are run (each resumable); without it a run without a sweep shows n/a; ∞ marks
-an error with no survivor or no hop to measure it on. One plot beside the table (OUT with .png): every seed's
-evaluation reward against training minutes.
-"""
+A RUN folder is one training run, or a `--seeds` parent holding seed-<s>/ runs. Per task x algorithm, over its
+seeds, the median and [min-max] of: minutes of training and env steps to the task's threshold (threshold.json of
+--scan-checkpoints; `hopper_mjx.metrics.thresholds`), env steps/s (Brax's, the median over the run's evaluations),
+and on the kicked gravity sweep of the run's policy (RUN/sweep/: `python -m hopper_mjx.sweep gravity --controller
+policy:RUN`, nine default gravities, the default kick) the worst gravity's survival, apex error |rise/command - 1|
+and speed error, each twice: on the physics the policy was trained on (RUN/sweep-trained/: the same sweep with
+`--as-trained`, its config's timestep and solver caps) and in the core; then the gap between the two at Earth, Mars
+and the Moon, held to 5 points of survival and 5 % of the commanded apex. Each task's reference controller
+(`registry.TASK_REFERENCES`: Raibert at the runs' command for the hopping tasks, Raibert at a 5 cm apex for stand)
+is swept the same way (OUT's folder, reference-<task>/). Every sweep runs on the run's own ground (`--terrain`:
+hop_terrain's rough ground; flat for the others). Stand's apex column is its reference's error against its own
+command. With --sweep the missing sweeps are run (each resumable); without it a run without a sweep shows n/a; ∞
+marks an error with no survivor or no hop to measure it on. One plot beside the table (OUT with .png): every seed's
+evaluation reward against training minutes."""
 
 from __future__ import annotations
 
@@ -28,7 +29,10 @@ from pathlib import Path
 
 from hopper_mjx import cli, registry
 
-SWEEP = "sweep"
+SWEEP = "sweep"  # the policy in the core
+TRAINED = "sweep-trained"  # the same sweep on the physics the policy was trained on (`sweep --as-trained`)
+COMPARED_GRAVITIES = (9.81, 3.71, 1.62)  # where the two are held to agree: Earth, Mars, the Moon
+GAP = {"survival_gap": 0.05, "apex_gap": 0.05}  # the most the core may differ from training: 5 points, 5 % of apex
 
 
 def parser() -> argparse.ArgumentParser:
@@ -85,15 +89,30 @@ def sweep_measures(folder: Path, height: float) -> dict:
     }
 
 
+def gap(core: Path, trained: Path, height: float) -> dict:
+    """The largest difference between the core's sweep and the training physics' at `COMPARED_GRAVITIES`: in
+    survival (a fraction) and in the apex rise, as a fraction of the command (None without one); None where a
+    sweep is missing."""
+    if not ((core / "summary.json").is_file() and (trained / "summary.json").is_file()):
+        return {"survival_gap": None, "apex_gap": None}
+    by_g = [{g["gravity"]: g for g in _json(folder / "summary.json")["groups"]} for folder in (core, trained)]
+    rows = [(by_g[0].get(g), by_g[1].get(g)) for g in COMPARED_GRAVITIES]
+    rows = [(a, b) for a, b in rows if a is not None and b is not None]
+    apex = lambda a, b: (float("inf") if a.get("apex_height") is None or b.get("apex_height") is None
+                         else abs(a["apex_height"] - b["apex_height"]) / height)
+    return {"survival_gap": max((abs(a["survival"] - b["survival"]) for a, b in rows), default=None),
+            "apex_gap": None if not height > 0 else max((apex(a, b) for a, b in rows), default=None)}
+
+
 def run_sweep(controller: str, folder: Path, height: float, speed, num: int, duration: float,
-              ground: str = "flat") -> None:
+              ground: str = "flat", as_trained: bool = False) -> None:
     """The kicked gravity sweep of `controller` into `folder` on `ground` (a --terrain spec; resumes a cut-short
-    one), by the sweep's own command."""
+    one), by the sweep's own command; `as_trained`: on the physics the policy was trained on."""
     from hopper_mjx.sweep.__main__ import main as sweep
 
     argv = ["gravity", "--controller", controller, "--num", str(num), "--duration", str(duration),
             "--height", str(height), "--speed", f"{speed[0]},{speed[1]}", "--terrain", ground, "--out", str(folder),
-            "--no-progress"]
+            "--no-progress"] + (["--as-trained"] if as_trained else [])
     if sweep(argv) != 0:
         raise ValueError(f"the sweep of {controller} into {folder} failed")
 
@@ -108,6 +127,9 @@ def run_record(run: Path, do_sweep: bool, num: int, duration: float) -> dict:
     rates = [r["training/sps"] for r in record["history"] if r.get("training/sps")]
     if do_sweep and not (run / SWEEP / "summary.json").is_file():
         run_sweep(f"policy:{run}", run / SWEEP, height, speed, num, duration, ground)
+    if do_sweep and not (run / TRAINED / "summary.json").is_file():
+        run_sweep(f"policy:{run}", run / TRAINED, height, speed, num, duration, ground, as_trained=True)
+    trained = {f"trained_{k}": v for k, v in sweep_measures(run / TRAINED, height).items()}
     return {"run": str(run), "task": args["task"], "algo": args["algo"], "seed": args["seed"], "ground": ground,
             "scanned": (run / "threshold.json").is_file(),
             "minutes_to_threshold": None if found is None else found["wall_time"] / 60,
@@ -116,7 +138,8 @@ def run_record(run: Path, do_sweep: bool, num: int, duration: float) -> dict:
             "steps_per_s": statistics.median(rates) if rates else None,
             "curve": [(r["wall_time"] / 60, r["eval/episode_reward"]) for r in record["history"]
                       if "eval/episode_reward" in r],
-            **sweep_measures(run / SWEEP, height), "height": height, "speed": list(speed)}
+            **sweep_measures(run / SWEEP, height), **trained, **gap(run / SWEEP, run / TRAINED, height),
+            "height": height, "speed": list(speed)}
 
 
 def spread(values, fmt: str) -> str:
@@ -130,7 +153,8 @@ def spread(values, fmt: str) -> str:
 
 
 HEADER = ("| task × algorithm | seeds | at threshold | min to threshold | M steps to threshold | env steps/s "
-          "| worst survival | worst apex error | worst speed error m/s |\n|---|---|---|---|---|---|---|---|---|")
+          "| worst survival: training / core | worst apex error: training / core | worst speed error m/s "
+          "| training → core gap at Earth, Mars, Moon: survival, apex |\n|---|---|---|---|---|---|---|---|---|---|")
 
 
 def _millions(steps):
@@ -147,14 +171,26 @@ def table(records: list[dict], references: dict) -> str:
                      f"| {spread([r['minutes_to_threshold'] for r in rows], '.1f')} "
                      f"| {spread([_millions(r['steps_to_threshold']) for r in rows], '.2f')} "
                      f"| {spread([r['steps_per_s'] for r in rows], ',.0f')} "
-                     f"| {spread([r['survival'] for r in rows], '.0%')} "
-                     f"| {spread([r['apex_error'] for r in rows], '.0%')} "
-                     f"| {spread([r['speed_error'] for r in rows], '.3f')} |")
+                     f"| {spread([r['trained_survival'] for r in rows], '.0%')} / "
+                     f"{spread([r['survival'] for r in rows], '.0%')} "
+                     f"| {spread([r['trained_apex_error'] for r in rows], '.0%')} / "
+                     f"{spread([r['apex_error'] for r in rows], '.0%')} "
+                     f"| {spread([r['speed_error'] for r in rows], '.3f')} | {gap_cell(rows)} |")
     for task, ref in sorted(references.items()):
         lines.append(f"| {task} × {ref['controller']} (reference) | — | — | — | — | — "
                      f"| {spread([ref['survival']], '.0%')} | {spread([ref['apex_error']], '.0%')} "
-                     f"| {spread([ref['speed_error']], '.3f')} |")
+                     f"| {spread([ref['speed_error']], '.3f')} | — |")
     return "\n".join(lines)
+
+
+def gap_cell(rows: list[dict]) -> str:
+    """The largest gap over a row's seeds, and whether it is within `GAP` (n/a without both sweeps)."""
+    worst = {k: max((r[k] for r in rows if r.get(k) is not None), default=None) for k in GAP}
+    if worst["survival_gap"] is None:
+        return "n/a"
+    within = all(v is None or v <= GAP[k] for k, v in worst.items())
+    apex = "n/a" if worst["apex_gap"] is None else format(worst["apex_gap"], ".0%")
+    return f"{worst['survival_gap']:.0%}, {apex}: " + ("within" if within else "**over**: the training physics differs")
 
 
 def plot(records: list[dict], path: Path) -> None:

@@ -380,8 +380,41 @@ def test_the_results_table_is_read_from_the_run_folders(seeded, tmp_path):
     cells = [c.strip() for c in row.split("|")[1:-1]]
     assert cells[1] == "2" and cells[2] == "0 of 0 scanned" and cells[3:5] == ["n/a"] * 2
     assert cells[5] == f"{statistics.median(rates):,.0f} [{min(rates):,.0f}–{max(rates):,.0f}]"
-    assert cells[6:] == ["n/a"] * 3
+    assert cells[6:] == ["n/a / n/a", "n/a / n/a", "n/a", "n/a"]  # no sweep: neither the core's nor training's
     assert out.with_suffix(".png").stat().st_size > 10_000
+
+
+def test_the_results_table_gives_the_gap_between_training_physics_and_the_core(tmp_path):
+    """A policy's two sweeps (the core's, and `--as-trained` on its training physics), as summary.json holds
+    them: the gap is the largest difference at Earth, Mars and the Moon (survival in points, the apex error as a
+    fraction of the command), and the row says whether it is within 5 points and 5 %."""
+    import json
+
+    results = _load_script("results")
+
+    def sweep(folder, rows):
+        folder.mkdir()
+        groups = [{"gravity": g, "survival": s, "apex_height": a, "tracking_error": 0.01} for g, s, a in rows]
+        (folder / "summary.json").write_text(json.dumps({"groups": groups}))
+
+    run = tmp_path / "run"
+    run.mkdir()
+    args = {"task": "hop", "algo": "ppo", "seed": 0, "eval_height": 0.10, "eval_speed": [0.0, 0.0]}
+    (run / "metrics.json").write_text(json.dumps({"args": args, "history": []}))
+    sweep(run / results.TRAINED, [(9.81, 1.0, 0.100), (3.71, 1.0, 0.102), (1.62, 1.0, 0.098), (0.5, 1.0, 0.1)])
+    sweep(run / results.SWEEP, [(9.81, 1.0, 0.101), (3.71, 0.875, 0.090), (1.62, 1.0, 0.099), (0.5, 0.0, None)])
+    found = results.gap(run / results.SWEEP, run / results.TRAINED, 0.10)
+    assert found["survival_gap"] == 0.125  # Mars; 0.5 m/s² is not compared
+    assert abs(found["apex_gap"] - 0.12) < 1e-12  # Mars: 0.090 m in the core, 0.102 in training, of 0.10
+    out = tmp_path / "results.md"
+    assert results.main([str(run), "--out", str(out)]) == 0
+    row = next(line for line in out.read_text().splitlines() if line.startswith("| hop × PPO"))
+    cells = [c.strip() for c in row.split("|")[1:-1]]
+    assert cells[6] == "100% / 0%"  # the worst gravity's survival: 0.5 m/s² in the core
+    assert cells[9] == "12%, 12%: **over**: the training physics differs"
+    sweep_core = run / results.SWEEP
+    (sweep_core / "summary.json").write_text((run / results.TRAINED / "summary.json").read_text())
+    assert results.gap(sweep_core, run / results.TRAINED, 0.10) == {"survival_gap": 0.0, "apex_gap": 0.0}
 
 def test_the_results_table_puts_each_tasks_registered_reference_beside_it(tmp_path):
     """results.py takes each task's reference from the registry: Raibert at the runs' evaluation command for the
