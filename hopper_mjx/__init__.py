@@ -9,9 +9,7 @@ Importing the package changes no JAX setting: the command-line entry points call
 both must be settled before MuJoCo is first imported (see `hopper_mjx.shell.startup`).
 """
 
-import importlib
-
-from hopper_mjx.shell import startup
+from hopper_mjx.shell import lazy, startup
 
 startup.prepare()
 
@@ -30,9 +28,4 @@ _PUBLIC = {
 __all__ = sorted(_PUBLIC)
 
 
-def __getattr__(name: str):
-    if name not in _PUBLIC:
-        raise AttributeError(f"module 'hopper_mjx' has no attribute {name!r}")
-    value = getattr(importlib.import_module(_PUBLIC[name]), name)
-    globals()[name] = value  # later lookups skip this function
-    return value
+__getattr__ = lazy.attributes(__name__, _PUBLIC, globals())

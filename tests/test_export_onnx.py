@@ -7,11 +7,10 @@ tested is the export of any such network, not what training reaches.
 """
 
 import functools
-import importlib.util
+import importlib
 import json
 import re
 import shutil
-from pathlib import Path
 
 import jax
 import jax.numpy as jnp
@@ -20,16 +19,7 @@ import pytest
 
 from hopper_mjx import envs
 
-
-def _load_script(name):
-    path = Path(__file__).resolve().parents[1] / "experiments" / f"{name}.py"
-    spec = importlib.util.spec_from_file_location(name, path)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
-export = _load_script("export_onnx")
+export = importlib.import_module("export_onnx")
 
 
 def _save_policy(out, mj_model, task: str, algo: str, key: int = 0):

@@ -5,9 +5,8 @@ The restored params are read back by running the same tiny training again from t
 a capture of Brax's step-0 params, so that run's compiled program is the one already compiled.
 """
 
-import importlib.util
+import importlib
 import os
-from pathlib import Path
 
 import jax
 import numpy as np
@@ -16,16 +15,7 @@ from test_tfevents import read_scalars
 
 from training import evaluation, learners
 
-
-def _load_script(name):
-    path = Path(__file__).resolve().parents[1] / "experiments" / f"{name}.py"
-    spec = importlib.util.spec_from_file_location(name, path)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
-train_script = _load_script("train")  # experiments/ is on pytest's path (pyproject.toml): its training package too
+train_script = importlib.import_module("train")  # experiments/ is on pytest's path (pyproject.toml)
 # 40 environment steps per PPO update (batch 4 x 2 minibatches x unroll 5): two updates, a checkpoint after each.
 TINY = ["--timesteps", "80", "--num-envs", "4", "--batch-size", "4", "--num-minibatches", "2",
         "--unroll-length", "5", "--updates-per-batch", "1", "--episode-length", "20", "--eval-every", "40",
@@ -364,7 +354,7 @@ def test_the_results_table_is_read_from_the_run_folders(seeded, tmp_path):
     import json
     import statistics
 
-    results = _load_script("results")
+    results = importlib.import_module("results")
     out = tmp_path / "results.md"
     assert results.main([str(seeded / "seeds"), "--out", str(out)]) == 0
     data = json.loads(out.with_suffix(".json").read_text())
@@ -390,7 +380,7 @@ def test_the_results_table_gives_the_gap_between_training_physics_and_the_core(t
     fraction of the command), and the row says whether it is within 5 points and 5 %."""
     import json
 
-    results = _load_script("results")
+    results = importlib.import_module("results")
 
     def sweep(folder, rows):
         folder.mkdir()
@@ -424,7 +414,7 @@ def test_the_results_table_puts_each_tasks_registered_reference_beside_it(tmp_pa
 
     from hopper_mjx import registry
 
-    results = _load_script("results")
+    results = importlib.import_module("results")
     runs = []
     for task in registry.TASKS:
         run = tmp_path / task
@@ -476,7 +466,7 @@ def test_a_damaged_history_is_refused_in_one_line(tmp_path, capsys):
 def test_the_robustness_table_gives_each_row_groups_median_and_range_over_its_seeds():
     """experiments/robustness.py's table from its sweeps' comparison.json groups: per gravity and column, the
     median [min-max] over a group's seeds of the survival and of the survivors' apex error (none: '–')."""
-    robustness = _load_script("robustness")
+    robustness = importlib.import_module("robustness")
     args = robustness.parser().parse_args(["--policies", "a=x", "--out", "o", "--values", "9.81,1.62"])
     found = {"raibert": ["raibert"], "a": ["policy:s0", "policy:s1", "policy:s2"]}
     row = lambda g, alive, err: {"gravity": g, "survival": alive, "apex_error": err}
@@ -501,7 +491,7 @@ def test_robustness_passes_a_refused_sweeps_one_line_on(tmp_path, monkeypatch, c
     A sweep that failed otherwise gets robustness.py's line naming its folder and exit code."""
     import subprocess
 
-    robustness = _load_script("robustness")
+    robustness = importlib.import_module("robustness")
     args = robustness.parser().parse_args(["--policies", "a=x", "--out", str(tmp_path / "o")])
     calls = []
     monkeypatch.setattr(robustness.subprocess, "run",

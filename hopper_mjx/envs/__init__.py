@@ -9,7 +9,7 @@ The names below load on first use, so that a tool reading a task's configuration
 does not import Brax's environments (about a second).
 """
 
-import importlib
+from hopper_mjx.shell import lazy
 
 _PUBLIC = {
     "MonopedConfig": "hopper_mjx.envs.task_config",
@@ -22,9 +22,4 @@ _PUBLIC = {
 __all__ = sorted(_PUBLIC)
 
 
-def __getattr__(name: str):
-    if name not in _PUBLIC:
-        raise AttributeError(f"module 'hopper_mjx.envs' has no attribute {name!r}")
-    value = getattr(importlib.import_module(_PUBLIC[name]), name)
-    globals()[name] = value
-    return value
+__getattr__ = lazy.attributes(__name__, _PUBLIC, globals())
