@@ -91,8 +91,14 @@ def train(args, physics=None) -> dict:
             if folder.exists() and not (folder / policy.ENV_CONFIG).exists():
                 shutil.rmtree(folder)  # an earlier run was stopped while saving it
             with files.partial(folder):  # complete once its task config is beside it (latest_checkpoint)
-                checkpoint.save(out / "checkpoints", step, params, network_config)
-                policy.write_env_config(folder, config)
+                try:
+                    checkpoint.save(out / "checkpoints", step, params, network_config)
+                    policy.write_env_config(folder, config)
+                except BaseException:  # a full disk: neither the checkpoint nor orbax's temporary folder stays
+                    shutil.rmtree(folder, ignore_errors=True)
+                    for tmp in folder.parent.glob(f"{folder.name}.orbax-checkpoint-tmp*"):
+                        shutil.rmtree(tmp, ignore_errors=True)
+                    raise
 
     out_of_time = args.minutes is not None and record["wall_time"] >= 60 * args.minutes
     if remaining > 0 and not out_of_time:

@@ -16,11 +16,13 @@
 - The cache is an optimisation, never a failure: a folder that cannot be created or
   written is one warning line and the run compiles without it; entries JAX cannot read
   (damaged, cut short) or write (a full disk) are compiled afresh, and JAX's own warning
-  for them (two lines each, one per program) becomes one line per process.
+  for them (two lines each, one per program) becomes one line per process; an entry whose
+  write failed is removed rather than left cut short for every later run to trip on.
 """
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import os
 import platform
@@ -81,6 +83,28 @@ def _cache_warnings_in_one_line() -> None:
     warnings.showwarning = showwarning
 
 
+def _no_cut_cache_entries() -> None:
+    """JAX writes a cache entry in place (jax/_src/lru_cache.py): one cut short by a full disk stayed there, and
+    every later run failed to read it (a warning each time) without ever rewriting it (`put` skips a key that
+    exists). A failed write now removes its entry."""
+    from jax._src import lru_cache
+
+    put = lru_cache.LRUCache.put
+    if getattr(put, "removes_a_cut_entry", False):
+        return
+
+    def put_or_remove(self, key, value):
+        try:
+            return put(self, key, value)
+        except BaseException:
+            with contextlib.suppress(OSError):
+                (self.path / f"{key}{lru_cache._CACHE_SUFFIX}").unlink()
+            raise
+
+    put_or_remove.removes_a_cut_entry = True
+    lru_cache.LRUCache.put = put_or_remove
+
+
 _configured: list = []  # set by the first `configure`: JAX takes the device count only before its first computation
 
 
@@ -105,5 +129,6 @@ def configure(*, devices: int | None = None, cache_dir: Path | str | None = CACH
         jax.config.update("jax_compilation_cache_dir", str(cpu_cache_dir(cache_dir)))
         jax.config.update("jax_persistent_cache_min_compile_time_secs", 1.0)
         _cache_warnings_in_one_line()
+        _no_cut_cache_entries()
     # gloo lets jax.distributed run collectives between CPU processes.
     jax.config.update("jax_cpu_collectives_implementation", "gloo")
