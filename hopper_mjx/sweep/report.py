@@ -23,6 +23,10 @@ RAIBERT_DELAY_LIMIT_MS = 2.0
 RAIBERT_DELAY_FIGURE = ("Raibert keeps every robot up at 0 ms, Earth and Mars at 2 ms (the Moon 31 %), 0-12 % at 4 ms "
                         "and none from 6 ms: its stance servo was tuned for prompt torques (docs/variation.md, 16 "
                         "robots per cell at Earth, Mars and Moon, 20 s)")
+# docs/control.md (`sweep gravity --controller balance --gravity 9.81,3.71,1.62 --num 64 --duration 10`): the LQR
+# stance keeps none of the sweep's kicked robots up; Raibert hopping in place at --height 0.05 keeps them all.
+BALANCE_FIGURE = ("balance, an LQR stance, keeps none of a sweep's kicked robots up (0 % at Earth, Mars and Moon, 64 "
+                  "per gravity, 10 s: docs/control.md); raibert --height 0.05 hops in place and keeps them all")
 REACH = 0.1  # m: a base this close to an obstacle's near edge has reached it (its foot lands ahead of it)
 UNITS = {"obstacle_height": "m", "roughness": "m, peak |height|"}  # a terrain sweep's value
 
@@ -126,6 +130,8 @@ def notes(spec: SweepSpec, inst: Instances, table: np.ndarray, columns: tuple[st
         span = f"{delays.min():g}" + (f"-{delays.max():g}" if delays.max() > delays.min() else "")
         out.append(f"note: {late.sum()} of the {fell.sum()} fallen robots ran {span} ms of action delay; "
                    f"{RAIBERT_DELAY_FIGURE}")
+    if spec.controller == "balance" and fell.any():
+        out.append(f"note: {fell.sum()} of {len(fell)} robots fell; {BALANCE_FIGURE}")
     band = obstacle_band(spec)
     missed = [g for g in groups if g.get("reached") == 0]
     if band is not None and missed:
@@ -240,7 +246,7 @@ def gravity_figure(spec: SweepSpec, groups: list[dict], series: list | None = No
     """The gravity sweep's figure (a matplotlib Figure; `write` saves it as gravity.png); `series`
     [(label, groups)] draws several controllers in one figure."""
     plt = _pyplot()
-    # The x axis ascends whatever order --values had.
+    # The x axis ascends whatever order --gravity had.
     series = [(name, sorted(rows_, key=lambda r: r["gravity"])) for name, rows_ in (series or [("measured", groups)])]
     # Hopping in place travels (almost) nowhere, so work / (m·g·distance) is empty or noise there;
     # the energy of one hop is meaningful either way.
