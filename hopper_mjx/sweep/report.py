@@ -314,7 +314,8 @@ def gains_figure(spec: SweepSpec, groups: list[dict], second=None, panels: int =
         ax.set_ylabel(param_label(spec.param))
         ax.set_title(label)
         for (r, c), v in np.ndenumerate(grid):
-            text = "-" if np.isnan(v) else f"{v:.0f} %" if scale == 100.0 else f"{v:.2f}"
+            empty = "none up" if at[values[r], gravity[c]].get("survival") == 0 else "-"  # why a cell has no figure
+            text = empty if np.isnan(v) else f"{v:.0f} %" if scale == 100.0 else f"{v:.2f}"
             ax.text(c, r, text, ha="center", va="center", fontsize=8,
                     color="k" if np.isnan(v) else _label_colour(im.cmap(im.norm(v))))
         fig.colorbar(im, ax=ax, label=label)
@@ -352,7 +353,8 @@ def terrain_figure(spec: SweepSpec, groups: list[dict]):
                  f"robots got (dotted)\napproach: {commanded}, {measured}", fontsize=10)
     band = obstacle_band(spec)
     if band is not None:  # the block and the way to it, not the whole ground
-        ax.set_xlim(-0.5, band[1] + 0.8)
+        made = _column(groups, "distance_made_good")
+        ax.set_xlim(-0.5, max(band[1] + 0.8, np.nanmax(made, initial=0.0) + 0.3))
         # A cell no replicate reached says so: its 0 % cleared is no measurement of the block.
         gravity, values = sorted(spec.gravity), sorted(spec.values)
         at = {(r[spec.param], r["gravity"]): r for r in groups}
