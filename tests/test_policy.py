@@ -322,3 +322,26 @@ def test_reading_a_policy_for_the_checks_leaves_jax_a_device_per_core(trained):
     assert done.returncode == 0, done.stderr[-2000:]
     devices, cores = done.stdout.split()
     assert devices == cores
+
+
+def test_as_trained_puts_the_sweep_on_the_policys_training_physics(trained):
+    """`sweep --as-trained`: the policy's recorded timestep and solver caps replace the core's in the sweep's
+    physics (and so in its model and its manifest); a controller that is no policy is refused in one line."""
+    import dataclasses
+
+    from hopper_mjx.envs import policy
+    from hopper_mjx.scenario import Physics
+    from hopper_mjx.sweep.__main__ import as_trained, main
+
+    folder, _ = trained
+    config = dataclasses.replace(policy.read(folder)[3])
+    physics = as_trained(Physics(), [f"policy:{folder}"])
+    assert physics.model_options == {"timestep": config.timestep, "iterations": config.solver_iterations,
+                                     "ls_iterations": config.ls_iterations}
+    m = physics.mj_model
+    assert (m.opt.timestep, m.opt.iterations, m.opt.ls_iterations) == (0.002, 2, 4)  # training's, not the core's
+    assert (Physics().mj_model.opt.timestep, Physics().mj_model.opt.iterations) == (0.001, 4)
+    with pytest.raises(ValueError, match="; raibert is not a policy:PATH$"):
+        as_trained(Physics(), ["raibert", f"policy:{folder}"])
+    assert main(["gravity", "--as-trained", "--num", "1", "--out", str(folder.parent / "no")]) == 2
+    assert not (folder.parent / "no").exists()

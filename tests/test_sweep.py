@@ -328,6 +328,12 @@ def test_a_sweep_says_why_its_robots_fell_past_the_delay_raibert_takes():
     assert "docs/variation.md" in said[0] and "none from 6 ms" in said[0]
     table, cols = _table(spec, inst, fell=inst.value < 2)
     assert report.notes(spec, inst, table, cols, report.group_summary(spec, inst, table, cols)) == []
+    # The LQR stance falls under a sweep's kicks wherever it runs (docs/control.md): said as well.
+    spec = _spec(controller="balance", num=2)
+    inst = expand(spec, 9)
+    table, cols = _table(spec, inst, fell=1)
+    said = report.notes(spec, inst, table, cols, report.group_summary(spec, inst, table, cols))
+    assert said == [f"note: 6 of 6 robots fell; {report.BALANCE_FIGURE}"] and "docs/control.md" in said[0]
 
 
 def test_an_obstacle_no_robot_reached_is_a_warning_with_the_duration_that_would():

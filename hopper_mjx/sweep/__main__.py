@@ -193,9 +193,10 @@ def as_trained(physics, controllers: list[str]):
     configs'; `envs.task_config.training_model`), which every one of them must share."""
     from hopper_mjx.envs import policy
 
-    if not all(c.startswith(registry.POLICY_PREFIX) for c in controllers):
-        raise ValueError(f"--as-trained runs policies on their training physics; {', '.join(controllers)} is not "
-                         f"all {registry.POLICY_PREFIX}PATH")
+    others = [c for c in controllers if not c.startswith(registry.POLICY_PREFIX)]
+    if others:
+        raise ValueError(f"--as-trained runs policies on their training physics; {', '.join(others)} is not a "
+                         f"{registry.POLICY_PREFIX}PATH")
     found = set()
     for name in controllers:
         config = policy.read(registry.policy_path(name))[3]  # JSON only

@@ -23,6 +23,10 @@ RAIBERT_DELAY_LIMIT_MS = 2.0
 RAIBERT_DELAY_FIGURE = ("Raibert keeps every robot up at 0 ms, Earth and Mars at 2 ms (the Moon 31 %), 0-12 % at 4 ms "
                         "and none from 6 ms: its stance servo was tuned for prompt torques (docs/variation.md, 16 "
                         "robots per cell at Earth, Mars and Moon, 20 s)")
+# docs/control.md (`sweep gravity --controller balance --gravity 9.81,3.71,1.62 --num 64 --duration 10`): the LQR
+# stance keeps none of the sweep's kicked robots up; Raibert hopping in place at --height 0.05 keeps them all.
+BALANCE_FIGURE = ("balance, an LQR stance, keeps none of a sweep's kicked robots up (0 % at Earth, Mars and Moon, 64 "
+                  "per gravity, 10 s: docs/control.md); raibert --height 0.05 hops in place and keeps them all")
 REACH = 0.1  # m: a base this close to an obstacle's near edge has reached it (its foot lands ahead of it)
 UNITS = {"obstacle_height": "m", "roughness": "m, peak |height|"}  # a terrain sweep's value
 
@@ -126,6 +130,8 @@ def notes(spec: SweepSpec, inst: Instances, table: np.ndarray, columns: tuple[st
         span = f"{delays.min():g}" + (f"-{delays.max():g}" if delays.max() > delays.min() else "")
         out.append(f"note: {late.sum()} of the {fell.sum()} fallen robots ran {span} ms of action delay; "
                    f"{RAIBERT_DELAY_FIGURE}")
+    if spec.controller == "balance" and fell.any():
+        out.append(f"note: {fell.sum()} of {len(fell)} robots fell; {BALANCE_FIGURE}")
     band = obstacle_band(spec)
     missed = [g for g in groups if g.get("reached") == 0]
     if band is not None and missed:
@@ -240,7 +246,7 @@ def gravity_figure(spec: SweepSpec, groups: list[dict], series: list | None = No
     """The gravity sweep's figure (a matplotlib Figure; `write` saves it as gravity.png); `series`
     [(label, groups)] draws several controllers in one figure."""
     plt = _pyplot()
-    # The x axis ascends whatever order --values had.
+    # The x axis ascends whatever order --gravity had.
     series = [(name, sorted(rows_, key=lambda r: r["gravity"])) for name, rows_ in (series or [("measured", groups)])]
     # Hopping in place travels (almost) nowhere, so work / (m·g·distance) is empty or noise there;
     # the energy of one hop is meaningful either way.
@@ -308,7 +314,8 @@ def gains_figure(spec: SweepSpec, groups: list[dict], second=None, panels: int =
         ax.set_ylabel(param_label(spec.param))
         ax.set_title(label)
         for (r, c), v in np.ndenumerate(grid):
-            text = "-" if np.isnan(v) else f"{v:.0f} %" if scale == 100.0 else f"{v:.2f}"
+            empty = "none up" if at[values[r], gravity[c]].get("survival") == 0 else "-"  # why a cell has no figure
+            text = empty if np.isnan(v) else f"{v:.0f} %" if scale == 100.0 else f"{v:.2f}"
             ax.text(c, r, text, ha="center", va="center", fontsize=8,
                     color="k" if np.isnan(v) else _label_colour(im.cmap(im.norm(v))))
         fig.colorbar(im, ax=ax, label=label)
@@ -346,7 +353,8 @@ def terrain_figure(spec: SweepSpec, groups: list[dict]):
                  f"robots got (dotted)\napproach: {commanded}, {measured}", fontsize=10)
     band = obstacle_band(spec)
     if band is not None:  # the block and the way to it, not the whole ground
-        ax.set_xlim(-0.5, band[1] + 0.8)
+        made = _column(groups, "distance_made_good")
+        ax.set_xlim(-0.5, max(band[1] + 0.8, np.nanmax(made, initial=0.0) + 0.3))
         # A cell no replicate reached says so: its 0 % cleared is no measurement of the block.
         gravity, values = sorted(spec.gravity), sorted(spec.values)
         at = {(r[spec.param], r["gravity"]): r for r in groups}
