@@ -262,12 +262,14 @@ CASES = [
                                                            "instance 0; it must be > 0 (and within ±3.4e+38"),
     ("simulate", ["--randomize", "body_mas=scale(0.9,1.1)", *SIM], "--randomize: unknown parameter 'body_mas'"),
     ("simulate", ["--randomize", "foot_friction=uniform(nan,1)", *SIM], "uniform(nan,1) has a non-finite bound"),
+    ("simulate", ["--randomize", "body_mass=scale(1e30,1e30)", *SIM],
+     "--randomize: body_mass: scale(1e+30,1e+30): a factor outside 0.01..100 of the URDF's value builds no robot"),
     ("simulate", ["--push", "1,1e300", *SIM], "--push speed must be finite and >= 0 and <= 340, got 1e+300"),
     ("simulate", ["--push", "nan,0.3", *SIM], "--push interval must be finite and > 0, got nan"),
     ("simulate", ["--action-delay", "nan", *SIM], "--action-delay must be finite and >= 0, got nan"),
     # sweep values the robot cannot stand at
-    ("sweep", ["gravity", "--values", "9.81,1e6", "--out", "s"],
-     "--values 1e+06 m/s²: the robot cannot stand there; its kfe_joint motor (80 N·m) holds the standing pose"),
+    ("sweep", ["gravity", "--gravity", "9.81,1e6", "--out", "s"],
+     "--gravity 1e+06 m/s²: the robot cannot stand there; its kfe_joint motor (80 N·m) holds the standing pose"),
     ("sweep", ["param", "--param", "base_mass", "--values", "5,50", "--out", "s"],
      "--values base_mass=50: 9.81 m/s²: the robot cannot stand there"),
     # outputs of a type the tool cannot write

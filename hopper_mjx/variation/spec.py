@@ -35,6 +35,11 @@ _RANGE = re.compile(rf"^({_NUMBER})\s*\.\.\s*({_NUMBER})$", re.IGNORECASE)
 NAMES = {**registry.PARAMETERS, **registry.CONTROL_PARAMETERS}
 
 
+# scale(a,b)'s factors: beyond these a drawn robot is no longer this robot (a mass 100 times the URDF's leaves its
+# motors able to hold it standing only below 0.81 m/s², `model.robot.max_standing_gravity`).
+MIN_SCALE, MAX_SCALE = 0.01, 100.0
+
+
 class Dist(NamedTuple):
     """One distribution: `kind` (a KINDS name) and its two numbers (a fixed value uses `a` only)."""
 
@@ -55,6 +60,10 @@ class Dist(NamedTuple):
             raise ValueError(f"{self}: bounds reversed ({self.a:g} > {self.b:g})")
         if self.kind == "loguniform" and self.a <= 0:
             raise ValueError(f"{self}: loguniform needs bounds > 0")
+        if self.kind == "scale" and not (MIN_SCALE <= self.a and self.b <= MAX_SCALE):
+            raise ValueError(f"{self}: a factor outside {MIN_SCALE:g}..{MAX_SCALE:g} of the URDF's value builds no "
+                             "robot of this kind (at 100 times its mass the motors hold it standing only below "
+                             "0.81 m/s²); give factors within it, or a value with uniform(a,b)")
 
     def draw(self, rng: np.random.Generator, nominal: np.ndarray, n: int) -> np.ndarray:
         """(n, *nominal.shape) values: nominal broadcast over n instances, each element drawn independently."""
