@@ -129,7 +129,7 @@ def main(argv=None) -> int:
 
     try:
         cli.check_range("--rate", args.rate, low=0, open_low=True)
-        cli.check_writable("--out", args.out, suffixes=(".npz",))
+        cli.check_writable("--out", args.out, suffixes=(".npz", ""))  # a bare name: NumPy's file as named
         batch = cli.check_batch(args)
         cli.check_rates("--rate", sensor_config(args), batch, args.duration)
         with foxglove.listening(args, live.spread(len(batch.gravity), live.SHOWN)) as stream:

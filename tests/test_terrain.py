@@ -195,14 +195,14 @@ def test_obstacles_are_the_bands_to_get_over():
 
 
 def test_an_instances_own_ground_goes_into_mjxs_height_field_as_mujoco_reads_it():
-    """`sim.on_ground` for MJX: the data it writes, put back into the compiled model, is the instance's
-    heights as MuJoCo C's own hfield reads them (rows along +y, in the model's elevation range)."""
+    """The MJX engine's `on_ground` (through `terrain.to_model_data`): the data it writes, put back into the
+    compiled model, is the instance's heights as MuJoCo C's own hfield reads them (rows along +y, in the model's
+    elevation range)."""
     from hopper_mjx.engine.mjx import MjxEngine
-    from hopper_mjx.sim import on_ground
 
     m = model.load(terrain=terrain.parse("rough:amp=0.02,seed=1,size=1x0.6,cell=0.1").terrain())
     other = terrain.parse("obstacle:height=0.05,x=0.2,size=1x0.6,cell=0.1").terrain().heights  # another ground
     engine = MjxEngine(m)
-    data = np.asarray(on_ground(engine, m, engine.model, other).hfield_data)
+    data = np.asarray(engine.on_ground(engine.model, other).hfield_data)
     m.hfield_data[:] = data
     np.testing.assert_allclose(terrain.from_model(m).heights, other, atol=1e-7)

@@ -31,6 +31,8 @@ ELSEWHERE = {
                          "render --video headless, end to end, and checks its frames",
     "hopper_mjx.ros.record": "tests/test_record.py records a batch into ROS 1 and ROS 2 bags and reads them back",
     "hopper_mjx.perf.bench": "tests/test_bench.py runs the bench's main at test sizes",
+    "experiments/export_onnx.py": "needs a trained policy: tests/test_export_onnx.py exports a PPO and a SAC policy "
+                                  "and checks ONNX Runtime's actions against the core's on rollouts",
 }
 # The tour's trained policy does not exist in a test (tests/test_policy.py compares one it trains): the comparison
 # runs Raibert alone, through the same path (a folder per controller, one table). `balance` would fall: docs/control.md.

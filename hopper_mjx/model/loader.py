@@ -272,6 +272,16 @@ def _add_floor(spec: mujoco.MjSpec, terrain: terrains.Terrain | None) -> None:
         terrains.to_spec(spec, floor, terrain)
 
 
+def _check_options(timestep, friction, iterations, ls_iterations) -> None:
+    if not (isinstance(timestep, (int, float)) and math.isfinite(timestep) and 0 < timestep <= MAX_TIMESTEP):
+        raise ValueError(f"timestep must be in (0, {MAX_TIMESTEP:g}] s, got {timestep!r}")
+    if len(friction) != 2 or not all(math.isfinite(mu) and mu >= 0 for mu in friction):
+        raise ValueError(f"friction must be two finite coefficients >= 0, got {friction!r}")
+    for name, cap in (("iterations", iterations), ("ls_iterations", ls_iterations)):
+        if not (isinstance(cap, int) and not isinstance(cap, bool) and 1 <= cap <= 1000):
+            raise ValueError(f"{name} must be a whole number in 1..1000, got {cap!r}")
+
+
 def build_spec(urdf: str | os.PathLike | None = None, *, timestep: float = DEFAULT_TIMESTEP,
                friction: tuple[float, float] = (FOOT_FRICTION, FOOT_FRICTION),
                terrain: terrains.Terrain | None = None, iterations: int = SOLVER_ITERATIONS,
@@ -282,13 +292,7 @@ def build_spec(urdf: str | os.PathLike | None = None, *, timestep: float = DEFAU
     None keeps the plane. `iterations`, `ls_iterations`: the constraint solver's caps (a policy's training
     physics asks for fewer, `envs.task_config.training_model`)."""
     path = Path(urdf) if urdf is not None else DEFAULT_URDF
-    if not (isinstance(timestep, (int, float)) and math.isfinite(timestep) and 0 < timestep <= MAX_TIMESTEP):
-        raise ValueError(f"timestep must be in (0, {MAX_TIMESTEP:g}] s, got {timestep!r}")
-    if len(friction) != 2 or not all(math.isfinite(mu) and mu >= 0 for mu in friction):
-        raise ValueError(f"friction must be two finite coefficients >= 0, got {friction!r}")
-    for name, cap in (("iterations", iterations), ("ls_iterations", ls_iterations)):
-        if not (isinstance(cap, int) and not isinstance(cap, bool) and 1 <= cap <= 1000):
-            raise ValueError(f"{name} must be a whole number in 1..1000, got {cap!r}")
+    _check_options(timestep, friction, iterations, ls_iterations)
     leg = describe(read_text(path, "URDF file", URDFError), str(path))
     try:
         spec = mujoco.MjSpec.from_file(str(path))

@@ -233,8 +233,9 @@ def check_writable(name: str, path: str | Path, *, folder: bool = False, may_exi
         wanted, found = ("folder", "file") if folder else ("file", "folder")
         raise ValueError(f"{name} {path} is a {found}; give a {wanted}")
     if suffixes and not is_device(path) and path.suffix.lower() not in suffixes:
-        raise ValueError(f"{name} {path}: this tool writes {' or '.join(suffixes)} files; give a name ending in "
-                         f"{suffixes[0]}")
+        shown = [s for s in suffixes if s]  # "": a name without a suffix is written as given
+        raise ValueError(f"{name} {path}: this tool writes {' or '.join(shown)} files; give a name ending in "
+                         f"{shown[0]}")
     if not os.access(parent, os.W_OK):
         raise ValueError(f"{name} {path}: cannot write in {parent}")
     return path
