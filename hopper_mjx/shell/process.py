@@ -39,7 +39,7 @@ from pathlib import Path
 from hopper_mjx.shell import files
 
 STOP_CODES = {signal.SIGINT: 130, signal.SIGTERM: 143}  # 128 + the signal's number, as a shell reports it
-PACKAGE_ROOT = Path(__file__).resolve().parents[1]
+PACKAGE_ROOT = Path(__file__).resolve().parents[2]  # the checkout: hopper_mjx/ and experiments/
 # An XLA log line that is not an alarm: a tuning preference taken for a missing CPU feature, and PjRt's note.
 FALSE_ALARMS = re.compile(r"cpu_aot_loader\.cc.*Target machine feature \+(prefer|tuning|fast|slow|false-deps)-"
                           r"|pjrt_executable\.cc.*Assume version compatibility")
