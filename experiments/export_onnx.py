@@ -71,8 +71,9 @@ def check(args):
     """(policy path, algorithm, network config, task config, physics of the check's rollouts), or ValueError
     naming the first bad argument. Reads JSON and compiles the MuJoCo model only."""
     from hopper_mjx.envs import policy
-    from hopper_mjx.envs.task_config import decimation, same_robot
+    from hopper_mjx.envs.task_config import decimation
     from hopper_mjx.model.layout import Layout
+    from hopper_mjx.model.robot import same_robot
 
     try:  # the `export` extra's packages
         import onnx  # noqa: F401

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from hopper_mjx import registry
-from hopper_mjx.envs.task_config import same_robot
+from hopper_mjx.model.robot import same_robot
 from hopper_mjx.scenario import Physics, Scenario
 from hopper_mjx.shell import budget, jaxsetup
 from hopper_mjx.shell.checks import (  # noqa: F401  re-exported: the tools use them beside the options

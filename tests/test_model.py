@@ -239,8 +239,7 @@ def test_reversed_transmissions_clip_each_joint_at_its_own_limit(tmp_path):
 def test_the_robot_fingerprint_tells_robots_apart_and_not_worlds():
     """A policy records the robot it learnt on: another timestep or floor is the same robot, a longer
     shank is another one, and running a policy on it is refused in one line."""
-    from hopper_mjx.envs.task_config import same_robot
-    from hopper_mjx.model.robot import fingerprint
+    from hopper_mjx.model.robot import fingerprint, same_robot
 
     seed, other = model.load(), model.load("tests/data/long_shin_hopper.urdf")
     assert fingerprint(seed) == fingerprint(model.load(timestep=0.002, friction=(0.5, 0.5)))

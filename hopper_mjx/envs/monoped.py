@@ -55,7 +55,7 @@ from brax.envs.base import Env, State
 from hopper_mjx import engine as engines
 from hopper_mjx import model as hopper_model
 from hopper_mjx.control.base import PDScale, Servo
-from hopper_mjx.envs.task_config import MonopedConfig, decimation, same_robot, training_model
+from hopper_mjx.envs.task_config import MonopedConfig, decimation, training_model
 from hopper_mjx.envs.terms import (
     DROPPING,
     FLIGHT_INFO,
@@ -149,7 +149,7 @@ class MonopedEnv(Env):
         ground = config.ground
         if mj_model is None:  # a config names no URDF: the shipped robot, held to the config's fingerprint below
             mj_model = hopper_model.load(hopper_model.DEFAULT_URDF, terrain=ground.terrain())
-        config = dataclasses.replace(config, robot=same_robot(config.robot, mj_model, "this task's config"))
+        config = dataclasses.replace(config, robot=robot.same_robot(config.robot, mj_model, "this task's config"))
         self.terrain = same_ground(ground, mj_model, "this task's config")
         trained = training_model(mj_model, config)
         self.config = config

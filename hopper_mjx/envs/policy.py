@@ -35,11 +35,11 @@ from hopper_mjx import registry, terrain
 from hopper_mjx.control.base import Commands, Controller, PDScale, Servo, joint_state
 from hopper_mjx.engine import batch_any
 from hopper_mjx.envs import tasks
-from hopper_mjx.envs.task_config import MonopedConfig, decimation, same_robot
+from hopper_mjx.envs.task_config import MonopedConfig, decimation
 from hopper_mjx.envs.terms import joint_targets, observe, pd_torque
 from hopper_mjx.hardware.signals import Observation
 from hopper_mjx.model.layout import Layout
-from hopper_mjx.model.robot import Robot, standing_height, standing_qpos
+from hopper_mjx.model.robot import Robot, same_robot, standing_height, standing_qpos
 
 ENV_CONFIG = "hopper_env.json"
 # Brax writes one of these beside the params: which agent's networks to rebuild.

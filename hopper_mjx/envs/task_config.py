@@ -14,7 +14,6 @@ from hopper_mjx import engine as engines
 from hopper_mjx import registry
 from hopper_mjx.hardware.pushes import Pushes
 from hopper_mjx.metrics import hops
-from hopper_mjx.model import robot
 from hopper_mjx.model.layout import Layout
 from hopper_mjx.variation.spec import Spec
 
@@ -188,15 +187,6 @@ def _kind(default) -> str:
     if isinstance(default, (int, float, str)):
         return f"a {type(default).__name__}"
     return f"{2 if default is None else len(default)} comma-separated numbers"
-
-
-def same_robot(recorded: str, mj_model, what: str) -> str:
-    """The fingerprint of `mj_model`'s robot, refusing one other than `recorded` (when recorded)."""
-    found = robot.fingerprint(mj_model)
-    if recorded and recorded != found:
-        raise ValueError(f"{what} is for another robot (fingerprint {recorded}) than the one given ({found}): "
-                         "give the --urdf it was trained with")
-    return found
 
 
 def steps_per_action(rate: float, timestep: float) -> int | None:

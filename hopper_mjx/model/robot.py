@@ -190,3 +190,12 @@ class Robot:
     def stance_joints(self) -> np.ndarray:
         """(3,) rad, haa, hfe, kfe of the stance."""
         return np.asarray(self.stance_qpos)[list(self.layout.joint_qpos)]
+
+
+def same_robot(recorded: str, mj_model, what: str) -> str:
+    """The fingerprint of `mj_model`'s robot, refusing one other than `recorded` (when recorded)."""
+    found = fingerprint(mj_model)
+    if recorded and recorded != found:
+        raise ValueError(f"{what} is for another robot (fingerprint {recorded}) than the one given ({found}): "
+                         "give the --urdf it was trained with")
+    return found
