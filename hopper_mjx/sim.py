@@ -131,6 +131,9 @@ class Sim:
             jnp.asarray(self.terrain.heights, jnp.float32), NamedSharding(self.mesh, PartitionSpec()))
         self.chunk = chunk
         self._compiled = {}
+        self._starts = {}  # (controller, shared params) -> the jitted start of `reset`
+        # Padded and laid over the devices in one program (device_put compiled one per leaf, in every process).
+        self._lay_out = jax.jit(_padded, static_argnums=1, out_shardings=NamedSharding(self.mesh, PartitionSpec(AXIS)))
         self.limp = zero_torque(self.layout)  # the default controller, one object so one compile
 
     # -- state ----------------------------------------------------------------
@@ -171,12 +174,10 @@ class Sim:
         qvel = np.broadcast_to(np.asarray(qvel, dtype=np.float32), (n, self.layout.nv))
         if not (np.isfinite(qpos).all() and np.isfinite(qvel).all()):
             raise ValueError("initial qpos/qvel must be finite")
-        data = jax.vmap(self.engine.make_data)(jnp.asarray(qpos), jnp.asarray(qvel))
         if not isinstance(key, jax.Array):
             key = jax.random.PRNGKey(key)
         controller = controller or self.limp
-        obs = self._first_observation(data, ground)
-        cstate = jax.vmap(controller.init, in_axes=(0, None if params is None else 0))(obs, params)
+        data, obs, cstate = self._start(controller, params is None)(qpos, qvel, ground, params)
         if motor is None and not self.actuation.passthrough:
             motor = self.actuation.motor(n, delay_steps=self.delay_steps)
         sensing = dict(sensing or {})
@@ -208,6 +209,19 @@ class Sim:
     def per_instance(self, controls: dict) -> dict:
         """`reset`'s motor= and sensing= for each instance's drawn control parameters (`per_instance`)."""
         return per_instance(controls, self.actuation, self.sensing, self.layout.timestep, self.delay_steps)
+
+    def _start(self, controller: Controller, shared_params: bool):
+        """The initial data, first observation and controller state from (qpos, qvel, ground, params): one
+        program per controller (run eagerly, they were some 30 small programs, each compiled in every process)."""
+        key = (controller, shared_params)
+        if key not in self._starts:
+            def start(qpos, qvel, ground, params):
+                data = jax.vmap(self.engine.make_data)(qpos, qvel)
+                obs = self._first_observation(data, ground)
+                return data, obs, jax.vmap(controller.init, in_axes=(0, None if shared_params else 0))(obs, params)
+
+            self._starts[key] = jax.jit(start)
+        return self._starts[key]
 
     def _first_observation(self, data, ground):
         """What each controller's `init` reads: the observation at the start, on the instance's ground."""
@@ -269,7 +283,7 @@ class Sim:
         chunk = min(self.chunk, per_device)
         padded = -(-per_device // chunk) * chunk * len(self.devices)
         fn = self._compiled_rollout(controller, steps, tick, periods, sensors, chunk)
-        padded_state = jax.device_put(_pad(state, padded), NamedSharding(self.mesh, PartitionSpec(AXIS)))
+        padded_state = self._lay_out(state, padded)
         final, traj = fn(self.model, self.heights, padded_state, controller.weights)
         if n < padded:  # one program for every leaf (eagerly, each leaf's slice would compile its own)
             final, traj = _head((final, traj), n)
@@ -373,13 +387,8 @@ def _head(tree, n: int):
     return jax.tree_util.tree_map(lambda x: x[:n], tree)
 
 
-def _pad(state: State, size: int) -> State:
-    """The state padded to `size` instances with copies of the first (one program for every leaf)."""
-    return state if state.gravity.shape[0] == size else _padded(state, size)
-
-
-@functools.partial(jax.jit, static_argnums=1)
 def _padded(state: State, size: int) -> State:
+    """The state padded to `size` instances with copies of the first."""
     n = state.gravity.shape[0]
     return jax.tree_util.tree_map(lambda x: jnp.concatenate([x, jnp.broadcast_to(x[:1], (size - n,) + x.shape[1:])]),
                                   state)

@@ -473,7 +473,7 @@ def raibert(robot: Robot, config: RaibertConfig | None = None) -> Controller:
     """
     layout = robot.layout
     mass, dt = layout.total_mass, layout.timestep
-    urdf_inertia = inertia_facts(robot.leg)
+    urdf_inertia = jax.jit(inertia_facts)(robot.leg)  # one program, not some 80 small eager ones
     defaults = jax.tree_util.tree_map(lambda v: v[0], raibert_params(1, height=DEFAULT_HEIGHT, config=config))
 
     def act(s: RaibertState, obs: Observation, gravity):

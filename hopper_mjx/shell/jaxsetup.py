@@ -127,7 +127,7 @@ def configure(*, devices: int | None = None, cache_dir: Path | str | None = CACH
               "HOPPER_MJX_CACHE to a writable folder)", file=sys.stderr)
     elif cache_dir is not None:
         jax.config.update("jax_compilation_cache_dir", str(cpu_cache_dir(cache_dir)))
-        jax.config.update("jax_persistent_cache_min_compile_time_secs", 1.0)
+        jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
         _cache_warnings_in_one_line()
         _no_cut_cache_entries()
     # gloo lets jax.distributed run collectives between CPU processes.
