@@ -22,6 +22,7 @@ import sys
 import time
 from dataclasses import dataclass, field, fields
 from functools import cached_property
+from pathlib import Path
 from typing import Any, NamedTuple
 
 import numpy as np
@@ -108,6 +109,43 @@ class Physics:
         """The fields as a run's manifest or config records them (the ground and the variation as their specs)."""
         record = {f.name: getattr(self, f.name) for f in fields(self)}
         return record | {"ground": str(self.ground), "variation": str(self.variation) if self.variation else None}
+
+    @classmethod
+    def from_json(cls, record: dict) -> Physics:
+        """The physics of a `to_json` record (a sweep's manifest); a field the record lacks, an older run's: its
+        default. Other keys beside the fields (a manifest's grid) are left alone."""
+        from hopper_mjx import terrain
+
+        known = {f.name: record[f.name] for f in fields(cls) if f.name in record}
+        known["ground"] = terrain.parse(known.get("ground") or "flat")
+        known["variation"] = Spec.parse(known["variation"]) if known.get("variation") else None
+        known["push"] = tuple(known["push"]) if known.get("push") else None
+        known["model_options"] = {k: tuple(v) if isinstance(v, list) else v  # JSON's lists were tuples
+                                  for k, v in known.get("model_options", {}).items()}
+        return cls(**known)
+
+    def described(self) -> dict[str, str]:
+        """This physics in words, one phrase per field (a plot's subtitle): the motors, delay, pushes, robot and
+        ground always, so that two runs never look alike; the URDF, model options and engine where not the
+        defaults."""
+        from hopper_mjx.model import loader
+
+        words = {"motor": f"{self.motor} motors",
+                 "action_delay": f"action delay {self.action_delay * 1e3:g} ms" if self.action_delay else "no delay",
+                 "push": f"pushes of {self.push[1]:g} m/s every {self.push[0]:g} s" if self.push else "no pushes",
+                 "variation": f"randomised {self.variation}" if self.variation else "the URDF's robot",
+                 "ground": "flat ground" if self.ground.is_flat else f"terrain {self.ground}"}
+        if self.urdf:
+            words["urdf"] = f"URDF {Path(self.urdf).name}"
+        defaults = {"timestep": loader.DEFAULT_TIMESTEP, "friction": (loader.FOOT_FRICTION,) * 2,
+                    "iterations": loader.SOLVER_ITERATIONS, "ls_iterations": loader.SOLVER_ITERATIONS}
+        changed = [f"timestep {v * 1e3:g} ms" if k == "timestep" else f"{k.replace('_', ' ')} {v}"
+                   for k, v in self.model_options.items() if v != defaults.get(k)]  # a world's, or --as-trained's
+        if changed:
+            words["model_options"] = ", ".join(changed)
+        if self.engine != registry.DEFAULT_ENGINE:
+            words["engine"] = f"engine {self.engine}"
+        return words
 
     def flags(self) -> list[str]:
         """The command-line options that give this physics but its engine (`cli.add_physics_options`'),

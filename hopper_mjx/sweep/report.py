@@ -210,23 +210,18 @@ def save(fig, path: Path) -> None:
 
 
 def physics_label(spec: SweepSpec) -> str:
-    """The run's command (apex rise, speed) and physics in words (a plot's subtitle): the motors, delay, pushes,
-    robot and ground always, and any other setting that differs from a sweep's defaults, so that two different
-    experiments never look alike. What the sweep varies is left to its axis."""
-    ph = spec.physics
-    parts = [f"command: apex rise {spec.height:g} m, speed {spec.speed[0]:g},{spec.speed[1]:g} m/s",
-             f"{ph.motor} motors"]
-    if spec.param != "action_delay":
-        parts.append(f"action delay {ph.action_delay * 1e3:g} ms" if ph.action_delay else "no delay")
-    parts.append(f"pushes of {ph.push[1]:g} m/s every {ph.push[0]:g} s" if ph.push else "no pushes")
-    robot = f"randomised {ph.variation}" if ph.variation else "the URDF's robot"
-    parts.append(robot + (f" but its {spec.param}" if spec.sweeps_robot and spec.param != "action_delay" else ""))
-    if not spec.grounds:  # a terrain sweep's ground is its axis
-        parts.append("flat ground" if ph.ground.is_flat else f"terrain {ph.ground}")
-    parts += [f"URDF {Path(ph.urdf).name}"] if ph.urdf else []
-    parts += [f"engine {ph.engine}"] if ph.engine != registry.DEFAULT_ENGINE else []
-    parts += [f"kick std {spec.kick:g}"] if spec.kick != KICK else []
-    return "; ".join(parts)
+    """The run's command (apex rise, speed) and physics in words (a plot's subtitle): `Physics.described`, and the
+    kick where not the default, so that two different experiments never look alike. What the sweep varies is left
+    to its axis."""
+    words = spec.physics.described()
+    if spec.param == "action_delay":
+        del words["action_delay"]
+    elif spec.sweeps_robot:
+        words["variation"] += f" but its {spec.param}"
+    if spec.grounds:  # a terrain sweep's ground is its axis
+        del words["ground"]
+    return "; ".join([f"command: apex rise {spec.height:g} m, speed {spec.speed[0]:g},{spec.speed[1]:g} m/s",
+                      *words.values()] + ([f"kick std {spec.kick:g}"] if spec.kick != KICK else []))
 
 
 def param_label(name: str) -> str:
