@@ -69,12 +69,12 @@ def figure(signals: list[tuple[str, dict]]):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    rows = (
-        ("imu_t", "gyro", "IMU angular velocity\n(body) [rad/s]"),
-        ("imu_t", "accel", "IMU specific force\n(body) [m/s²]"),
-        ("odom_t", "pos", "odometry position\n(world) [m]"),
-        ("odom_t", "linvel", "odometry velocity\n(world) [m/s]"),
-        ("contact_t", "force", "contact force\nfloor on foot [N]"),
+    rows = (  # the frame each vector is in, and its unit in parentheses (as every plot here gives it)
+        ("imu_t", "gyro", "IMU angular velocity,\nbody frame (rad/s)"),
+        ("imu_t", "accel", "IMU specific force,\nbody frame (m/s²)"),
+        ("odom_t", "pos", "odometry position,\nworld frame (m)"),
+        ("odom_t", "linvel", "odometry velocity,\nworld frame (m/s)"),
+        ("contact_t", "force", "contact force of the\nfloor on the foot (N)"),
     )
     fig, axes = plt.subplots(len(rows), len(signals), sharex=True, squeeze=False,
                              figsize=(4.2 * len(signals) + 1.2, 9.0))
@@ -88,7 +88,7 @@ def figure(signals: list[tuple[str, dict]]):
             if col == 0:
                 ax.set_ylabel(label, fontsize=9)
         axes[0, col].set_title(title, fontsize=10)
-        axes[-1, col].set_xlabel("simulation time [s]")
+        axes[-1, col].set_xlabel("simulation time (s)")
     axes[0, 0].legend(loc="upper right", fontsize=8, ncol=3)
     fig.text(0.99, 0.005, "grey: foot in contact", ha="right", va="bottom", fontsize=8, color="0.4")
     fig.tight_layout()
