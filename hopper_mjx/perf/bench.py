@@ -250,6 +250,7 @@ def run(num: int, steps: int, *, controller: str = "hold", chunk: int = 256, rep
         "steps": steps,
         "controller": controller,
         "engine": sim.engine.name,
+        "urdf": physics.urdf,
         "terrain": str(physics.ground),
         "randomize": str(physics.variation) if physics.variation else None,
         "native_controller": "none" if controller == "none" else "hold",
@@ -338,13 +339,18 @@ def markdown_table(records: list[dict]) -> str:
     return "\n".join(lines)
 
 
-def plot_scaling(records: list[dict], path: str) -> None:
+def scaling_figure(records: list[dict]):
+    """The --scaling records' figure (a matplotlib Figure): each side's steps/s and their ratio against N, one
+    colour per engine; its subtitle the physics the records ran (no error bars: each point is a best run)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, (rate, ratio) = plt.subplots(1, 2, figsize=(10, 4))
+    from hopper_mjx import terrain
+    from hopper_mjx.variation.spec import Spec
+
+    fig, (rate, ratio) = plt.subplots(1, 2, figsize=(10, 4.4))
     for k, engine in enumerate(dict.fromkeys(r.get("engine", "mjx") for r in records)):
         runs = [r for r in records if r.get("engine", "mjx") == engine]
         nums, color = [r["num"] for r in runs], f"C{k}"
@@ -353,17 +359,29 @@ def plot_scaling(records: list[dict], path: str) -> None:
         rate.loglog(nums, [r["native_steps_per_s"] for r in runs], "s--", color=color, alpha=0.6,
                     label=f"native mujoco.rollout, {runs[0]['native_threads']} threads, beside {engine}")
         ratio.semilogx(nums, [r["ratio"] for r in runs], "o-", color=color, label=engine)
-    rate.set_xlabel("instances N")
-    rate.set_ylabel("steps/s")
+    rate.set_xlabel("batch size N (instances)")
+    rate.set_ylabel("N × steps / wall time (steps/s)")
     rate.legend(fontsize=8)
     rate.grid(True, which="both", alpha=0.3)
+    ratio.axhline(1.0, color="gray", linestyle="--", label="as fast as native")
     ratio.legend()
-    ratio.axhline(1.0, color="gray", linestyle="--")
-    ratio.set_xlabel("instances N")
-    ratio.set_ylabel("core / native")
+    ratio.set_xlabel("batch size N (instances)")
+    ratio.set_ylabel("core / native steps/s (1)")
     ratio.grid(True, which="both", alpha=0.3)
-    fig.suptitle(f"monoped, {records[0]['steps']} steps, controller {records[0]['controller']}")
+    first = records[0]
+    physics = Physics(urdf=first.get("urdf"), ground=terrain.parse(first.get("terrain", "flat")),
+                      variation=Spec.parse(first["randomize"]) if first.get("randomize") else None,
+                      model_options={"timestep": first.get("timestep", 1e-3)}).described()  # engines: the legend
+    fig.suptitle(f"monoped, {first['steps']} steps per instance, controller {first['controller']}; each point the "
+                 f"best of {len(first['core_runs_s'])} timed runs\n{'; '.join(physics.values())}", fontsize=10)
     fig.tight_layout()
+    return fig
+
+
+def plot_scaling(records: list[dict], path: str) -> None:
+    import matplotlib.pyplot as plt
+
+    fig = scaling_figure(records)
     atomic_write(path, lambda f: fig.savefig(f, dpi=100, format=Path(path).suffix[1:] or None))
     plt.close(fig)
 
