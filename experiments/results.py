@@ -139,7 +139,7 @@ def run_record(run: Path, do_sweep: bool, num: int, duration: float) -> dict:
             "curve": [(r["wall_time"] / 60, r["eval/episode_reward"]) for r in record["history"]
                       if "eval/episode_reward" in r],
             **sweep_measures(run / SWEEP, height), **trained, **gap(run / SWEEP, run / TRAINED, height),
-            "height": height, "speed": list(speed)}
+            "height": height, "speed": list(speed), "physics": list(physics_of(args).described().values())}
 
 
 def spread(values, fmt: str) -> str:
@@ -193,25 +193,49 @@ def gap_cell(rows: list[dict]) -> str:
     return f"{worst['survival_gap']:.0%}, {apex}: " + ("within" if within else "**over**: the training physics differs")
 
 
-def plot(records: list[dict], path: Path) -> None:
+def physics_of(args: dict):
+    """The `Physics` a run trained on, from its recorded options (a run older than an option: its default)."""
+    from hopper_mjx import terrain
+    from hopper_mjx.scenario import Physics
+    from hopper_mjx.variation.spec import Spec
+
+    return Physics(urdf=args.get("urdf"), ground=terrain.parse(args.get("terrain") or "flat"),
+                   variation=Spec.parse(args["randomize"]) if args.get("randomize") else None,
+                   engine=args.get("engine", registry.DEFAULT_ENGINE), motor=args.get("motor", registry.DEFAULT_MOTOR),
+                   action_delay=args.get("action_delay", 0.0) / 1e3,
+                   push=tuple(args["push"]) if args.get("push") else None)
+
+
+def figure(records: list[dict]):
+    """Every seed's evaluation reward against training minutes (a matplotlib Figure), a colour per task x
+    algorithm; the physics every run shared in the subtitle, a group's own in its legend entry."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, ax = plt.subplots(figsize=(7, 4))
+    fig, ax = plt.subplots(figsize=(7, 4.2))
     groups = sorted({(r["task"], r["algo"]) for r in records})
+    shared = [w for w in records[0]["physics"] if all(w in r["physics"] for r in records)]
     for colour, group in zip(plt.rcParams["axes.prop_cycle"].by_key()["color"] * 4, groups):
         for i, r in enumerate(x for x in records if (x["task"], x["algo"]) == group):
             t, reward = zip(*r["curve"]) if r["curve"] else ((), ())
+            own = "".join(f"; {w}" for w in r["physics"] if w not in shared)
             ax.plot(t, reward, "o-", ms=3, color=colour, alpha=0.8,
-                    label=f"{group[0]} × {group[1].upper()}" if i == 0 else None)
-    ax.set_xlabel("training wall time, min")
-    ax.set_ylabel("evaluation episode reward")
-    ax.set_title("every seed's curve")
+                    label=f"{group[0]} × {group[1].upper()}{own}" if i == 0 else None)
+    ax.set_xlabel("training wall time (min)")
+    ax.set_ylabel("episode reward (1, summed per episode)")
+    ax.set_title(f"every seed's curve: the mean over its evaluation episodes\n{'; '.join(shared)}", fontsize=9)
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8)
     fig.tight_layout()
+    return fig
+
+
+def plot(records: list[dict], path: Path) -> None:
+    import matplotlib.pyplot as plt
+
+    fig = figure(records)
     fig.savefig(path, dpi=120)
     plt.close(fig)
 

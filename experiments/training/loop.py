@@ -116,24 +116,41 @@ def train(args, physics=None) -> dict:
         shutil.copytree(final[0], out / "policy")
     record["final_step"] = final[1]
     atomic_write_text(record_path, json.dumps(record, indent=1))
-    plot_rewards(record["history"], out / "reward_curve.png", f"{args.algo.upper()} on {args.task}")
+    plot_rewards(out / "reward_curve.png", record["history"], f"{args.algo.upper()} on {args.task}", physics,
+                 config.policy_rate, args.num_eval_envs)
     return record
 
 
 
-def plot_rewards(history: list[dict], path: Path, title: str) -> None:
+def reward_figure(history: list[dict], title: str, physics, policy_rate: float, episodes: int):
+    """The evaluation reward against environment steps (a matplotlib Figure): the mean over the `episodes`
+    evaluation episodes, ± 1 standard deviation shaded where recorded; the subtitle `physics` in words."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    import numpy as np
 
     rows = [r for r in history if "eval/episode_reward" in r]
-    fig, ax = plt.subplots(figsize=(6, 3.5))
-    ax.plot([r["step"] for r in rows], [r["eval/episode_reward"] for r in rows], "o-")
-    ax.set_xlabel("environment steps (50 Hz policy steps)")
-    ax.set_ylabel("evaluation episode reward")
-    ax.set_title(f"{title}, the batched monoped")
+    step = np.array([r["step"] for r in rows])
+    mean = np.array([r["eval/episode_reward"] for r in rows])
+    fig, ax = plt.subplots(figsize=(6.5, 3.8))
+    ax.plot(step, mean, "o-", label=f"mean over {episodes} evaluation episodes")
+    if rows and all("eval/episode_reward_std" in r for r in rows):  # Brax's, beside each mean
+        std = np.array([r["eval/episode_reward_std"] for r in rows])
+        ax.fill_between(step, mean - std, mean + std, alpha=0.25, lw=0, label="± 1 standard deviation over them")
+    ax.set_xlabel(f"environment steps (policy steps, {policy_rate:g} Hz)")
+    ax.set_ylabel("episode reward (1, summed per episode)")
+    ax.set_title(f"{title}, the batched monoped\n{'; '.join(physics.described().values())}", fontsize=9)
+    ax.legend(fontsize=8)
     ax.grid(alpha=0.3)
     fig.tight_layout()
+    return fig
+
+
+def plot_rewards(path: Path, history: list[dict], title: str, physics, policy_rate: float, episodes: int) -> None:
+    import matplotlib.pyplot as plt
+
+    fig = reward_figure(history, title, physics, policy_rate, episodes)
     files.atomic_write(path, lambda f: fig.savefig(f, dpi=120, format=Path(path).suffix[1:] or None))
     plt.close(fig)
