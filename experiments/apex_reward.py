@@ -12,12 +12,12 @@ held through the stance after it). The rise printed is the median flight apex ov
 
 from __future__ import annotations
 
-import argparse
 import sys
 from pathlib import Path
 
 import numpy as np
 
+from hopper_mjx.shell import checks
 from hopper_mjx.shell.checks import check_readable_file
 
 POLICY_RATE = 50.0  # Hz, the tasks' default
@@ -44,7 +44,7 @@ def judged(qpos: np.ndarray, qvel: np.ndarray, contact: np.ndarray, g: float, st
 
 
 def main(argv=None) -> int:
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p = checks.parser("python experiments/apex_reward.py", __doc__)  # one-line refusals, as every command's
     p.add_argument("runs", nargs="+", help="simulate --out .npz files")
     p.add_argument("--command", type=float, default=0.10, help="commanded apex rise above standing, m")
     p.add_argument("--scale", type=float, default=0.1, help="the apex kernel's width, m (hop's)")

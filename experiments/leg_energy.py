@@ -9,7 +9,6 @@ gives the commands), all run alike but for the parameter and its values. Reads t
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 from pathlib import Path
@@ -18,6 +17,8 @@ import matplotlib
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
+
+from hopper_mjx.shell import checks  # noqa: E402
 
 URDF_LENGTH = 0.35  # m, the seed's thigh and shank
 PLANETS = ((9.81, "Earth"), (3.71, "Mars"), (1.62, "Moon"))
@@ -92,7 +93,7 @@ def figure(shanks: list[dict], thighs: list[dict], arguments: dict):
 
 
 def main(argv=None) -> int:
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p = checks.parser("python experiments/leg_energy.py", __doc__)  # one-line refusals, as every command's
     p.add_argument("short_shanks")
     p.add_argument("shanks")
     p.add_argument("thighs")

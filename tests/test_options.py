@@ -163,3 +163,24 @@ def test_an_error_names_the_option_once(parsers, capsys):
     assert capsys.readouterr().err == "error: --values must be one or more finite numbers\n"
     checks.fail(ValueError("--values: kp_scale drew a value of -1"))
     assert capsys.readouterr().err == "error: --values: kp_scale drew a value of -1\n"
+
+
+def test_a_mistyped_option_is_answered_with_the_closest_one_the_command_takes(parsers, capsys):
+    """Every command: an option one letter off from one it takes is named back ("did you mean"); a word like
+    no option gets the plain refusal. Parsed whole: the top-level sweep parser knows its subcommands' options."""
+    for name, p in parsers.items():
+        flags = sorted(f for f in p._option_string_actions if f.startswith("--") and len(f) > 6 and f != "--help")
+        if not flags:
+            continue
+        typo = flags[0][:-2] + flags[0][-1]  # its last but one letter dropped
+        with pytest.raises(SystemExit):  # argparse's own words (a command's required options would come first)
+            p.error(f"unrecognized arguments: {typo}")
+        err = capsys.readouterr().err
+        assert err.startswith(f"error: unrecognized arguments: {typo}; did you mean --"), (name, err)
+        assert len(err.splitlines()) == 1
+    with pytest.raises(SystemExit):
+        parsers["-m hopper_mjx.sweep"].parse_args(["gravity", "--gravty", "9.81"])
+    assert "; did you mean --gravity?" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        parsers["-m hopper_mjx.simulate"].parse_args(["--zzzzzz"])
+    assert capsys.readouterr().err.startswith("error: unrecognized arguments: --zzzzzz (see ")

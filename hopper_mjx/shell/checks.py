@@ -43,7 +43,26 @@ class ArgumentParser(argparse.ArgumentParser):
             else []
         if named:
             message = names + rest[len(named[0]):]
+        if message.startswith("unrecognized arguments: "):
+            message += self._suggestion(message.removeprefix("unrecognized arguments: ").split())
         self.exit(2, f"error: {message} (see {self.prog} --help)\n")
+
+    def _suggestion(self, unknown: list[str]) -> str:
+        """'; did you mean --x?' for the first mistyped option that is close to one this command (or one of its
+        subcommands) takes."""
+        import difflib
+
+        options = set(self._option_string_actions)
+        for action in self._actions:
+            if isinstance(action, argparse._SubParsersAction):
+                for sub in action.choices.values():
+                    options |= set(sub._option_string_actions)
+        for word in unknown:
+            if word.startswith("--"):
+                close = difflib.get_close_matches(word.split("=")[0], sorted(options), n=1, cutoff=0.75)
+                if close:
+                    return f"; did you mean {close[0]}?"
+        return ""
 
     def refuse(self, flag: str, why: str) -> None:
         """An option of a shared set (`cli.add_physics_options`) that this command cannot honour: left out of
