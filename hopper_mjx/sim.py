@@ -352,11 +352,9 @@ class Sim:
     def _program_key(self, controller, steps, sensors, chunk) -> str:
         """Everything a rollout's trace closes over besides its arguments: the model (every number), the engine
         made from it, the motors, pushes and sensors, the controller's own key, the steps and the record."""
-        chain = getattr(self.engine, "chain", None)
-        engine = (type(self.engine).__name__, sorted(self.engine.varies), sorted(self.engine.compiler_options.items()),
-                  None if chain is None or chain.terrain is None else chain.terrain.max_contacts)
-        return repr((programs.model_digest(self.mj_model), engine, self.actuation.kind, self.actuation.depth,
-                     self.pushes, self.sensing.depth, self.sensing.noisy, controller.key, steps, sensors, chunk))
+        return repr((programs.model_digest(self.mj_model), self.engine.program_key(), self.actuation.kind,
+                     self.actuation.depth, self.pushes, self.sensing.depth, self.sensing.noisy, controller.key, steps,
+                     sensors, chunk))
 
 
 def per_instance(controls: dict, actuation: Actuation, sensing: Sensing, timestep: float, delay_steps: int = 0) -> dict:

@@ -67,6 +67,8 @@ class Engine(Protocol):
 
     def foot_contact(self, model, data) -> tuple: ...
 
+    def program_key(self) -> tuple: ...  # what its traced step folds in besides the MuJoCo model's numbers
+
 
 def check_name(name: str) -> None:
     """Raises ValueError for an unknown engine name (before any model is built)."""

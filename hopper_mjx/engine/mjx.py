@@ -104,5 +104,9 @@ class MjxEngine:
     def integrate(self, model: mjx.Model, data: mjx.Data, gravity: jax.Array) -> mjx.Data:
         return self._integrate(with_gravity(model, gravity), data)
 
+    def program_key(self) -> tuple:
+        """What a traced step folds in besides the MuJoCo model's numbers (`shell.programs`)."""
+        return (self.name, sorted(self.varies), sorted(self.compiler_options.items()))
+
     def foot_contact(self, model: mjx.Model, data: mjx.Data):
         return foot_contact(self.foot_geom, model, data)

@@ -213,6 +213,13 @@ class ChainEngine:
         return data.replace(qpos=_advance_qpos(cm, data.qpos, qvel), qvel=qvel, time=data.time + h,
                             qacc_warmstart=data.qacc)
 
+    def program_key(self) -> tuple:
+        """What a traced step folds in besides the MuJoCo model's numbers (`shell.programs`): the foot's
+        contacts kept on a heightfield too."""
+        terrain = self.chain.terrain
+        return (self.name, sorted(self.varies), sorted(self.compiler_options.items()),
+                None if terrain is None else terrain.max_contacts)
+
     def foot_contact(self, model: ChainParams, data: ChainData):
         return data.foot_touching, data.foot_force, data.foot_pos
 
