@@ -7,14 +7,16 @@ from hopper_mjx.shell import jaxsetup
 jaxsetup.configure()  # before any JAX computation: 2 host devices here, persistent compile cache
 
 # The files that take longest with an empty compile cache, longest first: each file's setup, call and teardown times
-# summed from `make test`'s parallel phase run with `--durations=0` (28 Nov, 18:58-19:24 UTC, 2 cores). `make test`
-# hands whole files to two processes in collection order (`--dist loadfile --no-loadscope-reorder`): a long file
-# handed out last would leave the other process idle at the end.
-# test_tour.py (added 1 Dec, not yet timed in that run) compiles ten batches, two on a terrain: a few minutes.
-LONGEST_FIRST = ("test_chain_terrain.py", "test_train.py", "test_terrain_physics.py", "test_chain.py",
-                 "test_control.py", "test_core.py", "test_actuators.py", "test_sweep.py", "test_faults.py",
-                 "test_tour.py", "test_policy.py", "test_chain_terrain_box.py", "test_train_sac.py", "test_command.py",
-                 "test_env.py", "test_hostile.py", "test_bad_inputs.py")
+# summed from `make test`'s parallel phase run with `--durations=0` (1 Dec, 2 cores; the refusal files since made
+# cheap: their processes no longer import JAX). `make test` hands whole files to two processes in collection order
+# (`--dist loadfile --no-loadscope-reorder`): a long file handed out last would leave the other process idle at the end.
+LONGEST_FIRST = ("test_tour.py", "test_core.py", "test_terrain_physics.py", "test_chain.py", "test_control.py",
+                 "test_bench.py", "test_chain_terrain.py", "test_train.py", "test_policy.py", "test_actuators.py",
+                 "test_train_sac.py", "test_faults.py", "test_sweep.py", "test_chain_terrain_box.py", "test_step.py",
+                 "test_variation.py", "test_export_onnx.py", "test_programs.py", "test_cross_cpu.py", "test_env.py",
+                 "test_raibert.py", "test_render.py", "test_bad_inputs.py", "test_hostile.py",
+                 "test_control_variation.py", "test_balance.py", "test_record.py", "test_env_robot_io.py",
+                 "test_command.py")
 
 
 def pytest_collection_modifyitems(items):
