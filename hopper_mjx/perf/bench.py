@@ -201,11 +201,19 @@ def peak_rss_mb() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # Linux reports KiB
 
 
+def machine(devices) -> dict:
+    """What a record was measured on: the devices, the cores and the versions."""
+    import jax
+    import mujoco
+
+    return {"devices": len(devices), "device_kind": devices[0].platform, "cpu_count": os.cpu_count(),
+            "jax": jax.__version__, "mujoco": mujoco.__version__, "python": platform.python_version()}
+
+
 def run(num: int, steps: int, *, controller: str = "hold", chunk: int = 256, repeat: int = 2,
         threads: int | None = None, physics: Physics = Physics()) -> dict:
     """One side-by-side measurement of `physics` (its robot, engine and timestep); returns the JSON record."""
     import jax
-    import mujoco
 
     from hopper_mjx.sim import gravity_vectors
     from hopper_mjx.variation import draw
@@ -267,16 +275,11 @@ def run(num: int, steps: int, *, controller: str = "hold", chunk: int = 256, rep
         "native_cpu_us_per_step": native_cpu,
         "cpu_ratio": native_cpu / core_cpu,
         "peak_rss_mb": peak_rss_mb(),
-        "devices": len(sim.devices),
-        "device_kind": sim.devices[0].platform,
         "native_threads": threads,
         "chunk": min(chunk, -(-num // len(sim.devices))),
-        "cpu_count": os.cpu_count(),
         "diverged": int(np.asarray(final.diverged).sum()),
         "core_final_base_height_m": float(np.median(qpos[:, 2])),
-        "jax": jax.__version__,
-        "mujoco": mujoco.__version__,
-        "python": platform.python_version(),
+        **machine(sim.devices),
     }
     if controller != "raibert":  # same law on both sides: same trajectories
         record["native_final_base_height_m"] = float(np.median(native_qpos[:, 2]))
