@@ -473,7 +473,9 @@ def raibert(robot: Robot, config: RaibertConfig | None = None) -> Controller:
     """
     layout = robot.layout
     mass, dt = layout.total_mass, layout.timestep
-    urdf_inertia = jax.jit(inertia_facts)(robot.leg)  # one program, not some 80 small eager ones
+    # Eager, op by op: under one jit XLA fuses it and rounds the float32 facts otherwise, which moves every sweep's
+    # numbers (make sweep's results.csv is kept byte for byte); its small programs come from the compile cache.
+    urdf_inertia = inertia_facts(robot.leg)
     defaults = jax.tree_util.tree_map(lambda v: v[0], raibert_params(1, height=DEFAULT_HEIGHT, config=config))
 
     def act(s: RaibertState, obs: Observation, gravity):
