@@ -148,6 +148,10 @@ CASES = [
     ("sweep", ["obstacle", "--heights", "0.1,-0.05", "--out", "s"], "--terrain: height=-0.05 must be >= 0 m"),
     ("sweep", ["obstacle", "--heights", "0.3", "--x", "0", "--out", "s"], "the ground within 0.1 m of the start "
      "rises to 0.300 m"),
+    ("sweep", ["gaps", "--widths", "0.2,3.5", "--out", "s"], "--widths 3.5: a gap must be > 0 m and end 0.5 m before "
+     "the ground's end (4 m ahead with --x 0.6): at most 2.9 m here"),
+    ("sweep", ["gaps", "--terrain", "rough", "--out", "s"], "--terrain: a gaps sweep makes its own ground per value "
+     "(--widths); drop --terrain"),
     ("sweep", ["terrain", "--terrain", "rough", "--out", "s"], "--terrain: a terrain sweep makes its own ground per "
      "value (--amps); drop --terrain"),
     ("sweep", ["terrain", "--amps", "0.01,0.01", "--out", "s"], "--amps must be one or more different values"),

@@ -115,7 +115,8 @@ def test_no_command_lists_an_option_it_refuses(parsers, capsys):
     """An option of a shared set a command cannot honour is hidden from its --help and refused in one line
     naming it; and every hidden option is such a refusal (or argparse's own --help)."""
     refusing = {name: p for name, p in parsers.items() if getattr(p, "refused", None)}
-    assert {"-m hopper_mjx.sweep obstacle", "-m hopper_mjx.sweep terrain", "-m hopper_mjx.sweep param",
+    assert {"-m hopper_mjx.sweep obstacle", "-m hopper_mjx.sweep gaps", "-m hopper_mjx.sweep terrain",
+            "-m hopper_mjx.sweep param",
             "-m hopper_mjx.perf.bench"} <= set(refusing)
     for name, p in parsers.items():
         text = p.format_help()
@@ -132,7 +133,7 @@ def test_no_command_lists_an_option_it_refuses(parsers, capsys):
             assert err.startswith(f"error: {flag}: ") and err.count("\n") == 1, err
 
 
-@pytest.mark.parametrize("kind", ["gravity", "gains", "param", "compare", "obstacle", "terrain"])
+@pytest.mark.parametrize("kind", ["gravity", "gains", "param", "compare", "obstacle", "gaps", "terrain"])
 def test_a_sweep_takes_every_physics_option_it_lists(parsers, kind, tmp_path):
     """The whole check (as the command runs it, no JAX) accepts each listed physics option: a refusal there
     would be an option listed, then refused."""

@@ -365,3 +365,84 @@ def test_an_obstacle_no_robot_reached_is_a_warning_with_the_duration_that_would(
     assert said == ["warning: no replicate reached the block at x = 0.6 m at g=1.62 obstacle_height=0.05, g=1.62 "
                     "obstacle_height=0.15: 'cleared' there means nothing; they made 0.10 m good at 0.30 m/s against "
                     "0.3 commanded; --duration 7 would carry them past it at that speed"]
+
+
+def test_a_gaps_sweep_lays_one_gap_per_width_with_ground_to_land_on_beyond_it():
+    from hopper_mjx import terrain
+    from hopper_mjx.sweep import __main__ as sweep
+
+    args = sweep.parser().parse_args(["gaps", "--widths", "0.1,0.35", "--x", "0.8", "--depth", "0.25",
+                                      "--duration", "6"])
+    grounds = sweep.terrain_grounds(args)
+    for width, text in zip((0.1, 0.35), grounds):
+        ground = terrain.parse(text)
+        np.testing.assert_allclose(ground.obstacles(), [[0.8, 0.8 + width, -0.25]])  # one gap, no second one
+        t = ground.terrain()
+        xs, _ = t.axes()
+        row = t.heights[t.heights.shape[0] // 2]
+        assert row[(xs > 0.8 + 0.02) & (xs < 0.8 + width - 0.02)].max() == pytest.approx(-0.25)
+        assert row[xs > 0.8 + width + 0.05].min() == 0.0  # level ground beyond, to its end
+    # 0.3 m/s for 6 s and a metre to spare, both ways: a 6 m ground, its end 3 m ahead; a gap must end 0.5 m before.
+    args.widths = [0.2, 1.8]
+    with pytest.raises(ValueError, match=r"--widths 1.8: a gap must be > 0 m and end 0.5 m before the ground's end "
+                                         r"\(3 m ahead with --x 0.8\): at most 1.7 m here"):
+        sweep.terrain_grounds(args)
+
+
+def _band_spec(kind, values, motor="dc"):
+    from hopper_mjx import terrain
+    from hopper_mjx.scenario import Physics
+
+    if kind == "obstacle":
+        grounds = tuple(str(terrain.parse(f"obstacle:height={v},x=0.6,size=4x2")) for v in values)
+        param = "obstacle_height"
+    else:
+        grounds = tuple(str(terrain.parse(f"gaps:width={v},spacing=4,depth=0.3,x=0.6,size=4x2")) for v in values)
+        param = "gap_width"
+    return _spec(kind=kind, param=param, values=values, speed=(0.3, 0.0), grounds=grounds,
+                 physics=Physics(ground=terrain.parse(grounds[0]), motor=motor))
+
+
+@pytest.mark.parametrize("kind", ["obstacle", "gaps"])
+def test_a_block_or_gaps_sweep_answers_beside_the_motors_bound(kind):
+    """results.csv carries each row's bound (by its gravity); the table's last lines give, per gravity, the
+    largest value at least half the replicates got past, in m and standing heights, beside the bound's; so does
+    limits.png, with units on both axes."""
+    from hopper_mjx.hardware import bound
+    from hopper_mjx.model.robot import standing_height
+    from hopper_mjx.sweep import report
+    from hopper_mjx.sweep.grid import expand
+
+    spec = _band_spec(kind, (0.1, 0.2, 0.3))
+    m = spec.physics.mj_model
+    per_g = bound.bounds(m, "dc", spec.gravity)
+    bounds = report.bound_columns(spec)
+    name = "height_bound" if kind == "obstacle" else "width_bound"
+    assert set(bounds) == {"apex_bound", name}
+    for g, b in per_g.items():
+        assert bounds["apex_bound"][g] == b.apex_rise
+        past = (bound.highest_block(b, standing_height(m), bound.tucked_drop(m)) if kind == "obstacle"
+                else bound.widest_gap(b))
+        assert bounds[name][g] == past
+    inst = expand(spec, m.nv)
+    table, cols = _table(spec, inst)
+    header, body = report.rows(spec, inst, table, cols, bounds)
+    assert header[-2:] == ["apex_bound", name]
+    for g, row in zip(inst.gravity, body):
+        assert row[-2] == bounds["apex_bound"][float(g)]
+    # Half or more past 0.1 and 0.2 m at the Moon, 0.1 m at Mars, none at Earth.
+    share = {(1.62, 0.1): 1.0, (1.62, 0.2): 0.5, (1.62, 0.3): 0.25, (3.71, 0.1): 0.75, (3.71, 0.2): 0.25}
+    groups = [{spec.param: v, "gravity": g, "cleared": share.get((g, v), 0.0), "survival": 1.0}
+              for v in spec.values for g in spec.gravity]
+    lines = report.limits(spec, groups, bounds)
+    standing = standing_height(m)
+    assert lines[1] == (f"  Earth g 9.81 m/s²: none of the grid's; bound {bounds[name][9.81]:.2f} m "
+                        f"({bounds[name][9.81] / standing:.2f}), from an apex rise of {per_g[9.81].apex_rise:.2f} m")
+    assert lines[2].startswith(f"  Moon  g 1.62 m/s²: 0.2 m ({0.2 / standing:.2f} standing heights); bound")
+    assert lines[3].startswith("  Mars  g 3.71 m/s²: 0.1 m (")
+    ax = report.limits_figure(spec, groups, bounds).axes[0]
+    assert ax.get_xlabel() == "gravity (m/s²)" and ax.get_ylabel().endswith("(m)")
+    assert ax.child_axes[0].get_ylabel() == "in standing heights (1)"
+    np.testing.assert_allclose(ax.lines[0].get_ydata(), [bounds[name][g] for g in sorted(spec.gravity)])
+    np.testing.assert_allclose(ax.lines[1].get_ydata(), [0.2, 0.1, np.nan])
+    assert report.bound_columns(_spec()) == {} and report.limits(_spec(), groups, {}) == []

@@ -1,5 +1,5 @@
-"""python -m hopper_mjx.sweep gravity | gains | param | compare | obstacle | terrain — hopping across gravity (and
-a gain, a parameter, or a terrain).
+"""python -m hopper_mjx.sweep gravity | gains | param | compare | obstacle | gaps | terrain — hopping across gravity
+(and a gain, a parameter, or a terrain).
 
     python -m hopper_mjx.sweep gravity                          # the main job, ~1000 monopeds
     python -m hopper_mjx.sweep gravity --controller policy:runs/hop-ppo     # a trained policy, same kicks
@@ -7,6 +7,7 @@ a gain, a parameter, or a terrain).
     python -m hopper_mjx.sweep gains --param speed_gain --values 0.1,0.3,0.6 --gravity 1.62,3.71,9.81
     python -m hopper_mjx.sweep param --param action_delay --values 0,5,10,20 --gravity 1.62,3.71,9.81
     python -m hopper_mjx.sweep obstacle --heights 0.05,0.1,0.15 --x 0.6 --speed 0.3,0    # the highest block cleared
+    python -m hopper_mjx.sweep gaps --widths 0.1,0.2,0.4 --motor dc              # the widest gap, beside the bound
     python -m hopper_mjx.sweep terrain --amps 0,0.01,0.02,0.03                   # survival and speed vs roughness
 
 Rerunning with the same --out resumes an interrupted sweep; finished chunks are not recomputed.
@@ -27,10 +28,12 @@ from hopper_mjx import cli, registry
 from hopper_mjx.shell import budget, jaxsetup, process
 from hopper_mjx.shell.checks import DEFAULT_TIMESTEP, OutputError
 from hopper_mjx.sweep import folder
-from hopper_mjx.sweep.grid import DEFAULT_GRAVITY, KICK, TERRAIN_KINDS
+from hopper_mjx.sweep.grid import BAND_KINDS, DEFAULT_GRAVITY, KICK, TERRAIN_KINDS
 
-PARAM = {"obstacle": "obstacle_height", "terrain": "roughness"}  # the value column of a terrain sweep
-VALUES = {"gains": "--values", "param": "--values", "obstacle": "--heights", "terrain": "--amps"}  # the swept values
+PARAM = {"obstacle": "obstacle_height", "gaps": "gap_width", "terrain": "roughness"}  # a terrain sweep's value column
+VALUES = {"gains": "--values", "param": "--values", "obstacle": "--heights", "gaps": "--widths",
+          "terrain": "--amps"}  # the swept values
+LANDING = 0.5  # m of ground a gaps sweep keeps beyond its gap to land on, before the ground's end
 
 
 def swept_values(args) -> list[float]:
@@ -39,15 +42,45 @@ def swept_values(args) -> list[float]:
     return list(getattr(args, flag[2:])) if flag else []
 
 
+def _swept_options(s: argparse.ArgumentParser, kind: str) -> None:
+    """The options of a sweep's second axis: a gain's or parameter's values, a terrain's."""
+    if kind == "gains":
+        s.add_argument("--param", required=True, help="Raibert gain to sweep (a RaibertConfig field)")
+        s.add_argument("--values", type=cli.floats("--values"), required=True, help="its values")
+    if kind == "param":
+        s.add_argument("--param", required=True,
+                       help="a Raibert gain (RaibertConfig field) or a --randomize parameter: "
+                            f"{', '.join(registry.PARAMETERS)}, {', '.join(registry.CONTROL_PARAMETERS)}")
+        s.add_argument("--values", type=cli.floats("--values"), required=True,
+                       help="its values, in the parameter's unit (docs/variation.md); every instance of a "
+                            "value gets it")
+    if kind == "obstacle":
+        s.add_argument("--heights", type=cli.floats("--heights"), default=[0.05, 0.1, 0.15, 0.2],
+                       help="block heights, m (default 0.05,0.1,0.15,0.2)")
+        s.add_argument("--x", type=float, default=0.6, help="the block's near edge, m ahead of the start")
+        s.add_argument("--length", type=float, default=0.1, help="the block's length along +x, m")
+    if kind == "gaps":
+        s.add_argument("--widths", type=cli.floats("--widths"), default=[0.1, 0.2, 0.3, 0.4],
+                       help="gap widths along +x, m (default 0.1,0.2,0.3,0.4)")
+        s.add_argument("--x", type=float, default=0.6, help="the gap's near edge, m ahead of the start")
+        s.add_argument("--depth", type=float, default=0.3, help="the gap's depth, m")
+    if kind == "terrain":
+        s.add_argument("--amps", type=cli.floats("--amps"), default=[0.0, 0.01, 0.02, 0.03],
+                       help="rough ground's peak |height|, m (default 0,0.01,0.02,0.03)")
+        s.add_argument("--wavelength", type=float, default=0.4, help="rough ground's wavelength, m")
+
+
 def parser() -> argparse.ArgumentParser:
     p = cli.parser("python -m hopper_mjx.sweep", __doc__)
     sub = p.add_subparsers(dest="kind", required=True)
     kinds = (("gravity", DEFAULT_GRAVITY, 112, 10.0), ("gains", (1.62, 3.71, 9.81), 32, 10.0),
              ("param", (1.62, 3.71, 9.81), 32, 10.0), ("compare", DEFAULT_GRAVITY, 112, 10.0),
-             ("obstacle", (1.62, 3.71, 9.81), 32, 10.0), ("terrain", (1.62, 3.71, 9.81), 32, 10.0))
+             ("obstacle", (1.62, 3.71, 9.81), 32, 10.0), ("gaps", (1.62, 3.71, 9.81), 32, 10.0),
+             ("terrain", (1.62, 3.71, 9.81), 32, 10.0))
     helps = {"compare": "gravity sweeps of several controllers, one table and plot",
              "param": "any Raibert gain or --randomize parameter (model field or not) against gravity",
              "obstacle": "the highest block cleared: obstacle height x gravity at an approach --speed",
+             "gaps": "the widest gap crossed: gap width x gravity at an approach --speed",
              "terrain": "survival and speed tracking: rough ground's amplitude x gravity, each replicate its own draw"}
     for kind, gravity, num, duration in kinds:
         s = sub.add_parser(kind, help=helps.get(kind, f"sweep {kind}"))
@@ -60,25 +93,7 @@ def parser() -> argparse.ArgumentParser:
         s.add_argument("--world", type=Path, nargs="+", default=None, metavar="FILE.world",
                        help="Gazebo world files instead of --gravity: their (vertical, non-zero) gravity")
         s.set_defaults(default_gravity=list(gravity))
-        if kind == "gains":
-            s.add_argument("--param", required=True, help="Raibert gain to sweep (a RaibertConfig field)")
-            s.add_argument("--values", type=cli.floats("--values"), required=True, help="its values")
-        if kind == "param":
-            s.add_argument("--param", required=True,
-                           help="a Raibert gain (RaibertConfig field) or a --randomize parameter: "
-                                f"{', '.join(registry.PARAMETERS)}, {', '.join(registry.CONTROL_PARAMETERS)}")
-            s.add_argument("--values", type=cli.floats("--values"), required=True,
-                           help="its values, in the parameter's unit (docs/variation.md); every instance of a "
-                                "value gets it")
-        if kind == "obstacle":
-            s.add_argument("--heights", type=cli.floats("--heights"), default=[0.05, 0.1, 0.15, 0.2],
-                           help="block heights, m (default 0.05,0.1,0.15,0.2)")
-            s.add_argument("--x", type=float, default=0.6, help="the block's near edge, m ahead of the start")
-            s.add_argument("--length", type=float, default=0.1, help="the block's length along +x, m")
-        if kind == "terrain":
-            s.add_argument("--amps", type=cli.floats("--amps"), default=[0.0, 0.01, 0.02, 0.03],
-                           help="rough ground's peak |height|, m (default 0,0.01,0.02,0.03)")
-            s.add_argument("--wavelength", type=float, default=0.4, help="rough ground's wavelength, m")
+        _swept_options(s, kind)
         if kind in TERRAIN_KINDS:
             s.add_argument("--size", default=None, help="the ground's extents LxW, m (default: 4 m wide, and long "
                            "enough for --speed over --duration and back: the ground ends at its edge)")
@@ -96,8 +111,8 @@ def parser() -> argparse.ArgumentParser:
         s.add_argument("--num", type=int, default=num, help=f"replicates per grid point (default {num})")
         s.add_argument("--duration", type=float, default=duration, help="simulated seconds per instance")
         s.add_argument("--height", type=float, default=0.10, help="commanded apex rise over standing height, m")
-        s.add_argument("--speed", type=cli.floats("--speed"), default=[0.3 if kind == "obstacle" else 0.0, 0.0],
-                       help="VX,VY m/s" + (" (default 0.3,0: the approach)" if kind == "obstacle" else ""))
+        s.add_argument("--speed", type=cli.floats("--speed"), default=[0.3 if kind in BAND_KINDS else 0.0, 0.0],
+                       help="VX,VY m/s" + (" (default 0.3,0: the approach)" if kind in BAND_KINDS else ""))
         s.add_argument("--kick", type=float, default=KICK, help="std of the random initial velocity, m/s and rad/s")
         s.add_argument("--seed", type=int, default=0)
         s.add_argument("--chunk", type=int, default=256, help="instances per compiled call")
@@ -158,6 +173,10 @@ def check(args):
         cli.refuse_each(physics.ground, f"a {args.kind} sweep")
     cli.check_delay(physics, args.duration, args.num, args.seed)
     check_standing("--gravity", gravity, physics.mj_model)
+    if args.kind in BAND_KINDS:  # its report holds each result against the motors' bound: one they must have
+        from hopper_mjx.hardware.bound import knee_motor
+
+        knee_motor(physics.mj_model, physics.motor)
     names = args.controllers.split(",") if args.kind == "compare" else [getattr(args, "controller", "raibert")]
     if len(set(names)) != len(names):
         raise ValueError(f"--controllers lists one twice: {args.controllers}")
@@ -288,6 +307,22 @@ def terrain_grounds(args) -> list[str]:
         cli.check_range("--length", args.length, low=0, open_low=True)
         cli.check_range("--x", args.x)
         return [f"obstacle:height={h!r},x={args.x!r},length={args.length!r},size={size}" for h in values]
+    if args.kind == "gaps":
+        cli.check_range("--depth", args.depth, low=0, open_low=True)
+        cli.check_range("--x", args.x)
+        try:
+            length = float(size.split("x")[0])
+        except ValueError:
+            raise ValueError(f"--size must be LxW in m, e.g. 8x4, got {size!r}") from None
+        room = length / 2 - LANDING - args.x  # the widest gap that leaves ground to land on beyond it
+        wide = [w for w in values if w > room]
+        if wide or min(values) <= 0:
+            bad = max(wide) if wide else min(values)
+            raise ValueError(f"--widths {bad:g}: a gap must be > 0 m and end {LANDING:g} m before the ground's end "
+                             f"({length / 2:g} m ahead with --x {args.x:g}): at most {max(room, 0):.3g} m here; "
+                             "give a longer --size or narrower gaps")
+        # One gap: the next would start a whole ground length further on, beyond the ground's end.
+        return [f"gaps:width={w!r},spacing={length:g},depth={args.depth!r},x={args.x!r},size={size}" for w in values]
     cli.check_range("--wavelength", args.wavelength, low=0, open_low=True)
     return [f"rough:amp={a!r},wavelength={args.wavelength!r},seed=each,size={size}" for a in values]
 

@@ -29,7 +29,9 @@ DEFAULT_GRAVITY = (0.5, 1.0, 1.62, 2.5, 3.71, 5.0, 7.5, 9.81, 12.0)  # m/s²
 # every gravity (README). Robustness is measured with --kick 0.3: 96.0 % survive over 1-12 m/s²
 # (docs/control.md).
 KICK = 0.03
-TERRAIN_KINDS = ("obstacle", "terrain")  # sweeps over a terrain's parameter: one ground per value
+TERRAIN_KINDS = ("obstacle", "gaps", "terrain")  # sweeps over a terrain's parameter: one ground per value
+# The terrain sweeps whose ground holds one band across the way to get past, and what the band is called.
+BAND_KINDS = {"obstacle": "block", "gaps": "gap"}
 KINDS = ("gravity", "gains", "param", *TERRAIN_KINDS)
 
 

@@ -14,7 +14,7 @@ import numpy as np
 from hopper_mjx import registry
 from hopper_mjx.metrics.thresholds import SPEED_TOLERANCE
 from hopper_mjx.shell.files import atomic_write, atomic_write_text
-from hopper_mjx.sweep.grid import KICK, PLANETS, Instances, SweepSpec
+from hopper_mjx.sweep.grid import BAND_KINDS, KICK, PLANETS, Instances, SweepSpec
 
 INTEGER_COLUMNS = {"replicate", "seed", "hops", "fell", "diverged", "obstacles_cleared"}
 # The action delay Raibert stops taking: docs/variation.md measured it (`sweep param --param action_delay --values
@@ -28,19 +28,98 @@ RAIBERT_DELAY_FIGURE = ("Raibert keeps every robot up at 0 ms, Earth and Mars at
 BALANCE_FIGURE = ("balance, an LQR stance, keeps none of a sweep's kicked robots up (0 % at Earth, Mars and Moon, 64 "
                   "per gravity, 10 s: docs/control.md); raibert --height 0.05 hops in place and keeps them all")
 REACH = 0.1  # m: a base this close to an obstacle's near edge has reached it (its foot lands ahead of it)
-UNITS = {"obstacle_height": "m", "roughness": "m, peak |height|"}  # a terrain sweep's value
+UNITS = {"obstacle_height": "m", "gap_width": "m", "roughness": "m, peak |height|"}  # a terrain sweep's value
+PASSED = {"obstacle": "cleared", "gaps": "crossed"}  # what getting past a band sweep's band is called
 
 
-def rows(spec: SweepSpec, inst: Instances, table: np.ndarray, columns: tuple[str, ...]) -> tuple[list[str], list[list]]:
+def rows(spec: SweepSpec, inst: Instances, table: np.ndarray, columns: tuple[str, ...],
+         bounds: dict | None = None) -> tuple[list[str], list[list]]:
+    """results.csv's header and rows; `bounds` (`bound_columns`) adds a column per bound."""
+    bounds = {name: [per_g[float(g)] for g in inst.gravity] for name, per_g in (bounds or {}).items()}
     header = ["gravity", "replicate", "seed"] + ([spec.param] if spec.swept else []) + list(inst.robot)
-    header += list(columns)
+    header += list(columns) + list(bounds)
     out = []
     for i in range(len(inst)):
         row = [inst.gravity[i], inst.replicate[i], spec.seed]
         row += [inst.value[i]] if spec.swept else []
         row += [v[i] for v in inst.robot.values()]
-        out.append(row + list(table[i]))
+        out.append(row + list(table[i]) + [v[i] for v in bounds.values()])
     return header, out
+
+
+def bound_columns(spec: SweepSpec) -> dict[str, dict[float, float]]:
+    """A block or gaps sweep's bounds per gravity (`hardware.bound`, the model's robot with the sweep's motors):
+    apex_bound, m of apex rise over standing, and the tallest block (height_bound) or widest gap (width_bound) it
+    allows, m. {} for other sweeps."""
+    if spec.kind not in BAND_KINDS:
+        return {}
+    from hopper_mjx.hardware import bound
+    from hopper_mjx.model.robot import standing_height
+
+    m = spec.physics.mj_model
+    per_g = bound.bounds(m, spec.physics.motor, spec.gravity)
+    if spec.kind == "obstacle":
+        standing, drop = standing_height(m), bound.tucked_drop(m)
+        past = ("height_bound", {g: bound.highest_block(b, standing, drop) for g, b in per_g.items()})
+    else:
+        past = ("width_bound", {g: bound.widest_gap(b) for g, b in per_g.items()})
+    return {"apex_bound": {g: b.apex_rise for g, b in per_g.items()}, past[0]: past[1]}
+
+
+def best_passed(spec: SweepSpec, groups: list[dict]) -> dict[float, float]:
+    """{g: the highest block (widest gap) at least half the replicates got past, m; NaN for none of the grid's}."""
+    out = {}
+    for g in spec.gravity:
+        passed = [r[spec.param] for r in groups if r["gravity"] == g and r.get("cleared", 0) >= 0.5]
+        out[float(g)] = max(passed) if passed else math.nan
+    return out
+
+
+def limits(spec: SweepSpec, groups: list[dict], bounds: dict) -> list[str]:
+    """A block or gaps sweep's answer, per gravity: the highest block (widest gap) at least half the replicates got
+    past, in m and in standing heights, beside the bound's (`bound_columns`)."""
+    if not bounds:
+        return []
+    from hopper_mjx.model.robot import standing_height
+
+    standing = standing_height(spec.physics.mj_model)
+    name, what = ("height_bound", "highest block") if spec.kind == "obstacle" else ("width_bound", "widest gap")
+    lines = [f"the {what} at least half the replicates {PASSED[spec.kind]}, beside the bound the {spec.physics.motor} "
+             f"motors put on it (docs/sweeps.md; standing height {standing:.3g} m):"]
+    for g, best in best_passed(spec, groups).items():
+        got = f"{best:g} m ({best / standing:.2f} standing heights)" if np.isfinite(best) else "none of the grid's"
+        limit = bounds[name][g]
+        lines.append(f"  {PLANETS.get(g, ''):5} g {g:g} m/s²: {got}; bound {limit:.2f} m ({limit / standing:.2f}), "
+                     f"from an apex rise of {bounds['apex_bound'][g]:.2f} m")
+    return lines
+
+
+def limits_figure(spec: SweepSpec, groups: list[dict], bounds: dict):
+    """limits.png of a block or gaps sweep: the highest block (widest gap) half the replicates got past against
+    gravity, beside the motors' bound, in m and in standing heights."""
+    from hopper_mjx.model.robot import standing_height
+
+    plt = _pyplot()
+    standing = standing_height(spec.physics.mj_model)
+    name, what = ("height_bound", "block height") if spec.kind == "obstacle" else ("width_bound", "gap width")
+    best = best_passed(spec, groups)
+    g = np.array(sorted(best))
+    fig, ax = plt.subplots(figsize=(8.5, 5.0))
+    ax.plot(g, [bounds[name][v] for v in g], "k--", label=f"bound: the {spec.physics.motor} motors' best jump")
+    ax.plot(g, [best[v] for v in g], "C0o-", label=f"{PASSED[spec.kind]} by ≥ half the replicates (grid's values)")
+    ax.plot(g, np.full(len(g), max(spec.values)), ":", color="0.5", label="the grid's largest value")
+    ax.set_xscale("log")
+    ax.minorticks_off()
+    ax.set_xticks(g, [f"{v:g}" for v in g])
+    ax.set_xlabel("gravity (m/s²)")
+    ax.set_ylabel(f"{what} (m)")
+    twin = ax.secondary_yaxis("right", functions=(lambda m: m / standing, lambda h: h * standing))
+    twin.set_ylabel("in standing heights (1)")
+    ax.legend(fontsize=8, loc="upper right")
+    ax.grid(alpha=0.3)
+    ax.set_title(f"the {'highest block' if spec.kind == 'obstacle' else 'widest gap'} vs gravity: "
+                 f"{spec.controller}, {spec.num} replicates per point\n{physics_label(spec)}", fontsize=9)
+    return fig
 
 
 def _cell(name: str, value) -> str:
@@ -93,8 +172,9 @@ def group_summary(spec: SweepSpec, inst: Instances, table: np.ndarray, columns: 
 
 
 def obstacle_band(spec: SweepSpec) -> tuple[float, float] | None:
-    """m, the near and far edge of an obstacle sweep's block along +x (every value's is there), else None."""
-    if spec.kind != "obstacle":
+    """m, the near and far edge of an obstacle sweep's block (a gaps sweep's gap) along +x, its first value's (every
+    value's starts there), else None."""
+    if spec.kind not in BAND_KINDS:
         return None
     from hopper_mjx.terrain import parse
 
@@ -161,12 +241,14 @@ def _not_reached(spec: SweepSpec, band: tuple[float, float], missed: list[dict],
     made = np.nanmean([np.nan if g.get("distance_made_good") is None else g["distance_made_good"] for g in missed])
     speed = np.nanmean([np.nan if g.get("mean_speed") is None else g["mean_speed"] for g in missed])
     where = "at any grid point" if everywhere else "at " + ", ".join(_point(spec, g) for g in missed)
-    line = (f"warning: no replicate reached the block at x = {band[0]:g} m {where}: 'cleared' there means nothing; "
+    line = (f"warning: no replicate reached the {BAND_KINDS[spec.kind]} at x = {band[0]:g} m {where}: "
+            f"'{PASSED[spec.kind]}' there means nothing; "
             f"they made {made:.2f} m good at {speed:.2f} m/s against {spec.speed[0]:g} commanded")
     if np.isfinite(speed) and speed > 0.01 and np.isfinite(made):
         need = math.ceil(spec.duration + (band[1] + REACH - made) / speed)
         return line + f"; --duration {need} would carry them past it at that speed"
-    return line + "; they hardly moved forward: raise --speed or lower the block"
+    easier = "lower the block" if spec.kind == "obstacle" else "narrow the gap"
+    return line + f"; they hardly moved forward: raise --speed or {easier}"
 
 
 def versions() -> dict:
@@ -184,7 +266,8 @@ def table_text(spec: SweepSpec, groups: list[dict], label: str | None = None) ->
         cols.insert(0, (spec.param, spec.param, "{:g}"))
     if spec.grounds:  # a terrain sweep's own figures: over all replicates (cleared), and the survivors' travel
         cols += [("made good m", "distance_made_good", "{:+.2f}")]
-        cols += [("reached", "reached", "{:.0%}"), ("cleared", "cleared", "{:.0%}")] if spec.kind == "obstacle" else []
+        if spec.kind in BAND_KINDS:
+            cols += [("reached", "reached", "{:.0%}"), (PASSED[spec.kind], "cleared", "{:.0%}")]
     if label:
         cols.insert(0, ("controller", "controller", "{}"))
     cells = [[h for h, _, _ in cols]]
@@ -324,8 +407,11 @@ def terrain_figure(spec: SweepSpec, groups: list[dict]):
     cleared the obstacle (or the speed tracking error), and the ground of every value along +x at y = 0."""
     from hopper_mjx.terrain import parse
 
-    fig = gains_figure(spec, groups, second=("cleared", "cleared the block (% of replicates)", "viridis",
-                                             (0.0, 100.0)) if spec.kind == "obstacle" else None, panels=3)
+    second = None
+    if spec.kind in BAND_KINDS:
+        second = ("cleared", f"{PASSED[spec.kind]} the {BAND_KINDS[spec.kind]} (% of replicates)", "viridis",
+                  (0.0, 100.0))
+    fig = gains_figure(spec, groups, second=second, panels=3)
     ax = fig.axes[2]
     for value, text in sorted(zip(spec.values, spec.grounds)):
         t = parse(text).instance(spec.seed, 0).terrain()  # a seed=each sweep: replicate 0's draw
@@ -364,16 +450,21 @@ def terrain_figure(spec: SweepSpec, groups: list[dict]):
 def write(out: Path, spec: SweepSpec, inst: Instances, table: np.ndarray, columns: tuple[str, ...],
           facts: dict) -> tuple[str, list[str]]:
     """Writes every output into OUT; returns the terminal table and its notes (`notes`, in table.txt below it)."""
-    header, body = rows(spec, inst, table, columns)
+    bounds = bound_columns(spec)
+    header, body = rows(spec, inst, table, columns, bounds)
     write_csv(out / "results.csv", header, body)
     groups = group_summary(spec, inst, table, columns)
     said = notes(spec, inst, table, columns, groups)
     summary = {"groups": groups, "note": "survival over all replicates; every other aggregate over the survivors",
+               **({"bounds": {k: {f"{g:g}": v for g, v in per_g.items()} for k, per_g in bounds.items()}}
+                  if bounds else {}),
                "notes": said, "arguments": spec.to_json(), "versions": versions(), "run": facts}
     atomic_write_text(out / "summary.json", json.dumps(summary, indent=1))
     figure = {"gravity": gravity_figure, "gains": gains_figure, "param": gains_figure}.get(spec.kind, terrain_figure)
     save(figure(spec, groups), out / f"{spec.kind}.png")
-    text = table_text(spec, groups)
+    if bounds:
+        save(limits_figure(spec, groups, bounds), out / "limits.png")
+    text = "\n".join([table_text(spec, groups), *limits(spec, groups, bounds)])
     atomic_write_text(out / "table.txt", "\n".join([text, *said]) + "\n")
     return text, said
 

@@ -1,0 +1,213 @@
+"""The most one stance can put into a jump: the knee motor's torque-speed line over the leg's stroke.
+
+A hop's energy comes from the motors during stance; the robot has no spring, so what a landing brings in is
+absorbed by the leg on the way down and the next takeoff starts, at best, from rest at the bottom of the stroke.
+The bound integrates the best push there is from that bottom to lift-off:
+
+- The body stays upright and the whole-robot centre of mass (COM) straight above the foot; the knee alone sets
+  its height h(q) over the floor (the virtual leg, `control.kinematics`). The hip joints then turn at zero torque:
+  a hip torque would turn the body, not raise it. h(q) is measured with MuJoCo C on the compiled model, the knee
+  from its lower stop to its upper one, the hip flexion chosen at each angle to keep the COM over the foot.
+- The knee gives all its motor allows at each speed: the ideal motor its effort limit; the DC motor its line
+  tau_s (1 - w/w0), clipped at the current limit (`actuators.envelope`). Full torque at every angle is the best
+  push: it reaches every height of the stroke with the most speed.
+- Energy: d(½ m v²)/dq = tau(w) - m g h'(q), v = dh/dt, w = v / h'(q) the knee's speed. Whatever goes into the
+  links' motion relative to the COM is counted as the COM's, so the bound is high, never low.
+- Lift-off: where the knee can no longer keep up with the body (the DC line reaches zero torque, w = w0; the
+  floor's push tau/h' would turn negative), or at the knee's upper stop.
+- The COM then rises v²/2g more. The apex reported is the base's, as the hop metrics measure it: the COM's
+  apex plus the base's height over the COM in the lift-off pose, less the standing height.
+
+So the ideal motor's bound is its effort limit times the knee's range, tau·Δq, whatever g; a DC motor gives less,
+and less the faster the push (the lower g, the faster the COM moves over the same stroke). The apex then scales
+about as 1/g. Per-instance robots (drawn masses, legs, motors) are not bounded apart: the bound is the model's.
+Plain NumPy and MuJoCo C, computed once per sweep.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import mujoco
+import numpy as np
+
+from hopper_mjx.model.layout import Layout
+from hopper_mjx.model.robot import standing_height
+
+KNEE = 2  # joint index of kfe in (haa, hfe, kfe)
+SAMPLES = 401  # knee angles at which h(q) is measured with MuJoCo C
+SUBSTEPS = 20  # integration steps per sampled interval
+
+
+class Stroke(NamedTuple):
+    """The leg's stroke as the bound sees it, sampled at the knee's angles (from its lower stop up)."""
+
+    knee: np.ndarray  # (S,) rad
+    hip: np.ndarray  # (S,) rad, the hip flexion that keeps the COM above the foot
+    com_height: np.ndarray  # (S,) m, COM over the floor, foot on the floor, COM above it
+    base_over_com: np.ndarray  # (S,) m, the base origin's height over the COM in that pose
+    inertia: np.ndarray  # (S,) kg·m²/rad²: the whole robot's kinetic energy is ½·inertia·q̇² along the stroke
+    mass: float  # kg, the whole robot
+
+
+class JumpBound(NamedTuple):
+    """One gravity's bound (SI units)."""
+
+    gravity: float  # m/s²
+    energy: float  # J the knee puts in over the stroke: the COM's rise to lift-off plus its speed there
+    takeoff_speed: float  # m/s of the COM at lift-off
+    takeoff_knee: float  # rad, the knee at lift-off
+    apex_rise: float  # m, the base's apex over its standing height
+
+
+class KneeMotor(NamedTuple):
+    """The knee's motor, joint-side figures."""
+
+    stall_torque: float  # N·m (the ideal motor: its effort limit)
+    no_load_speed: float  # rad/s (inf: the ideal motor, no speed line)
+    torque_limit: float  # N·m, the current limit
+
+
+def knee_motor(mj_model: mujoco.MjModel, motor: str) -> KneeMotor:
+    """The URDF's knee motor for a `registry.MOTORS` kind; refuses one that bounds nothing."""
+    lay = Layout.of(mj_model)
+    effort, speed = lay.effort_limit[KNEE], lay.speed_limit[KNEE]
+    if not (math.isfinite(effort) and effort > 0):
+        raise ValueError(f"the knee's motor has no effort limit ({effort:g} N·m): there is no bound on a jump; "
+                         "give the URDF's kfe joint <limit effort=...>")
+    if motor == "dc":
+        if not math.isfinite(speed):
+            raise ValueError("a dc motor's bound needs the knee's <limit velocity> in the URDF (its no-load speed)")
+        return KneeMotor(effort, speed, effort)
+    return KneeMotor(effort, math.inf, effort)
+
+
+def _hip_over_foot(m: mujoco.MjModel, d: mujoco.MjData, lay: Layout, knee: float) -> float:
+    """The hip flexion (rad) that puts the COM straight above the foot at `knee`; leaves d in that pose."""
+    haa, hfe, kfe = lay.joint_qpos
+
+    def ahead(hip: float) -> float:  # the COM's x ahead of the foot
+        d.qpos[:] = m.qpos0
+        d.qpos[[haa, hfe, kfe]] = (0.0, hip, knee)
+        mujoco.mj_kinematics(m, d)
+        mujoco.mj_comPos(m, d)
+        return float(d.subtree_com[0, 0] - d.geom_xpos[lay.foot_geom, 0])
+
+    a, b = lay.joint_range[1]
+    fa = ahead(a)
+    if fa * ahead(b) > 0:
+        raise ValueError(f"no hip flexion puts the centre of mass above the foot at knee {knee:.3f} rad")
+    for _ in range(60):  # bisection
+        mid = 0.5 * (a + b)
+        fm = ahead(mid)
+        if fa * fm <= 0:
+            b = mid
+        else:
+            a, fa = mid, fm
+    ahead(0.5 * (a + b))
+    return 0.5 * (a + b)
+
+
+def stroke(mj_model: mujoco.MjModel) -> Stroke:
+    """h(q), the base's offset over the COM and the kinetic energy's inertia along the knee's range, measured
+    with MuJoCo C: the foot's bottom held at the origin, the body upright, the COM above the foot."""
+    m, lay = mj_model, Layout.of(mj_model)
+    d = mujoco.MjData(m)
+    foot = lay.foot_geom
+    knees = np.linspace(*lay.joint_range[KNEE], SAMPLES)
+    hips, height, offset = np.empty(SAMPLES), np.empty(SAMPLES), np.empty(SAMPLES)
+    qpos = np.empty((SAMPLES, m.nq))
+    for i, q in enumerate(knees):
+        hips[i] = _hip_over_foot(m, d, lay, q)
+        bottom = d.geom_xpos[foot] - [0.0, 0.0, m.geom_size[foot, 0]]
+        qpos[i] = d.qpos
+        qpos[i, :3] -= bottom  # the foot's bottom at the origin
+        height[i] = d.subtree_com[0, 2] - bottom[2]
+        offset[i] = d.qpos[2] - d.subtree_com[0, 2]
+    # The path's tangent per radian of knee, in velocity coordinates (the base's orientation is fixed, so the
+    # free joint's linear part is d(position)/dq and its angular part zero), and ½ t^T M t.
+    tangent = np.zeros((SAMPLES, m.nv))
+    slope = np.gradient(qpos, knees, axis=0)
+    tangent[:, :3] = slope[:, :3]
+    for j in lay.joint_qpos:
+        tangent[:, lay.joint_dof[lay.joint_qpos.index(j)]] = slope[:, j]
+    inertia = np.empty(SAMPLES)
+    full = np.zeros((m.nv, m.nv))
+    for i in range(SAMPLES):
+        d.qpos[:] = qpos[i]
+        mujoco.mj_kinematics(m, d)
+        mujoco.mj_comPos(m, d)
+        mujoco.mj_crb(m, d)
+        mujoco.mj_fullM(m, d, full)
+        inertia[i] = tangent[i] @ full @ tangent[i]
+    return Stroke(knees, hips, height, offset, inertia, float(m.body_mass.sum()))
+
+
+def _knee_torque(motor: KneeMotor, speed: float) -> float:
+    """N·m the knee's motor gives while extending at `speed` rad/s (`actuators.envelope`'s upper bound)."""
+    line = motor.stall_torque * (1.0 - speed / motor.no_load_speed)
+    return min(line, motor.torque_limit)
+
+
+def jump_bound(leg: Stroke, motor: KneeMotor, gravity: float, standing: float) -> JumpBound:
+    """The bound at `gravity` m/s² (> 0), for a robot standing with its base `standing` m up."""
+    if not gravity > 0:
+        raise ValueError(f"a jump's bound needs a downward gravity, got {gravity:g} m/s²")
+    m, g = leg.mass, gravity
+    slope = np.gradient(leg.com_height, leg.knee)  # h'(q), m/rad, > 0 as the knee extends
+    kinetic, work = 0.0, 0.0  # J: the whole robot's kinetic energy ½·I·q̇², the knee's work so far
+    best = (leg.com_height[0], 0.0, leg.knee[0], 0.0)  # (COM apex, COM speed, knee, work) of the best lift-off
+    for i in range(len(leg.knee) - 1):
+        dq = (leg.knee[i + 1] - leg.knee[i]) / SUBSTEPS
+        for j in range(SUBSTEPS):
+            f = (j + 0.5) / SUBSTEPS
+            s, inertia = slope[i] + (slope[i + 1] - slope[i]) * f, leg.inertia[i] + (leg.inertia[i + 1] - leg.inertia[i]) * f
+            tau = _knee_torque(motor, math.sqrt(2.0 * kinetic / inertia))
+            if tau <= 0.0:  # the knee cannot keep up with the body: the foot has left the floor
+                break
+            kinetic += (tau - m * g * s) * dq
+            work += tau * dq
+            if kinetic <= 0.0:  # the knee cannot lift the robot from here: the push starts higher up
+                kinetic, work = 0.0, 0.0
+        else:
+            q = leg.knee[i + 1]
+            v = slope[i + 1] * math.sqrt(2.0 * kinetic / leg.inertia[i + 1])  # the COM's speed
+            apex = leg.com_height[i + 1] + v * v / (2.0 * g)
+            if apex > best[0]:  # leaving the floor here (the push released) would fly this high
+                best = (apex, v, q, work)
+            continue
+        break
+    apex_com, speed, knee, work = best
+    apex_base = apex_com + float(np.interp(knee, leg.knee, leg.base_over_com))
+    return JumpBound(g, work, speed, float(knee), apex_base - standing)
+
+
+def bounds(mj_model: mujoco.MjModel, motor: str, gravity) -> dict[float, JumpBound]:
+    """{g: its JumpBound} for each gravity, the model's robot with `motor` (a registry.MOTORS kind)."""
+    knee, leg, standing = knee_motor(mj_model, motor), stroke(mj_model), standing_height(mj_model)
+    return {float(g): jump_bound(leg, knee, float(g), standing) for g in gravity}
+
+
+def tucked_drop(mj_model: mujoco.MjModel) -> float:
+    """m from the base origin down to the foot's bottom with the leg drawn up as far as it goes (hips straight,
+    the knee at its lower stop): the least the base must be above a block for the foot to pass over it."""
+    m, lay = mj_model, Layout.of(mj_model)
+    d = mujoco.MjData(m)
+    d.qpos[:] = m.qpos0
+    d.qpos[list(lay.joint_qpos)] = (0.0, 0.0, lay.joint_range[KNEE][0])
+    mujoco.mj_kinematics(m, d)
+    return float(d.qpos[2] - (d.geom_xpos[lay.foot_geom, 2] - m.geom_size[lay.foot_geom, 0]))
+
+
+def highest_block(b: JumpBound, standing: float, drop: float) -> float:
+    """m: the tallest block the bound's apex lets the foot pass over (foot drawn up, no clearance): the base's
+    highest point, standing + apex rise, less `tucked_drop`."""
+    return standing + b.apex_rise - drop
+
+
+def widest_gap(b: JumpBound) -> float:
+    """m: the range v²/g of the COM launched at 45° with the bound's takeoff speed, level to level: the widest gap
+    the bound's speed spans (the foot's reach before and after adds a little; a push along a tilted leg works
+    against less of the weight and gives a little more speed: both left out)."""
+    return b.takeoff_speed**2 / b.gravity
