@@ -422,7 +422,7 @@ def test_a_block_or_gaps_sweep_answers_beside_the_motors_bound(kind):
     for g, b in per_g.items():
         assert bounds["apex_bound"][g] == b.apex_rise
         past = (bound.highest_block(b, standing_height(m), bound.tucked_drop(m)) if kind == "obstacle"
-                else bound.widest_gap(b))
+                else bound.widest_gap(b, bound.leg_reach(m)))
         assert bounds[name][g] == past
     inst = expand(spec, m.nv)
     table, cols = _table(spec, inst)

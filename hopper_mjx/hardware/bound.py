@@ -206,8 +206,18 @@ def highest_block(b: JumpBound, standing: float, drop: float) -> float:
     return standing + b.apex_rise - drop
 
 
-def widest_gap(b: JumpBound) -> float:
-    """m: the range v²/g of the COM launched at 45° with the bound's takeoff speed, level to level: the widest gap
-    the bound's speed spans (the foot's reach before and after adds a little; a push along a tilted leg works
-    against less of the weight and gives a little more speed: both left out)."""
-    return b.takeoff_speed**2 / b.gravity
+def widest_gap(b: JumpBound, reach: float) -> float:
+    """m: the widest gap a jump of the bound's takeoff speed spans, level to level: the COM's range v²/g launched at
+    45°, and the foot leaving from `reach` behind the COM and landing `reach` ahead of it (`leg_reach`). A push along
+    a tilted leg works against less of the weight and gives a little more speed; left out."""
+    return b.takeoff_speed**2 / b.gravity + 2.0 * reach
+
+
+def leg_reach(mj_model: mujoco.MjModel) -> float:
+    """m: the farthest the foot's edge gets from the hip's flexion axis, the leg straight: thigh, shank and the foot's
+    radius, as far as the foot can be ahead of or behind the COM at takeoff and landing (a loose figure: the COM
+    sits above the hip, and a leg swung far out does not hold the body)."""
+    from hopper_mjx.model.robot import LegGeometry
+
+    leg = LegGeometry.of(mj_model)
+    return leg.thigh + leg.shank + leg.foot_radius

@@ -63,7 +63,8 @@ def _swept_options(s: argparse.ArgumentParser, kind: str) -> None:
         s.add_argument("--widths", type=cli.floats("--widths"), default=[0.1, 0.2, 0.3, 0.4],
                        help="gap widths along +x, m (default 0.1,0.2,0.3,0.4)")
         s.add_argument("--x", type=float, default=0.6, help="the gap's near edge, m ahead of the start")
-        s.add_argument("--depth", type=float, default=0.3, help="the gap's depth, m")
+        s.add_argument("--depth", type=float, default=1.0,
+                       help="the gap's depth, m (default 1: deeper than the leg reaches, so a foot in it falls)")
     if kind == "terrain":
         s.add_argument("--amps", type=cli.floats("--amps"), default=[0.0, 0.01, 0.02, 0.03],
                        help="rough ground's peak |height|, m (default 0,0.01,0.02,0.03)")

@@ -62,7 +62,8 @@ def bound_columns(spec: SweepSpec) -> dict[str, dict[float, float]]:
         standing, drop = standing_height(m), bound.tucked_drop(m)
         past = ("height_bound", {g: bound.highest_block(b, standing, drop) for g, b in per_g.items()})
     else:
-        past = ("width_bound", {g: bound.widest_gap(b) for g, b in per_g.items()})
+        reach = bound.leg_reach(m)
+        past = ("width_bound", {g: bound.widest_gap(b, reach) for g, b in per_g.items()})
     return {"apex_bound": {g: b.apex_rise for g, b in per_g.items()}, past[0]: past[1]}
 
 
