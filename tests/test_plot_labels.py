@@ -107,6 +107,10 @@ def test_sweep_plots():
     assert_reads_alone(report.terrain_figure(obstacle, [dict(r, obstacle_height=v, cleared=0.5, reached=1.0,
                                                              distance_made_good=0.9, mean_speed=0.2)
                                                         for r in rows for v in obstacle.values]))
+    limits = [dict(r, obstacle_height=v, cleared=0.5) for r in rows for v in obstacle.values]
+    fig = report.limits_figure(obstacle, limits, report.bound_columns(obstacle))
+    assert_reads_alone(fig)
+    assert "the URDF's robot" in _titles(fig)  # the physics subtitle
 
 
 def test_signal_plot_of_a_bag():
