@@ -33,7 +33,7 @@ import mujoco
 import numpy as np
 
 from hopper_mjx.model.layout import Layout
-from hopper_mjx.model.robot import standing_height
+from hopper_mjx.model.robot import balancing, com_ahead_of_foot, standing_height
 
 KNEE = 2  # joint index of kfe in (haa, hfe, kfe)
 SAMPLES = 401  # knee angles at which h(q) is measured with MuJoCo C
@@ -85,28 +85,8 @@ def knee_motor(mj_model: mujoco.MjModel, motor: str) -> KneeMotor:
 
 def _hip_over_foot(m: mujoco.MjModel, d: mujoco.MjData, lay: Layout, knee: float) -> float:
     """The hip flexion (rad) that puts the COM straight above the foot at `knee`; leaves d in that pose."""
-    haa, hfe, kfe = lay.joint_qpos
-
-    def ahead(hip: float) -> float:  # the COM's x ahead of the foot
-        d.qpos[:] = m.qpos0
-        d.qpos[[haa, hfe, kfe]] = (0.0, hip, knee)
-        mujoco.mj_kinematics(m, d)
-        mujoco.mj_comPos(m, d)
-        return float(d.subtree_com[0, 0] - d.geom_xpos[lay.foot_geom, 0])
-
-    a, b = lay.joint_range[1]
-    fa = ahead(a)
-    if fa * ahead(b) > 0:
-        raise ValueError(f"no hip flexion puts the centre of mass above the foot at knee {knee:.3f} rad")
-    for _ in range(60):  # bisection
-        mid = 0.5 * (a + b)
-        fm = ahead(mid)
-        if fa * fm <= 0:
-            b = mid
-        else:
-            a, fa = mid, fm
-    ahead(0.5 * (a + b))
-    return 0.5 * (a + b)
+    return balancing(lambda hip: com_ahead_of_foot(m, d, lay, hip, knee), *lay.joint_range[1],
+                     f"hip flexion at knee {knee:.3f} rad")
 
 
 def stroke(mj_model: mujoco.MjModel) -> Stroke:

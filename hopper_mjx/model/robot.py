@@ -20,31 +20,39 @@ STANCE_HFE = 0.5  # rad: hip flexion of the default crouched stance
 CLEARANCE = 0.05  # m between the foot and the floor in the default initial state
 
 
+def com_ahead_of_foot(m: mujoco.MjModel, d: mujoco.MjData, lay: Layout, hip: float, knee: float) -> float:
+    """m the whole-robot centre of mass is ahead (+x) of the foot's centre with the joints at (0, hip, knee) and the
+    base at qpos0; leaves `d` in that pose."""
+    d.qpos[:] = m.qpos0
+    d.qpos[list(lay.joint_qpos)] = (0.0, hip, knee)
+    mujoco.mj_kinematics(m, d)
+    mujoco.mj_comPos(m, d)
+    return d.subtree_com[0, 0] - d.geom_xpos[lay.foot_geom, 0]
+
+
+def balancing(ahead, lo: float, hi: float, what: str) -> float:
+    """The angle in [lo, hi] where `ahead(angle)` (the COM ahead of the foot) is zero, by 60 bisections, `ahead`
+    called last at it; ValueError naming `what` when it keeps one sign there."""
+    f_lo = ahead(lo)
+    if f_lo * ahead(hi) > 0:
+        raise ValueError(f"no {what} puts the centre of mass above the foot")
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        f_mid = ahead(mid)
+        if f_lo * f_mid <= 0:
+            hi = mid
+        else:
+            lo, f_lo = mid, f_mid
+    ahead(0.5 * (lo + hi))
+    return 0.5 * (lo + hi)
+
+
 def stance_qpos(mj_model: mujoco.MjModel, clearance: float = CLEARANCE, hfe: float = STANCE_HFE) -> np.ndarray:
     """qpos upright at rest: hip flexed by `hfe`, the knee bent so that the whole-robot
     centre of mass sits straight above the foot, the foot `clearance` m above the floor."""
     m, lay = mj_model, Layout.of(mj_model)
     d = mujoco.MjData(m)
-
-    def com_ahead_of_foot(kfe: float) -> float:
-        d.qpos[:] = m.qpos0
-        d.qpos[list(lay.joint_qpos)] = (0.0, hfe, kfe)
-        mujoco.mj_kinematics(m, d)
-        mujoco.mj_comPos(m, d)
-        return d.subtree_com[0, 0] - d.geom_xpos[lay.foot_geom, 0]
-
-    lo, hi = lay.joint_range[2]
-    f_lo = com_ahead_of_foot(lo)
-    if f_lo * com_ahead_of_foot(hi) > 0:
-        raise ValueError(f"no knee angle puts the centre of mass above the foot at hfe={hfe}")
-    for _ in range(60):  # bisection on the knee angle
-        mid = 0.5 * (lo + hi)
-        f_mid = com_ahead_of_foot(mid)
-        if f_lo * f_mid <= 0:
-            hi = mid
-        else:
-            lo, f_lo = mid, f_mid
-    com_ahead_of_foot(0.5 * (lo + hi))
+    balancing(lambda kfe: com_ahead_of_foot(m, d, lay, hfe, kfe), *lay.joint_range[2], f"knee angle at hfe={hfe}")
     d.qpos[2] += clearance - (d.geom_xpos[lay.foot_geom, 2] - m.geom_size[lay.foot_geom, 0])
     return d.qpos.copy()
 
