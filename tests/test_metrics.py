@@ -157,3 +157,31 @@ def test_terrain_metrics_distance_obstacles_and_where_the_falls_happened():
     assert still["distance_made_good"][0] == pytest.approx(end)
     per_instance = hops.terrain_metrics(traj, obstacles=np.broadcast_to(blocks[:1], (4, 1, 3)))
     assert per_instance["obstacles_cleared"].tolist() == [1, 0, 1, 1]
+
+
+def test_landing_metrics_read_the_tilt_and_the_impact_at_each_touchdown():
+    """Instance 0 lands every 0.6 s, its body tilted 5° at the 4th landing only, each landing's force rising to
+    300 N in its first 0.03 s (the 2nd's to 900 N at 0.04 s, and 2000 N at 0.1 s: outside the window); 2 falls at
+    5 s, and a 20° tilt at a landing after it does not count; 1 never lands."""
+    traj, t = _trajectory()
+    n = len(t)
+    qpos = traj.qpos.copy()
+    flag = traj.contact.flag
+    touchdowns = np.flatnonzero(flag[0, 1:] & ~flag[0, :-1]) + 1
+    tilted = lambda deg: [np.cos(np.radians(deg) / 2), np.sin(np.radians(deg) / 2), 0.0, 0.0]
+    qpos[0, touchdowns[3], 3:7] = tilted(5.0)
+    late = touchdowns[t[touchdowns] > 5.0][0]
+    qpos[2, late, 3:7] = tilted(20.0)
+    force = np.zeros((4, n, 3))
+    for k in touchdowns:
+        force[:, k:k + 4, 2] = 300.0
+    force[:, touchdowns[1] + 4, 2] = 900.0
+    force[:, touchdowns[1] + 10, 2] = 2000.0
+    landing = SimpleNamespace(qpos=qpos, time=traj.time,
+                              contact=SimpleNamespace(flag=flag, pos=traj.contact.pos, force=force))
+    out = hops.landing_metrics(landing)
+    assert out["landing_tilt"][0] == pytest.approx(5.0)
+    assert out["impact_force"][0] == pytest.approx(900.0)
+    assert np.isnan(out["landing_tilt"][1]) and np.isnan(out["impact_force"][1])  # standing: no touchdown
+    assert out["landing_tilt"][2] == pytest.approx(0.0, abs=1e-6)  # the 20° landing came after its fall
+    assert out["impact_force"][2] == pytest.approx(900.0)

@@ -218,6 +218,39 @@ def terrain_metrics(traj, *, command_speed=(0.0, 0.0), obstacles=None) -> dict[s
     }
 
 
+IMPACT_WINDOW = 0.05  # s after a touchdown over which its impact force is read
+
+
+def landing_metrics(traj) -> dict[str, np.ndarray]:
+    """Per-instance landing measures, each (N,), over the touchdowns before any fall (NaN without one):
+
+    - landing_tilt: deg, the largest tilt of the body from upright (the angle of its z axis from the vertical) at a
+      touchdown: how well the flights before them were held level;
+    - impact_force: N, the largest foot contact force (its norm) within IMPACT_WINDOW of a touchdown: what a landing
+      asks of the leg and its motors.
+
+    Uses the state stream for the tilt (the sample at or before each touchdown) and the contact stream's force.
+    """
+    qpos = np.asarray(traj.qpos, dtype=float)
+    flag = np.asarray(traj.contact.flag, dtype=bool)
+    force = np.linalg.norm(np.asarray(traj.contact.force, dtype=float), axis=-1)
+    t_state = np.asarray(traj.time["state"], dtype=float)
+    t_contact = np.asarray(traj.time["contact"], dtype=float)
+    fall = _falls(qpos, t_state)
+    down = _events(flag, rising=True) & (t_contact[None, :] <= fall.t_fall[:, None])
+    x, y = qpos[..., 4], qpos[..., 5]
+    tilt = np.degrees(np.arccos(np.clip(1.0 - 2.0 * (x * x + y * y), -1.0, 1.0)))  # [w, x, y, z] quaternions
+    at = np.clip(np.searchsorted(t_state, t_contact, side="right") - 1, 0, len(t_state) - 1)
+    landing_tilt = np.where(down, tilt[:, at], -np.inf).max(axis=1)
+    # Each contact sample's most recent touchdown time, then the force while within the window after it.
+    last = np.maximum.accumulate(np.where(down, np.arange(len(t_contact))[None, :], -1), axis=1)
+    since = t_contact[None, :] - np.where(last >= 0, t_contact[np.maximum(last, 0)], np.inf)
+    near = (last >= 0) & (since <= IMPACT_WINDOW) & (t_contact[None, :] <= fall.t_fall[:, None])
+    impact = np.where(near, force, -np.inf).max(axis=1)
+    return {"landing_tilt": np.where(np.isfinite(landing_tilt), landing_tilt, np.nan),
+            "impact_force": np.where(np.isfinite(impact), impact, np.nan)}
+
+
 class _Falls(NamedTuple):
     roll: np.ndarray  # (N, T) rad
     pitch: np.ndarray  # (N, T) rad

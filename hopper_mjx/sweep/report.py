@@ -268,7 +268,8 @@ def table_text(spec: SweepSpec, groups: list[dict], label: str | None = None) ->
     if spec.grounds:  # a terrain sweep's own figures: over all replicates (cleared), and the survivors' travel
         cols += [("made good m", "distance_made_good", "{:+.2f}")]
         if spec.kind in BAND_KINDS:
-            cols += [("reached", "reached", "{:.0%}"), (PASSED[spec.kind], "cleared", "{:.0%}")]
+            cols += [("reached", "reached", "{:.0%}"), (PASSED[spec.kind], "cleared", "{:.0%}"),
+                     ("landing tilt °", "landing_tilt", "{:.1f}"), ("impact N", "impact_force", "{:.0f}")]
     if label:
         cols.insert(0, ("controller", "controller", "{}"))
     cells = [[h for h, _, _ in cols]]

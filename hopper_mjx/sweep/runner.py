@@ -28,7 +28,7 @@ from hopper_mjx.metrics import hops
 from hopper_mjx.shell.files import atomic_write
 from hopper_mjx.sim import Sim, gravity_vectors, steps_for
 from hopper_mjx.sweep.folder import chunk_path, claim, read_chunk
-from hopper_mjx.sweep.grid import Instances, SweepSpec, expand
+from hopper_mjx.sweep.grid import BAND_KINDS, Instances, SweepSpec, expand
 from hopper_mjx.variation import draw
 
 COLUMNS = ("apex_height", "flight_rise", "flight_time", "ballistic_flight_time", "stance_time", "hop_period",
@@ -37,6 +37,8 @@ COLUMNS = ("apex_height", "flight_rise", "flight_time", "ballistic_flight_time",
            "energy_per_hop", "mechanical_power")
 # An obstacle or terrain sweep's extra columns (`hops.terrain_metrics`).
 TERRAIN_COLUMNS = ("distance_made_good", "obstacles_cleared", "highest_cleared", "fall_x", "fall_y")
+# A block or gaps sweep's, besides: how its landings went (`hops.landing_metrics`).
+LANDING_COLUMNS = ("landing_tilt", "impact_force")
 def recorded(timestep: float) -> signals.SensorConfig:
     """The streams a sweep records: contact and state at the physics rate (events, lift-off heights and apexes to
     the step, short flights too), the IMU and odometry at 100 Hz."""
@@ -46,7 +48,7 @@ def recorded(timestep: float) -> signals.SensorConfig:
 
 def columns(spec: SweepSpec) -> tuple[str, ...]:
     """The metrics a sweep's rows hold."""
-    return COLUMNS + (TERRAIN_COLUMNS if spec.grounds else ())
+    return COLUMNS + (TERRAIN_COLUMNS if spec.grounds else ()) + (LANDING_COLUMNS if spec.kind in BAND_KINDS else ())
 
 
 class ChunkRunner:
@@ -137,6 +139,8 @@ class ChunkRunner:
         result["diverged"] = np.asarray(final.diverged)
         if self.grounds:
             result |= hops.terrain_metrics(traj, command_speed=self.spec.speed, obstacles=obstacles)
+        if self.spec.kind in BAND_KINDS:
+            result |= hops.landing_metrics(traj)
         return np.stack([np.asarray(result[c], dtype=np.float64) for c in self.columns], axis=1)[:n]
 
 
