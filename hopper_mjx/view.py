@@ -76,7 +76,7 @@ def display_model(physics, count: int):
     floor, for display only. On a terrain every copy has its own copy of the ground under it, at its
     offset on the display grid (`grid_offsets` at `spacing`): each instance is drawn where it is, in its
     own world."""
-    from hopper_mjx.model import FLOOR_GEOM, scene
+    from hopper_mjx.model import FLOOR_GEOM, LEG_CONTACT_GROUP, scene
 
     def dressed():
         return scene.dress(physics.spec())
@@ -94,7 +94,7 @@ def display_model(physics, count: int):
         source = dressed()  # a fresh spec per copy: attaching moves the body
         display.worldbody.add_frame().attach_body(source.worldbody.first_body(), f"monoped_{k}/", "")
     m = display.compile()
-    m.geom_group[m.geom_bodyid != 0] = ROBOT_GROUP
+    m.geom_group[(m.geom_bodyid != 0) & (m.geom_group != LEG_CONTACT_GROUP)] = ROBOT_GROUP  # contact boxes hidden
     m.site_rgba[:, 3] = 0  # the IMU and foot sites are for the simulation, not for the eye
     m.light_castshadow[:] = 0  # shadows double the cost of a frame in software OpenGL
     free = np.flatnonzero(m.jnt_type == mujoco.mjtJoint.mjJNT_FREE)

@@ -13,17 +13,20 @@ import mujoco
 import numpy as np
 
 from hopper_mjx.model import loader
+from hopper_mjx.terrain import HFIELD, Terrain
 
 
 def hfield_model(heights, hx: float, hy: float, base: float = 0.1, urdf=None,
                  base_pairs: bool = True) -> mujoco.MjModel:
     """The monoped with its floor replaced by the terrain `heights`; `base_pairs=False` drops
-    the base box's floor pairs (the foot's pair is kept)."""
+    the base box's and the leg links' floor pairs (the foot's pair is kept)."""
     heights = np.asarray(heights, dtype=float)
     low, zrange = float(heights.min()), float(np.ptp(heights))
-    spec = loader.build_spec(urdf)
+    # The loader's terrain model (its pairs: the base's and the leg links' boxes too), on this grid.
+    spec = loader.build_spec(urdf, terrain=Terrain(heights, (hx, hy)))
     nrow, ncol = heights.shape
     data = (heights - low) / zrange if zrange > 0 else np.zeros_like(heights)
+    spec.delete(spec.hfield(HFIELD))
     spec.add_hfield(name="terrain", nrow=nrow, ncol=ncol, size=[hx, hy, max(zrange, 1e-9), base],
                     userdata=data.ravel().tolist())
     floor = next(g for g in spec.geoms if g.name == loader.FLOOR_GEOM)

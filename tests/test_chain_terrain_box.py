@@ -40,6 +40,11 @@ def rough():
     return m
 
 
+def base_box(engine: chain.ChainEngine):
+    """The base box's pair on the heightfield (`chain_model.BoxBlock`): the one on body 0."""
+    return next(b for b in engine.chain.terrain.boxes if engine.chain.pairs[b.pair].body == 0)
+
+
 def box_poses(m: mujoco.MjModel, n: int, seed: int) -> np.ndarray:
     """qpos with the base turned at random over the terrain, its lowest corner 0-6 mm below the ground
     under it (at the nearest vertex)."""
@@ -89,7 +94,9 @@ def _mesh_penetration(top: np.ndarray, bottom: float, centre, rot, half) -> list
 def per_prism(rough):
     """Per pose: the box frame, the block's prisms and the chain's per-prism answer (float64)."""
     engine = chain.make(rough)
-    cm, t, pair = engine.chain, engine.chain.terrain, engine.chain.pairs[engine.chain.terrain.box]
+    cm, t = engine.chain, engine.chain.terrain
+    box = base_box(engine)
+    pair = cm.pairs[box.pair]
     poses = box_poses(rough, N_POSES, seed=0)
     with jax.enable_x64(True):
         params = engine.with_heights(from_model(rough).heights)
@@ -97,8 +104,8 @@ def per_prism(rough):
         def one(q):
             pose = chain_smooth.kinematics(cm, params.gate, tuple(q[i] for i in range(cm.nq)))
             centre, rot = chain_constraint.box_frame(pair, pose)
-            row, col = block_start(t, centre, t.box_radius, t.block_box)
-            tops = chain_hfield_box._prisms(t, params.terrain, row, col, centre.dtype)
+            row, col = block_start(t, centre, box.radius, box.block)
+            tops = chain_hfield_box._prisms(t, box.block, params.terrain, row, col, centre.dtype)
             axes, half = rot.T, jnp.asarray(pair.size)
             return centre, rot, tops, chain_hfield_box._box_prism(t, centre, axes, half, tops, params.terrain.bottom)
 
@@ -136,10 +143,10 @@ def test_each_box_prism_contact_is_c_convex_penetration(per_prism):
 
 
 def test_box_contacts_on_the_heightfield_against_c(rough, per_prism):
-    """The chain's contact set (its `box_keep` deepest) has C's heightfield count; C's own depths agree
+    """The chain's contact set (its `keep` deepest) has C's heightfield count; C's own depths agree
     for part of them (printed; see the module's note)."""
     poses, (_, _, _, (exists, depth, normal, pos)), _, _ = per_prism
-    keep = chain.make(rough).chain.terrain.box_keep
+    keep = base_box(chain.make(rough)).keep
     d = mujoco.MjData(rough)
     g = int(rough.pair_geom2[0])
     same = total = 0

@@ -167,7 +167,7 @@ def test_auto_steps_a_terrain_with_the_chain_engine(capsys):
     m = model.load(terrain=terrain.parse("steps").terrain())
     auto = engine.make("auto", m)
     assert auto.name == "chain" and capsys.readouterr().err == ""
-    assert auto.chain.terrain.max_contacts == chain.FOOT_CONTACTS and auto.chain.terrain.box is not None
+    assert auto.chain.terrain.max_contacts == chain.FOOT_CONTACTS and len(auto.chain.terrain.boxes) == 3  # base, legs
 
 
 def test_seed_each_draws_every_instance_its_own_ground():

@@ -7,6 +7,7 @@ from hopper_mjx.model.loader import (
     FOOT_GEOM,
     IMU_SITE,
     JOINTS,
+    LEG_CONTACT_GROUP,
     ROOT_JOINT,
     URDFError,
     build_spec,
@@ -15,6 +16,6 @@ from hopper_mjx.model.loader import (
 )
 
 __all__ = [
-    "DEFAULT_TIMESTEP", "DEFAULT_URDF", "FLOOR_GEOM", "FOOT_GEOM", "IMU_SITE", "JOINTS",
+    "DEFAULT_TIMESTEP", "DEFAULT_URDF", "FLOOR_GEOM", "FOOT_GEOM", "IMU_SITE", "JOINTS", "LEG_CONTACT_GROUP",
     "ROOT_JOINT", "URDFError", "build_spec", "describe", "load",
 ]

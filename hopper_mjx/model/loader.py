@@ -3,7 +3,8 @@
 The URDF is first checked here, so that a bad file fails with a message that
 names the problem; MuJoCo's own URDF parser then builds an `MjSpec`, to which
 the simulation-only parts are added: a free-floating base, the ground (a plane, or a
-terrain's height field), explicit foot/base-ground contact pairs, an IMU site, native
+terrain's height field), explicit foot/base-ground contact pairs (on a terrain the thigh's and
+shank's too), an IMU site, native
 MuJoCo sensors (for users of the exported MJCF) and one torque motor per transmission.
 """
 
@@ -31,6 +32,10 @@ FLOOR_GEOM = "floor"
 FOOT_GEOM = "foot"
 IMU_SITE = "imu"
 FOOT_SITE = "foot_site"
+# Contact-only boxes around the thigh's and shank's cylinders (terrain only): massless, hidden in MuJoCo's
+# default view and left out of the robot's fingerprint (they follow from the cylinders).
+LEG_CONTACT_GROUP = 3
+LEG_CONTACT_SUFFIX = "_contact"
 
 FOOT_FRICTION = 1.0  # rubber on concrete is 0.6-1.0
 
@@ -73,6 +78,7 @@ class LegDescription:
     """What the loader needs to know from the URDF, checked before MuJoCo sees it."""
 
     base_link: str
+    leg_links: tuple[str, str]  # the thigh and the shank (children of hfe_joint and kfe_joint)
     contact_links: tuple[str, ...]  # the shank and everything fixed to it
     foot_link: str
     foot_radius: float
@@ -256,6 +262,7 @@ def describe(urdf_text: str, source: str = "<string>") -> LegDescription:
 
     return LegDescription(
         base_link=base_link,
+        leg_links=(chain[1][1], chain[2][1]),
         contact_links=tuple(contact_links),
         foot_link=feet[0][0],
         foot_radius=feet[0][1],
@@ -270,6 +277,38 @@ def _add_floor(spec: mujoco.MjSpec, terrain: terrains.Terrain | None) -> None:
     )
     if terrain is not None:
         terrains.to_spec(spec, floor, terrain)
+
+
+def _add_leg_pairs(spec: mujoco.MjSpec, leg: LegDescription) -> None:
+    """On a terrain a block's edge can meet the thigh or the shank: each link's collision cylinders get a
+    bounding box paired with the floor. A box, not the cylinder or a capsule: the chain engine's exact
+    box-prism routine (`engine/chain/hfield_box.py`) serves it, and MJX collides boxes with a height field.
+    Frictionless (condim 1, as the base box): it only has to stop a link going through the ground, which
+    happens after a stumble, and one row a contact, not four, keeps every step's solve cheap."""
+    for name in leg.leg_links:
+        body = spec.body(name)
+        for k, cyl in enumerate([g for g in body.geoms if g.type == mujoco.mjtGeom.mjGEOM_CYLINDER]):
+            radius, half = cyl.size[0], cyl.size[1]
+            box = body.add_geom(name=f"{name}{LEG_CONTACT_SUFFIX}{k or ''}", type=mujoco.mjtGeom.mjGEOM_BOX,
+                                size=[radius, radius, half], pos=cyl.pos, quat=cyl.quat, contype=0,
+                                conaffinity=0, group=LEG_CONTACT_GROUP, mass=0, rgba=[0, 0, 0, 0])
+            spec.add_pair(geomname1=FLOOR_GEOM, geomname2=box.name, condim=1)
+
+
+def _add_sensors(spec: mujoco.MjSpec) -> None:
+    """MuJoCo's native IMU, odometry and foot-touch sensors, for users of the exported MJCF."""
+    obj = {"objtype": mujoco.mjtObj.mjOBJ_SITE, "objname": IMU_SITE}
+    for name, kind in (
+        ("imu_quat", mujoco.mjtSensor.mjSENS_FRAMEQUAT),
+        ("imu_gyro", mujoco.mjtSensor.mjSENS_GYRO),
+        ("imu_accel", mujoco.mjtSensor.mjSENS_ACCELEROMETER),
+        ("odom_pos", mujoco.mjtSensor.mjSENS_FRAMEPOS),
+        ("odom_linvel", mujoco.mjtSensor.mjSENS_FRAMELINVEL),
+        ("odom_angvel", mujoco.mjtSensor.mjSENS_FRAMEANGVEL),
+    ):
+        spec.add_sensor(name=name, type=kind, **obj)
+    spec.add_sensor(name="foot_touch", type=mujoco.mjtSensor.mjSENS_TOUCH,
+                    objtype=mujoco.mjtObj.mjOBJ_SITE, objname=FOOT_SITE)
 
 
 def _check_options(timestep, friction, iterations, ls_iterations) -> None:
@@ -319,7 +358,8 @@ def build_spec(urdf: str | os.PathLike | None = None, *, timestep: float = DEFAU
     _add_floor(spec, terrain)
 
     # Robot geoms collide only through explicit pairs: foot-floor while hopping,
-    # base-floor after a fall. The leg links never reach the floor before the base does.
+    # base-floor after a fall. On the plane the leg links never reach the floor before the
+    # base does; on a terrain a block's edge can meet them (`_add_leg_pairs`).
     # The base pair is frictionless (condim 1: 4 constraint rows, not 16): it only
     # acts after a fall, which the metrics have already called at a base height of
     # 0.4 m, and its rows were half the solver's work on every step (docs/performance.md).
@@ -334,22 +374,12 @@ def build_spec(urdf: str | os.PathLike | None = None, *, timestep: float = DEFAU
     for i, geom in enumerate(base.geoms):
         geom.name = geom.name or f"{leg.base_link}_collision{i}"
         spec.add_pair(geomname1=FLOOR_GEOM, geomname2=geom.name, condim=1)
+    if terrain is not None:
+        _add_leg_pairs(spec, leg)
     foot_body.add_site(name=FOOT_SITE, pos=foot.pos, size=[leg.foot_radius * 1.1, 0, 0],
                        type=mujoco.mjtGeom.mjGEOM_SPHERE)
 
-    obj = {"objtype": mujoco.mjtObj.mjOBJ_SITE, "objname": IMU_SITE}
-    for name, kind in (
-        ("imu_quat", mujoco.mjtSensor.mjSENS_FRAMEQUAT),
-        ("imu_gyro", mujoco.mjtSensor.mjSENS_GYRO),
-        ("imu_accel", mujoco.mjtSensor.mjSENS_ACCELEROMETER),
-        ("odom_pos", mujoco.mjtSensor.mjSENS_FRAMEPOS),
-        ("odom_linvel", mujoco.mjtSensor.mjSENS_FRAMELINVEL),
-        ("odom_angvel", mujoco.mjtSensor.mjSENS_FRAMEANGVEL),
-    ):
-        spec.add_sensor(name=name, type=kind, **obj)
-    spec.add_sensor(name="foot_touch", type=mujoco.mjtSensor.mjSENS_TOUCH,
-                    objtype=mujoco.mjtObj.mjOBJ_SITE, objname=FOOT_SITE)
-
+    _add_sensors(spec)
     for t in leg.transmissions:
         spec.add_actuator(
             name=t.actuator,

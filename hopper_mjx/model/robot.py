@@ -14,7 +14,7 @@ import mujoco
 import numpy as np
 
 from hopper_mjx.model.layout import Layout
-from hopper_mjx.model.loader import JOINTS
+from hopper_mjx.model.loader import JOINTS, LEG_CONTACT_GROUP
 
 STANCE_HFE = 0.5  # rad: hip flexion of the default crouched stance
 CLEARANCE = 0.05  # m between the foot and the floor in the default initial state
@@ -111,7 +111,9 @@ def fingerprint(mj_model: mujoco.MjModel) -> str:
     h = hashlib.sha256()
     for name in _FINGERPRINT_FIELDS:
         h.update(np.round(np.asarray(getattr(m, name), dtype=float), 9).tobytes())
-    on_robot = m.geom_bodyid > 0  # the floor (or terrain) belongs to the world
+    # The floor (or terrain) belongs to the world; the leg links' contact boxes (terrain only) follow from their
+    # cylinders: a policy learnt on the plane runs on a terrain.
+    on_robot = (m.geom_bodyid > 0) & (m.geom_group != LEG_CONTACT_GROUP)
     for name in ("geom_type", "geom_size", "geom_pos", "geom_quat"):
         h.update(np.round(np.asarray(getattr(m, name)[on_robot], dtype=float), 9).tobytes())
     return h.hexdigest()[:16]

@@ -1,10 +1,10 @@
 """The chain engine: MuJoCo's step specialised, at trace time, to one monoped's topology.
 
 A free base, a serial chain of hinges, a sphere foot and a base box on a plane floor, or on
-a heightfield (`chain_hfield`, `chain_hfield_box`), for any URDF the loader accepts (`chain_model.describe` says
-why another model is not one). The step is MuJoCo's, stage by stage, written as
-per-instance scalar arithmetic with the model's numbers as constants, so that `vmap` turns
-every quantity into one contiguous vector over instances:
+a heightfield (`chain_hfield`, `chain_hfield_box`; there the leg links' boxes too), for any URDF
+the loader accepts (`chain_model.describe` says why another model is not one). The step is
+MuJoCo's, stage by stage, written as per-instance scalar arithmetic with the model's numbers
+as constants, so that `vmap` turns every quantity into one contiguous vector over instances:
 
     kinematics -> mass matrix, bias, actuation, damping -> constraint rows -> Newton solve
     -> (integrate) Euler with implicit joint damping

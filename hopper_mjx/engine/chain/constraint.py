@@ -26,7 +26,7 @@ import jax.numpy as jnp
 from hopper_mjx.engine.chain import algebra as al
 from hopper_mjx.engine.chain import hfield as chain_hfield
 from hopper_mjx.engine.chain import hfield_box as chain_hfield_box
-from hopper_mjx.engine.chain.model import ChainModel, ContactPair, SolParams
+from hopper_mjx.engine.chain.model import BoxBlock, ChainModel, ContactPair, SolParams
 from hopper_mjx.engine.chain.smooth import Pose, dof_body
 from hopper_mjx.engine.chain.stage import batch_any, stored
 
@@ -173,25 +173,27 @@ def box_frame(pair: ContactPair, pose: Pose) -> tuple:
     return as_array(centre), as_array(rot).reshape(3, 3)
 
 
-def box_near(cm: ChainModel, pose: Pose, terrain):
-    """() bool: the base box (on a heightfield floor) may touch it this step."""
-    pair = cm.pairs[cm.terrain.box]
-    return chain_hfield_box.box_near(cm.terrain, terrain, *box_frame(pair, pose), pair.size)
+def box_near(cm: ChainModel, box: BoxBlock, pose: Pose, terrain):
+    """() bool: the box pair `box` (on a heightfield floor) may touch it this step."""
+    pair = cm.pairs[box.pair]
+    return chain_hfield_box.box_near(cm.terrain, box, terrain, *box_frame(pair, pose), pair.size)
 
 
-def _terrain_slots(cm: ChainModel, pair: ContactPair, pose: Pose, terrain, box_on, gate) -> list:
-    """Per heightfield contact slot of the pair: (exists, distance, point relative to O, contact frame).
-    The box's prisms are collided only where `box_on` (a box of the batch is near its ground)."""
+def _terrain_slots(cm: ChainModel, p: int, pose: Pose, terrain, box_on, gate) -> list:
+    """Per heightfield contact slot of pair `p`: (exists, distance, point relative to O, contact frame).
+    A box's prisms are collided only where `box_on[p]` (that box of some instance of the batch is near its
+    ground)."""
+    pair = cm.pairs[p]
     if pair.kind == "box":
+        box = next(b for b in cm.terrain.boxes if b.pair == p)
         centre, rot = box_frame(pair, pose)
-        keep = cm.terrain.box_keep
-        collide = lambda c, r: chain_hfield_box.box_contacts(cm.terrain, terrain, c, r, pair.size, keep)
+        collide = lambda c, r: chain_hfield_box.box_contacts(cm.terrain, box, terrain, c, r, pair.size)
         dtype = centre.dtype
         absent = lambda c, r: tuple(chain_hfield.PrismContact(jnp.zeros((), bool), jnp.zeros((), dtype),
                                                          (jnp.zeros((), dtype),) * 3,
                                                          (jnp.zeros((), dtype),) * 2 + (jnp.ones((), dtype),))
-                                    for _ in range(keep))
-        contacts = jax.lax.cond(box_on, collide, absent, centre, rot)
+                                    for _ in range(box.keep))
+        contacts = jax.lax.cond(box_on[p], collide, absent, centre, rot)
     else:
         centre = al.vadd(pose.origin[pair.body], al.matvec(pose.rot[pair.body], pair.pos))
         contacts = chain_hfield.sphere_contacts(cm.terrain, terrain, al.vadd(centre, pose.base_pos), pair.size[0],
@@ -203,7 +205,7 @@ def _terrain_slots(cm: ChainModel, pair: ContactPair, pose: Pose, terrain, box_o
 def _all_slots(cm: ChainModel, pose: Pose, terrain, box_on=None, gate=None):
     """Per pair, per slot: (exists, distance, point relative to O, contact frame: None for the plane's)."""
     if cm.terrain is not None:
-        return tuple(tuple(_terrain_slots(cm, pair, pose, terrain, box_on, gate)) for pair in cm.pairs)
+        return tuple(tuple(_terrain_slots(cm, p, pose, terrain, box_on, gate)) for p in range(len(cm.pairs)))
     normal = cm.contact_frame[0:3]
     height = al.dot(normal, al.vsub(pose.base_pos, cm.floor_point))  # base origin above the floor
     return tuple(tuple((dist <= pair.include_margin, dist, point, None)
@@ -246,10 +248,10 @@ def _assemble(cm: ChainModel, pose: Pose, qpos, qvel, slots) -> tuple[Rows, Foot
 
 def rows(cm: ChainModel, gate, pose: Pose, qpos, qvel, terrain=None) -> tuple[Rows, FootContact]:
     """All constraint rows (MuJoCo's order: friction, limits, then contacts by pair) and the foot's; `terrain`
-    (chain_hfield.TerrainParams) for a heightfield floor, whose base box is collided where `box_near` holds for
-    any instance of the core's vmapped chunk (`batch_any`)."""
+    (chain_hfield.TerrainParams) for a heightfield floor, each of whose boxes (the base's, the leg links') is
+    collided where `box_near` holds for it in any instance of the core's vmapped chunk (`batch_any`)."""
     box_on = None
-    if cm.terrain is not None and cm.terrain.box is not None:
-        box_on = batch_any(box_near(cm, pose, terrain))
+    if cm.terrain is not None:
+        box_on = {b.pair: batch_any(box_near(cm, b, pose, terrain)) for b in cm.terrain.boxes}
     slots = stored(gate, lambda p, t, b, g: _all_slots(cm, p, t, b, g), pose, terrain, box_on, gate)
     return stored(gate, lambda *a: _assemble(cm, *a), pose, qpos, qvel, slots)

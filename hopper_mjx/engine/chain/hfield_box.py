@@ -1,4 +1,4 @@
-"""The base box against a heightfield floor, as MuJoCo C's mjc_ConvexHField finds it.
+"""A box (the base's, a leg link's) against a heightfield floor, as MuJoCo C's mjc_ConvexHField finds it.
 
 C collides the box with the prism under each triangle of the cells its bounding box covers
 (`chain_hfield` describes the prisms), skipping a prism whose top lies wholly below the box's
@@ -15,8 +15,8 @@ overlap that depends on its polytope; here it is the point of the box's feature 
 prism's centroid (or the mean of the prism's parallel vertices), a point of that overlap.
 
 Arrays, not the chain's scalar tuples: one instance's block of prisms is a leading axis that
-XLA vectorises. The block is fixed at trace time from the box's bounding radius; of its
-prisms' contacts the deepest `keep` become constraint rows (C keeps up to 50).
+XLA vectorises. Each box pair has its own block (`chain_model.BoxBlock`), fixed at trace time from the
+box's bounding radius; of its prisms' contacts the deepest `keep` become constraint rows (C keeps up to 50).
 """
 
 from __future__ import annotations
@@ -25,14 +25,15 @@ import jax
 import jax.numpy as jnp
 
 from hopper_mjx.engine.chain.hfield import PrismContact, TerrainParams, block_start
-from hopper_mjx.engine.chain.model import HeightGrid
+from hopper_mjx.engine.chain.model import BoxBlock, HeightGrid
 
 PARALLEL = 1e-6  # |cos| below which a box axis counts as lying in a face (its feature is an edge or a face)
 
 
-def _prisms(t: HeightGrid, terrain: TerrainParams, row, col, dtype):
-    """The block's prisms' top triangles (P, 3, 3), in C's order: by row, by column, lower triangle first."""
-    rows, cols = t.block_box
+def _prisms(t: HeightGrid, block: tuple[int, int], terrain: TerrainParams, row, col, dtype):
+    """The (rows, cols) block's prisms' top triangles (P, 3, 3), in C's order: by row, by column, lower
+    triangle first."""
+    rows, cols = block
     block = jax.lax.dynamic_slice(terrain.heights, (row, col), (rows + 1, cols + 1))
     x = t.origin[0] - t.hx + t.dx * (col.astype(dtype) + jnp.arange(cols + 1, dtype=dtype))
     y = t.origin[1] - t.hy + t.dy * (row.astype(dtype) + jnp.arange(rows + 1, dtype=dtype))
@@ -175,12 +176,12 @@ def _box_prism(t: HeightGrid, centre, axes, half, tops, bottom):
     return reaches & (d > 0), d, jnp.stack(n, -1), jnp.stack(pos, -1)
 
 
-def _candidates(t: HeightGrid, terrain: TerrainParams, row, col, centre, axes, half, count: int):
-    """The block's `count` prisms most likely to hold a contact, and whether each may: the least overlap of
+def _candidates(t: HeightGrid, box: BoxBlock, terrain: TerrainParams, row, col, centre, axes, half):
+    """The block's `box.candidates` prisms most likely to hold a contact, and whether each may: the least overlap of
     the box and the prism along z and the box's three axes, an upper bound of the penetration (a prism
     separated along one of them holds none). The block's 2 x rows x cols prisms get this cheap test, only
     these few the full one (separating axes over 29 directions)."""
-    rows, cols = t.block_box
+    rows, cols = box.block
     dtype = centre.dtype
     block = jax.lax.dynamic_slice(terrain.heights, (row, col), (rows + 1, cols + 1))
     x = t.origin[0] - t.hx + t.dx * (col.astype(dtype) + jnp.arange(cols + 1, dtype=dtype))
@@ -205,20 +206,21 @@ def _candidates(t: HeightGrid, terrain: TerrainParams, row, col, centre, axes, h
         p_min = jnp.minimum(jnp.minimum(jnp.minimum(top[0], top[1]), jnp.minimum(top[2], low[0])),
                             jnp.minimum(low[1], low[2]))
         score = jnp.minimum(score, jnp.minimum(p_max - (reach - half[i]), (reach + half[i]) - p_min))
-    best, idx = jax.lax.top_k(score, count)
+    best, idx = jax.lax.top_k(score, box.candidates)
     tops = jnp.stack([jnp.stack(v, -1) for v in (v0, v1, v2)], 1)  # (P, 3, 3)
     return tops[idx], best > 0
 
 
-def box_contacts(t: HeightGrid, terrain: TerrainParams, centre, rot, half, keep: int) -> tuple[PrismContact, ...]:
-    """The deepest `keep` of the box's prism contacts (absent slots where fewer), deepest first.
+def box_contacts(t: HeightGrid, box: BoxBlock, terrain: TerrainParams, centre, rot, half) -> tuple[PrismContact, ...]:
+    """The deepest `box.keep` of the box's prism contacts (absent slots where fewer), deepest first.
     `centre` (3,) world, `rot` (3, 3) the box's axes as columns, `half` its half sizes."""
+    keep = box.keep
     centre, rot = jnp.asarray(centre), jnp.asarray(rot)
     dtype = centre.dtype
     half = jnp.asarray(half, dtype)
     axes = rot.T
-    row, col = block_start(t, centre, float(t.box_radius), t.block_box)
-    tops, may = _candidates(t, terrain, row, col, centre, axes, half, t.box_candidates)
+    row, col = block_start(t, centre, box.radius, box.block)
+    tops, may = _candidates(t, box, terrain, row, col, centre, axes, half)
     exists, depth, normal, pos = _box_prism(t, centre, axes, half, tops, jnp.asarray(terrain.bottom, dtype))
     score = jnp.where(exists & may, depth, -jnp.inf)
     top, idx = jax.lax.top_k(score, keep)
@@ -230,12 +232,18 @@ def box_contacts(t: HeightGrid, terrain: TerrainParams, centre, rot, half, keep:
                  for k in range(keep))
 
 
-def box_near(t: HeightGrid, terrain: TerrainParams, centre, rot, half):
-    """() bool: the box's lowest point is within reach of the highest vertex of its block (else it has
-    no contact, and its prisms need not be collided)."""
+def box_near(t: HeightGrid, box: BoxBlock, terrain: TerrainParams, centre, rot, half):
+    """() bool: the box's lowest point is within reach of the highest vertex of the cells under its
+    horizontal bounding box (else it has no contact, and its prisms need not be collided). Those vertices
+    lie within a cell of that bounding box; a leg link's block is mostly ground away from it."""
     centre, rot = jnp.asarray(centre), jnp.asarray(rot)
-    row, col = block_start(t, centre, float(t.box_radius), t.block_box)
-    rows, cols = t.block_box
+    half = jnp.asarray(half, centre.dtype)
+    dtype = centre.dtype
+    row, col = block_start(t, centre, box.radius, box.block)
+    rows, cols = box.block
     block = jax.lax.dynamic_slice(terrain.heights, (row, col), (rows + 1, cols + 1))
-    lowest = centre[2] - jnp.sum(jnp.asarray(half, centre.dtype) * jnp.abs(rot[2]))
-    return lowest <= jnp.max(block)
+    x = t.origin[0] - t.hx + t.dx * (col.astype(dtype) + jnp.arange(cols + 1, dtype=dtype))
+    y = t.origin[1] - t.hy + t.dy * (row.astype(dtype) + jnp.arange(rows + 1, dtype=dtype))
+    reach = jnp.abs(rot) @ half  # the box's half extents along x, y, z
+    under = (jnp.abs(y - centre[1])[:, None] <= reach[1] + t.dy) & (jnp.abs(x - centre[0])[None, :] <= reach[0] + t.dx)
+    return centre[2] - reach[2] <= jnp.max(jnp.where(under, block, -jnp.inf))

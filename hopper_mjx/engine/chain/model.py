@@ -2,9 +2,9 @@
 
 `describe(mj_model)` reads the topology the chain engine is written for (a free base, a
 serial chain of bodies each with at most one hinge, explicit sphere / box contact pairs with
-a plane floor, or the sphere foot alone with a heightfield floor, Euler with implicit joint
-damping, dry friction on the hinges only, Newton on a pyramidal cone) and raises `NotChain`
-with one line saying why when the model is outside it. The result is a frozen dataclass of
+a plane floor or a heightfield floor (there one sphere, the foot, and boxes on any body), Euler
+with implicit joint damping, dry friction on the hinges only, Newton on a pyramidal cone) and
+raises `NotChain` with one line saying why when the model is outside it. The result is a frozen dataclass of
 floats and tuples: the step reads it at trace time, so every axis, offset, inertia and
 solver parameter is a constant of the compiled function (a heightfield's heights are not:
 `terrain.from_model`), and `instance` puts one instance's varied numbers (a per-instance robot)
@@ -105,11 +105,18 @@ class HeightGrid:
     dy: float
     block: tuple[int, int]  # (rows, cols) of cells around the foot that can hold its contacts
     max_contacts: int | None = None  # keep the deepest this many foot contacts (None: all, as C)
-    box: int | None = None  # the base box's pair, or None without one
-    box_radius: float = 0.0  # its bounding radius (MuJoCo's geom_rbound)
-    block_box: tuple[int, int] = (0, 0)  # (rows, cols) of cells its bounding box can cover
-    box_keep: int = 0  # constraint rows for its deepest contacts
-    box_candidates: int = 0  # prisms of its block given the full collision test (`chain_hfield_box._candidates`)
+    boxes: tuple[BoxBlock, ...] = ()  # the box pairs (the base's, the leg links'), in pair order
+
+
+@dataclass(frozen=True)
+class BoxBlock:
+    """A box pair on a heightfield floor: the cells it can reach and the contacts it keeps."""
+
+    pair: int  # index in ChainModel.pairs
+    radius: float  # its bounding radius (MuJoCo's geom_rbound)
+    block: tuple[int, int]  # (rows, cols) of cells its bounding box can cover
+    keep: int  # constraint rows for its deepest contacts
+    candidates: int  # prisms of its block given the full collision test (`chain_hfield_box._candidates`)
 
 
 @dataclass(frozen=True)
@@ -272,6 +279,7 @@ def _pairs(m: mujoco.MjModel, floor: int) -> tuple[ContactPair, ...]:
     return tuple(pairs)
 
 
+# The box pairs' (keep, candidates) below, for the base and for a leg link.
 # The base box's contacts on a heightfield that become constraint rows (its deepest; C keeps up to
 # mjMAXCONPAIR = 50). A fallen box on rough ground touches a few prisms; lying on a level patch, every
 # prism under it, and then these carry its weight instead of C's dozens, so it sinks deeper (measured: 4.7 mm
@@ -283,6 +291,10 @@ BOX_CONTACTS = 8
 # cheap test (a box lying on a level top has more; then these hold its deepest contacts). The full test on
 # every prism cost ~60 times the rest of a step.
 BOX_CANDIDATES = 24
+# A leg link's box (4-5 cm thick) against a block's edge or a slope meets a few prisms; lying along level ground,
+# a row of them, of which these keep the deepest. Each kept slot is a row in every solve (condim 1: one a slot).
+LINK_CONTACTS = 4
+LINK_CANDIDATES = 16
 
 _FLOORS = (int(mujoco.mjtGeom.mjGEOM_PLANE), int(mujoco.mjtGeom.mjGEOM_HFIELD))
 
@@ -304,8 +316,7 @@ def _terrain(m: mujoco.MjModel, floor: int, pairs: tuple[ContactPair, ...]) -> H
         return None
     _require(np.allclose(m.geom_quat[floor], [1, 0, 0, 0], rtol=0, atol=0), "the heightfield floor is turned")
     others = [k for k, p in enumerate(pairs) if not p.is_foot]
-    _require(len(others) <= 1 and all(pairs[k].kind == "box" and pairs[k].body == 0 for k in others),
-             "a heightfield floor takes the foot sphere and at most one box on the base")
+    _require(all(pairs[k].kind == "box" for k in others), "a heightfield floor takes the foot sphere and boxes")
     _require(all(p.margin == 0 and p.include_margin == 0 for p in pairs), "a heightfield pair has a margin or gap")
     foot = next(p for p in pairs if p.is_foot)
     _require(not m.opt.disableflags & mujoco.mjtDisableBit.mjDSBL_NATIVECCD,
@@ -318,15 +329,16 @@ def _terrain(m: mujoco.MjModel, floor: int, pairs: tuple[ContactPair, ...]) -> H
     diameter = 2 * foot.size[0]
     block = (int(diameter // dy) + 2, int(diameter // dx) + 2)
     _require(nrow > block[0] and ncol > block[1], f"the heightfield grid {nrow}x{ncol} is smaller than the foot")
-    box = {}
-    if others:
-        radius = float(np.linalg.norm(pairs[others[0]].size))
+    boxes = []
+    for k in others:
+        radius = float(np.linalg.norm(pairs[k].size))
         rows, cols = int(2 * radius // dy) + 2, int(2 * radius // dx) + 2
-        _require(nrow > rows and ncol > cols, f"the heightfield grid {nrow}x{ncol} is smaller than the base box")
-        box = dict(box=others[0], box_radius=radius, block_box=(rows, cols), box_keep=BOX_CONTACTS,
-                   box_candidates=min(BOX_CANDIDATES, 2 * rows * cols))
+        _require(nrow > rows and ncol > cols, f"the heightfield grid {nrow}x{ncol} is smaller than a box")
+        keep, candidates = (BOX_CONTACTS, BOX_CANDIDATES) if pairs[k].body == 0 else (LINK_CONTACTS, LINK_CANDIDATES)
+        boxes.append(BoxBlock(pair=k, radius=radius, block=(rows, cols), keep=keep,
+                              candidates=min(candidates, 2 * rows * cols)))
     return HeightGrid(nrow=nrow, ncol=ncol, hx=hx, hy=hy, base=base, origin=_vec(m.geom_pos[floor]), dx=dx, dy=dy,
-                   block=block, **box)
+                      block=block, boxes=tuple(boxes))
 
 
 def _actuators(m: mujoco.MjModel):
