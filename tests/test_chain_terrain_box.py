@@ -45,28 +45,34 @@ def base_box(engine: chain.ChainEngine):
     return next(b for b in engine.chain.terrain.boxes if engine.chain.pairs[b.pair].body == 0)
 
 
+def sunk(m: mujoco.MjModel, d: mujoco.MjData, q: np.ndarray, g: int, rng) -> np.ndarray:
+    """`q` lowered so that box geom `g`'s lowest corner lies 0-6 mm below the ground under it (at the nearest
+    vertex)."""
+    heights = from_model(m).heights
+    cell = 2 * HALF / (heights.shape[0] - 1)
+    d.qpos[:] = q
+    mujoco.mj_kinematics(m, d)
+    rot, half = d.geom_xmat[g].reshape(3, 3), m.geom_size[g]
+    corners = np.array([d.geom_xpos[g] + rot @ (half * (2 * np.array(s) - 1)) for s in np.ndindex(2, 2, 2)])
+    low = corners[corners[:, 2].argmin()]
+    r, c = (int(round((v + HALF) / cell)) for v in (low[1], low[0]))
+    q = q.copy()
+    q[2] += heights[r, c] - low[2] - rng.uniform(0.0, 0.006)
+    return q
+
+
 def box_poses(m: mujoco.MjModel, n: int, seed: int) -> np.ndarray:
     """qpos with the base turned at random over the terrain, its lowest corner 0-6 mm below the ground
     under it (at the nearest vertex)."""
     rng = np.random.default_rng(seed)
     d = mujoco.MjData(m)
-    heights = from_model(m).heights
-    g = int(m.pair_geom2[0])
-    cell = 2 * HALF / (heights.shape[0] - 1)
     out = []
     for _ in range(n):
         q = stance_qpos(m).copy()
         quat = rng.normal(size=4)
         q[3:7] = quat / np.linalg.norm(quat)
         q[:2] = rng.uniform(-0.5, 0.5, 2)
-        d.qpos[:] = q
-        mujoco.mj_kinematics(m, d)
-        rot, half = d.geom_xmat[g].reshape(3, 3), m.geom_size[g]
-        corners = np.array([d.geom_xpos[g] + rot @ (half * (2 * np.array(s) - 1)) for s in np.ndindex(2, 2, 2)])
-        low = corners[corners[:, 2].argmin()]
-        r, c = (int(round((v + HALF) / cell)) for v in (low[1], low[0]))
-        q[2] += heights[r, c] - low[2] - rng.uniform(0.0, 0.006)
-        out.append(q)
+        out.append(sunk(m, d, q, int(m.pair_geom2[0]), rng))
     return np.array(out)
 
 

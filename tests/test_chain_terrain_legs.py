@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 from hfield_model import hfield_model
 from test_chain_terrain import HALF, _step_fn, terrain
-from test_chain_terrain_box import _mesh_penetration
+from test_chain_terrain_box import _mesh_penetration, sunk
 
 from hopper_mjx import model
 from hopper_mjx import terrain as terrains
@@ -63,8 +63,6 @@ def link_poses(m: mujoco.MjModel, g: int, n: int, seed: int) -> np.ndarray:
     ground under it (at the nearest vertex)."""
     rng = np.random.default_rng(seed)
     d = mujoco.MjData(m)
-    heights = from_model(m).heights
-    cell = 2 * HALF / (heights.shape[0] - 1)
     out = []
     for _ in range(n):
         q = m.qpos0.copy()
@@ -72,14 +70,7 @@ def link_poses(m: mujoco.MjModel, g: int, n: int, seed: int) -> np.ndarray:
         q[3:7] = quat / np.linalg.norm(quat)
         q[7:] = [rng.uniform(*m.jnt_range[j]) for j in range(1, 4)]
         q[:2] = rng.uniform(-0.4, 0.4, 2)
-        d.qpos[:] = q
-        mujoco.mj_kinematics(m, d)
-        rot, half = d.geom_xmat[g].reshape(3, 3), m.geom_size[g]
-        corners = np.array([d.geom_xpos[g] + rot @ (half * (2 * np.array(s) - 1)) for s in np.ndindex(2, 2, 2)])
-        low = corners[corners[:, 2].argmin()]
-        r, c = (int(round((v + HALF) / cell)) for v in (low[1], low[0]))
-        q[2] += heights[r, c] - low[2] - rng.uniform(0.0, 0.006)
-        out.append(q)
+        out.append(sunk(m, d, q, g, rng))
     return np.array(out)
 
 
