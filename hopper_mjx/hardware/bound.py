@@ -142,7 +142,8 @@ def jump_bound(leg: Stroke, motor: KneeMotor, gravity: float, standing: float) -
         dq = (leg.knee[i + 1] - leg.knee[i]) / SUBSTEPS
         for j in range(SUBSTEPS):
             f = (j + 0.5) / SUBSTEPS
-            s, inertia = slope[i] + (slope[i + 1] - slope[i]) * f, leg.inertia[i] + (leg.inertia[i + 1] - leg.inertia[i]) * f
+            s = slope[i] + (slope[i + 1] - slope[i]) * f
+            inertia = leg.inertia[i] + (leg.inertia[i + 1] - leg.inertia[i]) * f
             tau = _knee_torque(motor, math.sqrt(2.0 * kinetic / inertia))
             if tau <= 0.0:  # the knee cannot keep up with the body: the foot has left the floor
                 break
