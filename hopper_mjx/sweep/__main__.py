@@ -295,7 +295,7 @@ def check_size(args, gravities: int) -> int:
 
 
 def terrain_grounds(args) -> list[str]:
-    """An obstacle or terrain sweep's --terrain spec per value (checked with the rest), else []."""
+    """A terrain sweep's (obstacle, gaps, terrain) --terrain spec per value (checked with the rest), else []."""
     if args.kind not in TERRAIN_KINDS:
         return []
     values = swept_values(args)

@@ -405,7 +405,7 @@ def gains_figure(spec: SweepSpec, groups: list[dict], second=None, panels: int =
 
 
 def terrain_figure(spec: SweepSpec, groups: list[dict]):
-    """An obstacle or terrain sweep's figure (saved as obstacle.png or terrain.png): survival, the share that
+    """An obstacle, gaps or terrain sweep's figure (obstacle.png, gaps.png or terrain.png): survival, the share that
     cleared the obstacle (or the speed tracking error), and the ground of every value along +x at y = 0."""
     from hopper_mjx.terrain import parse
 

@@ -35,7 +35,7 @@ COLUMNS = ("apex_height", "flight_rise", "flight_time", "ballistic_flight_time",
            "duty_factor", "mean_speed", "tracking_error",
            "max_roll", "max_pitch", "hops", "fell", "diverged", "cost_of_transport",
            "energy_per_hop", "mechanical_power")
-# An obstacle or terrain sweep's extra columns (`hops.terrain_metrics`).
+# An obstacle, gaps or terrain sweep's extra columns (`hops.terrain_metrics`).
 TERRAIN_COLUMNS = ("distance_made_good", "obstacles_cleared", "highest_cleared", "fall_x", "fall_y")
 # A block or gaps sweep's, besides: how its landings went (`hops.landing_metrics`).
 LANDING_COLUMNS = ("landing_tilt", "impact_force")
@@ -80,7 +80,7 @@ class ChunkRunner:
         self._heights = {}
 
     def ground(self, full: np.ndarray):
-        """((n, nrow, ncol) m each instance's ground, (n, B, 3) its obstacles) of an obstacle or terrain sweep,
+        """((n, nrow, ncol) m each instance's ground, (n, B, 3) its obstacles) of a terrain sweep,
         or (None, None); replicate r's draw under seed=each is the same at every value and gravity."""
         if not self.grounds:
             return None, None
