@@ -4,9 +4,10 @@ A `SweepSpec` holds every argument that changes results; it is saved as the
 run's manifest, so a rerun into the same folder can tell a resume from a
 different experiment. A gains or param sweep's values are a Raibert gain's or a --randomize parameter's; an
 obstacle, gaps or terrain sweep's are a terrain's (a block's height, a gap's width, rough ground's amplitude), each
-with its own ground (`grounds`, one --terrain spec per value, all on one grid). Instances are ordered value-major, then gravity,
-then replicate, and chunked in that order. Replicate r has the same kick, and the same robot under --randomize, at
-every grid point (common random numbers): a swept parameter replaces its own draw only, the others' stay as they were.
+with its own ground (`grounds`, one --terrain spec per value, all on one grid). Instances are ordered value-major,
+then gravity, then replicate, and chunked in that order. Replicate r has the same kick, and the same robot under
+--randomize, at every grid point (common random numbers): a swept parameter replaces its own draw only, the others'
+stay as they were.
 """
 
 from __future__ import annotations
