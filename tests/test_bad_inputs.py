@@ -202,8 +202,17 @@ def prepare(folder: Path) -> None:
 
 
 def listing(folder: Path) -> dict[str, tuple[int, int]]:
-    """Each path's size and modification time: a file rewritten, even with the same bytes, differs."""
-    return {str(p.relative_to(folder)): (p.stat().st_size, p.stat().st_mtime_ns) for p in sorted(folder.rglob("*"))}
+    """Each path's size and modification time: a file rewritten, even with the same bytes, differs. Taken while a
+    run writes (test_interrupt), an atomic write's temporary file may be renamed away between the listing and its
+    stat: it was never a result, and is left out."""
+    out = {}
+    for p in sorted(folder.rglob("*")):
+        try:
+            stat = p.stat()
+        except FileNotFoundError:
+            continue
+        out[str(p.relative_to(folder))] = (stat.st_size, stat.st_mtime_ns)
+    return out
 
 
 class Refusal(NamedTuple):
