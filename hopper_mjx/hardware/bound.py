@@ -11,17 +11,19 @@ The bound integrates the best push there is from that bottom to lift-off:
 - The knee gives all its motor allows at each speed: the ideal motor its effort limit; the DC motor its line
   tau_s (1 - w/w0), clipped at the current limit (`actuators.envelope`). Full torque at every angle is the best
   push: it reaches every height of the stroke with the most speed.
-- Energy: d(½ m v²)/dq = tau(w) - m g h'(q), v = dh/dt, w = v / h'(q) the knee's speed. Whatever goes into the
-  links' motion relative to the COM is counted as the COM's, so the bound is high, never low.
-- Lift-off: where the knee can no longer keep up with the body (the DC line reaches zero torque, w = w0; the
-  floor's push tau/h' would turn negative), or at the knee's upper stop.
+- Energy: the whole robot's kinetic energy along the stroke is ½·I(q)·q̇², I(q) = tᵀ M t with M MuJoCo's mass
+  matrix and t the path's tangent per radian of knee, so the links' own motion is paid for:
+  d(½ I q̇²)/dq = tau(q̇) - m g h'(q). The COM's speed is h'(q)·q̇.
+- Lift-off: the push may be released at any angle; the bound takes the one whose flight goes highest, up to where
+  the knee can no longer keep up with the body (the DC line reaches zero torque, q̇ = w0: the floor's push would
+  turn negative) or the knee's upper stop.
 - The COM then rises v²/2g more. The apex reported is the base's, as the hop metrics measure it: the COM's
   apex plus the base's height over the COM in the lift-off pose, less the standing height.
 
-So the ideal motor's bound is its effort limit times the knee's range, tau·Δq, whatever g; a DC motor gives less,
-and less the faster the push (the lower g, the faster the COM moves over the same stroke). The apex then scales
-about as 1/g. Per-instance robots (drawn masses, legs, motors) are not bounded apart: the bound is the model's.
-Plain NumPy and MuJoCo C, computed once per sweep.
+So the ideal motor's work is its effort limit times the knee's travel to that lift-off, about the same whatever g;
+a DC motor gives less, and less the faster the push (the lower g, the faster the knee turns over the same stroke).
+The apex then scales about as 1/g. Per-instance robots (drawn masses, legs, motors) are not bounded apart: the
+bound is the model's. Plain NumPy and MuJoCo C, computed once per sweep.
 """
 
 from __future__ import annotations
@@ -55,7 +57,7 @@ class JumpBound(NamedTuple):
     """One gravity's bound (SI units)."""
 
     gravity: float  # m/s²
-    energy: float  # J the knee puts in over the stroke: the COM's rise to lift-off plus its speed there
+    energy: float  # J the knee's work from the push's start to the lift-off
     takeoff_speed: float  # m/s of the COM at lift-off
     takeoff_knee: float  # rad, the knee at lift-off
     apex_rise: float  # m, the base's apex over its standing height
@@ -130,35 +132,41 @@ def _knee_torque(motor: KneeMotor, speed: float) -> float:
     return min(line, motor.torque_limit)
 
 
+def _push_across(leg: Stroke, slope: np.ndarray, motor: KneeMotor, g: float, i: int, kinetic: float,
+                 work: float) -> tuple[float, float, bool]:
+    """(kinetic energy J, the knee's work J, whether the foot left the floor) after pushing from sample i of the
+    stroke to sample i + 1, in SUBSTEPS steps (slope and inertia interpolated linearly)."""
+    dq = (leg.knee[i + 1] - leg.knee[i]) / SUBSTEPS
+    for j in range(SUBSTEPS):
+        f = (j + 0.5) / SUBSTEPS
+        s = slope[i] + (slope[i + 1] - slope[i]) * f
+        inertia = leg.inertia[i] + (leg.inertia[i + 1] - leg.inertia[i]) * f
+        tau = _knee_torque(motor, math.sqrt(2.0 * kinetic / inertia))
+        if tau <= 0.0:  # the knee cannot keep up with the body: the foot has left the floor
+            return kinetic, work, True
+        kinetic += (tau - leg.mass * g * s) * dq
+        work += tau * dq
+        if kinetic <= 0.0:  # the knee cannot lift the robot from here: the push starts higher up
+            kinetic, work = 0.0, 0.0
+    return kinetic, work, False
+
+
 def jump_bound(leg: Stroke, motor: KneeMotor, gravity: float, standing: float) -> JumpBound:
     """The bound at `gravity` m/s² (> 0), for a robot standing with its base `standing` m up."""
     if not gravity > 0:
         raise ValueError(f"a jump's bound needs a downward gravity, got {gravity:g} m/s²")
-    m, g = leg.mass, gravity
+    g = gravity
     slope = np.gradient(leg.com_height, leg.knee)  # h'(q), m/rad, > 0 as the knee extends
     kinetic, work = 0.0, 0.0  # J: the whole robot's kinetic energy ½·I·q̇², the knee's work so far
     best = (leg.com_height[0], 0.0, leg.knee[0], 0.0)  # (COM apex, COM speed, knee, work) of the best lift-off
     for i in range(len(leg.knee) - 1):
-        dq = (leg.knee[i + 1] - leg.knee[i]) / SUBSTEPS
-        for j in range(SUBSTEPS):
-            f = (j + 0.5) / SUBSTEPS
-            s = slope[i] + (slope[i + 1] - slope[i]) * f
-            inertia = leg.inertia[i] + (leg.inertia[i + 1] - leg.inertia[i]) * f
-            tau = _knee_torque(motor, math.sqrt(2.0 * kinetic / inertia))
-            if tau <= 0.0:  # the knee cannot keep up with the body: the foot has left the floor
-                break
-            kinetic += (tau - m * g * s) * dq
-            work += tau * dq
-            if kinetic <= 0.0:  # the knee cannot lift the robot from here: the push starts higher up
-                kinetic, work = 0.0, 0.0
-        else:
-            q = leg.knee[i + 1]
-            v = slope[i + 1] * math.sqrt(2.0 * kinetic / leg.inertia[i + 1])  # the COM's speed
-            apex = leg.com_height[i + 1] + v * v / (2.0 * g)
-            if apex > best[0]:  # leaving the floor here (the push released) would fly this high
-                best = (apex, v, q, work)
-            continue
-        break
+        kinetic, work, left = _push_across(leg, slope, motor, g, i, kinetic, work)
+        if left:
+            break
+        v = slope[i + 1] * math.sqrt(2.0 * kinetic / leg.inertia[i + 1])  # the COM's speed
+        apex = leg.com_height[i + 1] + v * v / (2.0 * g)
+        if apex > best[0]:  # leaving the floor here (the push released) would fly this high
+            best = (apex, v, leg.knee[i + 1], work)
     apex_com, speed, knee, work = best
     apex_base = apex_com + float(np.interp(knee, leg.knee, leg.base_over_com))
     return JumpBound(g, work, speed, float(knee), apex_base - standing)

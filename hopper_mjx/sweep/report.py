@@ -30,6 +30,9 @@ BALANCE_FIGURE = ("balance, an LQR stance, keeps none of a sweep's kicked robots
 REACH = 0.1  # m: a base this close to an obstacle's near edge has reached it (its foot lands ahead of it)
 UNITS = {"obstacle_height": "m", "gap_width": "m", "roughness": "m, peak |height|"}  # a terrain sweep's value
 PASSED = {"obstacle": "cleared", "gaps": "crossed"}  # what getting past a band sweep's band is called
+# A band sweep's answer: (its bound's results.csv column, the answer in words, the quantity on its axis).
+ANSWER = {"obstacle": ("height_bound", "highest block", "block height"),
+          "gaps": ("width_bound", "widest gap", "gap width")}
 
 
 def rows(spec: SweepSpec, inst: Instances, table: np.ndarray, columns: tuple[str, ...],
@@ -60,11 +63,11 @@ def bound_columns(spec: SweepSpec) -> dict[str, dict[float, float]]:
     per_g = bound.bounds(m, spec.physics.motor, spec.gravity)
     if spec.kind == "obstacle":
         standing, drop = standing_height(m), bound.tucked_drop(m)
-        past = ("height_bound", {g: bound.highest_block(b, standing, drop) for g, b in per_g.items()})
+        past = {g: bound.highest_block(b, standing, drop) for g, b in per_g.items()}
     else:
         reach = bound.leg_reach(m)
-        past = ("width_bound", {g: bound.widest_gap(b, reach) for g, b in per_g.items()})
-    return {"apex_bound": {g: b.apex_rise for g, b in per_g.items()}, past[0]: past[1]}
+        past = {g: bound.widest_gap(b, reach) for g, b in per_g.items()}
+    return {"apex_bound": {g: b.apex_rise for g, b in per_g.items()}, ANSWER[spec.kind][0]: past}
 
 
 def best_passed(spec: SweepSpec, groups: list[dict]) -> dict[float, float]:
@@ -84,7 +87,7 @@ def limits(spec: SweepSpec, groups: list[dict], bounds: dict) -> list[str]:
     from hopper_mjx.model.robot import standing_height
 
     standing = standing_height(spec.physics.mj_model)
-    name, what = ("height_bound", "highest block") if spec.kind == "obstacle" else ("width_bound", "widest gap")
+    name, what, _ = ANSWER[spec.kind]
     lines = [f"the {what} at least half the replicates {PASSED[spec.kind]}, beside the bound the {spec.physics.motor} "
              f"motors put on it (docs/sweeps.md; standing height {standing:.3g} m):"]
     for g, best in best_passed(spec, groups).items():
@@ -102,7 +105,7 @@ def limits_figure(spec: SweepSpec, groups: list[dict], bounds: dict):
 
     plt = _pyplot()
     standing = standing_height(spec.physics.mj_model)
-    name, what = ("height_bound", "block height") if spec.kind == "obstacle" else ("width_bound", "gap width")
+    name, answer, what = ANSWER[spec.kind]
     best = best_passed(spec, groups)
     g = np.array(sorted(best))
     fig, ax = plt.subplots(figsize=(8.5, 5.0))
@@ -118,7 +121,7 @@ def limits_figure(spec: SweepSpec, groups: list[dict], bounds: dict):
     twin.set_ylabel("in standing heights (1)")
     ax.legend(fontsize=8, loc="upper right")
     ax.grid(alpha=0.3)
-    ax.set_title(f"the {'highest block' if spec.kind == 'obstacle' else 'widest gap'} vs gravity: "
+    ax.set_title(f"the {answer} vs gravity: "
                  f"{spec.controller}, {spec.num} replicates per point\n{physics_label(spec)}", fontsize=9)
     return fig
 
