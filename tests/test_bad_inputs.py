@@ -150,6 +150,7 @@ CASES = [
      "rises to 0.300 m"),
     ("sweep", ["gaps", "--widths", "0.2,3.5", "--out", "s"], "--widths 3.5: a gap must be > 0 m and end 0.5 m before "
      "the ground's end (4 m ahead with --x 0.6): at most 2.9 m here"),
+    ("sweep", ["gaps", "--x", "nan", "--out", "s"], "--x must be finite, got nan"),
     ("sweep", ["gaps", "--terrain", "rough", "--out", "s"], "--terrain: a gaps sweep makes its own ground per value "
      "(--widths); drop --terrain"),
     ("sweep", ["terrain", "--terrain", "rough", "--out", "s"], "--terrain: a terrain sweep makes its own ground per "

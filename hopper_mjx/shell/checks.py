@@ -230,7 +230,8 @@ def check_range(name: str, value: float, *, low: float | None = None, high: floa
     if not math.isfinite(value) or too_low or (high is not None and value > high):
         lower = "" if low is None else f"{'>' if open_low else '>='} {low:g}"
         upper = "" if high is None else f"<= {high:g}"
-        raise ValueError(f"{name} must be finite and {' and '.join(b for b in (lower, upper) if b)}, got {value:g}")
+        bounds = " and ".join(b for b in (lower, upper) if b)
+        raise ValueError(f"{name} must be finite{' and ' + bounds if bounds else ''}, got {value:g}")
 
 
 def check_writable(name: str, path: str | Path, *, folder: bool = False, may_exist: bool = True,
