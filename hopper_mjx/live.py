@@ -72,7 +72,7 @@ def spread(n: int, count: int) -> list[int]:
 
 
 STREAM_OF_FIELD = {"imu": "imu", "odom": "odom", "contact": "contact", "qpos": "state", "qvel": "state",
-                   "ground": "contact"}
+                   "torque": "state", "ground": "contact"}
 
 
 def joined(chunks: list[Chunk], end: float):

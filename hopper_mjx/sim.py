@@ -72,6 +72,9 @@ class Trajectory(NamedTuple):
     qvel: jax.Array
     time: dict  # stream name -> (T_stream,) seconds
     ground: signals.GroundTrace | tuple = ()  # on a height field, at the contact stream's rate; () on the plane
+    # (N, T_state, 3) N·m, joint order: the torque each joint's motor applied at the state samples (after the
+    # delay line, the motors' envelope and the actuators' control range), what the hops asked of the actuators.
+    torque: jax.Array | tuple = ()
 
 
 def split_rollout_key(key: jax.Array) -> tuple[jax.Array, jax.Array]:
@@ -290,7 +293,7 @@ class Sim:
         t0 = float(state.data.time[0])
         dt = self.layout.timestep
         times = {k: t0 + dt * np.arange(0, steps, p) for k, p in periods.items()}
-        return final, Trajectory(*traj[:5], time=times, ground=traj[5])
+        return final, Trajectory(*traj[:5], time=times, ground=traj[5], torque=traj[6])
 
     def run(
         self,
@@ -452,10 +455,18 @@ def _instance_rollout(engine, actuation: Actuation, pushes: Pushes | None, sensi
                                       state.sense if sensing.noisy else None)
         contact = decimate(sig.contact, "contact")
         traj = (imu, odom, contact, sig.qpos[:: every["state"]], sig.qvel[:: every["state"]],
-                decimate(sig.ground, "contact"))
+                decimate(sig.ground, "contact"), applied_torque(actuation.layout, sig.ctrl[:: every["state"]]))
         return state._replace(key=next_key), traj
 
     return run
+
+
+def applied_torque(layout, ctrl: jax.Array) -> jax.Array:
+    """(..., 3) N·m, joint order: what MuJoCo's motor actuators apply for `ctrl` (..., nu), clamped to their control
+    range (the URDF's effort limit)."""
+    act, gear = jnp.asarray(layout.actuator_of_joint), jnp.asarray(layout.gear, ctrl.dtype)
+    effort = jnp.asarray(layout.effort_limit, ctrl.dtype)
+    return jnp.clip(ctrl[..., act] * gear, -effort, effort)
 
 
 def _zeros_like(shapes):

@@ -46,6 +46,7 @@ def arrays(traj, gravity, diverged, drive=(), push=None, drawn: dict | None = No
         "gravity": gravity,
         "qpos": traj.qpos,
         "qvel": traj.qvel,
+        "torque": traj.torque,
         "imu_quat": traj.imu.quat,
         "imu_gyro": traj.imu.gyro,
         "imu_accel": traj.imu.accel,

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from hopper_mjx import simulate
-from hopper_mjx.control.base import hold, zero_torque
+from hopper_mjx.control.base import HOLD_GAINS, hold, zero_torque
 from hopper_mjx.hardware import signals
 from hopper_mjx.sim import gravity_vectors, split_rollout_key
 
@@ -133,6 +133,24 @@ def test_engine_agrees_with_mujoco_c_through_touchdown(mj_model, sim, fall):
         assert err < 1e-3, f"g={g}: {sim.engine.name} and MuJoCo C differ by {err:.2e} m"
 
 
+def test_the_recorded_torque_is_what_the_controller_asked_and_what_mujoco_c_applies(mj_model, sim, rest, fall):
+    """At every state sample the torque is hold's PD law on that same sample's joints (clipped at the effort limit),
+    so torque and state line up; MuJoCo C, given it as ctrl at that state, applies exactly it to the joints."""
+    lay = sim.layout
+    q, qd = rest.qpos[..., list(lay.joint_qpos)], rest.qvel[..., list(lay.joint_dof)]
+    effort = np.asarray(lay.effort_limit)
+    asked = np.clip(HOLD_GAINS["p"] * (q[:, :1] - q) - HOLD_GAINS["d"] * qd, -effort, effort)
+    assert rest.torque.shape == q.shape and np.abs(rest.torque).max() > 10.0  # it carries the robot's weight
+    np.testing.assert_allclose(rest.torque, asked, rtol=1e-4, atol=1e-3)
+    assert not np.any(fall[2].torque)  # limp: nothing applied
+    d = mujoco.MjData(mj_model)
+    for i, k in ((0, 3), (1, 50), (2, 99)):
+        d.qpos[:], d.qvel[:] = rest.qpos[i, k], rest.qvel[i, k]
+        d.ctrl[list(lay.actuator_of_joint)] = rest.torque[i, k] / np.asarray(lay.gear)
+        mujoco.mj_forward(mj_model, d)
+        np.testing.assert_allclose(d.qfrc_actuator[list(lay.joint_dof)], rest.torque[i, k], rtol=1e-6)
+
+
 def test_at_rest_imu_and_contact_carry_the_weight(sim, rest):
     weight = sim.layout.total_mass * G
     settled = rest.time["state"] >= 0.8
@@ -218,6 +236,7 @@ def test_simulate_cli_writes_the_documented_arrays(tmp_path, sim, rest):
                        ("odom_linvel", 3), ("odom_angvel", 3), ("contact_force", 3)):
         assert saved[key].shape == (3, 100, shape), key
     assert saved["contact"].shape == (3, 100) and saved["diverged"].shape == (3,)
+    assert saved["torque"].shape == (3, 100, 3)
     # Same inputs and seed as the `rest` fixture: the same numbers.
     np.testing.assert_array_equal(saved["qpos"], rest.qpos)
     np.testing.assert_array_equal(saved["contact_force"], rest.contact.force)

@@ -185,3 +185,32 @@ def test_landing_metrics_read_the_tilt_and_the_impact_at_each_touchdown():
     assert np.isnan(out["landing_tilt"][1]) and np.isnan(out["impact_force"][1])  # standing: no touchdown
     assert out["landing_tilt"][2] == pytest.approx(0.0, abs=1e-6)  # the 20° landing came after its fall
     assert out["impact_force"][2] == pytest.approx(900.0)
+
+
+def test_actuator_metrics_read_each_joints_peak_torque_power_and_share_of_its_motor_line():
+    """A knee torque of 60 N·m at 10 rad/s on a DC line τ_s = 80 N·m, ω0 = 20 rad/s gives 600 W and uses the
+    line 1.5 times over (80·(1 − 10/20) = 40 N·m available: a figure over 1 is a torque no such motor gives);
+    pushing against the motion (τ < 0 at ω > 0) the line gives 80·1.5 = 120, clipped at the 100 N·m current limit.
+    Instance 2's 500 N·m after its fall at 5 s does not count; ideal motors (no-load speed inf) are measured
+    against the effort alone."""
+    traj, t = _trajectory()
+    n = len(t)
+    torque, qvel = np.zeros((4, n, 3)), np.zeros((4, n, 9))
+    dof = (6, 7, 8)
+    torque[:, 100, 2], qvel[:, 100, 8] = 60.0, 10.0
+    torque[:, 200, 1], qvel[:, 200, 7] = -50.0, 10.0
+    torque[:, 300, 0], qvel[:, 300, 6] = 20.0, -2.0
+    torque[2, 700, 2] = 500.0  # t = 7 s, after instance 2's fall
+    traj = SimpleNamespace(qpos=traj.qpos, qvel=qvel, torque=torque, time=traj.time)
+    full = lambda *v: np.broadcast_to(np.array(v, float), (4, 3))
+    out = hops.actuator_metrics(traj, dof, full(40, 80, 80), full(20, 20, 20), full(40, 100, 100))
+    np.testing.assert_allclose(out["peak_torque_kfe"], 60.0)
+    np.testing.assert_allclose(out["peak_power_kfe"], 600.0)
+    np.testing.assert_allclose(out["line_use_kfe"], 60.0 / 40.0)
+    np.testing.assert_allclose(out["peak_torque_hfe"], 50.0)
+    np.testing.assert_allclose(out["line_use_hfe"], 50.0 / 100.0)  # braking: the current limit binds
+    np.testing.assert_allclose(out["peak_power_haa"], 40.0)
+    np.testing.assert_allclose(out["line_use_haa"], 20.0 / 40.0)  # τ > 0 at ω < 0: the line's 44 is cut to the 40 limit
+    ideal = hops.actuator_metrics(traj, dof, full(40, 80, 80), full(np.inf, np.inf, np.inf), full(40, 80, 80))
+    np.testing.assert_allclose(ideal["line_use_kfe"], 60.0 / 80.0)
+    np.testing.assert_allclose(ideal["line_use_haa"], 20.0 / 40.0)  # no speed limit: no more than the effort

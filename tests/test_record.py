@@ -126,7 +126,7 @@ def values(kind: str, msg) -> list[float]:
         return (xyz(msg.pose.pose.position) + [q.w, q.x, q.y, q.z] + xyz(msg.twist.twist.linear)
                 + xyz(msg.twist.twist.angular))
     if kind == "joint_states":
-        return list(msg.position) + list(msg.velocity)
+        return list(msg.position) + list(msg.velocity) + list(msg.effort)
     state = msg.states[0] if msg.states else None
     if state is None:
         return [0.0] * 7
@@ -143,7 +143,7 @@ def expected(kind: str, saved: dict, layout: Layout, i: int) -> np.ndarray:
     elif kind == "odom":
         columns = [pick("odom_pos"), pick("odom_quat"), pick("odom_linvel"), pick("odom_angvel")]
     elif kind == "joint_states":
-        columns = [pick("qpos")[:, list(layout.joint_qpos)], pick("qvel")[:, list(layout.joint_dof)]]
+        columns = [pick("qpos")[:, list(layout.joint_qpos)], pick("qvel")[:, list(layout.joint_dof)], pick("torque")]
     else:
         columns = [pick("contact")[:, None], pick("contact_force"), pick("contact_pos")]
     return np.concatenate(columns, axis=1)

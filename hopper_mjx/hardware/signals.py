@@ -77,6 +77,7 @@ class Signals(NamedTuple):
     qpos: jax.Array
     qvel: jax.Array
     ground: GroundTrace | tuple = ()  # on a height field; () on the plane
+    ctrl: jax.Array | tuple = ()  # (nu,) the controls the step applied (after the delay line and the motors)
 
 
 class Observation(NamedTuple):
@@ -129,6 +130,7 @@ def measure(engine, model, d, gravity: jax.Array, terrain: tuple = ()) -> Signal
         qpos=d.qpos,
         qvel=d.qvel,
         ground=GroundTrace(sensed.scan, sensed.normal) if sensed else (),
+        ctrl=d.ctrl,
     )
 
 

@@ -251,6 +251,40 @@ def landing_metrics(traj) -> dict[str, np.ndarray]:
             "impact_force": np.where(np.isfinite(impact), impact, np.nan)}
 
 
+JOINT_NAMES = ("haa", "hfe", "kfe")  # the joints in the columns' names, joint order
+
+
+def actuator_metrics(traj, joint_dof, stall_torque, no_load_speed, torque_limit) -> dict[str, np.ndarray]:
+    """What the run asked of each joint's motor, per instance, over the state samples before any fall:
+
+    - peak_torque_<joint>: N·m, the largest |τ| applied;
+    - peak_power_<joint>: W, the largest |τ·q̇|, the mechanical power through the joint (driving or braking);
+    - line_use_<joint>: the largest |τ| over the torque the motor can give at that speed in τ's direction
+      (`actuators.envelope`: 1 is on its torque-speed line or at its current limit).
+
+    Uses the state stream (`traj.torque`, the applied torques, and `qvel` at the same instants). The motor's
+    figures are (N, 3) each, joint order (ideal motors: stall torque = limit = the effort limit, no-load speed inf);
+    joint_dof: each joint's index in qvel.
+    """
+    torque = np.asarray(traj.torque, dtype=float)
+    speed = np.asarray(traj.qvel, dtype=float)[..., list(joint_dof)]
+    t_state = np.asarray(traj.time["state"], dtype=float)
+    upright = _falls(np.asarray(traj.qpos, dtype=float), t_state).upright[..., None]
+    tau_s, w0, limit = (np.asarray(a, dtype=float)[:, None, :] for a in (stall_torque, no_load_speed, torque_limit))
+    # The torque the motor can give in τ's own direction: τ_s(1 ∓ ω/ω0), within the current limit (as `envelope`).
+    direction = np.where(torque < 0, -1.0, 1.0)
+    available = np.clip(tau_s * (1.0 - direction * speed / w0), 0.0, limit)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        use = np.where(available > 0, np.abs(torque) / available, np.where(torque == 0, 0.0, np.inf))
+    peak = lambda values: np.where(upright, values, -np.inf).max(axis=1)
+    out = {}
+    for name, values in (("peak_torque", np.abs(torque)), ("peak_power", np.abs(torque * speed)), ("line_use", use)):
+        worst = peak(values)
+        worst = np.where(np.isneginf(worst), np.nan, worst)
+        out |= {f"{name}_{j}": worst[:, k] for k, j in enumerate(JOINT_NAMES)}
+    return out
+
+
 class _Falls(NamedTuple):
     roll: np.ndarray  # (N, T) rad
     pitch: np.ndarray  # (N, T) rad

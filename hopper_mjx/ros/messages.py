@@ -107,14 +107,14 @@ class _Builder:
             twist=t["geometry_msgs/msg/TwistWithCovariance"](twist=twist, covariance=cov["twist"]),
         )
 
-    def joint_state(self, header, names, position, velocity):
-        # effort stays empty (allowed by sensor_msgs/JointState): the core does not record torques.
+    def joint_state(self, header, names, position, velocity, effort=()):
+        # effort: the torques the motors applied (N·m); empty where none were recorded, as JointState allows.
         return self.t["sensor_msgs/msg/JointState"](
             header=header,
             name=list(names),
             position=np.asarray(position, dtype=np.float64),
             velocity=np.asarray(velocity, dtype=np.float64),
-            effort=np.zeros(0),
+            effort=np.asarray(effort, dtype=np.float64),
         )
 
     def contacts(self, header, touching: bool, force, pos, normal, collision1: str, seconds: float):
@@ -196,9 +196,10 @@ def messages(rec, instances: list[int], store, ros1: bool,
                              o.angvel[i, k], cov)
             yield topics["odom"], MSGTYPES["odom"], t, msg
         qadr, dadr = list(rec.joint_qpos), list(rec.joint_dof)
+        torque = not isinstance(getattr(traj, "torque", ()), tuple)  # a trajectory of the core records it
         for k, t in enumerate(traj.time["state"]):
             msg = b.joint_state(b.header(seq0["state"] + k, t, ""), rec.joint_names,
-                                traj.qpos[i, k, qadr], traj.qvel[i, k, dadr])
+                                traj.qpos[i, k, qadr], traj.qvel[i, k, dadr], traj.torque[i, k] if torque else ())
             yield topics["joint_states"], MSGTYPES["joint_states"], t, msg
         for k, t in enumerate(traj.time["contact"]):
             c = traj.contact

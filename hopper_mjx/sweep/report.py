@@ -272,7 +272,9 @@ def table_text(spec: SweepSpec, groups: list[dict], label: str | None = None) ->
         cols += [("made good m", "distance_made_good", "{:+.2f}")]
         if spec.kind in BAND_KINDS:
             cols += [("reached", "reached", "{:.0%}"), (PASSED[spec.kind], "cleared", "{:.0%}"),
-                     ("landing tilt °", "landing_tilt", "{:.1f}"), ("impact N", "impact_force", "{:.0f}")]
+                     ("landing tilt °", "landing_tilt", "{:.1f}"), ("impact N", "impact_force", "{:.0f}"),
+                     ("knee N·m", "peak_torque_kfe", "{:.0f}"), ("knee W", "peak_power_kfe", "{:.0f}"),
+                     ("knee line", "line_use_kfe", "{:.2f}")]
     if label:
         cols.insert(0, ("controller", "controller", "{}"))
     cells = [[h for h, _, _ in cols]]

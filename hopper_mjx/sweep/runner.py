@@ -39,6 +39,8 @@ COLUMNS = ("apex_height", "flight_rise", "flight_time", "ballistic_flight_time",
 TERRAIN_COLUMNS = ("distance_made_good", "obstacles_cleared", "highest_cleared", "fall_x", "fall_y")
 # A block or gaps sweep's, besides: how its landings went (`hops.landing_metrics`).
 LANDING_COLUMNS = ("landing_tilt", "impact_force")
+# And what its jumps asked of each joint's motor (`hops.actuator_metrics`).
+ACTUATOR_COLUMNS = tuple(f"{m}_{j}" for m in ("peak_torque", "peak_power", "line_use") for j in hops.JOINT_NAMES)
 def recorded(timestep: float) -> signals.SensorConfig:
     """The streams a sweep records: contact and state at the physics rate (events, lift-off heights and apexes to
     the step, short flights too), the IMU and odometry at 100 Hz."""
@@ -48,7 +50,8 @@ def recorded(timestep: float) -> signals.SensorConfig:
 
 def columns(spec: SweepSpec) -> tuple[str, ...]:
     """The metrics a sweep's rows hold."""
-    return COLUMNS + (TERRAIN_COLUMNS if spec.grounds else ()) + (LANDING_COLUMNS if spec.kind in BAND_KINDS else ())
+    bands = LANDING_COLUMNS + ACTUATOR_COLUMNS if spec.kind in BAND_KINDS else ()
+    return COLUMNS + (TERRAIN_COLUMNS if spec.grounds else ()) + bands
 
 
 class ChunkRunner:
@@ -140,7 +143,8 @@ class ChunkRunner:
         if self.grounds:
             result |= hops.terrain_metrics(traj, command_speed=self.spec.speed, obstacles=obstacles)
         if self.spec.kind in BAND_KINDS:
-            result |= hops.landing_metrics(traj)
+            result |= hops.landing_metrics(traj) | hops.actuator_metrics(traj, self.sim.layout.joint_dof,
+                                                                          *motor_figures(final, self.sim.layout))
         return np.stack([np.asarray(result[c], dtype=np.float64) for c in self.columns], axis=1)[:n]
 
 
@@ -148,6 +152,16 @@ def motor_energy(final):
     """(N,) J the motors used: with a motor model, what the drive measured (dc: electrical energy drawn);
     with ideal motors and no delay, the controller's ∫Σ|τ·q̇|dt of the torques it commanded (the same)."""
     return final.drive.energy if final.drive else final.cstate.work
+
+
+def motor_figures(final, layout) -> tuple:
+    """(stall torque, no-load speed, torque limit), (N, 3) N·m, rad/s, N·m each: the motors the run had (ideal
+    prompt motors: the effort limit at every speed)."""
+    if final.drive:
+        motor = final.drive.motor
+        return tuple(np.asarray(a) for a in (motor.stall_torque, motor.no_load_speed, motor.torque_limit))
+    effort = np.broadcast_to(np.asarray(layout.effort_limit, float), final.gravity.shape)
+    return effort, np.full_like(effort, np.inf), effort
 
 
 def robots(spec: SweepSpec, mj_model) -> tuple[dict, dict, dict]:
