@@ -73,7 +73,7 @@ class Trajectory(NamedTuple):
     time: dict  # stream name -> (T_stream,) seconds
     ground: signals.GroundTrace | tuple = ()  # on a height field, at the contact stream's rate; () on the plane
     # (N, T_state, 3) N·m, joint order: the torque each joint's motor applied at the state samples (after the
-    # delay line, the motors' envelope and the actuators' control range), what the hops asked of the actuators.
+    # delay line, the motors' envelope and the actuators' control range); () where `SensorConfig.torque` is off.
     torque: jax.Array | tuple = ()
 
 
@@ -413,8 +413,8 @@ def _instance_rollout(engine, actuation: Actuation, pushes: Pushes | None, sensi
         command, cstate = act(state.cstate, obs, state.gravity)
         ctrl, _, cstate, drive = actuate(plant, controller.servo, command, cstate, state.drive, now, d.qvel)
         # An unbatched predicate stays a real conditional under vmap: off-tick steps skip the signals.
-        measure = lambda d1: jax.lax.cond(record, lambda: signals.measure(engine, model, d1, state.gravity, sensed),
-                                          lambda: previous)
+        measure = lambda d1: jax.lax.cond(record, lambda: signals.measure(engine, model, d1, state.gravity, sensed,
+                                                                          sensors.torque), lambda: previous)
         d1, step, sig, bad = advance(plant, model, d, state.gravity, ctrl, state.key, state.step, measure,
                                      state.diverged)
         # A diverged instance is frozen at its last finite state; the others never see it.
@@ -432,7 +432,7 @@ def _instance_rollout(engine, actuation: Actuation, pushes: Pushes | None, sensi
         def body(k, state_sig):
             return physics_step(model, sensed, act, state_sig[0], record=k == 0, previous=state_sig[1])
 
-        measure = lambda: signals.measure(engine, model, state.data, state.gravity, sensed)
+        measure = lambda: signals.measure(engine, model, state.data, state.gravity, sensed, sensors.torque)
         state, sig = jax.lax.fori_loop(0, tick, body, (state, _zeros_like(jax.eval_shape(measure))))
         return (model, heights, weights, state), sig
 
@@ -455,7 +455,8 @@ def _instance_rollout(engine, actuation: Actuation, pushes: Pushes | None, sensi
                                       state.sense if sensing.noisy else None)
         contact = decimate(sig.contact, "contact")
         traj = (imu, odom, contact, sig.qpos[:: every["state"]], sig.qvel[:: every["state"]],
-                decimate(sig.ground, "contact"), applied_torque(actuation.layout, sig.ctrl[:: every["state"]]))
+                decimate(sig.ground, "contact"),
+                applied_torque(actuation.layout, sig.ctrl[:: every["state"]]) if sensors.torque else ())
         return state._replace(key=next_key), traj
 
     return run

@@ -119,8 +119,9 @@ def ground(heights, size, points, d, touch: Contact) -> SensedGround:
     return SensedGround(heights, scan, jnp.where(touch.flag, normal, 0.0), size)
 
 
-def measure(engine, model, d, gravity: jax.Array, terrain: tuple = ()) -> Signals:
-    """The signals; `terrain` (heights, size, points) adds the scan and the contact normal."""
+def measure(engine, model, d, gravity: jax.Array, terrain: tuple = (), ctrl: bool = False) -> Signals:
+    """The signals; `terrain` (heights, size, points) adds the scan and the contact normal, `ctrl` the controls the
+    step applied (static: without it the program is the one that records none)."""
     touch = contact(engine, model, d)
     sensed = ground(*terrain, d, touch) if terrain else None
     return Signals(
@@ -130,7 +131,7 @@ def measure(engine, model, d, gravity: jax.Array, terrain: tuple = ()) -> Signal
         qpos=d.qpos,
         qvel=d.qvel,
         ground=GroundTrace(sensed.scan, sensed.normal) if sensed else (),
-        ctrl=d.ctrl,
+        ctrl=d.ctrl if ctrl else (),
     )
 
 
@@ -158,6 +159,9 @@ class SensorConfig:
     odom_vel_noise: float = 0.0  # m/s and rad/s
     contact_rate: float = 50.0
     state_rate: float = 50.0  # qpos/qvel
+    # Each joint's applied torque at the state samples (`Trajectory.torque`). Off, the step's program is the one
+    # without it: an extra output moves XLA's fusion, and so a long hopping run's last digits (the gravity sweep's).
+    torque: bool = True
     # The height scan on a terrain (legged_gym's measured_heights): a grid of counts (ahead, left) at
     # spacing (m) centred under the base in its yaw frame; recorded at the contact rate with the normal.
     scan_counts: tuple[int, int] = (5, 5)

@@ -41,11 +41,12 @@ TERRAIN_COLUMNS = ("distance_made_good", "obstacles_cleared", "highest_cleared",
 LANDING_COLUMNS = ("landing_tilt", "impact_force")
 # And what its jumps asked of each joint's motor (`hops.actuator_metrics`).
 ACTUATOR_COLUMNS = tuple(f"{m}_{j}" for m in ("peak_torque", "peak_power", "line_use") for j in hops.JOINT_NAMES)
-def recorded(timestep: float) -> signals.SensorConfig:
+def recorded(timestep: float, torque: bool = False) -> signals.SensorConfig:
     """The streams a sweep records: contact and state at the physics rate (events, lift-off heights and apexes to
-    the step, short flights too), the IMU and odometry at 100 Hz."""
+    the step, short flights too), the IMU and odometry at 100 Hz; the joints' torques where its metrics read them
+    (a block or gaps sweep's)."""
     rate = 1.0 / timestep
-    return signals.SensorConfig(imu_rate=100, odom_rate=100, contact_rate=rate, state_rate=rate)
+    return signals.SensorConfig(imu_rate=100, odom_rate=100, contact_rate=rate, state_rate=rate, torque=torque)
 
 
 def columns(spec: SweepSpec) -> tuple[str, ...]:
@@ -76,7 +77,7 @@ class ChunkRunner:
 
             self.controller = policy_controller(sim.mj_model, self.policy)
             self.policy_config = read(self.policy)[3]  # once, not per chunk
-        self.sensors = recorded(sim.layout.timestep)
+        self.sensors = recorded(sim.layout.timestep, torque=spec.kind in BAND_KINDS)
         self.steps = steps_for(spec.duration, sim.layout.timestep, self.sensors)
         self.columns = columns(spec)
         self.grounds = [terrain.parse(g) for g in spec.grounds]  # one per value, all on the model's grid
