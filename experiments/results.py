@@ -10,7 +10,11 @@ and on the kicked gravity sweep of the run's policy (RUN/sweep/: `python -m hopp
 policy:RUN`, nine default gravities, the default kick) the worst gravity's survival, apex error |rise/command - 1|
 and speed error, each twice: on the physics the policy was trained on (RUN/sweep-trained/: the same sweep with
 `--as-trained`, its config's timestep and solver caps) and in the core; then the gap between the two at Earth, Mars
-and the Moon, held to 5 points of survival and 5 % of the commanded apex. Each task's reference controller
+and the Moon, held to 5 points of survival and 5 % of the commanded apex; where it is over, the sweep again on each
+part of the training physics alone (`--as-trained=timestep` and `=solver`, the other part the core's:
+RUN/sweep-trained-timestep/, RUN/sweep-trained-solver/), and the row names the part whose gap stays over. The row
+names the step and solver cap its policies were trained on, so runs on other training physics are rows of their own.
+Each task's reference controller
 (`registry.TASK_REFERENCES`: Raibert at the runs' command for the hopping tasks, Raibert at a 5 cm apex for stand)
 is swept the same way (OUT's folder, reference-<task>/). Every sweep runs on the run's own ground (`--terrain`:
 hop_terrain's rough ground; flat for the others). Stand's apex column is its reference's error against its own
@@ -31,6 +35,8 @@ from hopper_mjx import cli, registry
 
 SWEEP = "sweep"  # the policy in the core
 TRAINED = "sweep-trained"  # the same sweep on the physics the policy was trained on (`sweep --as-trained`)
+# Where a gap is over: the sweep on each part of the training physics alone (`sweep --as-trained=PART`), to say which.
+PARTS = {"timestep": "step", "solver": "solver cap"}
 COMPARED_GRAVITIES = (9.81, 3.71, 1.62)  # where the two are held to agree: Earth, Mars, the Moon
 GAP = {"survival_gap": 0.05, "apex_gap": 0.05}  # the most the core may differ from training: 5 points, 5 % of apex
 
@@ -105,14 +111,15 @@ def gap(core: Path, trained: Path, height: float) -> dict:
 
 
 def run_sweep(controller: str, folder: Path, height: float, speed, num: int, duration: float,
-              ground: str = "flat", as_trained: bool = False) -> None:
+              ground: str = "flat", as_trained: str | None = None) -> None:
     """The kicked gravity sweep of `controller` into `folder` on `ground` (a --terrain spec; resumes a cut-short
-    one), by the sweep's own command; `as_trained`: on the physics the policy was trained on."""
+    one), by the sweep's own command; `as_trained` (all, timestep or solver): on that of the physics the policy was
+    trained on."""
     from hopper_mjx.sweep.__main__ import main as sweep
 
     argv = ["gravity", "--controller", controller, "--num", str(num), "--duration", str(duration),
             "--height", str(height), "--speed", f"{speed[0]},{speed[1]}", "--terrain", ground, "--out", str(folder),
-            "--no-progress"] + (["--as-trained"] if as_trained else [])
+            "--no-progress"] + ([f"--as-trained={as_trained}"] if as_trained else [])
     if sweep(argv) != 0:
         raise ValueError(f"the sweep of {controller} into {folder} failed")
 
@@ -128,8 +135,16 @@ def run_record(run: Path, do_sweep: bool, num: int, duration: float) -> dict:
     if do_sweep and not (run / SWEEP / "summary.json").is_file():
         run_sweep(f"policy:{run}", run / SWEEP, height, speed, num, duration, ground)
     if do_sweep and not (run / TRAINED / "summary.json").is_file():
-        run_sweep(f"policy:{run}", run / TRAINED, height, speed, num, duration, ground, as_trained=True)
+        run_sweep(f"policy:{run}", run / TRAINED, height, speed, num, duration, ground, as_trained="all")
     trained = {f"trained_{k}": v for k, v in sweep_measures(run / TRAINED, height).items()}
+    gaps = gap(run / SWEEP, run / TRAINED, height)
+    parts = {}
+    if over(gaps):  # which part of the training physics makes it: each alone, the other the core's
+        for part in PARTS:
+            folder = run / f"{TRAINED}-{part}"
+            if do_sweep and not (folder / "summary.json").is_file():
+                run_sweep(f"policy:{run}", folder, height, speed, num, duration, ground, as_trained=part)
+            parts[part] = gap(run / SWEEP, folder, height)
     return {"run": str(run), "task": args["task"], "algo": args["algo"], "seed": args["seed"], "ground": ground,
             "scanned": (run / "threshold.json").is_file(),
             "minutes_to_threshold": None if found is None else found["wall_time"] / 60,
@@ -138,8 +153,24 @@ def run_record(run: Path, do_sweep: bool, num: int, duration: float) -> dict:
             "steps_per_s": statistics.median(rates) if rates else None,
             "curve": [(r["wall_time"] / 60, r["eval/episode_reward"]) for r in record["history"]
                       if "eval/episode_reward" in r],
-            **sweep_measures(run / SWEEP, height), **trained, **gap(run / SWEEP, run / TRAINED, height),
-            "height": height, "speed": list(speed), "physics": list(physics_of(args).described().values())}
+            **sweep_measures(run / SWEEP, height), **trained, **gaps, "parts": parts,
+            "training": training_physics(run), "height": height, "speed": list(speed),
+            "physics": list(physics_of(args).described().values())}
+
+
+def training_physics(run: Path) -> str:
+    """The step and solver cap a run's policy was trained on, in words ("" for a run without its policy/)."""
+    from hopper_mjx.envs import policy
+
+    if not (run / "policy" / "hopper_env.json").is_file():
+        return ""
+    config = policy.read(run / "policy")[3]  # JSON only
+    return f"{config.timestep * 1e3:g} ms step, solver ≤ {config.solver_iterations} iterations"
+
+
+def over(gaps: dict) -> bool:
+    """A gap past `GAP` in survival or apex."""
+    return any(gaps.get(k) is not None and gaps[k] > limit for k, limit in GAP.items())
 
 
 def spread(values, fmt: str) -> str:
@@ -163,11 +194,13 @@ def _millions(steps):
 
 def table(records: list[dict], references: dict) -> str:
     lines = [HEADER]
-    for (task, algo) in sorted({(r["task"], r["algo"]) for r in records}):
-        rows = [r for r in records if (r["task"], r["algo"]) == (task, algo)]
+    for (task, algo, training) in sorted({(r["task"], r["algo"], r["training"]) for r in records}):
+        rows = [r for r in records if (r["task"], r["algo"], r["training"]) == (task, algo, training)]
         reached = sum(r["minutes_to_threshold"] is not None for r in rows)
         scanned = sum(r["scanned"] for r in rows)
-        lines.append(f"| {task} × {algo.upper()} | {len(rows)} | {reached} of {scanned} scanned "
+        on = f", trained on a {training}" if training else ""
+        lines.append(f"| {task} × {algo.upper()}{on} | {len(rows)} "
+                     f"| {reached} of {scanned} scanned "
                      f"| {spread([r['minutes_to_threshold'] for r in rows], '.1f')} "
                      f"| {spread([_millions(r['steps_to_threshold']) for r in rows], '.2f')} "
                      f"| {spread([r['steps_per_s'] for r in rows], ',.0f')} "
@@ -183,14 +216,31 @@ def table(records: list[dict], references: dict) -> str:
     return "\n".join(lines)
 
 
+def _worst(gaps: list[dict]) -> dict:
+    return {k: max((g[k] for g in gaps if g.get(k) is not None), default=None) for k in GAP}
+
+
+def _gap_text(worst: dict) -> str:
+    """'survival, apex' of a worst gap, in points and % of the command."""
+    apex = "n/a" if worst["apex_gap"] is None else format(worst["apex_gap"], ".0%")
+    return f"{worst['survival_gap']:.0%}, {apex}"
+
+
 def gap_cell(rows: list[dict]) -> str:
-    """The largest gap over a row's seeds, and whether it is within `GAP` (n/a without both sweeps)."""
-    worst = {k: max((r[k] for r in rows if r.get(k) is not None), default=None) for k in GAP}
+    """The largest gap over a row's seeds and whether it is within `GAP` (n/a without both sweeps); over it, which
+    part of the training physics makes it, from the sweeps on each part alone (`PARTS`)."""
+    worst = _worst(rows)
     if worst["survival_gap"] is None:
         return "n/a"
-    within = all(v is None or v <= GAP[k] for k, v in worst.items())
-    apex = "n/a" if worst["apex_gap"] is None else format(worst["apex_gap"], ".0%")
-    return f"{worst['survival_gap']:.0%}, {apex}: " + ("within" if within else "**over**: the training physics differs")
+    if not over(worst):
+        return f"{_gap_text(worst)}: within"
+    alone = {part: _worst([r["parts"][part] for r in rows if part in r.get("parts", {})]) for part in PARTS}
+    alone = {part: w for part, w in alone.items() if w["survival_gap"] is not None}
+    if not alone:
+        return f"{_gap_text(worst)}: **over**: the training physics differs"
+    causes = [PARTS[part] for part, w in alone.items() if over(w)]
+    said = "; ".join(f"{PARTS[part]} alone {_gap_text(w)}" for part, w in alone.items())
+    return f"{_gap_text(worst)}: **over**: {'from the ' + ' and '.join(causes) if causes else 'neither alone'} ({said})"
 
 
 def physics_of(args: dict):

@@ -341,7 +341,14 @@ def test_as_trained_puts_the_sweep_on_the_policys_training_physics(trained):
     m = physics.mj_model
     assert (m.opt.timestep, m.opt.iterations, m.opt.ls_iterations) == (0.002, 2, 4)  # training's, not the core's
     assert (Physics().mj_model.opt.timestep, Physics().mj_model.opt.iterations) == (0.001, 4)
+    # One part alone, the other the core's: what results.py runs to tell which part makes a gap.
+    assert as_trained(Physics(), [f"policy:{folder}"], "timestep").model_options == {"timestep": config.timestep}
+    assert as_trained(Physics(), [f"policy:{folder}"], "solver").model_options == {
+        "iterations": config.solver_iterations, "ls_iterations": config.ls_iterations}
     with pytest.raises(ValueError, match="; raibert is not a policy:PATH$"):
         as_trained(Physics(), ["raibert", f"policy:{folder}"])
     assert main(["gravity", "--as-trained", "--num", "1", "--out", str(folder.parent / "no")]) == 2
     assert not (folder.parent / "no").exists()
+    with pytest.raises(SystemExit) as bad:  # argparse's one line, before anything is built
+        main(["gravity", f"--controller=policy:{folder}", "--as-trained=step", "--out", str(folder.parent / "no")])
+    assert bad.value.code == 2 and not (folder.parent / "no").exists()

@@ -402,6 +402,14 @@ def test_the_results_table_gives_the_gap_between_training_physics_and_the_core(t
     cells = [c.strip() for c in row.split("|")[1:-1]]
     assert cells[6] == "100% / 0%"  # the worst gravity's survival: 0.5 m/s² in the core
     assert cells[9] == "12%, 12%: **over**: the training physics differs"
+    # The sweeps on each part alone (`sweep --as-trained=timestep`, `=solver`) say which part makes the gap.
+    for part, like in (("timestep", results.TRAINED), ("solver", results.SWEEP)):
+        (run / f"{results.TRAINED}-{part}").mkdir()
+        (run / f"{results.TRAINED}-{part}" / "summary.json").write_text((run / like / "summary.json").read_text())
+    assert results.main([str(run), "--out", str(out)]) == 0
+    row = next(line for line in out.read_text().splitlines() if line.startswith("| hop × PPO"))
+    assert row.split("|")[10].strip() == ("12%, 12%: **over**: from the step (step alone 12%, 12%; "
+                                          "solver cap alone 0%, 0%)")
     sweep_core = run / results.SWEEP
     (sweep_core / "summary.json").write_text((run / results.TRAINED / "summary.json").read_text())
     assert results.gap(sweep_core, run / results.TRAINED, 0.10) == {"survival_gap": 0.0, "apex_gap": 0.0}

@@ -33,6 +33,7 @@ from hopper_mjx.sweep.grid import BAND_KINDS, DEFAULT_GRAVITY, KICK, TERRAIN_KIN
 PARAM = {"obstacle": "obstacle_height", "gaps": "gap_width", "terrain": "roughness"}  # a terrain sweep's value column
 VALUES = {"gains": "--values", "param": "--values", "obstacle": "--heights", "gaps": "--widths",
           "terrain": "--amps"}  # the swept values
+TRAINED_PARTS = ("all", "timestep", "solver")  # what --as-trained takes of a policy's training physics
 LANDING = 0.5  # m of ground a gaps sweep keeps beyond its gap to land on, before the ground's end
 
 
@@ -106,9 +107,10 @@ def parser() -> argparse.ArgumentParser:
                            help="comma-separated: raibert, balance and/or policy:PATH, each swept with the "
                            "same kicks")
         if kind in ("gravity", "compare"):
-            s.add_argument("--as-trained", action="store_true",
+            s.add_argument("--as-trained", nargs="?", const="all", choices=TRAINED_PARTS,
                            help="policies only: run on the physics they were trained on (their config's timestep "
-                                "and solver caps) instead of the core's, to measure what changes between the two")
+                                "and solver caps) instead of the core's, to measure what changes between the two; "
+                                "=timestep or =solver takes that part alone (the other stays the core's)")
         s.add_argument("--num", type=int, default=num, help=f"replicates per grid point (default {num})")
         s.add_argument("--duration", type=float, default=duration, help="simulated seconds per instance")
         s.add_argument("--height", type=float, default=0.10, help="commanded apex rise over standing height, m")
@@ -168,8 +170,8 @@ def check(args):
         args.terrain = grounds[0]
     physics = cli.check_physics(args, n=args.num, seed=args.seed)  # one robot per replicate, drawn now
     names = args.controllers.split(",") if args.kind == "compare" else [getattr(args, "controller", "raibert")]
-    if getattr(args, "as_trained", False):
-        physics = as_trained(physics, names)
+    if getattr(args, "as_trained", None):
+        physics = as_trained(physics, names, args.as_trained)
     if not grounds:  # every instance on the one ground --terrain gives (the parser refuses it where it cannot)
         cli.refuse_each(physics.ground, f"a {args.kind} sweep")
     cli.check_delay(physics, args.duration, args.num, args.seed)
@@ -208,9 +210,10 @@ def check(args):
     return specs, out
 
 
-def as_trained(physics, controllers: list[str]):
+def as_trained(physics, controllers: list[str], part: str = "all"):
     """`physics` on the timestep and solver caps the policies among `controllers` were trained on (their
-    configs'; `envs.task_config.training_model`), which every one of them must share."""
+    configs'; `envs.task_config.training_model`), which every one of them must share; `part` (TRAINED_PARTS):
+    both, or the timestep or the solver caps alone."""
     from hopper_mjx.envs import policy
 
     others = [c for c in controllers if not c.startswith(registry.POLICY_PREFIX)]
@@ -225,8 +228,9 @@ def as_trained(physics, controllers: list[str]):
         raise ValueError(f"--as-trained: the policies were trained on different physics {sorted(found)}; "
                          "sweep them apart")
     timestep, iterations, ls_iterations = found.pop()
-    options = {**physics.model_options, "timestep": timestep, "iterations": iterations,
-               "ls_iterations": ls_iterations}
+    step = {"timestep": timestep} if part in ("all", "timestep") else {}
+    solver = {"iterations": iterations, "ls_iterations": ls_iterations} if part in ("all", "solver") else {}
+    options = {**physics.model_options, **step, **solver}
     return dataclasses.replace(physics, model_options=options)
 
 
