@@ -265,14 +265,16 @@ def figure(records: list[dict]):
     import matplotlib.pyplot as plt
 
     fig, ax = plt.subplots(figsize=(7, 4.2))
-    groups = sorted({(r["task"], r["algo"]) for r in records})
+    key = lambda r: (r["task"], r["algo"], r.get("training", ""))  # a row of the table
+    groups = sorted({key(r) for r in records})
     shared = [w for w in records[0]["physics"] if all(w in r["physics"] for r in records)]
     for colour, group in zip(plt.rcParams["axes.prop_cycle"].by_key()["color"] * 4, groups):
-        for i, r in enumerate(x for x in records if (x["task"], x["algo"]) == group):
+        for i, r in enumerate(x for x in records if key(x) == group):
             t, reward = zip(*r["curve"]) if r["curve"] else ((), ())
             own = "".join(f"; {w}" for w in r["physics"] if w not in shared)
+            on = f", trained on a {group[2]}" if group[2] else ""
             ax.plot(t, reward, "o-", ms=3, color=colour, alpha=0.8,
-                    label=f"{group[0]} × {group[1].upper()}{own}" if i == 0 else None)
+                    label=f"{group[0]} × {group[1].upper()}{own}{on}" if i == 0 else None)
     ax.set_xlabel("training wall time (min)")
     ax.set_ylabel("episode reward (1, summed per episode)")
     ax.set_title(f"every seed's curve: the mean over its evaluation episodes\n{'; '.join(shared)}", fontsize=9)

@@ -116,8 +116,9 @@ def train(args, physics=None) -> dict:
         shutil.copytree(final[0], out / "policy")
     record["final_step"] = final[1]
     atomic_write_text(record_path, json.dumps(record, indent=1))
-    plot_rewards(out / "reward_curve.png", record["history"], f"{args.algo.upper()} on {args.task}", physics,
-                 config.policy_rate, args.num_eval_envs)
+    title = (f"{args.algo.upper()} on {args.task} ({config.timestep * 1e3:g} ms physics step, solver ≤ "
+             f"{config.solver_iterations} iterations)")
+    plot_rewards(out / "reward_curve.png", record["history"], title, physics, config.policy_rate, args.num_eval_envs)
     return record
 
 
