@@ -131,7 +131,7 @@ def test_each_task_resets_and_steps_with_shapes_dtypes_and_its_own_gravity(rollo
     assert first.obs.dtype == states.obs.dtype == states.reward.dtype == jnp.float32
     assert states.reward.shape == states.done.shape == (2, N)
     assert first.info["command"].shape == (N, env.command_size)
-    np.testing.assert_allclose(states.pipeline_state.time[0], 0.02, atol=1e-6)  # 10 steps of 2 ms
+    np.testing.assert_allclose(states.pipeline_state.time[0], 0.02, atol=1e-6)  # one 50 Hz policy step: 20 of 1 ms
     g = -np.asarray(first.info["gravity"][:, 2])
     assert len(np.unique(g)) == N and (g >= 0.5).all() and (g <= 12.0).all()
     np.testing.assert_allclose(np.asarray(first.obs[:, -1]) * 9.81, g, rtol=1e-5)  # observed gravity
@@ -348,7 +348,7 @@ def test_config_rejects_bad_ranges(mj_model):
     with pytest.raises(ValueError, match="gravity_range"):
         MonopedConfig(gravity_range=(0.0, 1.0))  # log-uniform draws need a positive low end
     with pytest.raises(ValueError, match="policy_rate"):
-        envs.make("hop", mj_model, policy_rate=300.0)  # 500 Hz / 300 Hz
+        envs.make("hop", mj_model, policy_rate=300.0)  # 1000 Hz / 300 Hz
     with pytest.raises(ValueError, match="unknown"):
         MonopedConfig.from_dict({**MonopedConfig().to_dict(), "gravity": 3})
     cfg = dataclasses.replace(envs.default_config("hop_velocity"), speed_range=(0.0, 0.5))
@@ -363,8 +363,8 @@ def test_config_rejects_bad_ranges(mj_model):
     assert (MonopedConfig.from_dict(before).motor, MonopedConfig.from_dict(before).action_delay,
             MonopedConfig.from_dict(before).push) == ("ideal", 0.0, None)
     for bad, message in ((dict(motor="stepper"), "unknown motor 'stepper'"),
-                         (dict(action_delay=0.003), "action_delay must be a whole number .* \\(2 ms\\), got 3 ms"),
-                         (dict(push=(0.001, 0.3)), "push interval must be a whole number"),
+                         (dict(action_delay=0.0025), "action_delay must be a whole number .* \\(1 ms\\), got 2.5 ms"),
+                         (dict(push=(0.0015, 0.3)), "push interval must be a whole number"),
                          (dict(push=(1.0, -0.3)), "push speed must be >= 0"),
                          (dict(randomize="motor_stall_torque=scale(0.5,1)"), "dc motor's figures; set motor='dc'")):
         with pytest.raises(ValueError, match=message):

@@ -25,7 +25,8 @@ EPISODE = 30
 PUSH = (0.02, 0.3)  # every 10 physics steps of 2 ms, 0.3 m/s
 RANDOMIZE = ("sensor_delay=2..10,gyro_noise=0.02..0.05,gyro_bias=normal(0,0.02),odom_pos_noise=0.01..0.02,"
              "odom_vel_noise=0.02..0.04,action_delay=0..6,motor_stall_torque=scale(0.4,0.7)")
-CONFIG = dict(motor="dc", push=PUSH, randomize=RANDOMIZE, randomize_seed=3, policy_rate=500.0,
+# On a 2 ms step (not training's default 1 ms): a 500 Hz policy is then one physics step per env step.
+CONFIG = dict(timestep=0.002, motor="dc", push=PUSH, randomize=RANDOMIZE, randomize_seed=3, policy_rate=500.0,
               gravity_range=(1.0, 1.0), initial_clearance=(0.5, 0.5), initial_joint_noise=0.0)
 # The observation's slices (ROBOT_SIGNALS): what the noise touches, and what it leaves exact.
 RATE, HEIGHT, VELOCITY, EXACT = slice(4, 7), 7, slice(8, 11), np.r_[0:4, 11:21]

@@ -339,7 +339,7 @@ def test_as_trained_puts_the_sweep_on_the_policys_training_physics(trained):
     assert physics.model_options == {"timestep": config.timestep, "iterations": config.solver_iterations,
                                      "ls_iterations": config.ls_iterations}
     m = physics.mj_model
-    assert (m.opt.timestep, m.opt.iterations, m.opt.ls_iterations) == (0.002, 2, 4)  # training's, not the core's
+    assert (m.opt.timestep, m.opt.iterations, m.opt.ls_iterations) == (0.001, 2, 4)  # training's cap, not the core's
     assert (Physics().mj_model.opt.timestep, Physics().mj_model.opt.iterations) == (0.001, 4)
     # One part alone, the other the core's: what results.py runs to tell which part makes a gap.
     assert as_trained(Physics(), [f"policy:{folder}"], "timestep").model_options == {"timestep": config.timestep}

@@ -19,7 +19,7 @@ POLICY_STEPS = 4
 
 
 def test_the_env_and_the_core_step_the_same_physics():
-    env = tasks.make("hop", engine="chain", motor="dc", action_delay=0.004, push=(0.03, 0.4))
+    env = tasks.make("hop", engine="chain", motor="dc", action_delay=0.004, push=(0.03, 0.4), timestep=0.002)
     assert env.config.delay_steps == 2 and env.pushes.every == 15
     lay, cfg = env.layout, env.config
     target = env.targets(jnp.array([0.4, -0.6, 0.9]))  # a crouch held for the whole run: the leg moves, pushes land
@@ -59,7 +59,7 @@ def test_the_env_and_the_core_step_the_same_physics():
 
 
 def test_advance_freezes_a_diverged_instance_and_counts_and_pushes_after_the_step():
-    env = tasks.make("hop", engine="chain", push=(0.002, 1.0))  # a push due after every 2 ms step
+    env = tasks.make("hop", engine="chain", push=(0.002, 1.0), timestep=0.002)  # a push due after every 2 ms step
     plant = Plant(env.engine, env.actuation, env.pushes, counts=True)
     qpos = jnp.asarray(env.standing_qpos)
     data = env.engine.make_data(qpos, jnp.zeros(env.layout.nv))

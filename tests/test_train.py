@@ -185,10 +185,12 @@ def test_train_rejects_bad_input_in_one_line_before_anything_runs(trained, capsy
     (["--max-grad-norm", "nan"], "--max-grad-norm must be finite and >= 0, got nan"),
     (["--algo", "sac", "--max-grad-norm", "1"], "--max-grad-norm is for --algo ppo (Brax's SAC does not clip its "
                                                 "gradients)"),
-    # The robots' motors, delays and pushes: on the training's own 2 ms physics step, within an episode.
-    (["--action-delay", "3"], "--action-delay must be a whole number of the training's physics steps (2 ms), got 3 ms"),
-    (["--push", "0.001,0.3"], "--push: the push interval must be a whole number (>= 1) of physics steps (0.002 s), "
-                              "got 0.001 s in training"),
+    # The robots' motors, delays and pushes: on the training's own physics step (here a coarser 2 ms), within an
+    # episode.
+    (["--config", "timestep=0.002", "--action-delay", "3"],
+     "--action-delay must be a whole number of the training's physics steps (2 ms), got 3 ms"),
+    (["--config", "timestep=0.002", "--push", "0.001,0.3"],
+     "--push: the push interval must be a whole number (>= 1) of physics steps (0.002 s), got 0.001 s in training"),
     (["--action-delay", "400", "--episode-length", "20"],
      "--action-delay 400 ms is not shorter than an episode (--episode-length 20 at 50 Hz) 0.4 s: no command would "
      "reach the motors"),
@@ -197,9 +199,9 @@ def test_train_rejects_bad_input_in_one_line_before_anything_runs(trained, capsy
      "50 Hz) 0.4 s"),
     (["--motor", "ideal", "--randomize", "motor_no_load_speed=scale(0.8,1.2)"],
      "--randomize: motor_no_load_speed is a dc motor's figure; add --motor dc"),
-    (["--policy-rate", "30"], "--policy-rate must divide the training's physics rate (500 Hz) into whole steps, "
+    (["--policy-rate", "30"], "--policy-rate must divide the training's physics rate (1000 Hz) into whole steps, "
                               "got 30 Hz"),
-    (["--policy-rate", "0"], "--policy-rate must divide the training's physics rate (500 Hz) into whole steps, "
+    (["--policy-rate", "0"], "--policy-rate must divide the training's physics rate (1000 Hz) into whole steps, "
                              "got 0 Hz"),
     # The episode is counted in policy steps at the given rate: 20 steps at 100 Hz are 0.2 s.
     (["--policy-rate", "100", "--action-delay", "200", "--episode-length", "20"],
@@ -516,8 +518,8 @@ def test_robustness_passes_a_refused_sweeps_one_line_on(tmp_path, monkeypatch, c
 
 
 def test_a_policy_rate_sets_the_tasks_physics_steps_per_action_and_the_policy_keeps_it(tmp_path):
-    """--policy-rate 100: 5 of the training's 2 ms steps per action (10 at the default 50 Hz), saved in the task's
-    config, from which the policy controller in the core takes 10 of its 1 ms steps per action."""
+    """--policy-rate 100: 10 of the training's 1 ms steps per action (20 at the default 50 Hz), saved in the task's
+    config, from which the policy controller in the core takes 10 of its 1 ms steps per action too."""
     from hopper_mjx.envs.task_config import MonopedConfig, decimation
     from hopper_mjx.model.layout import Layout
 
@@ -529,4 +531,4 @@ def test_a_policy_rate_sets_the_tasks_physics_steps_per_action_and_the_policy_ke
         env = learners.task_config(args, physics)
         frames[rate] = env.n_frames, decimation(Layout.of(physics.mj_model), env.config)
         assert MonopedConfig.from_dict(env.config.to_dict()) == env.config
-    assert frames == {None: (10, 20), "100": (5, 10)}
+    assert frames == {None: (20, 20), "100": (10, 10)}

@@ -203,11 +203,11 @@ def check(args):
         if args.seeds < 1:
             raise ValueError(f"--seeds must be >= 1, got {args.seeds}")
         cli.check_seed(args.seed + args.seeds - 1)
-    check_task_physics(args, physics)
     try:
-        envs.default_config(args.task).overridden(args.config, OWNED_FIELDS)
+        config = envs.default_config(args.task).overridden(args.config, OWNED_FIELDS)
     except ValueError as err:
         raise ValueError(f"--config: {err}") from None
+    check_task_physics(args, physics, config)
     # The evaluation's options too: a mistake there would otherwise surface after the whole training run.
     for flag in ("--eval-gravity", "--select-gravity"):
         for g in parse_floats(getattr(args, flag[2:].replace("-", "_")), flag):
@@ -245,15 +245,14 @@ def check(args):
 
 
 
-def check_task_physics(args, physics) -> None:
-    """The motors' delay and the pushes in whole steps of the task's own physics step (2 ms, not the core's
-    1 ms), and every delay the robot pool of each seed draws shorter than an episode."""
-    from hopper_mjx import envs
+def check_task_physics(args, physics, config) -> None:
+    """The motors' delay and the pushes in whole steps of the task's own physics step (`config`'s, with --config's
+    fields: it may be coarser than the core's 1 ms), and every delay the robot pool of each seed draws shorter than
+    an episode."""
     from hopper_mjx.envs.monoped import ROBOT_POOL
     from hopper_mjx.envs.task_config import steps_per_action
     from hopper_mjx.hardware.pushes import Pushes
 
-    config = envs.default_config(args.task)
     step = config.timestep
     rate = config.policy_rate if args.policy_rate is None else args.policy_rate
     if args.policy_rate is not None and steps_per_action(args.policy_rate, step) is None:

@@ -7,8 +7,8 @@ A task (`hopper_mjx.envs.tasks`) is a `MonopedEnv` that says what it commands
 
 - **Physics**: `hopper_mjx.model.load()` stepped by the config's engine
   (`hopper_mjx.engine.make(config.engine, ...)`: "auto" is the chain engine for the monoped,
-  "mjx" MuJoCo MJX) at the config's `timestep` (2 ms for training; the core evaluates at its
-  own 1 ms); the policy acts every `n_frames` physics steps (default 50 Hz). `MonopedEnv.physics`
+  "mjx" MuJoCo MJX) at the config's `timestep` (training's default is the core's 1 ms; a coarser step is
+  the config's to choose); the policy acts every `n_frames` physics steps (default 50 Hz). `MonopedEnv.physics`
   is the one place the env steps the physics, through the core's step (`hopper_mjx.step`), traced once per
   policy step.
 - **Actions** (3, in [-1, 1]) are joint position targets around the standing pose,

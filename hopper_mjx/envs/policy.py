@@ -9,7 +9,7 @@ The controller replays the environment's control loop: every
 and asks the deterministic policy for new joint targets; at every physics step
 the same PD law (`envs.terms.pd_torque`) turns them into torques. Only the physics
 differs: the core's own timestep (1 ms) and full constraint solve instead of the
-training's 2 ms and capped solve; the policy rate stays the same.
+training's (its config's step, and its capped solve); the policy rate stays the same.
 """
 
 from __future__ import annotations

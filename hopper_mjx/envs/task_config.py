@@ -69,10 +69,10 @@ class MonopedConfig:
     min_base_height: float = hops.FALL_HEIGHT  # m
     initial_clearance: tuple[float, float] = (0.0, 0.1)  # m, foot above the floor at reset
     initial_joint_noise: float = 0.05  # rad
-    # Training physics: a 2 ms step (half the core's cost per simulated second; a policy
-    # behaves alike at 1 and 2 ms) and MuJoCo's Newton solver, warm-started, capped at
-    # these iterations (the core runs to convergence; a capped solve is ~3x cheaper on CPU MJX).
-    timestep: float = 0.002  # s
+    # Training physics: the core's 1 ms step (a policy trained at 2 ms hopped 9-11 % of its commanded apex
+    # higher there than in the core: docs/learning.md) and MuJoCo's Newton solver, warm-started, capped at these
+    # iterations (the core's runs to convergence; the cap moved the apex by <= 1 %, and is cheaper on CPU MJX).
+    timestep: float = 0.001  # s
     solver_iterations: int = 2
     ls_iterations: int = 4
     engine: str = "auto"  # hopper_mjx.engine name: auto (chain for the monoped), chain or mjx
