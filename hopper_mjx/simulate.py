@@ -28,7 +28,7 @@ def sensor_config(args):
     from hopper_mjx.hardware import signals
 
     counts, spacing = cli.parse_scan(args.scan)
-    return dataclasses.replace(signals.SensorConfig.uniform(args.rate, gyro_noise=args.gyro_noise,
+    return dataclasses.replace(signals.SensorConfig.uniform(args.rate, torque=True, gyro_noise=args.gyro_noise,
                                                             accel_noise=args.accel_noise),
                                scan_counts=counts, scan_spacing=spacing)
 

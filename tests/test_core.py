@@ -17,9 +17,9 @@ from hopper_mjx.sim import gravity_vectors, split_rollout_key
 G = np.array([1.62, 3.71, 9.81])  # Moon, Mars, Earth, m/s²
 DROP = 0.05  # m, foot clearance of the default initial state
 FALL_STEPS = 500
-FALL_SENSORS = signals.SensorConfig(imu_rate=100, odom_rate=500, contact_rate=1000, state_rate=1000)
+FALL_SENSORS = signals.SensorConfig(imu_rate=100, odom_rate=500, contact_rate=1000, state_rate=1000, torque=True)
 REST_STEPS = 1000
-REST_SENSORS = signals.SensorConfig.uniform(100)
+REST_SENSORS = signals.SensorConfig.uniform(100, torque=True)
 
 
 @pytest.fixture(scope="module", params=["chain", "mjx"])

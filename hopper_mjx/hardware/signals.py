@@ -159,9 +159,10 @@ class SensorConfig:
     odom_vel_noise: float = 0.0  # m/s and rad/s
     contact_rate: float = 50.0
     state_rate: float = 50.0  # qpos/qvel
-    # Each joint's applied torque at the state samples (`Trajectory.torque`). Off, the step's program is the one
-    # without it: an extra output moves XLA's fusion, and so a long hopping run's last digits (the gravity sweep's).
-    torque: bool = True
+    # Each joint's applied torque at the state samples (`Trajectory.torque`), for what reads it (simulate's .npz,
+    # the bags, the band sweeps). Off, the step's program is the one without it: the extra output cost the bench's
+    # core ~10 % and moves XLA's fusion, and so a long hopping run's last digits.
+    torque: bool = False
     # The height scan on a terrain (legged_gym's measured_heights): a grid of counts (ahead, left) at
     # spacing (m) centred under the base in its yaw frame; recorded at the contact rate with the normal.
     scan_counts: tuple[int, int] = (5, 5)

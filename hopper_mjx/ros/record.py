@@ -75,6 +75,7 @@ def sensor_config(args):
         odom_rate=rate(args.odom_rate),
         contact_rate=rate(args.contact_rate),
         state_rate=rate(args.joint_rate),
+        torque=True,  # the joint states' effort
     )
 
 
