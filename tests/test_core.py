@@ -20,6 +20,10 @@ FALL_STEPS = 500
 FALL_SENSORS = signals.SensorConfig(imu_rate=100, odom_rate=500, contact_rate=1000, state_rate=1000, torque=True)
 REST_STEPS = 1000
 REST_SENSORS = signals.SensorConfig.uniform(100, torque=True)
+# Gyro, accelerometer and odometry noise over 90 steps, all three instances airborne: one program for the tests of
+# the noise and of the keys it draws from.
+NOISE_STEPS = 90
+NOISE_SENSORS = signals.SensorConfig.uniform(1000, gyro_noise=0.1, accel_noise=0.5, odom_pos_noise=0.01)
 
 
 @pytest.fixture(scope="module", params=["chain", "mjx"])
@@ -184,9 +188,8 @@ def test_same_seed_gives_bit_identical_results(sim, limp, fall):
 
 
 def test_sensor_noise_has_its_configured_spread_per_instance(sim, limp):
-    cfg = signals.SensorConfig.uniform(1000, gyro_noise=0.1, accel_noise=0.5, odom_pos_noise=0.01)
     state = sim.reset(gravity_vectors(G), key=3, controller=limp)
-    _, traj = sim.rollout(state, limp, steps=90, sensors=cfg)  # all three airborne
+    _, traj = sim.rollout(state, limp, steps=NOISE_STEPS, sensors=NOISE_SENSORS)
     gyro, accel = np.asarray(traj.imu.gyro), np.asarray(traj.imu.accel)
     assert np.std(gyro) == pytest.approx(0.1, rel=0.1)
     assert np.std(accel) == pytest.approx(0.5, rel=0.1)
@@ -199,10 +202,10 @@ def test_sensor_noise_has_its_configured_spread_per_instance(sim, limp):
 def test_the_next_rollout_key_was_never_used_for_noise(sim, limp):
     """The key a rollout hands on is none of the keys its noise drew from (under jax 0.9.2,
     split(key)[0] is bit-identical to split(key, 6)[0]: handing on split(key)[0] while drawing
-    the noise from `key` itself reused the orientation noise's key)."""
-    cfg = signals.SensorConfig.uniform(1000, orientation_noise=0.01)
+    the noise from `key` itself reused the orientation noise's key). Every noise's key is checked, whichever
+    noises are on, so the noise test's program serves."""
     state = sim.reset(gravity_vectors(G), key=5, controller=limp)
-    final, _ = sim.rollout(state, limp, steps=10, sensors=cfg)
+    final, _ = sim.rollout(state, limp, steps=NOISE_STEPS, sensors=NOISE_SENSORS)
     for key, handed_on in zip(np.asarray(state.key), np.asarray(final.key)):
         noise_key, next_key = split_rollout_key(jnp.asarray(key))
         np.testing.assert_array_equal(handed_on, next_key)  # what the rollout did

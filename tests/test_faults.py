@@ -72,7 +72,8 @@ def runs(tmp_path_factory):
     """An uninterrupted sweep (from a fresh cache of its own, which it fills); the same sweep started without a
     usable cache (a file where the cache's folder would be), a second process started on its --out while it
     runs, then the first killed with SIGKILL after its first chunk; the killed one rerun from the cache with
-    every entry damaged; and a new run whose every file may hold only a few KiB (the disk full)."""
+    every entry damaged; and, before that damage, a new run whose every file may hold only a few KiB (the disk
+    full)."""
     base = tmp_path_factory.mktemp("faults")
     cache = base / "cache"
     (base / "a_file").write_text("not a folder\n")
@@ -87,12 +88,13 @@ def runs(tmp_path_factory):
     kept = sorted(p.name for p in (base / "killed" / "s" / "chunks").glob("*.npy"))
     whole_result = finish(whole)
     assert whole_result[0] == 0, whole_result[1][-2000:]
+    # On the healthy cache, so that it compiles nothing (a damaged entry is not replaced: it would compile again).
+    full = finish(start(SWEEP, base / "full", cache, limit=16 * 1024))  # results.csv fits; the plot does not
     entries = [p for p in cache.rglob("*") if p.is_file()]
     for entry in entries:  # every compiled program in the cache damaged: its second half zeroed
         data = entry.read_bytes()
         entry.write_bytes(data[: len(data) // 2] + bytes(len(data) - len(data) // 2))
     resumed = finish(start(SWEEP, base / "killed", cache))
-    full = finish(start(SWEEP, base / "full", cache, limit=16 * 1024))  # results.csv fits; the plot does not
     return dict(base=base, whole=whole_result, second=second_result, killed_pid=killed.pid,
                 killed_stderr=killed_stderr, kept=kept, entries=len(entries), resumed=resumed, full=full)
 

@@ -79,17 +79,18 @@ def test_policy_runs_as_a_core_controller(trained, mj_model, sim):
 
     out, _ = trained
     controller = policy.policy_controller(mj_model, os.path.relpath(out))  # relative, as typed on a command line
-    params = policy.policy_params(sim.robot, 3, height=0.2, config=policy.read(out)[3])
+    params = policy.policy_params(sim.robot, 2, height=0.2, config=policy.read(out)[3])
     standing = robot.standing_qpos(mj_model)[2]
     np.testing.assert_allclose(np.asarray(params.command[0]), [standing + 0.2, 0.0, 0.0], rtol=1e-6)
-    state = sim.reset(gravity_vectors([9.81, 3.71, 1.62]), key=0, controller=controller, params=params)
-    final, traj = sim.rollout(state, controller, steps=100)
+    # The batch and steps of the weights test above: one compiled program serves both.
+    state = sim.reset(gravity_vectors([9.81, 1.62]), key=0, controller=controller, params=params)
+    final, traj = sim.rollout(state, controller, steps=200)
     assert not np.asarray(final.diverged).any() and np.isfinite(np.asarray(traj.qpos)).all()
     cs = final.cstate
-    assert (np.asarray(cs.tick) == 100).all() and (np.asarray(cs.work) > 0).all()
+    assert (np.asarray(cs.tick) == 200).all() and (np.asarray(cs.work) > 0).all()
     lo, hi = np.asarray(sim.layout.joint_range).T
     assert ((np.asarray(cs.target) >= lo - 1e-6) & (np.asarray(cs.target) <= hi + 1e-6)).all()
-    # Five policy decisions in 0.1 s at 50 Hz: the last action is a real policy output in [-1, 1].
+    # Ten policy decisions in 0.2 s at 50 Hz: the last action is a real policy output in [-1, 1].
     assert (np.abs(np.asarray(cs.last_action)) <= 1).all() and np.abs(np.asarray(cs.last_action)).sum() > 0
 
 
@@ -225,12 +226,13 @@ def test_sweep_compare_judges_the_policy_and_raibert_alike(trained, tmp_path, ca
 
     out, _ = trained
     folder = tmp_path / "compared"  # new: a sweep writes only into a folder it made
-    args = ["compare", "--controllers", f"raibert,policy:{out}", "--values", "9.81,1.62", "--num", "2",
-            "--duration", "0.2", "--chunk", "4", "--height", "0.15", "--no-progress", "--out", str(folder)]
+    # Raibert's sweep has tests/test_sweep.py's sizes (chunks of 2, 3 s): its program is compiled once for both.
+    args = ["compare", "--controllers", f"raibert,policy:{out}", "--values", "9.81,1.62", "--num", "1",
+            "--duration", "3", "--chunk", "2", "--height", "0.15", "--no-progress", "--out", str(folder)]
     assert sweep.main(args) == 0
     groups = json.loads((folder / "comparison.json").read_text())["groups"]
     assert [(g["controller"], g["gravity"], g["n"]) for g in groups] == [
-        ("raibert", 9.81, 2), ("raibert", 1.62, 2), ("policy-run", 9.81, 2), ("policy-run", 1.62, 2)]
+        ("raibert", 9.81, 1), ("raibert", 1.62, 1), ("policy-run", 9.81, 1), ("policy-run", 1.62, 1)]
     assert (folder / "gravity.png").stat().st_size > 1000
     table = (folder / "table.txt").read_text()
     assert table.count("raibert") == 2 and table.count("policy-run") == 2

@@ -43,10 +43,14 @@ def test_the_env_and_the_core_step_the_same_physics():
     @jax.jit
     def env_run(data, episode):
         model = env.run_time_model(jnp.asarray(gravity[0], jnp.float32))
-        for _ in range(POLICY_STEPS):
+
+        def policy_step(_, carry):  # a loop, not unrolled: one copy of the physics to compile
+            data, episode = carry
             data, _, episode = env.physics(model, data, jnp.asarray(gravity[0], jnp.float32), target,
                                            episode=episode, key=state0.key[0])
-        return data, episode
+            return data, episode
+
+        return jax.lax.fori_loop(0, POLICY_STEPS, policy_step, (data, episode))
 
     data, episode = env_run(env.engine.make_data(jnp.asarray(qpos, jnp.float32), jnp.zeros(lay.nv)), episode)
     assert int(episode.steps) == int(core.step[0]) == POLICY_STEPS * env.n_frames

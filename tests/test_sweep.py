@@ -234,18 +234,19 @@ def test_a_plots_title_carries_every_physics_option_the_run_changed():
 
 def test_a_randomized_sweep_records_each_replicates_robot_the_same_at_every_gravity(tmp_path, capsys):
     out = tmp_path / "rough"
-    args = ["gravity", "--values", "1.62,9.81", "--num", "3", "--duration", "1", "--chunk", "6", "--seed", "2",
+    # The sizes of the README tour's randomised line as tests/test_tour.py runs it (16 instances of 2 s): one program.
+    args = ["gravity", "--values", "1.62,9.81", "--num", "8", "--duration", "2", "--chunk", "16", "--seed", "2",
             "--no-progress", "--randomize", "foot_friction=uniform(0.4,1.0),base_mass=scale(0.9,1.1)"]
     assert main([*args, "--out", str(out)]) == 0
     assert "engine auto uses mjx" not in capsys.readouterr().err  # the chain takes friction and masses per instance
     rows = _read(out)
     drawn = {(float(r["gravity"]), int(r["replicate"])): (float(r["foot_friction"]), float(r["base_mass"]))
              for r in rows}
-    for k in range(3):  # common random numbers: replicate k is one robot, at both gravities
+    for k in range(8):  # common random numbers: replicate k is one robot, at both gravities
         assert drawn[(1.62, k)] == drawn[(9.81, k)]
-    friction, mass = np.array([drawn[(1.62, k)] for k in range(3)]).T
-    assert len(set(friction)) == 3 and 0.4 <= friction.min() and friction.max() <= 1.0
-    assert 4.5 <= mass.min() and mass.max() <= 5.5 and len(set(mass)) == 3  # the URDF's 5 kg base x U(0.9, 1.1)
+    friction, mass = np.array([drawn[(1.62, k)] for k in range(8)]).T
+    assert len(set(friction)) == 8 and 0.4 <= friction.min() and friction.max() <= 1.0
+    assert 4.5 <= mass.min() and mass.max() <= 5.5 and len(set(mass)) == 8  # the URDF's 5 kg base x U(0.9, 1.1)
     # Another variation into the same folder is another experiment.
     assert main([*args[:-1], "foot_friction=0.5", "--out", str(out)]) == 2
     assert "holds a different sweep (differs in variation" in capsys.readouterr().err

@@ -12,7 +12,7 @@ from hopper_mjx.model import world
 LOW_GRAVITY = world.LOW_GRAVITY_WORLD
 # Same steps, sensors and batch size as test_core's limp drop: one compiled rollout serves both.
 STEPS = 500
-SENSORS = signals.SensorConfig(imu_rate=100, odom_rate=500, contact_rate=1000, state_rate=1000)
+SENSORS = signals.SensorConfig(imu_rate=100, odom_rate=500, contact_rate=1000, state_rate=1000, torque=True)
 
 
 def sdf(body: str, version: str = "1.6") -> str:
