@@ -73,11 +73,11 @@ from typing import NamedTuple, Sequence
 import jax
 import jax.numpy as jnp
 import numpy as np
-from brax import math as bmath
 
 from hopper_mjx.control import kinematics
 from hopper_mjx.control.base import Commands, Controller, PDScale, joint_state, pd, saturate, scaled, to_ctrl
 from hopper_mjx.control.foothold import clear_of_edges, foothold, landing_floor
+from hopper_mjx.hardware import rotation
 from hopper_mjx.hardware.signals import Observation
 from hopper_mjx.model.robot import LegGeometry, Robot
 from hopper_mjx.model.world import EARTH_GRAVITY  # where the attitude stiffness holds as given
@@ -249,7 +249,7 @@ def sense(robot: Robot, obs: Observation, leg: LegGeometry | None = None) -> Bod
     gyro = obs.qvel[3:6]
     com, com_rate = jax.jvp(lambda a: kinematics.com_position(leg, a), (q,), (qd,))
     from_base = com + jnp.array([0.0, 0.0, -leg.haa_below_base])
-    rot = bmath.quat_to_3x3(obs.qpos[3:7])  # body -> world ([w, x, y, z] quaternion)
+    rot = rotation.matrix(obs.qpos[3:7])  # body -> world ([w, x, y, z] quaternion)
     unturn = _unturn(rot)
     # Horizontal velocity of the COM (constant through a flight, unlike the base's).
     v = (obs.qvel[:3] + rot @ (jnp.cross(gyro, from_base) + com_rate))[:2]

@@ -39,7 +39,6 @@ import mujoco
 
 from hopper_mjx import registry
 from hopper_mjx.engine.chain.stage import BATCH_AXIS, batch_any
-from hopper_mjx.engine.mjx import MjxEngine
 from hopper_mjx.engine.xla import CPU_COMPILER_OPTIONS, FUSION_EMITTERS, WIDE_VECTORS
 from hopper_mjx.shell.programs import model_digest
 from hopper_mjx.variation.spec import check_engine_varies
@@ -116,9 +115,14 @@ def _build(name: str, mj_model: mujoco.MjModel, varies: frozenset[str]):
         except ValueError as err:  # NotChain, or a varied field
             if name == "chain":
                 raise
-            return MjxEngine(mj_model, varies), f"note: engine auto uses mjx ({err})"
-    return MjxEngine(mj_model, varies), ""
+            note = f"note: engine auto uses mjx ({err})"
+    else:
+        note = ""
+    # Imported only here: MJX's import costs about 0.8 s, which a process on the chain engine never needs.
+    from hopper_mjx.engine.mjx import MjxEngine
+
+    return MjxEngine(mj_model, varies), note
 
 
-__all__ = ["BATCH_AXIS", "batch_any", "CPU_COMPILER_OPTIONS", "FUSION_EMITTERS", "WIDE_VECTORS", "Engine", "MjxEngine",
+__all__ = ["BATCH_AXIS", "batch_any", "CPU_COMPILER_OPTIONS", "FUSION_EMITTERS", "WIDE_VECTORS", "Engine",
            "check_name", "make"]

@@ -18,8 +18,8 @@ from typing import Any, NamedTuple
 
 import jax
 import jax.numpy as jnp
-from brax import math as bmath
 
+from hopper_mjx.hardware import rotation
 from hopper_mjx.terrain import scan as terrain_scan
 
 
@@ -96,14 +96,14 @@ class Observation(NamedTuple):
 
 def imu(d: Any, gravity: jax.Array) -> Imu:
     """The IMU at the origin of the free base, whose qpos/qvel come first."""
-    rot = bmath.quat_to_3x3(d.qpos[3:7])
+    rot = rotation.matrix(d.qpos[3:7])
     # qacc[:3] is the world acceleration of the base origin over this step.
     return Imu(quat=d.qpos[3:7], gyro=d.qvel[3:6], accel=rot.T @ (d.qacc[:3] - gravity))
 
 
 def odometry(d: Any) -> Odometry:
     quat = d.qpos[3:7]
-    return Odometry(pos=d.qpos[:3], quat=quat, linvel=d.qvel[:3], angvel=bmath.rotate(d.qvel[3:6], quat))
+    return Odometry(pos=d.qpos[:3], quat=quat, linvel=d.qvel[:3], angvel=rotation.rotate(d.qvel[3:6], quat))
 
 
 def contact(engine, model, d) -> Contact:
@@ -210,7 +210,7 @@ def _perturb_quat(key, quat, std):
         return quat
     angle = std * jax.random.normal(key, quat.shape[:-1] + (3,), quat.dtype)
     small = jnp.concatenate([jnp.ones_like(angle[..., :1]), 0.5 * angle], axis=-1)
-    noisy = jax.vmap(bmath.quat_mul)(quat.reshape(-1, 4), small.reshape(-1, 4)).reshape(quat.shape)
+    noisy = jax.vmap(rotation.multiply)(quat.reshape(-1, 4), small.reshape(-1, 4)).reshape(quat.shape)
     return noisy / jnp.linalg.norm(noisy, axis=-1, keepdims=True)
 
 
