@@ -73,3 +73,29 @@ def test_a_controller_without_a_key_is_never_stored(store, mj_model):
     state = sim.reset(gravity_vectors([9.81]), controller=unnamed)
     sim.rollout(state, unnamed, steps=STEPS)
     assert not any(store.iterdir())
+
+
+def test_raiberts_inertia_facts_are_worked_out_once_and_read_back_bit_for_bit(store, monkeypatch, mj_model):
+    """`programs.remembered`: the first Raibert computes its facts and keeps them; later ones read them back
+    without computing, equal to the last bit; a damaged entry is computed again."""
+    from hopper_mjx.control import raibert
+    from hopper_mjx.model.robot import Robot
+
+    robot, facts, computed = Robot.of(mj_model), raibert.inertia_facts, []
+
+    def counting(leg, *args):
+        computed.append(True)
+        return facts(leg, *args)
+
+    monkeypatch.setattr(raibert, "inertia_facts", counting)
+    raibert.raibert(robot)
+    raibert.raibert(robot)
+    assert len(computed) == 1 and len(list(store.iterdir())) == 1
+    kept = programs.remembered(f"raibert inertia facts|{robot!r}", lambda: None)  # read back: never computed
+    for a, b in zip(kept, facts(robot.leg)):
+        np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+    assert np.asarray(kept.robot).shape == (3,) and (np.asarray(kept.robot) > 0).all()  # kg·m² about each axis
+    for entry in store.iterdir():
+        entry.write_bytes(entry.read_bytes()[:-5] + b"xxxxx")
+    raibert.raibert(robot)
+    assert len(computed) == 2

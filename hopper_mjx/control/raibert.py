@@ -81,6 +81,7 @@ from hopper_mjx.hardware import rotation
 from hopper_mjx.hardware.signals import Observation
 from hopper_mjx.model.robot import LegGeometry, Robot
 from hopper_mjx.model.world import EARTH_GRAVITY  # where the attitude stiffness holds as given
+from hopper_mjx.shell import programs
 
 FLIGHT, COMPRESSION, THRUST, UNLOADING = 0, 1, 2, 3
 MIN_PHASE_TIME = 0.01  # s in flight / stance before contact may end it (debounce)
@@ -474,8 +475,10 @@ def raibert(robot: Robot, config: RaibertConfig | None = None) -> Controller:
     layout = robot.layout
     mass, dt = layout.total_mass, layout.timestep
     # Eager, op by op: under one jit XLA fuses it and rounds the float32 facts otherwise, which moves every sweep's
-    # numbers (make sweep's results.csv is kept byte for byte); its small programs come from the compile cache.
-    urdf_inertia = inertia_facts(robot.leg)
+    # numbers (make sweep's results.csv is kept byte for byte). Its ~80 small programs cost a second of every
+    # process, so the facts are worked out once and kept on disk beside the stored programs.
+    urdf_inertia = programs.remembered(f"raibert inertia facts|{robot!r}",
+                                       lambda: jax.tree_util.tree_map(np.asarray, inertia_facts(robot.leg)))
     defaults = jax.tree_util.tree_map(lambda v: v[0], raibert_params(1, height=DEFAULT_HEIGHT, config=config))
 
     def act(s: RaibertState, obs: Observation, gravity):

@@ -61,12 +61,10 @@ class Stored:
     complete the key. Calls with the same shapes reuse the program in this process too."""
 
     def __init__(self, fn, key: str, compiler_options: dict | None = None):
-        import jax
 
         self.fn, self.options, self.key = fn, compiler_options, key
         self.loaded: dict[str, tuple] = {}
-        self.version = "|".join([jax.__version__, _version("jaxlib"), _version("mujoco"), source_digest(),
-                                 f"x64={jax.config.jax_enable_x64}"])
+        self.version = versions()
 
     def __call__(self, *args):
         import jax
@@ -88,15 +86,11 @@ class Stored:
         """(runner, output tree) of the stored program, or None (none stored, or unreadable: traced again)."""
         import jax
 
-        path = folder()
-        if path is None or not (path / digest).is_file():
+        kept = _read(digest)
+        if kept is None:
             return None
         try:
-            blob = (path / digest).read_bytes()
-            head, check, payload = blob[:len(MAGIC)], blob[len(MAGIC):len(MAGIC) + 32], blob[len(MAGIC) + 32:]
-            if head != MAGIC or hashlib.sha256(payload).digest() != check:
-                return None
-            serialized, out_tree = pickle.loads(payload)  # our own file, checked whole above
+            serialized, out_tree = kept
             return self._runner(jax.export.deserialize(serialized)), out_tree
         except Exception:  # a damaged or foreign entry is only a miss
             return None
@@ -112,11 +106,51 @@ class Stored:
             return out
 
         exported = jax.export.export(jax.jit(flat, compiler_options=self.options))(*leaves)
-        path = folder()
-        if path is not None:
-            payload = pickle.dumps((exported.serialize(), out_tree[0]))
-            _write(path / digest, MAGIC + hashlib.sha256(payload).digest() + payload)
+        _keep(digest, (exported.serialize(), out_tree[0]))
         return self._runner(exported), out_tree[0]
+
+
+def versions() -> str:
+    """What a stored entry was made with besides its key: JAX, jaxlib, MuJoCo, the package's source, x64."""
+    import jax
+
+    return "|".join([jax.__version__, _version("jaxlib"), _version("mujoco"), source_digest(),
+                     f"x64={jax.config.jax_enable_x64}"])
+
+
+def remembered(key: str, compute):
+    """`compute()`'s result (a pytree of NumPy arrays), kept on disk under `key` (naming everything it depends
+    on) and the `versions`, and read back by later processes instead of computed: for numbers a process would
+    otherwise work out afresh each time, eagerly and slowly (Raibert's inertia facts: about 80 small programs)."""
+    digest = hashlib.sha256(repr((versions(), "value", key)).encode()).hexdigest()
+    kept = _read(digest)
+    if kept is not None:
+        return kept
+    value = compute()
+    _keep(digest, value)
+    return value
+
+
+def _read(digest: str):
+    """The object kept under `digest`, or None (none kept, or damaged or foreign: a miss)."""
+    path = folder()
+    if path is None or not (path / digest).is_file():
+        return None
+    try:
+        blob = (path / digest).read_bytes()
+        head, check, payload = blob[:len(MAGIC)], blob[len(MAGIC):len(MAGIC) + 32], blob[len(MAGIC) + 32:]
+        if head != MAGIC or hashlib.sha256(payload).digest() != check:
+            return None
+        return pickle.loads(payload)  # our own file, checked whole above
+    except Exception:
+        return None
+
+
+def _keep(digest: str, value) -> None:
+    path = folder()
+    if path is not None:
+        payload = pickle.dumps(value)
+        _write(path / digest, MAGIC + hashlib.sha256(payload).digest() + payload)
 
 
 def _version(package: str) -> str:
