@@ -57,13 +57,14 @@ class Drive(NamedTuple):
     energy: jax.Array  # () J: dc, drawn from the supply; ideal, the motors' work ∫Σ|τ·q̇|dt (as the controllers')
 
 
-def envelope(motor: Motor, speed: jax.Array) -> tuple[jax.Array, jax.Array]:
-    """(lowest, highest) joint torque N·m the motor can apply at joint speed `speed` rad/s."""
+def envelope(motor: Motor, speed: jax.Array, xp=jnp) -> tuple[jax.Array, jax.Array]:
+    """(lowest, highest) joint torque N·m the motor can apply at joint speed `speed` rad/s. `motor` needs only
+    the three figures; xp=np works it out in NumPy (the metrics' and the jump bound's float64)."""
     tau_s, w0 = motor.stall_torque, motor.no_load_speed
     ratio = speed / w0  # w0 = inf (no velocity limit in the URDF): 0, a plain torque source
-    low = jnp.maximum(tau_s * (-1.0 - ratio), -motor.torque_limit)
-    high = jnp.minimum(tau_s * (1.0 - ratio), motor.torque_limit)
-    return jnp.minimum(low, 0.0), jnp.maximum(high, 0.0)
+    low = xp.maximum(tau_s * (-1.0 - ratio), -motor.torque_limit)
+    high = xp.minimum(tau_s * (1.0 - ratio), motor.torque_limit)
+    return xp.minimum(low, 0.0), xp.maximum(high, 0.0)
 
 
 def electrical_power(motor: Motor, torque: jax.Array, speed: jax.Array) -> jax.Array:

@@ -34,6 +34,7 @@ from typing import NamedTuple
 import mujoco
 import numpy as np
 
+from hopper_mjx.hardware.actuators import envelope
 from hopper_mjx.model.layout import Layout
 from hopper_mjx.model.robot import balancing, com_ahead_of_foot, standing_height
 
@@ -128,8 +129,7 @@ def stroke(mj_model: mujoco.MjModel) -> Stroke:
 
 def _knee_torque(motor: KneeMotor, speed: float) -> float:
     """N·m the knee's motor gives while extending at `speed` rad/s (`actuators.envelope`'s upper bound)."""
-    line = motor.stall_torque * (1.0 - speed / motor.no_load_speed)
-    return min(line, motor.torque_limit)
+    return float(envelope(motor, speed, xp=np)[1])
 
 
 def _push_across(leg: Stroke, slope: np.ndarray, motor: KneeMotor, g: float, i: int, kinetic: float,

@@ -38,6 +38,8 @@ from typing import NamedTuple
 
 import numpy as np
 
+from hopper_mjx.hardware.actuators import Motor, envelope
+
 FALL_HEIGHT = 0.4  # m: the base centre this low means the leg folded or the robot lies on the floor
 # (the deepest upright crouch, knee at its -1.6 rad limit, keeps the base above 0.7 m)
 FALL_ROLL_PITCH = 0.8  # rad of |roll| or |pitch| (each): far past any recoverable hopping attitude
@@ -270,10 +272,11 @@ def actuator_metrics(traj, joint_dof, stall_torque, no_load_speed, torque_limit)
     speed = np.asarray(traj.qvel, dtype=float)[..., list(joint_dof)]
     t_state = np.asarray(traj.time["state"], dtype=float)
     upright = _falls(np.asarray(traj.qpos, dtype=float), t_state).upright[..., None]
-    tau_s, w0, limit = (np.asarray(a, dtype=float)[:, None, :] for a in (stall_torque, no_load_speed, torque_limit))
-    # The torque the motor can give in τ's own direction: τ_s(1 ∓ ω/ω0), within the current limit (as `envelope`).
-    direction = np.where(torque < 0, -1.0, 1.0)
-    available = np.clip(tau_s * (1.0 - direction * speed / w0), 0.0, limit)
+    figures = (np.asarray(a, dtype=float)[:, None, :] for a in (stall_torque, no_load_speed, torque_limit))
+    motor = Motor(*figures, delay=0)
+    # The torque the motor can give in τ's own direction at that speed, within the current limit.
+    low, high = envelope(motor, speed, xp=np)
+    available = np.where(torque < 0, -low, high)
     with np.errstate(divide="ignore", invalid="ignore"):
         use = np.where(available > 0, np.abs(torque) / available, np.where(torque == 0, 0.0, np.inf))
     peak = lambda values: np.where(upright, values, -np.inf).max(axis=1)
