@@ -139,3 +139,23 @@ def test_vmap_batches_the_chain_step_once(mj_model, monkeypatch):
     jax.make_jaxpr(lambda m, d, g: jax.vmap(lambda x: eng.forward(m, x, g), axis_name=engine.BATCH_AXIS)(d))(
         eng.model, many, gravity)
     assert 0.5 * _equations(plain.jaxpr) < len(batched) < 1.1 * _equations(plain.jaxpr)
+
+
+def test_the_chain_engine_with_raibert_and_the_sensors_imports_neither_brax_nor_mjx():
+    """About 0.8 s of every process on the chain engine: brax (whose package imports MJX) and MJX stay unimported
+    until a policy or the mjx engine needs them. A fresh interpreter builds the engine, the controller and a
+    reset, as a command does."""
+    import subprocess
+    import sys
+
+    code = ("import sys\n"
+            "from hopper_mjx import control, engine, model\n"
+            "from hopper_mjx.hardware import signals\n"
+            "from hopper_mjx.model.robot import Robot\n"
+            "m = model.load()\n"
+            "engine.make('auto', m)\n"
+            "control.make('raibert', Robot.of(m), 2)\n"
+            "print(sorted(k for k in ('brax', 'mujoco.mjx') if k in sys.modules))\n")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert done.stdout.strip().splitlines()[-1] == "[]", done.stdout
