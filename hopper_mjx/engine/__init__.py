@@ -106,6 +106,7 @@ def make(name: str, mj_model: mujoco.MjModel, varies: frozenset[str] = frozenset
 
 def _build(name: str, mj_model: mujoco.MjModel, varies: frozenset[str]):
     """(the engine, the "auto" fallback's notice or "")."""
+    note = ""
     if name in ("auto", "chain"):
         from hopper_mjx.engine import chain
 
@@ -116,8 +117,6 @@ def _build(name: str, mj_model: mujoco.MjModel, varies: frozenset[str]):
             if name == "chain":
                 raise
             note = f"note: engine auto uses mjx ({err})"
-    else:
-        note = ""
     # Imported only here: MJX's import costs about 0.8 s, which a process on the chain engine never needs.
     from hopper_mjx.engine.mjx import MjxEngine
 

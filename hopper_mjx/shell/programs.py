@@ -61,7 +61,6 @@ class Stored:
     complete the key. Calls with the same shapes reuse the program in this process too."""
 
     def __init__(self, fn, key: str, compiler_options: dict | None = None):
-
         self.fn, self.options, self.key = fn, compiler_options, key
         self.loaded: dict[str, tuple] = {}
         self.version = versions()
