@@ -30,6 +30,7 @@ from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from hopper_mjx.engine.chain import algebra as al
 from hopper_mjx.engine.chain.model import HeightGrid
@@ -136,11 +137,23 @@ def block_start(t: HeightGrid, centre, radius, block):
     return row, col
 
 
+def prism_vertices(rows: int, cols: int) -> tuple:
+    """Per vertex of the prisms' top triangles, the (row, col) offsets of every prism of a (rows, cols) block
+    in C's order (by row, by column, the lower triangle (a, c, d) first, then (a, d, b)): three pairs of
+    (P,) int arrays, P = 2 rows cols."""
+    r, c = (g.reshape(-1) for g in np.meshgrid(np.arange(rows), np.arange(cols), indexing="ij"))
+    corner = lambda dr, dc: (np.stack([r + dr[0], r + dr[1]], 1).reshape(-1), np.stack([c + dc[0], c + dc[1]], 1)
+                             .reshape(-1))
+    return corner((0, 0), (0, 0)), corner((1, 1), (0, 1)), corner((1, 0), (1, 1))
+
+
 def sphere_contacts(t: HeightGrid, terrain: TerrainParams, centre, radius: float,
                     gate=None) -> tuple[PrismContact, ...]:
     """One contact slot per prism of the block around the sphere (world centre `centre`); with
-    `HeightGrid.max_contacts`, the deepest that many. The prisms' contacts are stored once behind `gate`
-    (chain_stage.stored): fused into the choice of the deepest, every prism's test ran once per slot kept."""
+    `HeightGrid.max_contacts`, the deepest that many. The prisms are tested together, each coordinate a
+    vector over the block's prisms (one operation for all of them, where one per prism made this stage a
+    fifth of the rough step's program), and stored once behind `gate` (chain_stage.stored): fused into
+    the choice of the deepest, every prism's test ran once per slot kept."""
     rows, cols = t.block
     row, col = block_start(t, centre, radius, t.block)
     block = jax.lax.dynamic_slice(terrain.heights, (row, col), (rows + 1, cols + 1))
@@ -149,28 +162,28 @@ def sphere_contacts(t: HeightGrid, terrain: TerrainParams, centre, radius: float
     y0 = t.origin[1] - t.hy + t.dy * row.astype(dtype)
 
     def prisms(centre, block, x0, y0, bottom):
-        def vertex(r, c):
-            return (x0 + t.dx * c, y0 + t.dy * r, block[r, c])
+        def vertex(r, c):  # C's vertex (x0 + dx c, y0 + dy r, height), each (P,)
+            return (x0 + np.asarray(t.dx * c, dtype), y0 + np.asarray(t.dy * r, dtype), block[r, c])
 
-        out = []
-        for r in range(rows):
-            for c in range(cols):
-                a, b, cc, d = vertex(r, c), vertex(r, c + 1), vertex(r + 1, c), vertex(r + 1, c + 1)
-                for top in ((a, cc, d), (a, d, b)):
-                    out.append(_prism_contact(centre, top, bottom, radius))
-        return tuple(out)
+        found = _prism_contact(centre, tuple(vertex(r, c) for r, c in prism_vertices(rows, cols)), bottom, radius)
+        size = 2 * rows * cols
+        wide = lambda x: jnp.broadcast_to(jnp.asarray(x, dtype), (size,))
+        return PrismContact(jnp.broadcast_to(found.exists, (size,)), wide(found.dist), tuple(map(wide, found.pos)),
+                            tuple(map(wide, found.normal)))
 
-    out = stored(jnp.array(True) if gate is None else gate, prisms, tuple(centre), block, x0, y0, terrain.bottom)
-    if t.max_contacts is not None and t.max_contacts < len(out):
-        return deepest(out, t.max_contacts)
-    return out
+    found = stored(jnp.array(True) if gate is None else gate, prisms, tuple(centre), block, x0, y0, terrain.bottom)
+    if t.max_contacts is not None and t.max_contacts < found.exists.shape[0]:
+        return deepest(found, t.max_contacts)
+    return tuple(PrismContact(found.exists[k], found.dist[k], tuple(x[k] for x in found.pos),
+                              tuple(x[k] for x in found.normal)) for k in range(found.exists.shape[0]))
 
 
-def deepest(contacts: tuple[PrismContact, ...], keep: int) -> tuple[PrismContact, ...]:
-    """The `keep` deepest present contacts (absent slots where fewer exist), deepest first, the earlier
-    slot first among equals: fewer constraint rows, the same contacts as C whenever at most `keep` exist."""
-    depth = jnp.stack([jnp.where(c.exists, -c.dist, -jnp.inf) for c in contacts])
-    fields = jnp.stack([jnp.stack([c.dist, *c.pos, *c.normal]) for c in contacts])  # (slots, 7)
+def deepest(contacts: PrismContact, keep: int) -> tuple[PrismContact, ...]:
+    """The `keep` deepest present contacts of the (P,) slots `contacts` (absent slots where fewer exist),
+    deepest first, the earlier slot first among equals: fewer constraint rows, the same contacts as C
+    whenever at most `keep` exist."""
+    depth = jnp.where(contacts.exists, -contacts.dist, -jnp.inf)
+    fields = jnp.stack([contacts.dist, *contacts.pos, *contacts.normal], 1)  # (P, 7)
     top, idx = jax.lax.top_k(depth, keep)
     found = jnp.isfinite(top)
     picked = jnp.where(found[:, None], fields[idx], jnp.array([0.0, 0, 0, 0, 0, 0, 1], fields.dtype))
