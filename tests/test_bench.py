@@ -149,3 +149,45 @@ def test_profile_solve_setup_cut_is_mujoco_c_with_no_newton_iteration(settling_c
     ran = niter.reshape(80) > 0
     assert ran.sum() >= 8, "the states take Newton iterations"
     assert np.abs(full - chain_qacc)[ran].max(axis=1).min() > 1e-3 * scale  # the cut leaves those iterations out
+
+
+def _sorts_program(loop: int, branches: tuple[int, int]) -> str:
+    """A compiled program whose kernels are known: `loop` sorts in a while loop's body, then a conditional
+    with branches of the given numbers of sorts (each sort one kernel, the scaling before it another)."""
+    import jax
+    import jax.numpy as jnp
+
+    def sorts(k):
+        def run(x):
+            for _ in range(k):
+                x = jnp.sort(x * 1.5)
+            return x
+        return run
+
+    def f(p, x):
+        x = jax.lax.while_loop(lambda c: c[0] < 3, lambda c: (c[0] + 1, sorts(loop)(c[1])), (0, x))[1]
+        return jax.lax.cond(p, sorts(branches[0]), sorts(branches[1]), x)
+
+    return jax.jit(f).lower(True, jnp.ones(5)).compile().as_text()
+
+
+def test_kernels_count_a_loop_body_once_and_a_conditionals_larger_branch():
+    from hopper_mjx.perf import kernels
+
+    base = kernels.count(_sorts_program(1, (1, 1)))
+    assert kernels.count(_sorts_program(2, (1, 1))) == base + 2  # once, though the loop runs 3 times
+    assert kernels.count(_sorts_program(1, (1, 3))) == kernels.count(_sorts_program(1, (3, 1))) == base + 4
+    assert kernels.count(_sorts_program(1, (3, 3))) == base + 4
+    with pytest.raises(ValueError, match="HLO"):
+        kernels.count("not a program")
+
+
+def test_the_flat_chain_step_launches_about_a_thousand_kernels(settling_chain):
+    """perf.profile's kernel count of the core's flat step, watched: 1,102 at 8 instances (2 Dec). A change that
+    adds kernels to every step (each costs a launch, docs/performance.md) fails here first."""
+    from hopper_mjx.perf import kernels
+
+    _, sim, standing, _, _ = settling_chain
+    count = kernels.per_step(sim.engine, standing.data, standing.gravity)
+    print(f"\nkernels a flat chain step launches: {count}")
+    assert 500 <= count <= 1200

@@ -27,6 +27,9 @@ the Newton iterations (MuJoCo's solver_niter) over the same steps: how many
 each instance needs, how many MuJoCo C runs from the same states (whether
 they are the physics' own), and how many its batch runs, since a vmapped loop
 runs until the batch's slowest instance is done.
+
+Both: the kernels one step launches, counted from its compiled program (`perf.kernels`):
+XLA:CPU pays a fixed cost for each, so their number bounds how fast a small step can be.
 """
 
 from __future__ import annotations
@@ -39,6 +42,7 @@ import mujoco
 import numpy as np
 
 from hopper_mjx import cli
+from hopper_mjx.perf import kernels
 from hopper_mjx.scenario import Physics
 from hopper_mjx.shell import jaxsetup, process
 
@@ -211,7 +215,8 @@ def measure(num: int, steps: int, settle: int, physics: Physics = Physics()) -> 
         raise ValueError(f"--num and --steps must be >= 1, got {num}, {steps}")
     mj_model = physics.mj_model
     sim, standing = standing_batch(num, settle, physics)
-    record = {"num": num, "steps": steps, "engine": sim.engine.name, "terrain": str(physics.ground)}
+    record = {"num": num, "steps": steps, "engine": sim.engine.name, "terrain": str(physics.ground),
+              "kernels": kernels.per_step(sim.engine, standing.data, standing.gravity)}
     if sim.engine.name == "chain":
         args = (sim.engine, standing.data.qpos, standing.data.qvel, standing.data.ctrl, standing.gravity, steps)
         niter, states = newton_iterations(*args)
@@ -231,6 +236,11 @@ def measure(num: int, steps: int, settle: int, physics: Physics = Physics()) -> 
 
 
 def table(record: dict) -> str:
+    return _table(record) + (f"\nkernels one step launches (compiled, one pass through its loops): "
+                             f"{record['kernels']:,}")
+
+
+def _table(record: dict) -> str:
     us = record["us"]
     full = us["full step"]
     if record["engine"] == "chain":

@@ -1,0 +1,91 @@
+"""How many kernels one batched step launches: counted from the compiled program, not timed.
+
+XLA:CPU runs a compiled program as a sequence of kernels (its "thunks"): each fusion, copy, sort,
+custom call and un-fused operation of the program's top-level computations is one launch, with a
+fixed cost of its own (docs/performance.md). Parameters, constants, tuples and their elements, and
+bitcasts launch nothing; a fusion's inner operations are inside its one kernel. A conditional
+runs one branch: the count takes its larger one (a stored stage's, `chain.stage.stored`, not the
+zeros of the branch never taken). A while loop's body and condition are counted once: one pass
+through the step, where the Newton solve and the line search may run several.
+
+    kernels.count(jax.jit(step).lower(*args).compile().as_text())
+"""
+
+from __future__ import annotations
+
+import re
+
+NO_KERNEL = frozenset({"parameter", "constant", "get-tuple-element", "tuple", "bitcast", "after-all", "opt-barrier"})
+# A computation's header ("%name (params) -> type {", "ENTRY %name ... {") and an instruction
+# ("%x = type op(operands), attributes"; the type may be a tuple with spaces in it).
+_HEAD = re.compile(r"^(ENTRY\s+)?%?([\w.\-]+)\s.*\{\s*$")
+_INSTRUCTION = re.compile(r"^\s*(?:ROOT\s+)?%?[\w.\-]+ = .*? ([a-z][a-z0-9\-]*)\((.*)$")
+
+
+def _computations(hlo: str) -> tuple[dict[str, list[tuple[str, str]]], str]:
+    """{computation: [(opcode, the rest of its line)]} of an HLO module's text, and the entry's name."""
+    found: dict[str, list[tuple[str, str]]] = {}
+    entry = current = None
+    for line in hlo.splitlines():
+        if current is None:
+            head = _HEAD.match(line)
+            if head and "=" not in line.split("(")[0]:
+                current = head.group(2)
+                found[current] = []
+                entry = current if head.group(1) else entry
+        elif line.strip() == "}":
+            current = None
+        elif (inst := _INSTRUCTION.match(line)) is not None:
+            found[current].append((inst.group(1), inst.group(2)))
+    if entry is None:
+        raise ValueError("not an HLO module's text: no ENTRY computation")
+    return found, entry
+
+
+def _called(attribute: str, rest: str) -> list[str]:
+    """The computations an instruction names in `attribute` (one name, or a {list})."""
+    m = re.search(attribute + r"=(\{[^}]*\}|[^,\s]+)", rest)
+    return [] if m is None else [name.strip().lstrip("%") for name in m.group(1).strip("{}").split(",")]
+
+
+def count(hlo: str) -> int:
+    """Kernels one pass through the compiled program `hlo` (its `as_text()`) launches (the module's docstring)."""
+    computations, entry = _computations(hlo)
+    memo: dict[str, int] = {}
+
+    def launches(name: str) -> int:
+        if name not in memo:
+            total = 0
+            for op, rest in computations[name]:
+                if op in NO_KERNEL:
+                    continue
+                if op == "while":
+                    total += 1 + sum(launches(c) for c in _called("body", rest) + _called("condition", rest))
+                elif op == "conditional":
+                    branches = (_called("branch_computations", rest)
+                                or _called("true_computation", rest) + _called("false_computation", rest))
+                    total += 1 + max(launches(c) for c in branches)
+                elif op == "call":
+                    total += sum(launches(c) for c in _called("to_apply", rest))
+                else:
+                    total += 1
+            memo[name] = total
+        return memo[name]
+
+    return launches(entry)
+
+
+def per_step(engine, data, gravity) -> int:
+    """Kernels of one step (forward, then integrate) of `engine` over the batch `data` ((N, ...) leaves; its
+    gravity (N, 3)), compiled as the core compiles its step: vmapped over the instances, the model an argument,
+    the engine's XLA:CPU options."""
+    import jax
+
+    from hopper_mjx.engine import BATCH_AXIS
+
+    def step(m, d, g):
+        return engine.integrate(m, engine.forward(m, d, g), g)
+
+    batched = jax.jit(jax.vmap(step, in_axes=(None, 0, 0), axis_name=BATCH_AXIS),
+                      compiler_options=engine.compiler_options)
+    return count(batched.lower(engine.model, data, gravity).compile().as_text())
