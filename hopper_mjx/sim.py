@@ -278,22 +278,35 @@ class Sim:
         """
         controller = controller or self.limp
         periods = sensors.periods(self.layout.timestep)
-        tick = math.gcd(*periods.values())
-        if steps < 1 or any(steps % p for p in periods.values()):
-            raise ValueError(f"steps={steps} must be a positive multiple of the stream periods {periods}")
+        fn, args = self._program(state, controller, steps, sensors)
+        final, traj = fn(*args)
         n = state.gravity.shape[0]
-        per_device = -(-n // len(self.devices))
-        chunk = min(self.chunk, per_device)
-        padded = -(-per_device // chunk) * chunk * len(self.devices)
-        fn = self._compiled_rollout(controller, steps, tick, periods, sensors, chunk)
-        padded_state = self._lay_out(state, padded)
-        final, traj = fn(self.model, self.heights, padded_state, controller.weights)
-        if n < padded:  # one program for every leaf (eagerly, each leaf's slice would compile its own)
+        if n < args[2].gravity.shape[0]:  # one program for every leaf (eagerly, each slice would compile its own)
             final, traj = _head((final, traj), n)
         t0 = float(state.data.time[0])
         dt = self.layout.timestep
         times = {k: t0 + dt * np.arange(0, steps, p) for k, p in periods.items()}
         return final, Trajectory(*traj[:5], time=times, ground=traj[5], torque=traj[6])
+
+    def rollout_program(self, state: State, controller: Controller | None = None, *, steps: int,
+                        sensors: signals.SensorConfig = signals.SensorConfig()):
+        """The program `rollout` runs for these arguments, lowered (`jax.stages.Lowered`): its `.compile()` is
+        the one `rollout` compiled, read back from the compile cache; `perf.kernels` counts its kernels."""
+        fn, args = self._program(state, controller or self.limp, steps, sensors)
+        return fn.lower(*args)
+
+    def _program(self, state: State, controller: Controller, steps: int, sensors: signals.SensorConfig):
+        """The compiled rollout for `steps` of `controller` recording `sensors`, and its arguments: the state padded
+        to whole chunks on every device."""
+        periods = sensors.periods(self.layout.timestep)
+        tick = math.gcd(*periods.values())
+        if steps < 1 or any(steps % p for p in periods.values()):
+            raise ValueError(f"steps={steps} must be a positive multiple of the stream periods {periods}")
+        per_device = -(-state.gravity.shape[0] // len(self.devices))
+        chunk = min(self.chunk, per_device)
+        padded = -(-per_device // chunk) * chunk * len(self.devices)
+        fn = self._compiled_rollout(controller, steps, tick, periods, sensors, chunk)
+        return fn, (self.model, self.heights, self._lay_out(state, padded), controller.weights)
 
     def run(
         self,

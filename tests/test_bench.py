@@ -182,12 +182,24 @@ def test_kernels_count_a_loop_body_once_and_a_conditionals_larger_branch():
         kernels.count("not a program")
 
 
-def test_the_flat_chain_step_launches_about_a_thousand_kernels(settling_chain):
-    """perf.profile's kernel count of the core's flat step, watched: 1,102 at 8 instances (2 Dec). A change that
-    adds kernels to every step (each costs a launch, docs/performance.md) fails here first."""
+@pytest.fixture(scope="module")
+def flat_step_kernels(settling_chain) -> int:
     from hopper_mjx.perf import kernels
 
     _, sim, standing, _, _ = settling_chain
-    count = kernels.per_step(sim.engine, standing.data, standing.gravity)
-    print(f"\nkernels a flat chain step launches: {count}")
-    assert 500 <= count <= 1200
+    return kernels.per_step(sim.engine, standing.data, standing.gravity)
+
+
+def test_the_flat_chain_step_launches_about_a_thousand_kernels(flat_step_kernels):
+    """perf.profile's kernel count of the core's flat step, watched: 1,102 at 8 instances (2 Dec). A change that
+    adds kernels to every step (each costs a launch, docs/performance.md) fails here first."""
+    print(f"\nkernels a flat chain step launches: {flat_step_kernels}")
+    assert 500 <= flat_step_kernels <= 1200
+
+
+def test_the_bench_counts_the_kernels_of_the_rollout_it_ran(record, flat_step_kernels):
+    """The bench's count is its own compiled rollout's: the engine's step (here with run-time robots, more than the
+    flat step's folded constants) plus the controller and the record, so more than the bare step launches."""
+    print(f"\nkernels a core step launches (bench): {record['kernels_per_step']}")
+    assert flat_step_kernels < record["kernels_per_step"] < 5 * flat_step_kernels
+    assert f"{record['kernels_per_step']:,}" in bench.format_table(record)

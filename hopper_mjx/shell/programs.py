@@ -68,13 +68,25 @@ class Stored:
     def __call__(self, *args):
         import jax
 
+        run, out_tree, leaves = self._entry(args)
+        return jax.tree_util.tree_unflatten(out_tree, run(*leaves))
+
+    def lower(self, *args):
+        """The program these arguments run, lowered (`jax.stages.Lowered`), as a jit's `lower`."""
+        run, _, leaves = self._entry(args)
+        return run.lower(*leaves)
+
+    def _entry(self, args) -> tuple:
+        """(runner, output tree, argument leaves) of the program for these arguments: loaded or traced once."""
+        import jax
+
         leaves, treedef = jax.tree_util.tree_flatten(args)
         avals = [(tuple(x.shape), str(x.dtype), str(getattr(x, "sharding", ""))) for x in leaves]
         digest = hashlib.sha256(repr((self.version, self.key, str(treedef), avals)).encode()).hexdigest()
         if digest not in self.loaded:
             self.loaded[digest] = self._load(digest) or self._trace(digest, leaves, treedef)
         run, out_tree = self.loaded[digest]
-        return jax.tree_util.tree_unflatten(out_tree, run(*leaves))
+        return run, out_tree, leaves
 
     def _runner(self, exported):
         import jax
