@@ -138,13 +138,16 @@ def block_start(t: HeightGrid, centre, radius, block):
 
 
 def prism_vertices(rows: int, cols: int) -> tuple:
-    """Per vertex of the prisms' top triangles, the (row, col) offsets of every prism of a (rows, cols) block
-    in C's order (by row, by column, the lower triangle (a, c, d) first, then (a, d, b)): three pairs of
-    (P,) int arrays, P = 2 rows cols."""
+    """Per vertex of the prisms' top triangles, the (row, col) of every prism of a (rows, cols) block in C's
+    order (by row, by column, the lower triangle (a, c, d) first, then (a, d, b)): three pairs of (P,) int
+    arrays, P = 2 rows cols."""
     r, c = (g.reshape(-1) for g in np.meshgrid(np.arange(rows), np.arange(cols), indexing="ij"))
-    corner = lambda dr, dc: (np.stack([r + dr[0], r + dr[1]], 1).reshape(-1), np.stack([c + dc[0], c + dc[1]], 1)
-                             .reshape(-1))
-    return corner((0, 0), (0, 0)), corner((1, 1), (0, 1)), corner((1, 0), (1, 1))
+
+    def vertex(lower, upper):  # its (row, col) offset from the cell's corner in the lower and the upper triangle
+        interleave = lambda base, k: np.stack([base + lower[k], base + upper[k]], 1).reshape(-1)
+        return interleave(r, 0), interleave(c, 1)
+
+    return vertex((0, 0), (0, 0)), vertex((1, 0), (1, 1)), vertex((1, 1), (0, 1))
 
 
 def sphere_contacts(t: HeightGrid, terrain: TerrainParams, centre, radius: float,
