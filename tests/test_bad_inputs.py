@@ -320,3 +320,18 @@ def test_the_checks_know_what_the_library_accepts(sim):
         control.make("bogus", sim.robot, 2)
     assert list(tasks.TASKS) == list(registry.TASKS)
     assert cli.DEFAULT_TIMESTEP == loader.DEFAULT_TIMESTEP
+
+
+def test_the_commands_check_their_arguments_without_importing_jax():
+    """Every package command the cases run imports neither JAX nor Brax before its checks: a refusal then
+    costs a Python start-up (about 0.5 s of CPU), not JAX's import (1.5 s more), and the suite starts about
+    two hundred of them. A module the checks reach that imports JAX at its top fails this."""
+    modules = sorted({f"hopper_mjx.{c}" for c, _, _ in CASES if not c.endswith(".py")})
+    code = ("import importlib, importlib.util, sys\n"
+            f"for name in {modules!r}:\n"
+            "    main = name + '.__main__'  # a package runs its __main__ (which only runs under -m)\n"
+            "    importlib.import_module(main if importlib.util.find_spec(name).submodule_search_locations else name)\n"
+            "print(sorted(k for k in ('jax', 'brax', 'mujoco.mjx') if k in sys.modules))\n")
+    done = subprocess.run([sys.executable, "-c", code], env=ENV, capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert len(modules) >= 8 and done.stdout.strip() == "[]", (modules, done.stdout)

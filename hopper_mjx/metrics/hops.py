@@ -38,8 +38,6 @@ from typing import NamedTuple
 
 import numpy as np
 
-from hopper_mjx.hardware.actuators import Motor, envelope
-
 FALL_HEIGHT = 0.4  # m: the base centre this low means the leg folded or the robot lies on the floor
 # (the deepest upright crouch, knee at its -1.6 rad limit, keeps the base above 0.7 m)
 FALL_ROLL_PITCH = 0.8  # rad of |roll| or |pitch| (each): far past any recoverable hopping attitude
@@ -272,6 +270,10 @@ def actuator_metrics(traj, joint_dof, stall_torque, no_load_speed, torque_limit)
     speed = np.asarray(traj.qvel, dtype=float)[..., list(joint_dof)]
     t_state = np.asarray(traj.time["state"], dtype=float)
     upright = _falls(np.asarray(traj.qpos, dtype=float), t_state).upright[..., None]
+    # Here, not at the top: the motor model imports JAX, and `simulate` imports these metrics before it
+    # checks its arguments (a refusal would pay for JAX's import, about 1.5 s of CPU).
+    from hopper_mjx.hardware.actuators import Motor, envelope
+
     figures = (np.asarray(a, dtype=float)[:, None, :] for a in (stall_torque, no_load_speed, torque_limit))
     motor = Motor(*figures, delay=0)
     # The torque the motor can give in τ's own direction at that speed, within the current limit.
