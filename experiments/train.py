@@ -26,7 +26,7 @@ from pathlib import Path
 
 from hopper_mjx import cli
 from hopper_mjx.metrics.thresholds import APEX_TOLERANCE, MIN_HOPS, SPEED_TOLERANCE  # noqa: F401 (one definition)
-from hopper_mjx.shell import jaxsetup, process
+from hopper_mjx.shell import files, jaxsetup, process
 from hopper_mjx.shell.files import atomic_write_text
 from training.evaluation import (
     SELECTION,
@@ -72,7 +72,17 @@ def main(argv=None) -> int:
 
 
 def train_and_report(args, physics) -> int:
-    """One seed's training on `physics`, then its scan and evaluation as the arguments ask."""
+    """One seed's training on `physics`, then its scan and evaluation as the arguments ask, holding its folder:
+    a second live run given the same --out refuses in one line (two runs resuming one folder at once had each
+    written the same checkpoints)."""
+    try:
+        with files.hold(cli.make_folder("--out", args.out), "another training run"):
+            return _train_and_report(args, physics)
+    except files.OutputError as err:  # the folder refused, or in use
+        return cli.fail(err)
+
+
+def _train_and_report(args, physics) -> int:
     try:
         record = train(args, physics)
     except ValueError as err:

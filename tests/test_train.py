@@ -7,12 +7,15 @@ a capture of Brax's step-0 params, so that run's compiled program is the one alr
 
 import importlib
 import os
+import subprocess
+import sys
 
 import jax
 import numpy as np
 import pytest
 from test_tfevents import read_scalars
 
+from hopper_mjx.shell import files
 from training import evaluation, learners
 
 train_script = importlib.import_module("train")  # experiments/ is on pytest's path (pyproject.toml)
@@ -471,6 +474,29 @@ def test_a_damaged_history_is_refused_in_one_line(tmp_path, capsys):
     assert err == f"error: --out: {out.resolve() / 'metrics.json'} is damaged (cut short?); move it away to train " \
                   "from the checkpoints without the old history, or use another --out\n"
     assert (out / "metrics.json").read_text() == '{"history": [{"step": 4'
+
+
+def test_a_run_into_a_folder_another_run_holds_is_refused_in_one_line(tmp_path, capsys):
+    """Two runs resuming one folder at once each wrote the same checkpoints. While another live process holds
+    the folder (its lock, as a running train.py holds it), a run given it refuses in one line naming the holder,
+    and writes nothing; the holder's death frees it."""
+    out = tmp_path / "run"
+    out.mkdir()
+    code = ("import sys, time\nfrom hopper_mjx.shell import files\nwith files.hold(sys.argv[1], 'a test'):\n"
+            "    print('held', flush=True)\n    time.sleep(300)\n")
+    holder = subprocess.Popen([sys.executable, "-c", code, str(out)], stdout=subprocess.PIPE, text=True)
+    try:
+        assert holder.stdout.readline().strip() == "held"
+        before = sorted(p.name for p in out.iterdir())
+        assert train_script.main([*TINY, *PPO, "--out", str(out)]) == 2
+        assert capsys.readouterr().err == (f"error: --out {out} is in use by another training run (pid {holder.pid}); "
+                                           "wait for it to end, or use another --out\n")
+        assert sorted(p.name for p in out.iterdir()) == before
+    finally:
+        holder.kill()
+        holder.wait()
+    with files.hold(out, "a test"):  # released with its holder's last breath
+        pass
 
 
 def test_the_robustness_table_gives_each_row_groups_median_and_range_over_its_seeds():

@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from hopper_mjx import registry
-from hopper_mjx.shell.files import is_device
+from hopper_mjx.shell.files import OutputError, is_device  # noqa: F401 (OutputError: the checks' name too)
 
 MAX_TIMESTEP = 0.01  # s, the longest physics step model.load and a world file may set
 DEFAULT_TIMESTEP = 1e-3  # s, model.DEFAULT_TIMESTEP (checked equal by a test; importing model loads MuJoCo)
@@ -259,11 +259,6 @@ def check_writable(name: str, path: str | Path, *, folder: bool = False, may_exi
     if not os.access(parent, os.W_OK):
         raise ValueError(f"{name} {path}: cannot write in {parent}")
     return path
-
-
-class OutputError(ValueError):
-    """An output the system refused to create after the checks let it through (tools catch this one alone
-    around their work, so that a real error inside stays a traceback)."""
 
 
 def make_folder(name: str, path: str | Path) -> Path:

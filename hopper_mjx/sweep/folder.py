@@ -6,15 +6,12 @@ overwrite `results.csv`) there. A power cut leaves a damaged manifest or chunk b
 line; a chunk that cannot be read is recomputed. Reads JSON and NumPy only, so that the command
 line checks the folder before anything is compiled.
 
-One sweep process writes a folder at a time (`hold`): a second one given the same --out refuses in one
-line rather than interleave its chunks and tables with the first's. The lock is the kernel's (`flock`),
-so a process killed with SIGKILL releases it with its last breath; the lock file keeps its owner's pid.
+One sweep process writes a folder at a time (`hold`, `shell.files.hold`): a second one given the same --out
+refuses in one line rather than interleave its chunks and tables with the first's.
 """
 
 from __future__ import annotations
 
-import contextlib
-import fcntl
 import json
 import os
 import shutil
@@ -22,16 +19,12 @@ from pathlib import Path
 
 import numpy as np
 
-from hopper_mjx.shell.checks import OutputError, make_folder
+from hopper_mjx.shell import files
+from hopper_mjx.shell.checks import make_folder
 from hopper_mjx.shell.files import atomic_write, partial
 from hopper_mjx.sweep.grid import SweepSpec
 
 MANIFEST = "manifest.json"
-_held: set[Path] = set()  # the lock files this process holds
-
-
-class FolderInUse(OutputError):
-    """Another live process is writing the sweep's folder."""
 
 
 class ManifestMismatch(ValueError):
@@ -90,30 +83,11 @@ def claim(out: Path, spec: SweepSpec) -> None:
             check(out, spec)
 
 
-@contextlib.contextmanager
 def hold(out: Path, process: int = 0):
-    """Locks OUT for this process while the block runs; FolderInUse (one line) if another live process holds it.
-    Each process of a multi-process sweep (`process`, its id) holds its own lock: they write different chunks."""
-    path = (Path(out) / f".lock-{process}").resolve()
-    if path in _held:  # this process holds it already (a library caller's nested run)
-        yield
-        return
-    fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
-    try:
-        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-    except BlockingIOError:
-        owner = os.pread(fd, 32, 0).decode(errors="replace").strip() or "?"
-        os.close(fd)
-        raise FolderInUse(f"--out {out} is in use by another sweep (pid {owner}); wait for it to end, or use "
-                          "another --out") from None
-    os.ftruncate(fd, 0)
-    os.pwrite(fd, f"{os.getpid()}\n".encode(), 0)
-    _held.add(path)
-    try:
-        yield
-    finally:
-        _held.discard(path)
-        os.close(fd)  # releases the lock; the file stays (removing it would race a process opening it)
+    """Locks OUT for this process while the block runs (`files.hold`); FolderInUse (one line) if another live
+    process holds it. Each process of a multi-process sweep (`process`, its id) holds its own lock: they write
+    different chunks."""
+    return files.hold(out, "another sweep", f".lock-{process}")
 
 
 def chunk_path(out: Path, k: int) -> Path:
