@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from hopper_mjx.shell import checks
+from hopper_mjx.shell import checks, process
 from hopper_mjx.shell.checks import check_readable_file
 
 POLICY_RATE = 50.0  # Hz, the tasks' default
@@ -85,4 +85,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    sys.exit(process.run(main))

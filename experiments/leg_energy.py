@@ -18,7 +18,7 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
-from hopper_mjx.shell import checks  # noqa: E402
+from hopper_mjx.shell import checks, process  # noqa: E402
 
 URDF_LENGTH = 0.35  # m, the seed's thigh and shank
 PLANETS = ((9.81, "Earth"), (3.71, "Mars"), (1.62, "Moon"))
@@ -111,4 +111,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    sys.exit(process.run(main))

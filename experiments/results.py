@@ -32,6 +32,7 @@ import sys
 from pathlib import Path
 
 from hopper_mjx import cli, registry
+from hopper_mjx.shell import process
 
 SWEEP = "sweep"  # the policy in the core
 TRAINED = "sweep-trained"  # the same sweep on the physics the policy was trained on (`sweep --as-trained`)
@@ -332,4 +333,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(process.run(main))

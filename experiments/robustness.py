@@ -21,6 +21,7 @@ import sys
 from pathlib import Path
 
 from hopper_mjx import cli
+from hopper_mjx.shell import process
 
 COLUMNS = ("urdf", "randomized")  # the URDF's robot, and --randomize's robots
 SETTINGS = ("gravity", "num", "duration", "height", "push", "variation")  # what a reused sweep must share
@@ -159,4 +160,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(process.run(main))
