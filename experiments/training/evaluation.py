@@ -14,10 +14,8 @@ from hopper_mjx import registry
 from hopper_mjx.metrics import thresholds
 from hopper_mjx.metrics.thresholds import APEX_TOLERANCE, MIN_HOPS, SPEED_TOLERANCE  # noqa: F401 (one definition)
 from hopper_mjx.shell.files import atomic_write_text
-from training.loop import read_history
-from training.options import parse_floats
+from training.options import HISTORY, parse_floats, read_history
 
-HISTORY = "metrics.json"
 SCAN = "scan.json"  # every scanned checkpoint's evaluation
 
 

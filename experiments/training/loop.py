@@ -14,27 +14,11 @@ from hopper_mjx.metrics.thresholds import APEX_TOLERANCE, MIN_HOPS, SPEED_TOLERA
 from hopper_mjx.shell import files, process
 from hopper_mjx.shell.files import atomic_write_text
 from training.learners import learner_settings, networks, run_ppo, run_sac, task_config
-from training.options import check, latest_checkpoint
-
-HISTORY = "metrics.json"
-
+from training.options import HISTORY, check, latest_checkpoint, read_history
 
 
 class OutOfTime(Exception):
     """The --minutes budget is spent: training stops after the evaluation that found it so."""
-
-
-
-def read_history(path: Path) -> dict:
-    """A run's metrics record; one cut short (a kill mid-write, before writes were atomic) is refused in one line."""
-    try:
-        record = json.loads(path.read_text())
-    except (json.JSONDecodeError, UnicodeDecodeError):
-        raise ValueError(f"--out: {path} is damaged (cut short?); move it away to train from the checkpoints "
-                         "without the old history, or use another --out") from None
-    if not isinstance(record, dict) or not isinstance(record.get("history"), list):
-        raise ValueError(f"--out: {path} is not a training record (no history list)")
-    return record
 
 
 

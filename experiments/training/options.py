@@ -3,12 +3,15 @@
 from __future__ import annotations
 
 import argparse
+import json
 import math
 from pathlib import Path
 
 from hopper_mjx import cli, registry
 from hopper_mjx.metrics.thresholds import APEX_TOLERANCE, MIN_HOPS, SPEED_TOLERANCE  # noqa: F401 (one definition)
 from hopper_mjx.sweep.grid import DEFAULT_GRAVITY
+
+HISTORY = "metrics.json"  # a run's record of its evaluations
 
 ALGORITHMS = ("ppo", "sac")
 
@@ -137,6 +140,18 @@ def parse_pair(text: str, what: str) -> tuple[float, float]:
 
 
 
+def read_history(path: Path) -> dict:
+    """A run's metrics record; one cut short (a kill mid-write, before writes were atomic) is refused in one line."""
+    try:
+        record = json.loads(path.read_text())
+    except (json.JSONDecodeError, UnicodeDecodeError):
+        raise ValueError(f"--out: {path} is damaged (cut short?); move it away to train from the checkpoints "
+                         "without the old history, or use another --out") from None
+    if not isinstance(record, dict) or not isinstance(record.get("history"), list):
+        raise ValueError(f"--out: {path} is not a training record (no history list)")
+    return record
+
+
 def latest_checkpoint(out: Path) -> tuple[Path, int] | None:
     """The newest complete checkpoint under out/checkpoints, and its env step."""
     from hopper_mjx.envs.policy import ENV_CONFIG
@@ -219,6 +234,8 @@ def check(args):
     if args.minutes is not None and not (math.isfinite(args.minutes) and args.minutes > 0):
         raise ValueError(f"--minutes must be finite and > 0, got {args.minutes:g}")
     cli.check_writable("--out", args.out, folder=True, make_parents=True)  # runs/ need not exist yet
+    if (Path(args.out) / HISTORY).exists():  # a resume's record must read, before the folder is taken
+        read_history(Path(args.out).resolve() / HISTORY)
     if args.no_eval and args.algo != "ppo":
         raise ValueError("--no-eval is for --algo ppo (Brax's SAC evaluates at every checkpoint)")
     resume = latest_checkpoint(Path(args.out))
