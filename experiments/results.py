@@ -13,7 +13,9 @@ and speed error, each twice: on the physics the policy was trained on (RUN/sweep
 and the Moon, held to 5 points of survival and 5 % of the commanded apex; where it is over, the sweep again on each
 part of the training physics alone (`--as-trained=timestep` and `=solver`, the other part the core's:
 RUN/sweep-trained-timestep/, RUN/sweep-trained-solver/), and the row names the part whose gap stays over. The row
-names the step and solver cap its policies were trained on, so runs on other training physics are rows of their own.
+names the step and solver cap its policies were trained on, so runs on other training physics are rows of their own,
+and so are runs whose learner's settings differ (epochs per batch, minibatches, learning rate...: `LEARNER`), named by
+the settings they differ in.
 Each task's reference controller
 (`registry.TASK_REFERENCES`: Raibert at the runs' command for the hopping tasks, Raibert at a 5 cm apex for stand)
 is swept the same way (OUT's folder, reference-<task>/). Every sweep runs on the run's own ground (`--terrain`:
@@ -40,6 +42,12 @@ TRAINED = "sweep-trained"  # the same sweep on the physics the policy was traine
 PARTS = {"timestep": "step", "solver": "solver cap"}
 COMPARED_GRAVITIES = (9.81, 3.71, 1.62)  # where the two are held to agree: Earth, Mars, the Moon
 GAP = {"survival_gap": 0.05, "apex_gap": 0.05}  # the most the core may differ from training: 5 points, 5 % of apex
+# The learner's settings (train.py's options, as metrics.json records them), in the words a row uses: runs of one task,
+# algorithm and training physics that differ in any of them are rows of their own, named by the ones they differ in.
+LEARNER = {"updates_per_batch": "epochs per batch", "num_minibatches": "minibatches", "batch_size": "batch size",
+           "unroll_length": "unroll", "num_envs": "envs", "learning_rate": "learning rate",
+           "entropy_cost": "entropy cost", "reward_scaling": "reward scaling", "policy_layers": "policy MLP",
+           "value_layers": "value MLP"}
 
 
 def parser() -> argparse.ArgumentParser:
@@ -155,7 +163,8 @@ def run_record(run: Path, do_sweep: bool, num: int, duration: float) -> dict:
             "curve": [(r["wall_time"] / 60, r["eval/episode_reward"]) for r in record["history"]
                       if "eval/episode_reward" in r],
             **sweep_measures(run / SWEEP, height), **trained, **gaps, "parts": parts,
-            "training": training_physics(run), "height": height, "speed": list(speed),
+            "training": training_physics(run), "learner": {k: args.get(k) for k in LEARNER},
+            "height": height, "speed": list(speed),
             "physics": list(physics_of(args).described().values())}
 
 
@@ -193,14 +202,30 @@ def _millions(steps):
     return None if steps is None else steps / 1e6
 
 
+def rows_of(records: list[dict]) -> list[tuple[str, list[dict]]]:
+    """The table's rows, (name, runs): one per task x algorithm x training physics x the learner's settings
+    (`LEARNER`), named by the task, the algorithm, the physics and the settings its runs differ in from the
+    other rows of the same task, algorithm and physics."""
+    physics = lambda r: (r["task"], r["algo"], r.get("training", ""))
+    settings = lambda r: tuple(sorted((k, str(v)) for k, v in r.get("learner", {}).items()))
+    rows = []
+    for group in sorted({physics(r) for r in records}):
+        runs = [r for r in records if physics(r) == group]
+        varied = [k for k in LEARNER if len({str(r.get("learner", {}).get(k)) for r in runs}) > 1]
+        for own in sorted({settings(r) for r in runs}):
+            mine = [r for r in runs if settings(r) == own]
+            said = "".join(f", {LEARNER[k]} {mine[0]['learner'][k]}" for k in varied)
+            on = f", trained on a {group[2]}" if group[2] else ""
+            rows.append((f"{group[0]} × {group[1].upper()}{on}{said}", mine))
+    return rows
+
+
 def table(records: list[dict], references: dict) -> str:
     lines = [HEADER]
-    for (task, algo, training) in sorted({(r["task"], r["algo"], r["training"]) for r in records}):
-        rows = [r for r in records if (r["task"], r["algo"], r["training"]) == (task, algo, training)]
+    for name, rows in rows_of(records):
         reached = sum(r["minutes_to_threshold"] is not None for r in rows)
         scanned = sum(r["scanned"] for r in rows)
-        on = f", trained on a {training}" if training else ""
-        lines.append(f"| {task} × {algo.upper()}{on} | {len(rows)} "
+        lines.append(f"| {name} | {len(rows)} "
                      f"| {reached} of {scanned} scanned "
                      f"| {spread([r['minutes_to_threshold'] for r in rows], '.1f')} "
                      f"| {spread([_millions(r['steps_to_threshold']) for r in rows], '.2f')} "
@@ -266,16 +291,12 @@ def figure(records: list[dict]):
     import matplotlib.pyplot as plt
 
     fig, ax = plt.subplots(figsize=(7, 4.2))
-    key = lambda r: (r["task"], r["algo"], r.get("training", ""))  # a row of the table
-    groups = sorted({key(r) for r in records})
     shared = [w for w in records[0]["physics"] if all(w in r["physics"] for r in records)]
-    for colour, group in zip(plt.rcParams["axes.prop_cycle"].by_key()["color"] * 4, groups):
-        for i, r in enumerate(x for x in records if key(x) == group):
+    for colour, (name, rows) in zip(plt.rcParams["axes.prop_cycle"].by_key()["color"] * 4, rows_of(records)):
+        for i, r in enumerate(rows):  # a row of the table
             t, reward = zip(*r["curve"]) if r["curve"] else ((), ())
             own = "".join(f"; {w}" for w in r["physics"] if w not in shared)
-            on = f", trained on a {group[2]}" if group[2] else ""
-            ax.plot(t, reward, "o-", ms=3, color=colour, alpha=0.8,
-                    label=f"{group[0]} × {group[1].upper()}{own}{on}" if i == 0 else None)
+            ax.plot(t, reward, "o-", ms=3, color=colour, alpha=0.8, label=f"{name}{own}" if i == 0 else None)
     ax.set_xlabel("training wall time (min)")
     ax.set_ylabel("episode reward (1, summed per episode)")
     ax.set_title(f"every seed's curve: the mean over its evaluation episodes\n{'; '.join(shared)}", fontsize=9)

@@ -451,6 +451,34 @@ def test_the_results_table_puts_each_tasks_registered_reference_beside_it(tmp_pa
     assert [c.strip() for c in hop.split("|")[1:-1]][2:5] == ["1 of 1 scanned", "3.4", "4.92"]
 
 
+def test_runs_whose_learner_settings_differ_are_rows_of_their_own(tmp_path):
+    """Two hop x PPO seeds per learner setting, one with 8 epochs per batch and one with 2: two rows, each named
+    by the setting they differ in (and by nothing they share), each with its own seeds' medians; a single
+    setting's runs stay one row named as before."""
+    import json
+
+    results = importlib.import_module("results")
+    runs = []
+    for epochs, minutes in ((8, (4.0, 6.0)), (2, (2.0, 3.0))):
+        for seed, wall in enumerate(minutes):
+            run = tmp_path / f"e{epochs}-s{seed}"
+            run.mkdir()
+            args = {"task": "hop", "algo": "ppo", "seed": seed, "eval_height": 0.10, "eval_speed": [0.0, 0.0],
+                    "updates_per_batch": epochs, "num_minibatches": 8, "learning_rate": 6e-4}
+            (run / "metrics.json").write_text(json.dumps({"args": args, "history": []}))
+            (run / "threshold.json").write_text(json.dumps({"step": 1_000_000 * (seed + 1), "wall_time": 60 * wall}))
+            runs.append(str(run))
+    out = tmp_path / "results.md"
+    assert results.main([*runs, "--out", str(out)]) == 0
+    rows = {c[0]: c for c in ([x.strip() for x in line.split("|")[1:-1]] for line in out.read_text().splitlines()
+                               if line.startswith("| hop × PPO"))}
+    assert set(rows) == {"hop × PPO, epochs per batch 2", "hop × PPO, epochs per batch 8"}
+    assert rows["hop × PPO, epochs per batch 2"][1:5] == ["2", "2 of 2 scanned", "2.5 [2.0–3.0]", "1.50 [1.00–2.00]"]
+    assert rows["hop × PPO, epochs per batch 8"][3] == "5.0 [4.0–6.0]"
+    assert results.main([*runs[:2], "--out", str(out)]) == 0
+    assert "| hop × PPO | 2 | 2 of 2 scanned | 5.0 [4.0–6.0] |" in out.read_text()
+
+
 def test_train_rejects_an_out_it_cannot_make_in_one_line(tmp_path, capsys):
     """Under a file: one line, nothing made. A missing parent (runs/ on a fresh clone, as the docs' commands
     write) is made with the run, so the check passes and still makes nothing."""

@@ -30,9 +30,6 @@ def task_config(args, physics):
 
 
 REWARD_SCALING = {"ppo": 0.1, "sac": 1.0}  # --reward-scaling's defaults
-
-
-REWARD_SCALING = {"ppo": 0.1, "sac": 1.0}  # --reward-scaling's defaults
 LEARNING_RATE = {"ppo": 6e-4, "sac": 3e-4}  # --learning-rate's defaults
 
 
