@@ -20,6 +20,12 @@ steps from the same initial state, instance i under the same gravity:
   has no C twin: the core runs Raibert's hopping controller while native keeps the
   hold law, which flatters native (cheaper control, fewer contact changes).
 
+With `--env TASK`, the task's training env (train.py's wrapping, the stance held) is then timed for the same N
+and T, sharded as Brax's training pmaps it (`perf.env_pace`): its physics steps/s beside the core's. Its JSON keys
+start with `env_`.
+
+    python -m hopper_mjx.perf.bench --num 256 --steps 1000 --env hop   # training's physics against the core's
+
 Timings interleave the two sides and keep each side's best of `--repeat`
 runs, because the cores are shared and noise only ever adds time. The ratio
 is core steps/s over native steps/s.
@@ -212,8 +218,9 @@ def machine(devices) -> dict:
 
 
 def run(num: int, steps: int, *, controller: str = "hold", chunk: int = 256, repeat: int = 2,
-        threads: int | None = None, physics: Physics = Physics()) -> dict:
-    """One side-by-side measurement of `physics` (its robot, engine and timestep); returns the JSON record."""
+        threads: int | None = None, physics: Physics = Physics(), env: str | None = None) -> dict:
+    """One side-by-side measurement of `physics` (its robot, engine and timestep), then `env`'s training env on
+    the same physics if given; returns the JSON record."""
     import jax
 
     from hopper_mjx.sim import gravity_vectors
@@ -289,6 +296,11 @@ def run(num: int, steps: int, *, controller: str = "hold", chunk: int = 256, rep
     if controller != "raibert":  # same law on both sides: same trajectories
         record["native_final_base_height_m"] = float(np.median(native_qpos[:, 2]))
         record["max_final_qpos_gap"] = float(np.abs(native_qpos - qpos).max())
+    if env is not None:
+        from hopper_mjx.perf import env_pace
+
+        record |= env_pace.run(env, num, steps, physics, repeat)
+        record["env_to_core"] = record["env_physics_steps_per_s"] / core_rate
     return record
 
 
@@ -310,6 +322,15 @@ def format_table(record: dict) -> str:
     ]
     if "max_final_qpos_gap" in record:
         rows.append(("final qpos, max |core - native|", f"{record['max_final_qpos_gap']:.2e}"))
+    if "env_task" in record:
+        rows += [(f"env {record['env_task']} physics steps/s",
+                  f"{record['env_physics_steps_per_s']:,.0f}  ({record['env_to_core']:.2f} of the core's; train.py's "
+                  f"env wrapping, stance held)"),
+                 (f"env {record['env_task']} env steps/s",
+                  f"{record['env_steps_per_s']:,.0f}  (policy steps at {record['env_policy_rate_hz']:g} Hz; "
+                  f"first call {record['env_first_call_s']:.1f} s)"),
+                 (f"env {record['env_task']} kernels per pass", f"{record['env_kernels_per_pass']:,}  (a physics step, "
+                  "and the env's work around a policy step once)")]
     width = max(len(k) for k, _ in rows)
     return "\n".join(f"{k:<{width}}  {v}" for k, v in rows)
 
@@ -414,6 +435,8 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--json", default=None, help="write the record (or the scaling records) here")
     p.add_argument("--scaling", default=None, help="comma-separated N values: one bench process each")
     p.add_argument("--plot", default=None, help="with --scaling: save the scaling plot (PNG) here")
+    p.add_argument("--env", default=None, metavar="TASK",
+                   help=f"then time this task's training env on the same physics: {registry.listed(registry.TASKS)}")
     return p
 
 
@@ -440,6 +463,15 @@ def check(args) -> tuple[list[int] | None, Physics]:
     physics = cli.check_physics(argparse.Namespace(**vars(args) | {"engine": engines[0]}),
                                 {"timestep": args.timestep}, engines=engines, n=2 * max(sizes))  # both sides' heights
     cli.refuse_each(physics.ground, "perf.bench")
+    if args.env is not None:
+        try:
+            registry.check("task", registry.TASKS, args.env)
+        except ValueError as err:
+            raise ValueError(f"--env: {err}") from None
+        if args.scaling:
+            raise ValueError("--env times one N: give it without --scaling")
+        if args.num % (os.cpu_count() or 1):  # one device per core (jaxsetup), each a share of the envs, as Brax's
+            raise ValueError(f"--num={args.num} must be a multiple of the {os.cpu_count()} devices for --env")
     if args.plot and not args.scaling:
         raise ValueError("--plot draws the --scaling records: give --scaling N1,N2,... too")
     if args.plot:
@@ -466,7 +498,7 @@ def main(argv=None) -> int:
             result = records
         else:
             result = run(args.num, args.steps, controller=args.controller, chunk=args.chunk,
-                         repeat=args.repeat, threads=args.threads, physics=physics)
+                         repeat=args.repeat, threads=args.threads, physics=physics, env=args.env)
             print(format_table(result))
     except (ValueError, argparse.ArgumentTypeError) as err:
         return cli.fail(err)
