@@ -218,9 +218,8 @@ def machine(devices) -> dict:
 
 
 def run(num: int, steps: int, *, controller: str = "hold", chunk: int = 256, repeat: int = 2,
-        threads: int | None = None, physics: Physics = Physics(), env: str | None = None) -> dict:
-    """One side-by-side measurement of `physics` (its robot, engine and timestep), then `env`'s training env on
-    the same physics if given; returns the JSON record."""
+        threads: int | None = None, physics: Physics = Physics()) -> dict:
+    """One side-by-side measurement of `physics` (its robot, engine and timestep); returns the JSON record."""
     import jax
 
     from hopper_mjx.sim import gravity_vectors
@@ -296,12 +295,15 @@ def run(num: int, steps: int, *, controller: str = "hold", chunk: int = 256, rep
     if controller != "raibert":  # same law on both sides: same trajectories
         record["native_final_base_height_m"] = float(np.median(native_qpos[:, 2]))
         record["max_final_qpos_gap"] = float(np.abs(native_qpos - qpos).max())
-    if env is not None:
-        from hopper_mjx.perf import env_pace
-
-        record |= env_pace.run(env, num, steps, physics, repeat)
-        record["env_to_core"] = record["env_physics_steps_per_s"] / core_rate
     return record
+
+
+def with_env(record: dict, task: str, physics: Physics, repeat: int) -> dict:
+    """`record` and `task`'s training env timed on the same physics, N and T (`perf.env_pace`), beside the core."""
+    from hopper_mjx.perf import env_pace
+
+    env = env_pace.run(task, record["num"], record["steps"], physics, repeat)
+    return record | env | {"env_to_core": env["env_physics_steps_per_s"] / record["core_steps_per_s"]}
 
 
 def format_table(record: dict) -> str:
@@ -498,7 +500,9 @@ def main(argv=None) -> int:
             result = records
         else:
             result = run(args.num, args.steps, controller=args.controller, chunk=args.chunk,
-                         repeat=args.repeat, threads=args.threads, physics=physics, env=args.env)
+                         repeat=args.repeat, threads=args.threads, physics=physics)
+            if args.env is not None:
+                result = with_env(result, args.env, physics, args.repeat)
             print(format_table(result))
     except (ValueError, argparse.ArgumentTypeError) as err:
         return cli.fail(err)
