@@ -66,7 +66,9 @@ def stop(signum: int) -> None:
             stream.flush()
         except (OSError, ValueError):
             pass
-    _end_filter()
+    # Descriptor 2 to nowhere, not back to the terminal: the main thread may still be inside XLA (a cache load at
+    # start-up), whose log lines would then reach the user unfiltered beside the one line below.
+    _end_filter(quiet=True)
     name = signal.Signals(signum).name
     # The copy taken when armed, not descriptor 2: a signal in the instant the filter takes descriptor 2
     # over, before it is on record in `_stderr`, would send the line into a pipe nobody drains.
@@ -145,12 +147,14 @@ def filter_stderr() -> None:
     os.close(write)
 
 
-def _end_filter() -> None:
-    """Puts the real stderr back on descriptor 2 and lets the filter pass on what it holds."""
+def _end_filter(quiet: bool = False) -> None:
+    """Puts the real stderr back on descriptor 2 (`quiet`: /dev/null, for a process about to end) and lets the
+    filter pass on what it holds."""
     if not _stderr:
         return
     real, thread = _stderr
-    os.dup2(real, 2)  # closes the pipe's last writer: the thread reads to its end and stops
+    target = os.open(os.devnull, os.O_WRONLY) if quiet else real
+    os.dup2(target, 2)  # closes the pipe's last writer: the thread reads to its end and stops
     thread.join(timeout=0.3)
     _stderr.clear()
 
