@@ -155,6 +155,8 @@ def _end_filter(quiet: bool = False) -> None:
     real, thread = _stderr
     target = os.open(os.devnull, os.O_WRONLY) if quiet else real
     os.dup2(target, 2)  # closes the pipe's last writer: the thread reads to its end and stops
+    if quiet:
+        os.close(target)  # descriptor 2 holds /dev/null now
     thread.join(timeout=0.3)
     _stderr.clear()
 
