@@ -68,7 +68,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass
-from typing import NamedTuple, Sequence
+from typing import Any, NamedTuple, Protocol, Sequence
 
 import jax
 import jax.numpy as jnp
@@ -167,6 +167,7 @@ class RaibertState(NamedTuple):
     thrust_force: jax.Array  # N, the extra leg force of this thrust
     work: jax.Array  # J, ∫ Σ|τ·q̇| dt of the three motors (for the cost of transport)
     floor: jax.Array  # m, world z of the ground the apex is aimed above (0 on the flat plane)
+    plan: Any = ()  # a `Plan`'s own state (`jump`); () for Raibert: no leaves, today's program
 
 
 def _batch(n: int, name: str, value, shape: tuple) -> np.ndarray:
@@ -467,11 +468,37 @@ def initial_state(params: RaibertParams, obs: Observation) -> RaibertState:
 COMMANDS = Commands(read=_read_commands, write=_write_commands)
 
 
+class Plan(Protocol):
+    """What a controller built on this gait (`jump`) changes in it; static, one per controller. Each hook is pure and
+    per instance, called inside `act` with what `act` has worked out so far."""
+
+    def initial(self, obs: Observation) -> Any:
+        """The plan's own state at the start (`RaibertState.plan`)."""
+
+    def aim(self, leg, body: Body, ground, base_xy, speed: "Speed", s: RaibertState, ev: Events, phase, floor,
+            standing, g) -> tuple[jax.Array, Any]:
+        """(the floor the next hop is aimed above, the plan's state), from Raibert's `floor`."""
+
+    def bias(self, s: RaibertState, ev: Events, height_bias) -> jax.Array:
+        """The apex-target bias kept, from the one Raibert's height loop adapted."""
+
+    def flight(self, leg, body: Body, ground, base_xy, speed: "Speed", s: RaibertState, plan, torque, g,
+               scale: PDScale | None, spin, inertia: "Inertia") -> jax.Array:
+        """Joint torques (3,) in flight, from Raibert's `torque`."""
+
+
 def raibert(robot: Robot, config: RaibertConfig | None = None) -> Controller:
     """`raibert`: hops at the per-instance commanded apex rise and speed.
 
     params: `raibert_params(...)` or None (`config` gains, DEFAULT_HEIGHT in place).
     """
+    return gait(robot, config)
+
+
+def gait(robot: Robot, config: RaibertConfig | None = None, name: str = "raibert", plan: Plan | None = None,
+         key: str = "") -> Controller:
+    """Raibert's three-part gait as a controller named `name`, changed where `plan` says (None: Raibert's own).
+    `key`: what `plan` closed over, for the controller's key."""
     layout = robot.layout
     mass, dt = layout.total_mass, layout.timestep
     # Eager, op by op: under one jit XLA fuses it and rounds the float32 facts otherwise, which moves every sweep's
@@ -494,10 +521,12 @@ def raibert(robot: Robot, config: RaibertConfig | None = None) -> Controller:
         phase, ev = next_phase(s.phase, obs.contact.flag, obs.time - s.phase_start, body.length,
                                body.length_rate, gains.leg_length)
         speed = speed_update(s, ev, body.v, obs.time, g)
-        ground, base_xy, floor = obs.ground, obs.qpos[:2], s.floor
+        ground, base_xy, floor, planned = obs.ground, obs.qpos[:2], s.floor, s.plan
         if ground is not None:  # static: on a terrain, the ground under the next hop (the plane: z = 0)
             floor = jnp.where(ev.bottom, landing_floor(leg, body, ground, base_xy, speed, s.params.height, g),
                               s.floor)
+            if plan is not None:  # static: Raibert's own (today's program)
+                floor, planned = plan.aim(leg, body, ground, base_xy, speed, s, ev, phase, floor, standing, g)
         height_bias, thrust_force = height_update(s, ev, body, g, stiffness, mass, standing,
                                                   None if ground is None else floor)
         apex = jnp.where(ev.liftoff, body.z, jnp.where(phase == FLIGHT, jnp.maximum(s.apex, body.z), s.apex))
@@ -505,19 +534,27 @@ def raibert(robot: Robot, config: RaibertConfig | None = None) -> Controller:
         stance = stance_torque(leg, gains, phase, body, spin, speed, thrust_force, g, stiffness, mass,
                                inertia.swing_tilt, s.params.pd)
         flight = flight_torque(leg, gains, body, spin, speed, g, inertia, s.params.pd, ground, base_xy)
+        if plan is not None and ground is not None:
+            height_bias = plan.bias(s, ev, height_bias)
+            flight = plan.flight(leg, body, ground, base_xy, speed, s, planned, flight, g, s.params.pd, spin, inertia)
         torque = saturate(layout, jnp.where(phase == FLIGHT, flight, stance))
         ctrl = to_ctrl(layout, torque)
         state = RaibertState(
             params=s.params, phase=phase, phase_start=jnp.where(phase != s.phase, obs.time, s.phase_start),
             touchdown_time=speed.touchdown_time, stance_time=speed.stance_time, apex=apex,
             height_bias=height_bias, speed_offset=speed.offset, speed_reference=speed.reference,
-            thrust_force=thrust_force, work=s.work + jnp.abs(torque * body.qd).sum() * dt, floor=floor,
+            thrust_force=thrust_force, work=s.work + jnp.abs(torque * body.qd).sum() * dt, floor=floor, plan=planned,
         )
         return ctrl, state
 
-    return Controller(name="raibert", init=lambda obs, params: initial_state(
-        defaults if params is None else params, obs), act=act, commands=COMMANDS,
-                      key=f"raibert|{config!r}|{robot!r}")
+    def init(obs, params):
+        state = initial_state(defaults if params is None else params, obs)
+        return state if plan is None else state._replace(plan=plan.initial(obs))
+
+    return Controller(name=name, init=init, act=act, commands=COMMANDS, key=f"{name}|{key}|{config!r}|{robot!r}"
+                      if plan is not None else f"raibert|{config!r}|{robot!r}")
+
+
 def _within_tilt_budget(wanted: jax.Array, now: jax.Array, drift: jax.Array, swing_tilt: jax.Array,
                         budget: jax.Array, length: jax.Array) -> jax.Array:
     """The placement `wanted` moved, if need be, so that the body lands tilted <= `budget`.
