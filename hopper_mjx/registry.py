@@ -18,12 +18,17 @@ CONTROLLERS = {
     "hold": "keep the initial joint angles",
     "pid": "the seed's joint position controllers, holding them",
     "raibert": "hop to --height and --speed",
+    "jump": "Raibert's gait, each hop sized to the ground ahead and the leg drawn up over obstacles",
     "balance": "stand still on the foot: an LQR about the stance (holds it at rest; kicks topple it, docs/control.md)",
 }
 # The controllers with joint PD gains that `--randomize kp_scale=...,kd_scale=...` scales (and `policy:PATH`).
-PD_CONTROLLERS = ("hold", "pid", "raibert")
+PD_CONTROLLERS = ("hold", "pid", "raibert", "jump")
 # The model-based controllers a gravity sweep runs beside `policy:PATH` (every task's reference among them).
-SWEEP_CONTROLLERS = ("raibert", "balance")
+SWEEP_CONTROLLERS = ("raibert", "jump", "balance")
+# The controllers of Raibert's gait: they take its commands, gains and per-instance legs (`raibert_params`).
+GAIT_CONTROLLERS = ("raibert", "jump")
+# A terrain sweep's (obstacle, gaps) controllers, its default first: what jumps as the ground ahead needs.
+TERRAIN_SWEEP_CONTROLLERS = ("jump", "raibert")
 ENGINES = {
     "auto": "chain when the model qualifies, else mjx",
     "chain": "MuJoCo's step specialised to the monoped",

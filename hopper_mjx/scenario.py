@@ -234,7 +234,8 @@ class Scenario:
         from hopper_mjx.variation.draw import legs
 
         # Raibert models each drawn leg (the others take none): measured only for it, a few ms per distinct leg.
-        own = legs(sim.mj_model, self.draws(sim.mj_model)) if self.controller == "raibert" else None
+        own = legs(sim.mj_model, self.draws(sim.mj_model)) if self.controller in registry.GAIT_CONTROLLERS \
+            else None
         return control.make(self.controller, sim.robot, self.n, height=self.height, speed=self.speed, gains=self.gains,
                             mj_model=sim.mj_model, pd=pd, legs=own)
 

@@ -145,7 +145,7 @@ def test_two_processes_give_the_rows_of_one(tiny, tmp_path):
      (["gravity", "--values", "0,9.81"], "> 0"), (["gravity", "--values", "-3.7"], "> 0"),
      (["gains", "--param", "bogus", "--values", "1,2"], "unknown gain 'bogus'"),
      (["gravity", "--num", "0"], "--num"),
-     (["gravity", "--controller", "hold"], "a sweep runs raibert, balance or policy:PATH"),
+     (["gravity", "--controller", "hold"], "a sweep runs raibert, jump, balance or policy:PATH"),
      (["compare", "--controllers", "raibert,raibert"], "lists one twice"),
      (["compare", "--controllers", "raibert,policy:/nonexistent"], "is not a trained policy"),
      (["gravity", "--values", "9.81,9.81"], "gravity values must differ, got [9.81, 9.81]"),

@@ -5,7 +5,7 @@ from __future__ import annotations
 from typing import Sequence
 
 from hopper_mjx import registry
-from hopper_mjx.control import balance, pid, raibert
+from hopper_mjx.control import balance, jump, pid, raibert
 from hopper_mjx.control.base import Controller, PDScale, hold, zero_torque
 from hopper_mjx.model.robot import Robot
 
@@ -41,10 +41,11 @@ def make(name: str, robot: Robot, n: int, *, height: float = raibert.DEFAULT_HEI
         if mj_model is None:
             raise ValueError("balance is designed on the compiled model: pass mj_model=")
         return balance.balance(robot, mj_model), None
-    if len(speed) != 2:  # raibert
+    if len(speed) != 2:  # raibert, jump
         raise ValueError(f"speed needs two values VX,VY in m/s, got {list(speed)}")
     leg = None if legs is None else raibert.legs(robot, legs)
-    return raibert.raibert(robot), raibert.raibert_params(n, height=height, speed=speed, pd=pd, leg=leg)
+    build = jump.jump if name == "jump" else raibert.raibert
+    return build(robot), raibert.raibert_params(n, height=height, speed=speed, pd=pd, leg=leg)
 
 
 __all__ = ["NAMES", "Controller", "make"]

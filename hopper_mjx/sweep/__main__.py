@@ -101,10 +101,16 @@ def parser() -> argparse.ArgumentParser:
                            "enough for --speed over --duration and back: the ground ends at its edge)")
         if kind in ("gravity", "param"):
             s.add_argument("--controller", default="raibert",
-                           help="raibert (the tasks' reference), balance (an LQR stance) or policy:PATH")
+                           help="raibert (the tasks' reference), jump (Raibert's gait leaping what is ahead), "
+                                "balance (an LQR stance) or policy:PATH")
+        if kind in BAND_KINDS:
+            s.add_argument("--controller", default=registry.TERRAIN_SWEEP_CONTROLLERS[0],
+                           choices=registry.TERRAIN_SWEEP_CONTROLLERS,
+                           help="jump (each hop sized to the ground ahead, the leg drawn up over it; default) or "
+                                "raibert (hops to --height above the ground it lands on)")
         if kind == "compare":
             s.add_argument("--controllers", required=True,
-                           help="comma-separated: raibert, balance and/or policy:PATH, each swept with the "
+                           help="comma-separated: raibert, jump, balance and/or policy:PATH, each swept with the "
                            "same kicks")
         if kind in ("gravity", "compare"):
             s.add_argument("--as-trained", nargs="?", const="all", choices=TRAINED_PARTS,

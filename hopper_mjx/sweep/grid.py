@@ -88,8 +88,9 @@ class SweepSpec:
             if self.param not in (*GAINS, *NAMES):
                 raise ValueError(f"unknown --param {self.param!r}; choose a Raibert gain ({', '.join(GAINS)}) or a "
                                  f"--randomize parameter ({', '.join(NAMES)})")
-            if self.param in GAINS and self.controller != "raibert":
-                raise ValueError(f"{self.param} is a Raibert gain: use --controller raibert")
+            if self.param in GAINS and self.controller not in registry.GAIT_CONTROLLERS:
+                raise ValueError(f"{self.param} is a Raibert gain: use --controller "
+                                 f"{' or '.join(registry.GAIT_CONTROLLERS)}")
             if self.param in self.variation.names:
                 raise ValueError(f"--param {self.param} is drawn by --randomize too; leave it out of one")
             if not self.values or not all(math.isfinite(v) for v in self.values):
@@ -105,8 +106,9 @@ class SweepSpec:
     def _check_grounds(self) -> None:
         from hopper_mjx.terrain import TerrainError, parse
 
-        if self.controller != "raibert":
-            raise ValueError(f"a {self.kind} sweep measures Raibert on terrain: use --controller raibert")
+        if self.controller not in registry.TERRAIN_SWEEP_CONTROLLERS:
+            raise ValueError(f"a {self.kind} sweep measures a hopping gait on terrain: use --controller "
+                             f"{' or '.join(registry.TERRAIN_SWEEP_CONTROLLERS)}")
         if not self.values or len(self.grounds) != len(self.values) or len(set(self.values)) != len(self.values):
             raise ValueError(f"a {self.kind} sweep needs one ground per value, the values all different")
         try:

@@ -21,6 +21,7 @@ from tqdm import tqdm
 from hopper_mjx import registry, terrain
 from hopper_mjx.control.balance import balance
 from hopper_mjx.control.base import pd_scale
+from hopper_mjx.control.jump import jump
 from hopper_mjx.control.raibert import GAINS, raibert, raibert_params
 from hopper_mjx.control.raibert import legs as raibert_legs
 from hopper_mjx.hardware import signals
@@ -65,13 +66,14 @@ class ChunkRunner:
         self.spec, self.instances, self.sim, self.robots, self.controls = spec, instances, sim, robots, controls
         # Each robot row's leg, when drawn: what Raibert models and where the apex rise counts from.
         own = draw.legs(sim.mj_model, robots)
-        self.legs = None if own is None or spec.controller != "raibert" else raibert_legs(sim.robot, own)
+        self.legs = None if own is None or spec.controller not in registry.GAIT_CONTROLLERS \
+            else raibert_legs(sim.robot, own)
         self.standing = None if own is None else np.array([r.standing_height for r in own])
         self.policy = registry.policy_path(spec.controller) if registry.is_policy(spec.controller) else None
         if spec.controller == "balance":  # commands nothing: it stands
             self.controller = balance(sim.robot, sim.mj_model)
         elif self.policy is None:
-            self.controller = raibert(sim.robot)
+            self.controller = jump(sim.robot) if spec.controller == "jump" else raibert(sim.robot)
         else:  # brax is imported only when a policy is swept
             from hopper_mjx.envs.policy import policy_controller, read
 

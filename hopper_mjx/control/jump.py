@@ -1,0 +1,224 @@
+"""`jump`: Raibert's gait, each hop sized to the ground ahead and the leg drawn up over what is there.
+
+Raibert (`raibert`) aims a hop at the commanded rise above the ground it lands on. A block it must pass over on the
+way to its landing (a wall whose far side it lands beyond) it does not see: the leg swings into it. The jump looks
+ahead along the commanded direction of travel, on the known ground (`signals.SensedGround`, `obstacle`), and makes
+the stance before an obstacle a *leap*:
+
+- *Decide, in the flight before.* Where the foot comes down, would the next ordinary stride reach the obstacle's
+  face? Then that stance launches a leap. The leap's apex is what lets the leg, drawn up (`tuck_drop` below the
+  base), pass `CLEARANCE` over the top; its flight lasts 2·√(2·rise/g), in which the COM must carry from its lift-off
+  (v·T_s/2 past the foot) to within `LAND_AHEAD` of a landing `LAND_BEYOND` past the far edge. The speed that needs
+  comes from the launching stance: its foot is set `boost` behind Raibert's neutral point, and the push along the
+  leg, tilted by b/L, gives the COM about b/L of its vertical speed change forwards (at most `MAX_BOOST`).
+- *Launch.* At the stance's bottom the leap's rise, `LEAP_GAIN` over what the geometry asks (the leg's jerk off the
+  floor takes a share of a hop's energy that Raibert's bias learns over many hops, and a leap is one hop), becomes
+  the apex Raibert's height loop sizes the thrust for, capped by what the motors give. The leap does not adapt the
+  bias of the hops after it.
+- *Over.* In the leap's flight the leg is drawn up (the knee `TUCK_KNEE` short of its stop), the foot held
+  `FACE_MARGIN` short of the face until its bottom is above the top, then carried on just far enough that it is past
+  the far edge when, falling, it would reach the top: each centimetre of the foot ahead of the COM turns the body
+  back, the leg being as heavy in rotation as the body. Past the far edge the leg reaches down beyond it, within
+  Raibert's tilt budget.
+
+On the flat plane (no height field) the jump is Raibert: nothing to look at. Hopping in place (no commanded speed)
+it leaps nothing. The commands, gains and per-instance legs are Raibert's (`raibert_params`).
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+
+from hopper_mjx.control import raibert
+from hopper_mjx.control.base import Controller, pd, scaled
+from hopper_mjx.control.kinematics import leg_length
+from hopper_mjx.model.robot import Robot
+
+STEP_UP = 0.05  # m over the floor under the foot: ground the foot must be drawn up over
+CLEARANCE = 0.05  # m the drawn-up foot's bottom is aimed over an obstacle's top
+TUCK_AHEAD = 0.10  # m ahead of the hip the drawn-up foot is carried (level frame)
+TUCK_KNEE = 0.1  # rad short of the knee's lower stop the drawn-up leg holds
+FACE_MARGIN = 0.06  # m the foot's edge is held short of an obstacle's face until it is above the top
+LAND_BEYOND = 0.08  # m past an obstacle's far edge the foot's edge is set down
+LEAP_REACH = 0.3  # m: the farthest ahead of the COM a leap's foot is set down
+LEAP_GAIN = 1.25  # on a leap's rise over the stance (see `Leap.aim`)
+LAND_AHEAD = 0.1  # m: the farthest ahead of the COM a leap's landing may want the foot, so the body lands upright
+MAX_BOOST = 0.12  # m: the farthest a launching stance's foot is set behind the neutral point
+KNEE = 2  # kfe in (haa, hfe, kfe)
+SAMPLES = 64  # ground samples along the way
+LOOK_SPAN = 1.2  # m the samples span ahead of the foot (a flight's travel, the foot's reach and margins)
+
+
+class JumpState(NamedTuple):
+    """The jump's own state, one instance's; positions along the way are world (x, y)·`along`, m."""
+
+    launch: jax.Array  # bool: decided in a flight, the stance it lands in launches a leap
+    boost: jax.Array  # m behind Raibert's neutral point that stance's foot is set down, for the leap's speed
+    leap: jax.Array  # bool: this stance launches a leap, or this flight is one (latched at its touchdown)
+    base: jax.Array  # m, world z of the ground under the foot at that touchdown: what obstacles rise from
+    along: jax.Array  # (2,) the travel direction, world, at that touchdown
+    face: jax.Array  # m, the obstacle's near face along the way
+    far: jax.Array  # m, its far edge
+    top: jax.Array  # m, world z of its top
+
+
+def tuck_length(robot: Robot, leg) -> jax.Array:
+    """m: the virtual leg drawn up, the knee `TUCK_KNEE` short of its lower stop."""
+    return leg_length(leg, robot.layout.joint_range[KNEE][0] + TUCK_KNEE)
+
+
+def tuck_drop(robot: Robot, leg) -> jax.Array:
+    """m from the base origin down to the drawn-up foot's bottom, the body level: the least height of the base over
+    an obstacle's top for the foot to pass over it."""
+    length = tuck_length(robot, leg)
+    return leg.haa_below_base + leg.hfe_below_haa + jnp.sqrt(length**2 - TUCK_AHEAD**2) + leg.foot_radius
+
+
+def _along(s) -> jax.Array:
+    """(2,) the commanded direction of travel, world: obstacles are leapt going that way only (a robot pushed back
+    does not leap back over what it crossed); zeros when hopping in place."""
+    command = s.params.speed
+    size = jnp.linalg.norm(command)
+    return jnp.where(size > 0.05, command / jnp.maximum(size, 1e-6), 0.0)
+
+
+def _foot(leg, body) -> jax.Array:
+    """(3,) the foot's centre from the base origin, world axes."""
+    return body.rot @ (body.foot - jnp.array([0.0, 0.0, leg.haa_below_base]))
+
+
+def _com_xy(leg, body, base_xy) -> jax.Array:
+    return base_xy + (body.rot @ (body.com - jnp.array([0.0, 0.0, leg.haa_below_base])))[:2]
+
+
+def obstacle(ground, foot_xy, along, radius) -> tuple[jax.Array, ...]:
+    """(any, near face, far edge, top) of the first obstacle ahead of the foot (ground `STEP_UP` over the ground
+    under it), m along `along` from `foot_xy` (the top world z); within `LOOK_SPAN`."""
+    offsets = jnp.linspace(-radius, LOOK_SPAN, SAMPLES)
+    points = foot_xy[:, None] + along[:, None] * offsets[None, :]
+    heights = ground.height(points[0], points[1])
+    high = heights > ground.height(foot_xy[0], foot_xy[1]) + STEP_UP
+    face = jnp.min(jnp.where(high, offsets, jnp.inf))
+    after = jnp.min(jnp.where(~high & (offsets > face), offsets, jnp.inf))  # the first sample past it
+    run = high & (offsets < after)
+    far = jnp.minimum(after, LOOK_SPAN) - (LOOK_SPAN + radius) / (SAMPLES - 1) / 2
+    return high.any(), face, far, jnp.max(jnp.where(run, heights, -jnp.inf))
+
+
+class Leap:
+    """The jump's `raibert.Plan`."""
+
+    def __init__(self, robot: Robot):
+        self.robot = robot
+
+    def initial(self, obs) -> JumpState:
+        base = (jnp.float32(0.0) if obs.ground is None
+                else jnp.asarray(obs.ground.height(obs.qpos[0], obs.qpos[1]), jnp.float32))
+        zero, no = jnp.float32(0.0), jnp.bool_(False)
+        return JumpState(launch=no, boost=zero, leap=no, base=base, along=jnp.array([1.0, 0.0], jnp.float32),
+                         face=zero, far=zero, top=base)
+
+    def _launch(self, leg, body, ground, base_xy, speed, s, standing, g) -> tuple[jax.Array, jax.Array]:
+        """In a flight: (does the stance it lands in launch a leap, the boost m that stance's foot is set behind
+        Raibert's neutral point so that the leap carries the COM past the obstacle)."""
+        along = _along(s)
+        v = jnp.maximum(jnp.dot(body.v, along), 0.0)  # m/s the way it goes
+        bottom = body.z + _foot(leg, body)[2] - leg.foot_radius
+        com_xy = _com_xy(leg, body, base_xy)
+        here = ground.height(*(base_xy + _foot(leg, body)[:2]))
+        sink = jnp.sqrt(body.zdot**2 + 2.0 * g * jnp.maximum(bottom - here, 0.0))  # m/s down at touchdown
+        time_left = (body.zdot + sink) / g
+        touch = com_xy + body.v * time_left + along * v * speed.stance_time / 2  # where the foot comes down
+        seen, face, far, top = obstacle(ground, touch, along, leg.foot_radius)
+        rise = jnp.maximum(top + tuck_drop(self.robot, leg) + CLEARANCE - standing - ground.height(*touch), 0.0)
+        up = jnp.sqrt(2.0 * g * rise)  # m/s up at the leap's lift-off
+        flight = 2.0 * up / g
+        # The COM leaves v·T_s/2 ahead of the foot, and must come down within LAND_AHEAD of the landing past the far
+        # edge. A foot set b behind the neutral point gives the stance a forward push of about b/L of its vertical.
+        travel = far + leg.foot_radius + LAND_BEYOND - LAND_AHEAD - v * speed.stance_time / 2
+        wanted = travel / jnp.maximum(flight, 1e-3) - v
+        boost = jnp.maximum(wanted, 0.0) * s.params.gains.leg_length / (up + sink + g * speed.stance_time)
+        # A leap now: the next ordinary stride would reach the obstacle's face.
+        stride = v * (speed.stance_time + 2.0 * jnp.sqrt(2.0 * jnp.maximum(s.params.height, 0.0) / g))
+        near = face - leg.foot_radius - FACE_MARGIN < stride
+        return seen & near & (face > leg.foot_radius + FACE_MARGIN) & (boost <= MAX_BOOST), boost
+
+    def aim(self, leg, body, ground, base_xy, speed, s, ev, phase, floor, standing, g):
+        """In a flight: does the next stance launch a leap. At touchdown: the obstacle it leaps. At the bottom: the
+        leap's apex aimed over it."""
+        launch, boost = self._launch(leg, body, ground, base_xy, speed, s, standing, g)
+        deciding = (phase == raibert.FLIGHT) & ~s.plan.leap
+        plan = s.plan._replace(launch=jnp.where(deciding, launch, s.plan.launch & ~s.plan.leap),
+                               boost=jnp.where(deciding, boost, s.plan.boost))
+        along, foot = _along(s), base_xy + _foot(leg, body)[:2]
+        _, face, far, top = obstacle(ground, foot, along, leg.foot_radius)
+        at = jnp.dot(foot, along)
+        landed = plan._replace(leap=s.plan.launch, launch=jnp.bool_(False), base=ground.height(foot[0], foot[1]),
+                               along=along, face=at + face, far=at + far, top=top)
+        plan = jax.tree_util.tree_map(lambda a, b: jnp.where(ev.touchdown, a, b), landed, plan)
+        # The rise over the stance aimed LEAP_GAIN higher: what the leg's jerk off the floor takes from a hop
+        # Raibert's bias learns over hops, and a leap is one hop.
+        rise = plan_apex(plan, self.robot, leg) - (standing + plan.base)
+        aimed = jnp.where(ev.bottom & plan.leap, jnp.maximum(floor, plan.base + LEAP_GAIN * rise - s.params.height),
+                          floor)
+        return aimed, plan
+
+    def bias(self, s, ev, height_bias):
+        return jnp.where(ev.touchdown & s.plan.leap, s.height_bias, height_bias)
+
+    def flight(self, leg, body, ground, base_xy, speed, s, plan, torque, g, scale, spin, inertia):
+        """A leap's flight: the leg drawn up until the foot is past the obstacle, then set down beyond it; the flight
+        before it: the foot set down `boost` behind Raibert's neutral point."""
+        foot = _foot(leg, body)
+        at = jnp.dot(base_xy + foot[:2], plan.along)
+        com = jnp.dot(_com_xy(leg, body, base_xy), plan.along)
+        bottom = body.z + foot[2] - leg.foot_radius
+        passed = at - leg.foot_radius > plan.far
+        above = bottom > plan.top + 0.5 * CLEARANCE
+        beyond = plan.far + leg.foot_radius + LAND_BEYOND
+        # Drawn up: short of the face until the foot's bottom is above the top; from then on (or once over the
+        # obstacle) carried on so that it is past the far edge when, falling, it would come down to the top. Each
+        # centimetre ahead of the COM turns the body back (the leg is as heavy in rotation as the body), so no sooner.
+        short = jnp.minimum(TUCK_AHEAD, plan.face - leg.foot_radius - FACE_MARGIN - com)
+        to_top = (body.zdot + jnp.sqrt(body.zdot**2 + 2.0 * g * jnp.maximum(bottom - plan.top, 0.0))) / g
+        over = jnp.clip(beyond - com - jnp.dot(body.v, plan.along) * to_top, TUCK_AHEAD, LEAP_REACH)
+        tuck = jnp.where(above | (at > plan.face), over, short)
+        # Set down past the far edge: the foot kept beyond it (from the COM now) while the leg reaches down, and aimed
+        # there from where the COM is when it lands (the fall to the ground beyond), whichever is further.
+        fall = jnp.maximum(bottom - plan.base, 0.0)
+        time_left = (body.zdot + jnp.sqrt(body.zdot**2 + 2.0 * g * fall)) / g
+        landing = com + jnp.dot(body.v, plan.along) * time_left
+        down = jnp.clip(jnp.maximum(beyond - landing, beyond - com), -0.1, LEAP_REACH)
+        ahead = jnp.where(passed, down, tuck)
+        along = jnp.where(plan.leap, plan.along, _along(s))
+        ahead = jnp.where(plan.leap, ahead, jnp.dot(body.v, along) * speed.stance_time / 2 - plan.boost)
+        length = jnp.where(plan.leap & ~passed, tuck_length(self.robot, leg), s.params.gains.leg_length)
+        placement = body.unturn[:2, :2] @ (along * ahead)
+        # Reaching down, as Raibert's flight does: no further than lands the body tilted within its budget.
+        drift = jnp.stack([body.roll, body.pitch]) + spin[:2] * time_left / (1.0 - inertia.alpha)
+        now = (body.level @ (body.foot - body.com))[:2]
+        budgeted = raibert._within_tilt_budget(placement, now, drift, inertia.swing_tilt,
+                                               s.params.gains.tilt_budget, s.params.gains.leg_length)
+        placement = jnp.where(plan.leap & passed, budgeted, placement)
+        target = raibert._placement_angles(leg, body.level, placement, length, body.com)
+        leg_rate = body.qd + jnp.concatenate([body.gyro[:2], jnp.zeros(1)])
+        drive = pd(*scaled(jnp.asarray(raibert.FLIGHT_KP), jnp.asarray(raibert.FLIGHT_KD), scale), target - body.q,
+                   leg_rate)
+        return jnp.where(plan.leap | plan.launch, drive, torque)
+
+
+def plan_apex(plan: JumpState, robot: Robot, leg) -> jax.Array:
+    """m, world z the base's apex must reach for the drawn-up foot to pass `CLEARANCE` over the obstacle's top."""
+    return plan.top + tuck_drop(robot, leg) + CLEARANCE
+
+
+def jump(robot: Robot, config: raibert.RaibertConfig | None = None) -> Controller:
+    """`jump`: Raibert's gait that leaps what lies ahead (the module's docstring); params: `raibert_params(...)`."""
+    key = repr((STEP_UP, CLEARANCE, TUCK_AHEAD, TUCK_KNEE, FACE_MARGIN, LAND_BEYOND, LEAP_REACH, LEAP_GAIN, LAND_AHEAD,
+                MAX_BOOST, SAMPLES, LOOK_SPAN))
+    return raibert.gait(robot, config, name="jump", plan=Leap(robot), key=key)
+
+

@@ -1,0 +1,115 @@
+"""The jump: Raibert's gait that leaps what lies ahead. Its look at the ground against the terrain's own geometry, its
+drawn-up leg against MuJoCo C, and its leaps over the obstacle sweep's blocks on the chain engine."""
+
+import jax
+import jax.numpy as jnp
+import mujoco
+import numpy as np
+import pytest
+
+from hopper_mjx import control, terrain
+from hopper_mjx.control import jump, kinematics, raibert
+from hopper_mjx.hardware.signals import SensedGround
+from hopper_mjx.model.layout import Layout
+from hopper_mjx.model.robot import Robot
+
+BLOCK = "obstacle:height={h},x=0.6,length=0.1,size=8x4"  # the obstacle sweep's block, on its 4 cm grid
+
+
+def _sensed(spec: str) -> SensedGround:
+    t = terrain.parse(spec).terrain()
+    return SensedGround(jnp.asarray(t.heights, jnp.float32), jnp.zeros(1), jnp.zeros(3), tuple(t.size))
+
+
+def test_the_obstacle_ahead_is_the_block_as_the_engine_collides_with_it():
+    """A 0.3 m block from x = 0.6 to 0.7: the grid (cell 4 cm) makes each vertical face a ramp one cell wide, so ground
+    5 cm up (`STEP_UP`) starts 7 mm up the near ramp (x = 0.567) and ends 7 mm before the far one's foot (0.713). The
+    samples, 2 cm apart, find both within one sample; the top is the block's height. Flat ground, ground behind the
+    foot, and no direction of travel hold no obstacle."""
+    ground = _sensed(BLOCK.format(h=0.3))
+    ahead = jnp.array([1.0, 0.0])
+    spacing = (jump.LOOK_SPAN + 0.03) / (jump.SAMPLES - 1)
+    for foot_x in (0.1, 0.3, 0.45):
+        seen, face, far, top = (float(v) for v in jump.obstacle(ground, jnp.array([foot_x, 0.0]), ahead, 0.03))
+        assert seen == 1.0 and top == pytest.approx(0.3)
+        assert foot_x + face == pytest.approx(0.567, abs=spacing)
+        assert foot_x + far == pytest.approx(0.713, abs=spacing)
+    assert not jump.obstacle(_sensed(BLOCK.format(h=0.0)), jnp.array([0.3, 0.0]), ahead, 0.03)[0]
+    assert not jump.obstacle(ground, jnp.array([0.9, 0.0]), ahead, 0.03)[0]  # past it
+    assert not jump.obstacle(ground, jnp.array([0.3, 0.0]), -ahead, 0.03)[0]  # going the other way
+    assert not jump.obstacle(ground, jnp.array([0.3, 0.0]), jnp.zeros(2), 0.03)[0]  # hopping in place
+
+
+def test_the_drawn_up_leg_drops_the_foot_as_much_as_tuck_drop_says_in_mujoco_c(mj_model):
+    """The foot `TUCK_AHEAD` ahead of the hip on the shortest leg the knee allows less `TUCK_KNEE`: its joint angles
+    are within their ranges, and MuJoCo C puts the foot's bottom `tuck_drop` below the level base origin."""
+    robot = Robot.of(mj_model)
+    leg, lay = robot.leg, Layout.of(mj_model)
+    length = float(jump.tuck_length(robot, leg))
+    assert length == pytest.approx(float(kinematics.leg_length(leg, lay.joint_range[2][0] + jump.TUCK_KNEE)))
+    down = leg.hfe_below_haa + np.sqrt(length**2 - jump.TUCK_AHEAD**2)
+    angles = np.asarray(kinematics.inverse(leg, jnp.array([jump.TUCK_AHEAD, 0.0, -down])))
+    for (low, high), q in zip(lay.joint_range, angles):
+        assert low <= q <= high
+    d = mujoco.MjData(mj_model)
+    d.qpos[:] = mj_model.qpos0
+    d.qpos[2] = 2.0
+    d.qpos[list(lay.joint_qpos)] = angles
+    mujoco.mj_kinematics(mj_model, d)
+    foot_bottom = d.geom_xpos[lay.foot_geom, 2] - mj_model.geom_size[lay.foot_geom, 0]
+    assert d.qpos[2] - foot_bottom == pytest.approx(float(jump.tuck_drop(robot, leg)), abs=1e-5)
+    # Drawn up, the foot is higher than standing by the most that the knee's stop allows less its margin.
+    assert float(jump.tuck_drop(robot, leg)) < robot.standing_height - 0.1
+
+
+def test_on_the_flat_plane_the_jump_is_raibert(sim):
+    """Nothing to look at: the same trajectory, bit for bit."""
+    gravity = np.array([[0.0, 0.0, -9.81], [0.0, 0.0, -1.62]])
+    runs = []
+    for build in (raibert.raibert, jump.jump):
+        params = raibert.raibert_params(2, height=0.1, speed=(0.3, 0.0))
+        final, traj = sim.run(gravity, build(sim.robot), params, duration=1.0)
+        runs.append(np.asarray(traj.qpos))
+    np.testing.assert_array_equal(runs[0], runs[1])
+
+
+@pytest.fixture(scope="module")
+def leaps():
+    """The jump over the sweep's blocks with DC motors on the chain engine: 0.8 m at the Moon, 0.3 m at Mars and
+    Earth (each beyond what Raibert clears there, docs/sweeps.md), 10 s at the sweep's 0.3 m/s."""
+    from hopper_mjx.scenario import Physics
+    from hopper_mjx.sim import gravity_vectors
+    from hopper_mjx.sweep.runner import recorded
+
+    cells = ((0.8, 1.62), (0.3, 3.71), (0.3, 9.81))
+    physics = Physics(ground=terrain.parse(BLOCK.format(h=0.3)), motor="dc", engine="chain")
+    sim = physics.sim(chunk=len(cells))
+    grids = np.stack([terrain.parse(BLOCK.format(h=h)).terrain().heights for h, _ in cells])
+    controller, params = control.make("jump", sim.robot, len(cells), height=0.1, speed=(0.3, 0.0))
+    final, traj = sim.run(gravity_vectors([g for _, g in cells]), controller, params, duration=10.0,
+                          sensors=recorded(physics.timestep), key=0, ground=grids)
+    return cells, sim, jax.tree_util.tree_map(np.asarray, traj)
+
+
+def test_the_jump_leaps_the_sweeps_blocks(leaps):
+    """Each robot's foot comes down beyond the block's far edge (the sweep's `cleared`), and the base rose at
+    least as high as the drawn-up foot needs to pass over the top."""
+    from hopper_mjx.metrics import hops
+
+    cells, sim, traj = leaps
+    bands = np.array([[[0.6, 0.7, h]] for h, _ in cells])
+    cleared = hops.terrain_metrics(traj, command_speed=(0.3, 0.0), obstacles=bands)["obstacles_cleared"]
+    assert list(cleared) == [1, 1, 1]
+    drop = float(jump.tuck_drop(sim.robot, sim.robot.leg))
+    for (h, _), z in zip(cells, traj.qpos[:, :, 2]):
+        assert z.max() >= h + drop
+
+
+def test_a_block_or_gaps_sweep_runs_the_jump_unless_told_raibert():
+    from hopper_mjx.sweep import __main__ as sweep
+
+    for kind in ("obstacle", "gaps"):
+        assert sweep.parser().parse_args([kind]).controller == "jump"
+        assert sweep.parser().parse_args([kind, "--controller", "raibert"]).controller == "raibert"
+        with pytest.raises(SystemExit):
+            sweep.parser().parse_args([kind, "--controller", "balance"])
