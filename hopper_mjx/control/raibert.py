@@ -469,22 +469,15 @@ COMMANDS = Commands(read=_read_commands, write=_write_commands)
 
 
 class Plan(Protocol):
-    """What a controller built on this gait (`jump`) changes in it; static, one per controller. Each hook is pure and
-    per instance, called inside `act` with what `act` has worked out so far."""
+    """What a controller built on this gait (`jump`) changes in it; static, one per controller, each hook pure and per
+    instance: `initial` its own state (`RaibertState.plan`); `aim` (the floor the next hop is aimed above, its state)
+    from Raibert's floor; `bias` the apex-target bias kept of the one Raibert's height loop adapted; `flight` the
+    flight's joint torques from Raibert's `torque`."""
 
-    def initial(self, obs: Observation) -> Any:
-        """The plan's own state at the start (`RaibertState.plan`)."""
-
-    def aim(self, leg, body: Body, ground, base_xy, speed: "Speed", s: RaibertState, ev: Events, phase, floor,
-            standing, g) -> tuple[jax.Array, Any]:
-        """(the floor the next hop is aimed above, the plan's state), from Raibert's `floor`."""
-
-    def bias(self, s: RaibertState, ev: Events, height_bias) -> jax.Array:
-        """The apex-target bias kept, from the one Raibert's height loop adapted."""
-
-    def flight(self, leg, body: Body, ground, base_xy, speed: "Speed", s: RaibertState, plan, torque, g,
-               scale: PDScale | None, spin, inertia: "Inertia") -> jax.Array:
-        """Joint torques (3,) in flight, from Raibert's `torque`."""
+    def initial(self, obs: Observation) -> Any: ...
+    def aim(self, leg, body, ground, base_xy, speed, s, ev, phase, floor, standing, g) -> tuple[jax.Array, Any]: ...
+    def bias(self, s, ev, height_bias) -> jax.Array: ...
+    def flight(self, leg, body, ground, base_xy, speed, s, plan, torque, g, scale, spin, inertia) -> jax.Array: ...
 
 
 def raibert(robot: Robot, config: RaibertConfig | None = None) -> Controller:
