@@ -47,8 +47,8 @@ CASES = [
     ("simulate", ["--gravity", "-1"], "--gravity: gravity magnitudes point down and must be >= 0"),
     ("simulate", ["--num", "0"], "--num must be >= 1, got 0"),
     ("simulate", ["--num", "abc"], "argument --num: invalid int value: 'abc'"),
-    ("simulate", ["--controller", "jump"], "--controller: unknown controller 'jump'; choose from: none, hold, pid, "
-                                             "raibert, balance, policy:PATH"),
+    ("simulate", ["--controller", "leap"], "--controller: unknown controller 'leap'; choose from: none, hold, pid, "
+                                             "raibert, jump, balance, policy:PATH"),
     ("simulate", ["--rate", "7"], "--rate 7 must divide the physics rate 1000 Hz (a sample every whole number of "
                                   "steps), e.g. 5, 8, 10, 20, 25, 40, 50, 100"),
     ("render", ["--video", "h.gif", "--fps", "15"], "--fps 15 must divide the physics rate 1000 Hz"),
@@ -316,7 +316,7 @@ def test_the_checks_know_what_the_library_accepts(sim):
 
     for name in registry.CONTROLLERS:
         assert control.make(name, sim.robot, 2, mj_model=sim.mj_model)[0].name == name
-    with pytest.raises(ValueError, match="unknown controller 'bogus'; choose from: none, hold, pid, raibert, balance"):
+    with pytest.raises(ValueError, match="unknown controller 'bogus'; choose from: none, hold, pid, raibert, jump, balance"):
         control.make("bogus", sim.robot, 2)
     assert list(tasks.TASKS) == list(registry.TASKS)
     assert cli.DEFAULT_TIMESTEP == loader.DEFAULT_TIMESTEP
