@@ -316,7 +316,8 @@ def test_the_checks_know_what_the_library_accepts(sim):
 
     for name in registry.CONTROLLERS:
         assert control.make(name, sim.robot, 2, mj_model=sim.mj_model)[0].name == name
-    with pytest.raises(ValueError, match="unknown controller 'bogus'; choose from: none, hold, pid, raibert, jump, balance"):
+    with pytest.raises(ValueError,
+                       match="unknown controller 'bogus'; choose from: none, hold, pid, raibert, jump, balance"):
         control.make("bogus", sim.robot, 2)
     assert list(tasks.TASKS) == list(registry.TASKS)
     assert cli.DEFAULT_TIMESTEP == loader.DEFAULT_TIMESTEP
