@@ -10,6 +10,7 @@ from hopper_mjx.control.base import Controller, PDScale, hold, zero_torque
 from hopper_mjx.model.robot import Robot
 
 NAMES = tuple(registry.CONTROLLERS)
+GAITS = {"raibert": raibert.raibert, "jump": jump.jump}  # registry.GAIT_CONTROLLERS' builders: robot -> Controller
 
 
 def make(name: str, robot: Robot, n: int, *, height: float = raibert.DEFAULT_HEIGHT,
@@ -44,8 +45,7 @@ def make(name: str, robot: Robot, n: int, *, height: float = raibert.DEFAULT_HEI
     if len(speed) != 2:  # raibert, jump
         raise ValueError(f"speed needs two values VX,VY in m/s, got {list(speed)}")
     leg = None if legs is None else raibert.legs(robot, legs)
-    build = jump.jump if name == "jump" else raibert.raibert
-    return build(robot), raibert.raibert_params(n, height=height, speed=speed, pd=pd, leg=leg)
+    return GAITS[name](robot), raibert.raibert_params(n, height=height, speed=speed, pd=pd, leg=leg)
 
 
-__all__ = ["NAMES", "Controller", "make"]
+__all__ = ["GAITS", "NAMES", "Controller", "make"]

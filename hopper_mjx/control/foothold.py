@@ -25,6 +25,16 @@ from hopper_mjx.model.robot import LegGeometry
 EDGE_STEP, EDGE_KINK, EDGE_SLOPE, EDGE_MARGIN, EDGE_SHIFTS = 0.01, 0.003, 0.6, 0.01, 5
 
 
+def sink_speed(zdot, drop, g):
+    """m/s downwards when a body rising at `zdot` m/s comes down `drop` m below where it is now (none when above)."""
+    return jnp.sqrt(zdot**2 + 2.0 * g * jnp.maximum(drop, 0.0))
+
+
+def fall_time(zdot, drop, g):
+    """s until a body rising at `zdot` m/s comes down `drop` m below where it is now, ballistic under `g`."""
+    return (zdot + sink_speed(zdot, drop, g)) / g
+
+
 def foothold(leg: LegGeometry, body, base_xy, placement) -> tuple[jax.Array, jax.Array]:
     """World (x, y) where the foot lands if placed `placement` (heading frame, m) from the COM."""
     com = base_xy + (body.rot @ (body.com - jnp.array([0.0, 0.0, leg.haa_below_base])))[:2]
@@ -54,8 +64,7 @@ def clear_of_edges(leg: LegGeometry, body, ground, base_xy, placement, foot_heig
     # The travel direction, heading frame; hopping in place, the heading.
     along = jnp.where(speed > 0.05, body.unturn[:2, :2] @ body.v / jnp.maximum(speed, 1e-6), jnp.array([1.0, 0.0]))
     x, y = foothold(leg, body, base_xy, placement)
-    drop = jnp.maximum(foot_height - ground.height(x, y), 0.0)
-    fall = (body.zdot + jnp.sqrt(body.zdot**2 + 2.0 * g * drop)) / g
+    fall = fall_time(body.zdot, foot_height - ground.height(x, y), g)
     world_along = body.unturn[:2, :2].T @ along
     lands = jnp.stack([x, y]) + body.v * fall
     samples = lands[:, None] + world_along[:, None] * jnp.asarray(offsets)[None, :]

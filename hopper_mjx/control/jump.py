@@ -33,7 +33,8 @@ import jax
 import jax.numpy as jnp
 
 from hopper_mjx.control import raibert
-from hopper_mjx.control.base import Controller, pd, scaled
+from hopper_mjx.control.base import Controller
+from hopper_mjx.control.foothold import fall_time, sink_speed
 from hopper_mjx.control.kinematics import leg_length
 from hopper_mjx.model.robot import Robot
 
@@ -129,7 +130,7 @@ class Leap:
         bottom = body.z + _foot(leg, body)[2] - leg.foot_radius
         com_xy = _com_xy(leg, body, base_xy)
         here = ground.height(*(base_xy + _foot(leg, body)[:2]))
-        sink = jnp.sqrt(body.zdot**2 + 2.0 * g * jnp.maximum(bottom - here, 0.0))  # m/s down at touchdown
+        sink = sink_speed(body.zdot, bottom - here, g)  # m/s down at touchdown
         time_left = (body.zdot + sink) / g
         touch = com_xy + body.v * time_left + along * v * speed.stance_time / 2  # where the foot comes down
         seen, face, far, top = obstacle(ground, touch, along, leg.foot_radius)
@@ -183,13 +184,12 @@ class Leap:
         # obstacle) carried on so that it is past the far edge when, falling, it would come down to the top. Each
         # centimetre ahead of the COM turns the body back (the leg is as heavy in rotation as the body), so no sooner.
         short = jnp.minimum(TUCK_AHEAD, plan.face - leg.foot_radius - FACE_MARGIN - com)
-        to_top = (body.zdot + jnp.sqrt(body.zdot**2 + 2.0 * g * jnp.maximum(bottom - plan.top, 0.0))) / g
+        to_top = fall_time(body.zdot, bottom - plan.top, g)
         over = jnp.clip(beyond - com - jnp.dot(body.v, plan.along) * to_top, TUCK_AHEAD, LEAP_REACH)
         tuck = jnp.where(above | (at > plan.face), over, short)
         # Set down past the far edge: the foot kept beyond it (from the COM now) while the leg reaches down, and aimed
         # there from where the COM is when it lands (the fall to the ground beyond), whichever is further.
-        fall = jnp.maximum(bottom - plan.base, 0.0)
-        time_left = (body.zdot + jnp.sqrt(body.zdot**2 + 2.0 * g * fall)) / g
+        time_left = fall_time(body.zdot, bottom - plan.base, g)
         landing = com + jnp.dot(body.v, plan.along) * time_left
         down = jnp.clip(jnp.maximum(beyond - landing, beyond - com), -0.1, LEAP_REACH)
         ahead = jnp.where(passed, down, tuck)
@@ -204,9 +204,7 @@ class Leap:
                                                s.params.gains.tilt_budget, s.params.gains.leg_length)
         placement = jnp.where(plan.leap & passed, budgeted, placement)
         target = raibert._placement_angles(leg, body.level, placement, length, body.com)
-        leg_rate = body.qd + jnp.concatenate([body.gyro[:2], jnp.zeros(1)])
-        drive = pd(*scaled(jnp.asarray(raibert.FLIGHT_KP), jnp.asarray(raibert.FLIGHT_KD), scale), target - body.q,
-                   leg_rate)
+        drive = raibert.flight_pd(body, target, scale)
         return jnp.where(plan.leap | plan.launch, drive, torque)
 
 

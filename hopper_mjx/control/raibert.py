@@ -76,7 +76,7 @@ import numpy as np
 
 from hopper_mjx.control import kinematics
 from hopper_mjx.control.base import Commands, Controller, PDScale, joint_state, pd, saturate, scaled, to_ctrl
-from hopper_mjx.control.foothold import clear_of_edges, foothold, landing_floor
+from hopper_mjx.control.foothold import clear_of_edges, fall_time, foothold, landing_floor
 from hopper_mjx.hardware import rotation
 from hopper_mjx.hardware.signals import Observation
 from hopper_mjx.model.robot import LegGeometry, Robot
@@ -431,7 +431,7 @@ def flight_torque(leg: LegGeometry, gains: RaibertConfig, body: Body, spin, spee
         rise = landing - ground.height(base_xy[0] + foot[0], base_xy[1] + foot[1])
         retract = retract + jnp.clip(rise, 0.0, MAX_RETRACT)
         hold = (rise > RISER) & (foot_height < SWING_CLEARANCE)
-    time_left = (body.zdot + jnp.sqrt(body.zdot**2 + 2.0 * g * jnp.maximum(foot_height, 0.0))) / g  # to touchdown
+    time_left = fall_time(body.zdot, foot_height, g)  # to touchdown
     drift = jnp.stack([body.roll, body.pitch]) + spin[:2] * time_left / (1.0 - inertia.alpha)  # tilt at touchdown
     now = (body.level @ (body.foot - body.com))[:2]  # where the foot is, heading frame from the COM
     placement = _within_tilt_budget(placement, now, drift,
@@ -440,6 +440,11 @@ def flight_torque(leg: LegGeometry, gains: RaibertConfig, body: Body, spin, spee
     placement = jnp.where(hold, now, placement)
     flight_length = gains.leg_length - jnp.where(body.zdot > 0, retract, 0.0)
     target = _placement_angles(leg, body.level, placement, flight_length, body.com)
+    return flight_pd(body, target, scale)
+
+
+def flight_pd(body: Body, target: jax.Array, scale: PDScale | None = None) -> jax.Array:
+    """Joint torques (3,) N·m of the flight PD to joint `target`s (rad), damping the leg's rate in the world."""
     leg_rate = body.qd + jnp.concatenate([body.gyro[:2], jnp.zeros(1)])  # the leg's rate in the world
     return pd(*scaled(jnp.asarray(FLIGHT_KP), jnp.asarray(FLIGHT_KD), scale), target - body.q, leg_rate)
 

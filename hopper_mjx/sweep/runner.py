@@ -19,10 +19,10 @@ import numpy as np
 from tqdm import tqdm
 
 from hopper_mjx import registry, terrain
+from hopper_mjx.control import GAITS
 from hopper_mjx.control.balance import balance
 from hopper_mjx.control.base import pd_scale
-from hopper_mjx.control.jump import jump
-from hopper_mjx.control.raibert import GAINS, raibert, raibert_params
+from hopper_mjx.control.raibert import GAINS, raibert_params
 from hopper_mjx.control.raibert import legs as raibert_legs
 from hopper_mjx.hardware import signals
 from hopper_mjx.metrics import hops
@@ -73,7 +73,7 @@ class ChunkRunner:
         if spec.controller == "balance":  # commands nothing: it stands
             self.controller = balance(sim.robot, sim.mj_model)
         elif self.policy is None:
-            self.controller = jump(sim.robot) if spec.controller == "jump" else raibert(sim.robot)
+            self.controller = GAITS[spec.controller](sim.robot)
         else:  # brax is imported only when a policy is swept
             from hopper_mjx.envs.policy import policy_controller, read
 
