@@ -27,6 +27,8 @@ PD_CONTROLLERS = ("hold", "pid", "raibert", "jump")
 SWEEP_CONTROLLERS = ("raibert", "jump", "balance")
 # The controllers of Raibert's gait: they take its commands, gains and per-instance legs (`raibert_params`).
 GAIT_CONTROLLERS = ("raibert", "jump")
+# The gaits that know their action delay: they act on the state predicted over it (`control.latency`).
+PREDICTING_CONTROLLERS = ("jump",)
 # A terrain sweep's (obstacle, gaps) controllers, its default first: what jumps as the ground ahead needs.
 TERRAIN_SWEEP_CONTROLLERS = ("jump", "raibert")
 ENGINES = {

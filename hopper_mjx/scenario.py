@@ -236,8 +236,9 @@ class Scenario:
         # Raibert models each drawn leg (the others take none): measured only for it, a few ms per distinct leg.
         own = legs(sim.mj_model, self.draws(sim.mj_model)) if self.controller in registry.GAIT_CONTROLLERS \
             else None
+        latency = controls["action_delay"] * 1e-3 if "action_delay" in controls else self.physics.action_delay
         return control.make(self.controller, sim.robot, self.n, height=self.height, speed=self.speed, gains=self.gains,
-                            mj_model=sim.mj_model, pd=pd, legs=own)
+                            mj_model=sim.mj_model, pd=pd, legs=own, latency=latency)
 
     def run(self, duration: float, sensors):
         """(Sim, final state, trajectory as NumPy) of the whole batch for `duration` s; prints the rate."""

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from typing import Sequence
 
+import numpy as np
+
 from hopper_mjx import registry
 from hopper_mjx.control import balance, jump, pid, raibert
 from hopper_mjx.control.base import Controller, PDScale, hold, zero_torque
@@ -15,7 +17,7 @@ GAITS = {"raibert": raibert.raibert, "jump": jump.jump}  # registry.GAIT_CONTROL
 
 def make(name: str, robot: Robot, n: int, *, height: float = raibert.DEFAULT_HEIGHT,
          speed=(0.0, 0.0), gains=None, mj_model=None, pd: PDScale | None = None,
-         legs: Sequence[Robot] | None = None) -> tuple[Controller, object]:
+         legs: Sequence[Robot] | None = None, latency=None) -> tuple[Controller, object]:
     """(controller, per-instance params or None) for n instances of `robot`.
 
     none: limp; hold: PD to the initial joint angles; pid: the seed's joint position
@@ -26,7 +28,8 @@ def make(name: str, robot: Robot, n: int, *, height: float = raibert.DEFAULT_HEI
     (`base.pd_scale`), for the controllers that have them (`registry.PD_CONTROLLERS`). legs: each
     instance's robot facts when its leg is drawn (`variation.draw.legs`): raibert models each instance's
     own leg; hold and pid hold each instance's own start (its own stance) anyway; balance keeps the
-    URDF's design.
+    URDF's design. latency: s, each instance's action delay (scalar or (n,)), which the gaits that predict
+    (`registry.PREDICTING_CONTROLLERS`) act over; the others, and these with none, take their torques as prompt.
     """
     registry.check("controller", registry.CONTROLLERS, name)
     if pd is not None and name not in registry.PD_CONTROLLERS:
@@ -45,7 +48,16 @@ def make(name: str, robot: Robot, n: int, *, height: float = raibert.DEFAULT_HEI
     if len(speed) != 2:  # raibert, jump
         raise ValueError(f"speed needs two values VX,VY in m/s, got {list(speed)}")
     leg = None if legs is None else raibert.legs(robot, legs)
-    return GAITS[name](robot), raibert.raibert_params(n, height=height, speed=speed, pd=pd, leg=leg)
+    return GAITS[name](robot), raibert.raibert_params(n, height=height, speed=speed, pd=pd, leg=leg,
+                                                      latency=predicted_latency(name, latency))
 
 
-__all__ = ["GAITS", "NAMES", "Controller", "make"]
+def predicted_latency(name: str, latency):
+    """`latency` (s, scalar or (n,)) for the gait `name` to predict over, or None: it does not predict
+    (`registry.PREDICTING_CONTROLLERS`), or there is no delay (no leaves: the gait's program without a prediction)."""
+    if name not in registry.PREDICTING_CONTROLLERS or latency is None or not np.any(np.asarray(latency) > 0):
+        return None
+    return latency
+
+
+__all__ = ["GAITS", "NAMES", "Controller", "make", "predicted_latency"]

@@ -1,5 +1,7 @@
 """Where a hopping controller's foot lands on terrain: the foothold a placement gives (`foothold`), that foothold
-moved clear of the ground's edges (`clear_of_edges`), and the ground the next hop must clear (`landing_floor`).
+moved clear of the ground's edges (`clear_of_edges`), the ground the next hop must clear (`landing_floor`), a placement
+kept within the body's tilt budget (`within_tilt_budget`), and the joint angles that place the foot there
+(`placement_angles`).
 
 Pure and per instance. `body` is what the controller senses of the robot (`raibert.Body`: its rotation, COM, foot,
 velocity, heading frame `unturn`), `speed` its gait's timing (`raibert.Speed`: the last stance time), `ground`
@@ -12,6 +14,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from hopper_mjx.control import kinematics
 from hopper_mjx.model.robot import LegGeometry
 
 # The foothold kept off terrain edges (`clear_of_edges`): the ground is sampled every EDGE_STEP m along the travel
@@ -87,3 +90,37 @@ def landing_floor(leg: LegGeometry, body, ground, base_xy, speed, height, g):
     flight = 2.0 * jnp.sqrt(2.0 * jnp.maximum(height, 0.0) / g)
     ahead = foothold(leg, body, base_xy, body.unturn[:2, :2] @ (body.v * (speed.stance_time + flight)))
     return jnp.maximum(ground.height(foot[0], foot[1]), ground.height(*ahead))
+
+
+def within_tilt_budget(wanted: jax.Array, now: jax.Array, drift: jax.Array, swing_tilt: jax.Array,
+                        budget: jax.Array, length: jax.Array) -> jax.Array:
+    """The placement `wanted` moved, if need be, so that the body lands tilted <= `budget`.
+
+    Heading frame, from the COM: `now` is where the foot is, `drift` the (roll,
+    pitch) the body would land with if the leg were held where it is. In flight,
+    tilt + swing_tilt·(leg world angle) - H·t/I_body is constant (the robot's angular
+    momentum H is), so sending the foot Δ further tilts the body by swing_tilt·Δ/L
+    more. Past the budget the leg is sent short, taking up part of H itself.
+    """
+    # +x placement turns the leg by -x/L about y (pitch +), +y by +y/L about x (roll -).
+    sign = jnp.array([-1.0, 1.0])  # (roll, pitch) per unit of (y, x)
+    landing = drift + sign * swing_tilt * (wanted[::-1] - now[::-1]) / length
+    allowed = jnp.clip(landing, -budget, budget)
+    return (now[::-1] + sign * (allowed - drift) * length / swing_tilt)[::-1]
+
+
+def placement_angles(leg: LegGeometry, level: jax.Array, placement: jax.Array, length: jax.Array,
+                      com: jax.Array) -> jax.Array:
+    """Joint targets that put the foot `placement` (m, heading-frame x and y) from the
+    COM (`com`, base frame from the haa axis) with a virtual leg of `length`.
+
+    The target is built in the level frame (the body's frame without its roll and
+    pitch; `level` turns body vectors into it) and turned into the body frame by
+    the body's present tilt, so the foot lands where wanted although the body
+    tilts: in flight it must, because this leg is as heavy in rotation as the body
+    and every swing turns the body back.
+    """
+    x, y = placement + (level @ com)[:2]
+    down = jnp.sqrt(jnp.maximum(length**2 - x**2, 1e-4)) + leg.hfe_below_haa
+    z = -jnp.sqrt(jnp.maximum(down**2 - y**2, 1e-4))
+    return kinematics.inverse(leg, level.T @ jnp.stack([x, y, z]))

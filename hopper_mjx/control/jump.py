@@ -34,7 +34,7 @@ import jax.numpy as jnp
 
 from hopper_mjx.control import raibert
 from hopper_mjx.control.base import Controller
-from hopper_mjx.control.foothold import fall_time, sink_speed
+from hopper_mjx.control.foothold import fall_time, placement_angles, sink_speed, within_tilt_budget
 from hopper_mjx.control.kinematics import leg_length
 from hopper_mjx.model.robot import Robot
 
@@ -200,10 +200,10 @@ class Leap:
         # Reaching down, as Raibert's flight does: no further than lands the body tilted within its budget.
         drift = jnp.stack([body.roll, body.pitch]) + spin[:2] * time_left / (1.0 - inertia.alpha)
         now = (body.level @ (body.foot - body.com))[:2]
-        budgeted = raibert._within_tilt_budget(placement, now, drift, inertia.swing_tilt,
-                                               s.params.gains.tilt_budget, s.params.gains.leg_length)
+        budgeted = within_tilt_budget(placement, now, drift, inertia.swing_tilt,
+                                      s.params.gains.tilt_budget, s.params.gains.leg_length)
         placement = jnp.where(plan.leap & passed, budgeted, placement)
-        target = raibert._placement_angles(leg, body.level, placement, length, body.com)
+        target = placement_angles(leg, body.level, placement, length, body.com)
         drive = raibert.flight_pd(body, target, scale)
         return jnp.where(plan.leap | plan.launch, drive, torque)
 

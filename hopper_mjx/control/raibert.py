@@ -28,7 +28,7 @@ last measured stance time (touchdown to lift-off), k_v = speed_gain·L/(g·T_s)
 the fraction of the error removed per hop), x_i a per-hop integral of the error,
 and v_ref a reference that ramps to the command by `speed_step` per hop. Lateral
 placement uses haa. The target is built in the level frame and turned into the
-body frame by the body's present tilt (see `_placement_angles`), and the hip
+body frame by the body's present tilt (see `foothold.placement_angles`), and the hip
 damping acts on the leg's world rate: this leg is as heavy in rotation as the
 body, so every swing in flight tilts the body back, and targets fixed to the
 body would land the foot off by L·tilt.
@@ -76,7 +76,15 @@ import numpy as np
 
 from hopper_mjx.control import kinematics
 from hopper_mjx.control.base import Commands, Controller, PDScale, joint_state, pd, saturate, scaled, to_ctrl
-from hopper_mjx.control.foothold import clear_of_edges, fall_time, foothold, landing_floor
+from hopper_mjx.control.foothold import (
+    clear_of_edges,
+    fall_time,
+    foothold,
+    landing_floor,
+    placement_angles,
+    within_tilt_budget,
+)
+from hopper_mjx.control.latency import ahead, detuned
 from hopper_mjx.hardware import rotation
 from hopper_mjx.hardware.signals import Observation
 from hopper_mjx.model.robot import LegGeometry, Robot
@@ -142,6 +150,9 @@ class RaibertParams:
     # Factors on the joint PD gains (the flight PD, the attitude servo, the brake); None: as designed.
     pd: PDScale | None = None
     leg: "Leg | None" = None  # each instance's own leg (`legs`); None: the URDF's, folded as constants
+    # s, each instance's action delay, which the gait predicts over (`control.latency`); None: it takes its torques
+    # as prompt (Raibert's own, today's program).
+    latency: jax.Array | None = None
 
 
 def _read_commands(s: "RaibertState"):
@@ -192,14 +203,16 @@ def _check_gains(gains: RaibertConfig) -> None:
 
 
 def raibert_params(n: int, *, height, speed=(0.0, 0.0), config: RaibertConfig | None = None,
-                   pd: PDScale | None = None, leg: "Leg | None" = None, **gain_overrides) -> RaibertParams:
+                   pd: PDScale | None = None, leg: "Leg | None" = None, latency=None,
+                   **gain_overrides) -> RaibertParams:
     """Per-instance commands and gains, every leaf with leading axis n.
 
     height: apex rise over the standing height, m, scalar or (n,);
     speed: (vx, vy) m/s, (2,) or (n, 2); gain_overrides: any RaibertConfig field,
     scalar or (n,) (a sweep over a gain is just an array here); pd: (n, 3) factors on the joint
     PD gains (`base.pd_scale`); leg: each instance's own leg (`legs`), whose `length_shift` moves
-    `leg_length` (given for the URDF's leg) to that leg's.
+    `leg_length` (given for the URDF's leg) to that leg's; latency: s of action delay, scalar or (n,), for a gait
+    that predicts over it (None: prompt).
     """
     if n < 1:
         raise ValueError(f"n must be >= 1, got {n}")
@@ -216,7 +229,12 @@ def raibert_params(n: int, *, height, speed=(0.0, 0.0), config: RaibertConfig | 
             raise ValueError(f"leg must hold n={n} legs, got {np.shape(leg.standing_height)}")
         gains = dataclasses.replace(gains, leg_length=gains.leg_length + np.asarray(leg.length_shift, np.float32))
     _check_gains(gains)
-    return RaibertParams(height=heights, speed=_batch(n, "speed", speed, (2,)), gains=gains, pd=pd, leg=leg)
+    if latency is not None:
+        latency = _batch(n, "latency", latency, ())
+        if np.any(latency < 0):
+            raise ValueError("latency (action delay) must be >= 0 s")
+    return RaibertParams(height=heights, speed=_batch(n, "speed", speed, (2,)), gains=gains, pd=pd, leg=leg,
+                         latency=latency)
 
 
 def _tilt(rot: jax.Array) -> tuple[jax.Array, jax.Array]:
@@ -434,12 +452,12 @@ def flight_torque(leg: LegGeometry, gains: RaibertConfig, body: Body, spin, spee
     time_left = fall_time(body.zdot, foot_height, g)  # to touchdown
     drift = jnp.stack([body.roll, body.pitch]) + spin[:2] * time_left / (1.0 - inertia.alpha)  # tilt at touchdown
     now = (body.level @ (body.foot - body.com))[:2]  # where the foot is, heading frame from the COM
-    placement = _within_tilt_budget(placement, now, drift,
+    placement = within_tilt_budget(placement, now, drift,
                                     inertia.swing_tilt, gains.tilt_budget, gains.leg_length)
     # Below a riser's top the foot stays where it is, the leg shortening: the swing waits until it clears.
     placement = jnp.where(hold, now, placement)
     flight_length = gains.leg_length - jnp.where(body.zdot > 0, retract, 0.0)
-    target = _placement_angles(leg, body.level, placement, flight_length, body.com)
+    target = placement_angles(leg, body.level, placement, flight_length, body.com)
     return flight_pd(body, target, scale)
 
 
@@ -514,6 +532,9 @@ def gait(robot: Robot, config: RaibertConfig | None = None, name: str = "raibert
         # The floor is level, so hops and flights follow gravity's vertical part; a sideways
         # part only pushes the robot along, which the speed loop sees as an error.
         g = jnp.maximum(-gravity[2], MIN_GRAVITY)
+        scale = s.params.pd
+        if s.params.latency is not None:  # static: what the torque will meet when it acts, with loops that wait
+            obs, scale = ahead(obs, s.params.latency), detuned(scale, s.params.latency)
         body = sense(robot, obs, leg)
         stiffness = mass * EARTH_GRAVITY / gains.sag
         phase, ev = next_phase(s.phase, obs.contact.flag, obs.time - s.phase_start, body.length,
@@ -530,11 +551,11 @@ def gait(robot: Robot, config: RaibertConfig | None = None, name: str = "raibert
         apex = jnp.where(ev.liftoff, body.z, jnp.where(phase == FLIGHT, jnp.maximum(s.apex, body.z), s.apex))
         spin = kinematics.angular_momentum(leg, body.q, body.qd, body.gyro) / inertia.robot
         stance = stance_torque(leg, gains, phase, body, spin, speed, thrust_force, g, stiffness, mass,
-                               inertia.swing_tilt, s.params.pd)
-        flight = flight_torque(leg, gains, body, spin, speed, g, inertia, s.params.pd, ground, base_xy)
+                               inertia.swing_tilt, scale)
+        flight = flight_torque(leg, gains, body, spin, speed, g, inertia, scale, ground, base_xy)
         if plan is not None and ground is not None:
             height_bias = plan.bias(s, ev, height_bias)
-            flight = plan.flight(leg, body, ground, base_xy, speed, s, planned, flight, g, s.params.pd, spin, inertia)
+            flight = plan.flight(leg, body, ground, base_xy, speed, s, planned, flight, g, scale, spin, inertia)
         torque = saturate(layout, jnp.where(phase == FLIGHT, flight, stance))
         ctrl = to_ctrl(layout, torque)
         state = RaibertState(
@@ -553,42 +574,8 @@ def gait(robot: Robot, config: RaibertConfig | None = None, name: str = "raibert
                       if plan is not None else f"raibert|{config!r}|{robot!r}")
 
 
-def _within_tilt_budget(wanted: jax.Array, now: jax.Array, drift: jax.Array, swing_tilt: jax.Array,
-                        budget: jax.Array, length: jax.Array) -> jax.Array:
-    """The placement `wanted` moved, if need be, so that the body lands tilted <= `budget`.
-
-    Heading frame, from the COM: `now` is where the foot is, `drift` the (roll,
-    pitch) the body would land with if the leg were held where it is. In flight,
-    tilt + swing_tilt·(leg world angle) - H·t/I_body is constant (the robot's angular
-    momentum H is), so sending the foot Δ further tilts the body by swing_tilt·Δ/L
-    more. Past the budget the leg is sent short, taking up part of H itself.
-    """
-    # +x placement turns the leg by -x/L about y (pitch +), +y by +y/L about x (roll -).
-    sign = jnp.array([-1.0, 1.0])  # (roll, pitch) per unit of (y, x)
-    landing = drift + sign * swing_tilt * (wanted[::-1] - now[::-1]) / length
-    allowed = jnp.clip(landing, -budget, budget)
-    return (now[::-1] + sign * (allowed - drift) * length / swing_tilt)[::-1]
-
-
 def _unturn(rot: jax.Array) -> jax.Array:
     """World -> heading frame (the world turned by the body's yaw)."""
     heading = jnp.arctan2(rot[1, 0], rot[0, 0])
     c, s = jnp.cos(heading), jnp.sin(heading)
     return jnp.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])
-
-
-def _placement_angles(leg: LegGeometry, level: jax.Array, placement: jax.Array, length: jax.Array,
-                      com: jax.Array) -> jax.Array:
-    """Joint targets that put the foot `placement` (m, heading-frame x and y) from the
-    COM (`com`, base frame from the haa axis) with a virtual leg of `length`.
-
-    The target is built in the level frame (the body's frame without its roll and
-    pitch; `level` turns body vectors into it) and turned into the body frame by
-    the body's present tilt, so the foot lands where wanted although the body
-    tilts: in flight it must, because this leg is as heavy in rotation as the body
-    and every swing turns the body back.
-    """
-    x, y = placement + (level @ com)[:2]
-    down = jnp.sqrt(jnp.maximum(length**2 - x**2, 1e-4)) + leg.hfe_below_haa
-    z = -jnp.sqrt(jnp.maximum(down**2 - y**2, 1e-4))
-    return kinematics.inverse(leg, level.T @ jnp.stack([x, y, z]))

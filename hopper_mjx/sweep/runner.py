@@ -19,7 +19,7 @@ import numpy as np
 from tqdm import tqdm
 
 from hopper_mjx import registry, terrain
-from hopper_mjx.control import GAITS
+from hopper_mjx.control import GAITS, predicted_latency
 from hopper_mjx.control.balance import balance
 from hopper_mjx.control.base import pd_scale
 from hopper_mjx.control.raibert import GAINS, raibert_params
@@ -115,7 +115,10 @@ class ChunkRunner:
                                  config=self.policy_config, pd=pd)
         gains = {spec.param: self.instances.value[full]} if spec.param in GAINS else {}
         leg = None if self.legs is None else jax.tree_util.tree_map(lambda v: v[row], self.legs)
-        return raibert_params(len(full), height=spec.height, speed=spec.speed, pd=pd, leg=leg, **gains)
+        delay = pick("action_delay")  # ms, drawn or swept; else the run's one
+        latency = predicted_latency(spec.controller, spec.physics.action_delay if delay is None else delay * 1e-3)
+        return raibert_params(len(full), height=spec.height, speed=spec.speed, pd=pd, leg=leg, latency=latency,
+                              **gains)
 
     def mass(self, full: np.ndarray):
         """kg of each instance's robot (its drawn link masses), for the cost of transport and power."""
