@@ -357,7 +357,8 @@ def test_an_obstacle_no_robot_reached_is_a_warning_with_the_duration_that_would(
                        "nothing; they made 0.23 m good at 0.06 m/s against 0.3 commanded; --duration 14 would carry "
                        "them past it at that speed")
     assert said[1] == ("warning: the speed is more than 0.1 m/s from its command (+0.30,+0.00 m/s) at every grid "
-                       "point (+0.06 to +0.06 m/s): the survivors' mean vx over their last 5 s")
+                       "point (0.24 to 0.24 m/s): each survivor's mean (vx, vy) over its last 5 s, its distance from "
+                       "the command averaged")
     assert "reached" in report.table_text(spec, groups).splitlines()[0]
     # Robots that got within 0.1 m of the block reached it (the foot lands ahead of the base): no warning.
     table, cols = _table(spec, inst, distance_made_good=np.where(inst.gravity == 9.81, 0.55, 0.1), mean_speed=0.3)

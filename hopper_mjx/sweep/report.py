@@ -22,7 +22,8 @@ INTEGER_COLUMNS = {"replicate", "seed", "hops", "fell", "diverged", "obstacles_c
 RAIBERT_DELAY_LIMIT_MS = 2.0
 RAIBERT_DELAY_FIGURE = ("Raibert keeps every robot up at 0 ms, Earth and Mars at 2 ms (the Moon 31 %), 0-12 % at 4 ms "
                         "and none from 6 ms: its stance servo was tuned for prompt torques (docs/variation.md, 16 "
-                        "robots per cell at Earth, Mars and Moon, 20 s)")
+                        "robots per cell at Earth, Mars and Moon, 20 s); --controller jump acts on what its delay "
+                        "will meet (docs/control.md)")
 # docs/control.md (`sweep gravity --controller balance --gravity 9.81,3.71,1.62 --num 64 --duration 10`): the LQR
 # stance keeps none of the sweep's kicked robots up; Raibert hopping in place at --height 0.05 keeps them all.
 BALANCE_FIGURE = ("balance, an LQR stance, keeps none of a sweep's kicked robots up (0 % at Earth, Mars and Moon, 64 "
@@ -223,15 +224,16 @@ def notes(spec: SweepSpec, inst: Instances, table: np.ndarray, columns: tuple[st
     commanded = np.array(spec.speed)
     far = [g for g in groups if g.get("tracking_error") is not None and g["tracking_error"] > SPEED_TOLERANCE]
     if far:
-        speeds = [g["mean_speed"] for g in far]
+        errors = [g["tracking_error"] for g in far]
         if len(far) == len(groups):
-            where = f"every grid point ({min(speeds):+.2f} to {max(speeds):+.2f} m/s)"
+            where = f"every grid point ({min(errors):.2f} to {max(errors):.2f} m/s)"
         else:
-            listed = ", ".join(f"{_point(spec, g)}: {g['mean_speed']:+.2f} m/s" for g in far[:4])
+            listed = ", ".join(f"{_point(spec, g)}: {g['tracking_error']:.2f} m/s" for g in far[:4])
             where = f"{len(far)} of {len(groups)} grid points ({listed}{', ...' if len(far) > 4 else ''})"
+        # Each robot's own drift: pushes in random directions leave the group's mean velocity on the command.
         out.append(f"warning: the speed is more than {SPEED_TOLERANCE:g} m/s from its command "
-                   f"({commanded[0]:+.2f},{commanded[1]:+.2f} m/s) at {where}: the survivors' mean vx over their "
-                   "last 5 s")
+                   f"({commanded[0]:+.2f},{commanded[1]:+.2f} m/s) at {where}: each survivor's mean (vx, vy) over its "
+                   "last 5 s, its distance from the command averaged")
     return out
 
 
@@ -404,8 +406,8 @@ def gains_figure(spec: SweepSpec, groups: list[dict], second=None, panels: int =
             ax.text(c, r, text, ha="center", va="center", fontsize=8,
                     color="k" if np.isnan(v) else _label_colour(im.cmap(im.norm(v))))
         fig.colorbar(im, ax=ax, label=label)
-    fig.suptitle(f"{spec.kind} sweep: {spec.param} x gravity, {spec.num} replicates per cell, {spec.duration:g} s "
-                 f"each\n{physics_label(spec)}", fontsize=11)
+    fig.suptitle(f"{spec.kind} sweep of {spec.controller}: {spec.param} x gravity, {spec.num} replicates per cell, "
+                 f"{spec.duration:g} s each\n{physics_label(spec)}", fontsize=11)
     return fig
 
 
