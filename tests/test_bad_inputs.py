@@ -148,6 +148,8 @@ CASES = [
     ("sweep", ["obstacle", "--heights", "0.1,-0.05", "--out", "s"], "--terrain: height=-0.05 must be >= 0 m"),
     ("sweep", ["obstacle", "--heights", "0.3", "--x", "0", "--out", "s"], "the ground within 0.1 m of the start "
      "rises to 0.300 m"),
+    ("sweep", ["obstacle", "--heights", "0.2,2.5", "--motor", "dc", "--gravity", "1.62,9.81", "--out", "s"],
+     "--heights 2.5: taller than any block the dc motors can lift the robot over at g=1.62 m/s² (2.19 m"),
     ("sweep", ["gaps", "--widths", "0.2,3.5", "--out", "s"], "--widths 3.5: a gap must be > 0 m and end 0.5 m before "
      "the ground's end (4 m ahead with --x 0.6): at most 2.9 m here"),
     ("sweep", ["gaps", "--x", "nan", "--out", "s"], "--x must be finite, got nan"),

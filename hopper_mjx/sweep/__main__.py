@@ -186,6 +186,8 @@ def check(args):
         from hopper_mjx.hardware.bound import knee_motor
 
         knee_motor(physics.mj_model, physics.motor)
+        if args.kind == "obstacle":
+            check_blocks(physics, gravity, swept_values(args))
     names = args.controllers.split(",") if args.kind == "compare" else [getattr(args, "controller", "raibert")]
     if len(set(names)) != len(names):
         raise ValueError(f"--controllers lists one twice: {args.controllers}")
@@ -238,6 +240,19 @@ def as_trained(physics, controllers: list[str], part: str = "all"):
     solver = {"iterations": iterations, "ls_iterations": ls_iterations} if part in ("all", "solver") else {}
     options = {**physics.model_options, **step, **solver}
     return dataclasses.replace(physics, model_options=options)
+
+
+def check_blocks(physics, gravity, heights) -> None:
+    """No block above the tallest the motors' energy bound lets the robot pass over at the grid's lowest gravity
+    (`hardware.bound`): no robot could clear it, so its cells would cost their compute and measure nothing."""
+    from hopper_mjx.hardware import bound
+    from hopper_mjx.model.robot import standing_height
+
+    m, g = physics.mj_model, min(gravity)
+    top = bound.highest_block(bound.bounds(m, physics.motor, [g])[g], standing_height(m), bound.tucked_drop(m))
+    if max(heights) > top:
+        raise ValueError(f"--heights {max(heights):g}: taller than any block the {physics.motor} motors can lift the "
+                         f"robot over at g={g:g} m/s² ({top:.2f} m, their energy bound: docs/sweeps.md)")
 
 
 def check_robots(spec, duration: float) -> None:
