@@ -12,7 +12,7 @@ jaxsetup.configure()  # before any JAX computation: 2 host devices here, persist
 # (`--dist loadfile --no-loadscope-reorder`): a long file handed out last would leave the other process idle at the end.
 LONGEST_FIRST = ("test_tour.py", "test_core.py", "test_terrain_physics.py", "test_chain.py", "test_control.py",
                  "test_bench.py", "test_chain_terrain.py", "test_chain_terrain_legs.py",  # 50-70 s warm, 140 s cold
-                 "test_jump.py",
+                 "test_jump.py", "test_leap_against_c.py", "test_latency.py",
                  "test_train.py", "test_policy.py", "test_actuators.py",
                  "test_train_sac.py", "test_faults.py", "test_sweep.py", "test_chain_terrain_box.py", "test_step.py",
                  "test_variation.py", "test_export_onnx.py", "test_programs.py", "test_cross_cpu.py", "test_env.py",
