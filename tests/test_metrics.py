@@ -59,6 +59,24 @@ def test_periodic_hops_are_measured_exactly():
     assert m["cost_of_transport"][0] == pytest.approx(100.0 / (6.8 * G * travel))
 
 
+def test_the_highest_apex_is_the_highest_hop_before_the_fall_not_the_last_hops_mean():
+    """One hop of instance 2 raised 0.5 m higher, one of 3 after its fall: the highest is that hop's apex on 2, the
+    periodic rise on 3 (the fall ends the count), and NaN without a hop."""
+    traj, t = _trajectory()
+    rise = G * (FLIGHT * DT / 2) ** 2 / 2
+    k = np.arange(len(t)) % (STANCE + FLIGHT)
+    second = (t >= 1.2) & (t < 1.8) & (k >= STANCE)  # the second complete hop's flight (before the 5 s fall)
+    after = (t >= 6.0) & (t < 6.6) & (k >= STANCE)
+    traj.qpos[2, second, 2] += 0.5
+    traj.qpos[3, after, 2] += 0.5
+    m = hops.hop_metrics(traj, np.full(4, G), standing_height=STAND)
+    assert m["highest_apex"][0] == pytest.approx(rise, rel=1e-9)
+    assert m["highest_apex"][2] == pytest.approx(rise + 0.5, rel=1e-9)
+    assert m["apex_height"][2] < m["highest_apex"][2] - 0.3  # the mean of the last hops does not see it
+    assert m["highest_apex"][3] == pytest.approx(rise, rel=1e-9)
+    assert np.isnan(m["highest_apex"][1])
+
+
 def test_no_hops_gives_nan_not_garbage():
     traj, _ = _trajectory()
     m = hops.hop_metrics(traj, np.full(4, G), standing_height=STAND)

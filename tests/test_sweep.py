@@ -17,7 +17,8 @@ from hopper_mjx.sweep.__main__ import main
 TINY = ["--values", "3.71,9.81", "--num", "3", "--duration", "3", "--chunk", "2", "--seed", "5", "--no-progress"]
 EXPECTED_COLUMNS = ["gravity", "replicate", "seed", "apex_height", "flight_rise", "flight_time",
                     "ballistic_flight_time", "stance_time", "hop_period", "duty_factor", "mean_speed",
-                    "tracking_error", "max_roll", "max_pitch", "hops", "fell", "diverged", "cost_of_transport"]
+                    "tracking_error", "max_roll", "max_pitch", "hops", "fell", "diverged", "cost_of_transport",
+                    "highest_apex"]
 
 
 def _sweep_cmd(out, *extra):

@@ -22,7 +22,9 @@ the stance before an obstacle a *leap*:
   Raibert's tilt budget.
 
 On the flat plane (no height field) the jump is Raibert: nothing to look at. Hopping in place (no commanded speed)
-it leaps nothing. The commands, gains and per-instance legs are Raibert's (`raibert_params`).
+it leaps nothing. On any ground, a hop asked for more than Raibert's ordinary stroke holds takes the full stroke
+(`control.stroke`) instead: the knee's whole travel, as the energy bound's push does. The commands, gains and
+per-instance legs are Raibert's (`raibert_params`).
 """
 
 from __future__ import annotations
@@ -32,7 +34,7 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 
-from hopper_mjx.control import raibert
+from hopper_mjx.control import raibert, stroke
 from hopper_mjx.control.base import Controller
 from hopper_mjx.control.foothold import fall_time, placement_angles, sink_speed, within_tilt_budget
 from hopper_mjx.control.kinematics import leg_length
@@ -64,6 +66,7 @@ class JumpState(NamedTuple):
     face: jax.Array  # m, the obstacle's near face along the way
     far: jax.Array  # m, its far edge
     top: jax.Array  # m, world z of its top
+    full: jax.Array  # bool: this stance (decided at its touchdown) takes the full stroke (`control.stroke`)
 
 
 def tuck_length(robot: Robot, leg) -> jax.Array:
@@ -110,7 +113,7 @@ def obstacle(ground, foot_xy, along, radius) -> tuple[jax.Array, ...]:
 
 
 class Leap:
-    """The jump's `raibert.Plan`."""
+    """The jump's `plan.Plan`."""
 
     def __init__(self, robot: Robot):
         self.robot = robot
@@ -120,7 +123,7 @@ class Leap:
                 else jnp.asarray(obs.ground.height(obs.qpos[0], obs.qpos[1]), jnp.float32))
         zero, no = jnp.float32(0.0), jnp.bool_(False)
         return JumpState(launch=no, boost=zero, leap=no, base=base, along=jnp.array([1.0, 0.0], jnp.float32),
-                         face=zero, far=zero, top=base)
+                         face=zero, far=zero, top=base, full=no)
 
     def _launch(self, leg, body, ground, base_xy, speed, s, standing, g) -> tuple[jax.Array, jax.Array]:
         """In a flight: (does the stance it lands in launch a leap, the boost m that stance's foot is set behind
@@ -167,6 +170,24 @@ class Leap:
                           floor)
         return aimed, plan
 
+    def release(self, s, leg, body):
+        return (jnp.where(s.plan.full, stroke.release_length(leg), s.params.gains.leg_length),
+                s.plan.full & ~stroke.steady(body))
+
+    def push(self, leg, body, s, ev, phase, plan, height_bias, thrust_force, standing, g):
+        """A hop asked for more than the ordinary stroke holds takes the full stroke (`control.stroke`); a leap's
+        stance stays Raibert's."""
+        lay = self.robot.layout
+        mass, effort, lowest = lay.total_mass, jnp.asarray(lay.effort_limit), lay.joint_range[KNEE][0]
+        # The commanded apex over the ground the foot stands on (`base`, at this touchdown; 0 on the plane).
+        target = standing + s.params.height + height_bias + plan.base
+        needs = stroke.needs_full(leg, body, s.params.gains, target, g, mass, effort[KNEE]) & ~plan.leap
+        full = jnp.where(ev.touchdown, needs, plan.full)
+        thrust_force = jnp.where(full & ev.bottom, stroke.thrust(leg, body, target, g, mass, lowest, effort),
+                                 thrust_force)
+        own = stroke.push(leg, body, phase, thrust_force, g, mass, lowest, effort)
+        return own._replace(where=full), thrust_force, plan._replace(full=full)
+
     def bias(self, s, ev, height_bias):
         return jnp.where(ev.touchdown & s.plan.leap, s.height_bias, height_bias)
 
@@ -205,7 +226,8 @@ class Leap:
         placement = jnp.where(plan.leap & passed, budgeted, placement)
         target = placement_angles(leg, body.level, placement, length, body.com)
         drive = raibert.flight_pd(body, target, scale)
-        return jnp.where(plan.leap | plan.launch, drive, torque)
+        torque = jnp.where(plan.leap | plan.launch, drive, torque)
+        return jnp.where(plan.full, stroke.flight(leg, body, speed, scale), torque)
 
 
 def plan_apex(plan: JumpState, robot: Robot, leg) -> jax.Array:
@@ -216,7 +238,7 @@ def plan_apex(plan: JumpState, robot: Robot, leg) -> jax.Array:
 def jump(robot: Robot, config: raibert.RaibertConfig | None = None) -> Controller:
     """`jump`: Raibert's gait that leaps what lies ahead (the module's docstring); params: `raibert_params(...)`."""
     key = repr((STEP_UP, CLEARANCE, TUCK_AHEAD, TUCK_KNEE, FACE_MARGIN, LAND_BEYOND, LEAP_REACH, LEAP_GAIN, LAND_AHEAD,
-                MAX_BOOST, SAMPLES, LOOK_SPAN))
+                MAX_BOOST, SAMPLES, LOOK_SPAN, stroke.LOW_MARGIN, stroke.RELEASE_KNEE, stroke.HIP_SHARE))
     return raibert.gait(robot, config, name="jump", plan=Leap(robot), key=key)
 
 

@@ -68,7 +68,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass
-from typing import Any, NamedTuple, Protocol, Sequence
+from typing import Any, NamedTuple, Sequence
 
 import jax
 import jax.numpy as jnp
@@ -85,6 +85,7 @@ from hopper_mjx.control.foothold import (
     within_tilt_budget,
 )
 from hopper_mjx.control.latency import ahead, detuned
+from hopper_mjx.control.plan import OwnPush, Plan
 from hopper_mjx.hardware import rotation
 from hopper_mjx.hardware.signals import Observation
 from hopper_mjx.model.robot import LegGeometry, Robot
@@ -287,14 +288,18 @@ class Events(NamedTuple):
 
 
 def next_phase(phase: jax.Array, touching: jax.Array, elapsed: jax.Array, length: jax.Array,
-               length_rate: jax.Array, leg_length: jax.Array) -> tuple[jax.Array, Events]:
-    """The phase after this observation, and which transitions fired."""
+               length_rate: jax.Array, leg_length: jax.Array, hold=None) -> tuple[jax.Array, Events]:
+    """The phase after this observation, and which transitions fired; `hold`: a plan's bool that keeps the leg at the
+    bottom of its compression (None: never)."""
     in_stance = phase != FLIGHT
     settled = elapsed > MIN_PHASE_TIME
+    bottom = (phase == COMPRESSION) & (length_rate >= 0) & settled
+    if hold is not None:  # static: Raibert's own, today's program
+        bottom = bottom & ~hold
     events = Events(
         touchdown=~in_stance & touching & settled,
         liftoff=in_stance & ~touching & settled,
-        bottom=(phase == COMPRESSION) & (length_rate >= 0) & settled,
+        bottom=bottom,
         extended=(phase == THRUST) & (length >= leg_length),
     )
     new = jnp.where(events.touchdown, COMPRESSION, phase)
@@ -396,16 +401,19 @@ def legs(robot: Robot, own: Sequence[Robot]) -> Leg:
 
 
 def stance_torque(leg: LegGeometry, gains: RaibertConfig, phase, body: Body, spin, speed: Speed, thrust_force,
-                  g, stiffness, mass: float, swing_tilt, scale: PDScale | None = None) -> jax.Array:
+                  g, stiffness, mass: float, swing_tilt, scale: PDScale | None = None,
+                  own: OwnPush | None = None) -> jax.Array:
     """Joint torques (3,) N·m in compression, thrust and unloading: the leg force through J^T
     plus the hip attitude servo; in unloading only a brake. `scale`: factors on the servo's and
-    the brake's gains (haa: roll, hfe: pitch)."""
+    the brake's gains (haa: roll, hfe: pitch). `own`: a plan's stance where it says; None: the spring's."""
     # The floor's push is aimed at the COM (not the hip), so that it does not
     # spin the robot; the spring acts on the virtual leg length.
     spring = stiffness * (gains.leg_length - body.length)
     damping = 2.0 * gains.damping_ratio * jnp.sqrt(stiffness * mass) * body.length_rate
     leg_force = jnp.select([phase == COMPRESSION, phase == THRUST], [spring - damping, spring + thrust_force], 0.0)
     leg_force = jnp.maximum(leg_force, 0.0)  # a foot can only push on the floor
+    if own is not None:  # static: Raibert's own, today's program
+        leg_force = jnp.where(own.where, own.force, leg_force)
     to_com = body.com - body.foot
     floor_push = leg_force * to_com / jnp.linalg.norm(to_com)
     servo = (phase == COMPRESSION) | (phase == THRUST)
@@ -420,12 +428,17 @@ def stance_torque(leg: LegGeometry, gains: RaibertConfig, phase, body: Body, spi
     if scale is not None:  # static: without factors, the gains as designed (today's program)
         roll_kp, roll_kd = scaled(roll_kp, roll_kd, PDScale(scale.kp[0], scale.kd[0]))
         pitch_kp, pitch_kd = scaled(pitch_kp, pitch_kd, PDScale(scale.kp[1], scale.kd[1]))
+    if own is not None:
+        lean = lean * jnp.where(own.where, own.stiffness, 1.0)
+        spin = spin * jnp.where(own.where, own.damping, 1.0)
     attitude = jnp.stack([lean * roll_kp * (body.roll - lean_ref[0]) + roll_kd * spin[0],
                           lean * pitch_kp * (body.pitch - lean_ref[1]) + pitch_kd * spin[1], 0.0])
     # A hip torque τ pushes the foot sideways with τ/L: beyond the floor's grip the foot slides.
     grip = gains.traction * leg_force * body.length
     attitude = attitude * jnp.minimum(1.0, grip / (jnp.linalg.norm(attitude) + 1e-6))
     brake = -scaled(0.0, jnp.asarray(FLIGHT_KD), scale)[1] * body.qd  # unloading: coast to rest, no push
+    if own is not None:  # a plan's stance brakes the joints it says (the knee alone: no hip torque on the floor)
+        brake = jnp.where(own.where, brake * own.braked, brake)
     push = -kinematics.jacobian(leg, body.q).T @ floor_push
     return jnp.where(phase == UNLOADING, brake, push + jnp.where(servo, attitude, 0.0))
 
@@ -491,18 +504,6 @@ def initial_state(params: RaibertParams, obs: Observation) -> RaibertState:
 COMMANDS = Commands(read=_read_commands, write=_write_commands)
 
 
-class Plan(Protocol):
-    """What a controller built on this gait (`jump`) changes in it; static, one per controller, each hook pure and per
-    instance: `initial` its own state (`RaibertState.plan`); `aim` (the floor the next hop is aimed above, its state)
-    from Raibert's floor; `bias` the apex-target bias kept of the one Raibert's height loop adapted; `flight` the
-    flight's joint torques from Raibert's `torque`."""
-
-    def initial(self, obs: Observation) -> Any: ...
-    def aim(self, leg, body, ground, base_xy, speed, s, ev, phase, floor, standing, g) -> tuple[jax.Array, Any]: ...
-    def bias(self, s, ev, height_bias) -> jax.Array: ...
-    def flight(self, leg, body, ground, base_xy, speed, s, plan, torque, g, scale, spin, inertia) -> jax.Array: ...
-
-
 def raibert(robot: Robot, config: RaibertConfig | None = None) -> Controller:
     """`raibert`: hops at the per-instance commanded apex rise and speed.
 
@@ -537,8 +538,9 @@ def gait(robot: Robot, config: RaibertConfig | None = None, name: str = "raibert
             obs, scale = ahead(obs, s.params.latency), detuned(scale, s.params.latency)
         body = sense(robot, obs, leg)
         stiffness = mass * EARTH_GRAVITY / gains.sag
+        release, hold = (gains.leg_length, None) if plan is None else plan.release(s, leg, body)
         phase, ev = next_phase(s.phase, obs.contact.flag, obs.time - s.phase_start, body.length,
-                               body.length_rate, gains.leg_length)
+                               body.length_rate, release, hold)
         speed = speed_update(s, ev, body.v, obs.time, g)
         ground, base_xy, floor, planned = obs.ground, obs.qpos[:2], s.floor, s.plan
         if ground is not None:  # static: on a terrain, the ground under the next hop (the plane: z = 0)
@@ -550,11 +552,15 @@ def gait(robot: Robot, config: RaibertConfig | None = None, name: str = "raibert
                                                   None if ground is None else floor)
         apex = jnp.where(ev.liftoff, body.z, jnp.where(phase == FLIGHT, jnp.maximum(s.apex, body.z), s.apex))
         spin = kinematics.angular_momentum(leg, body.q, body.qd, body.gyro) / inertia.robot
+        own = None
+        if plan is not None:  # static
+            own, thrust_force, planned = plan.push(leg, body, s, ev, phase, planned, height_bias, thrust_force,
+                                                   standing, g)
         stance = stance_torque(leg, gains, phase, body, spin, speed, thrust_force, g, stiffness, mass,
-                               inertia.swing_tilt, scale)
+                               inertia.swing_tilt, scale, own)
         flight = flight_torque(leg, gains, body, spin, speed, g, inertia, scale, ground, base_xy)
-        if plan is not None and ground is not None:
-            height_bias = plan.bias(s, ev, height_bias)
+        if plan is not None:  # static
+            height_bias = height_bias if ground is None else plan.bias(s, ev, height_bias)
             flight = plan.flight(leg, body, ground, base_xy, speed, s, planned, flight, g, scale, spin, inertia)
         torque = saturate(layout, jnp.where(phase == FLIGHT, flight, stance))
         ctrl = to_ctrl(layout, torque)

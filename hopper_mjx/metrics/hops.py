@@ -5,7 +5,8 @@ foot contact after one with it, a *touchdown* the reverse. A *hop* is one
 complete flight (its lift-off and touchdown both recorded) together with the
 stance before it, when that stance began inside the record. Per-hop values:
 
-- apex rise: highest base height in the flight minus the standing height (m);
+- apex rise: highest base height in the flight minus the standing height (m); `highest_apex` is the
+  highest of all hops before the fall, the rest are means over the last hops;
 - flight rise: the same apex minus the base height at lift-off (m), the height of
   the ballistic arc; `ballistic_flight_time` is 2·√(2·flight_rise/g) of each hop
   (averaged like the rest), the flight time a point mass would need for that arc;
@@ -101,6 +102,12 @@ def _nearest_after(after: np.ndarray, times: np.ndarray, first: bool) -> np.ndar
     return np.where(np.isfinite(out), out, np.nan)
 
 
+def _highest(values: np.ndarray, keep: np.ndarray) -> np.ndarray:
+    """The largest kept entry of each row (NaN if none)."""
+    out = np.where(keep, values, -np.inf).max(axis=1)
+    return np.where(np.isfinite(out), out, np.nan)
+
+
 def _last_mean(values: np.ndarray, keep: np.ndarray, last: int) -> np.ndarray:
     """Mean of the last `last` kept entries of each row (NaN if none)."""
     rank_from_end = np.cumsum(keep[:, ::-1], axis=1)[:, ::-1]
@@ -155,6 +162,7 @@ def hop_metrics(
     return {
         "hops": hops.complete.sum(axis=1),
         "apex_height": mean(rise),
+        "highest_apex": _highest(rise, hops.complete),
         "flight_rise": mean(arc),
         "ballistic_flight_time": mean(2 * np.sqrt(np.maximum(arc, 0.0) * 2 / g[:, None])),
         "flight_time": mean(hops.flight_time),

@@ -35,7 +35,7 @@ from hopper_mjx.variation import draw
 COLUMNS = ("apex_height", "flight_rise", "flight_time", "ballistic_flight_time", "stance_time", "hop_period",
            "duty_factor", "mean_speed", "tracking_error",
            "max_roll", "max_pitch", "hops", "fell", "diverged", "cost_of_transport",
-           "energy_per_hop", "mechanical_power")
+           "energy_per_hop", "mechanical_power", "highest_apex")
 # An obstacle, gaps or terrain sweep's extra columns (`hops.terrain_metrics`).
 TERRAIN_COLUMNS = ("distance_made_good", "obstacles_cleared", "highest_cleared", "fall_x", "fall_y")
 # A block or gaps sweep's, besides: how its landings went (`hops.landing_metrics`).
