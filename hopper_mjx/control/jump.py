@@ -185,8 +185,8 @@ class Leap:
         full = jnp.where(ev.touchdown, needs, plan.full)
         thrust_force = jnp.where(full & ev.bottom, stroke.thrust(leg, body, target, g, mass, lowest, effort),
                                  thrust_force)
-        own = stroke.push(leg, body, phase, thrust_force, g, mass, lowest, effort)
-        return own._replace(where=full), thrust_force, plan._replace(full=full)
+        own = stroke.push(full, leg, body, phase, thrust_force, g, mass, lowest, effort)
+        return own, thrust_force, plan._replace(full=full)
 
     def bias(self, s, ev, height_bias):
         return jnp.where(ev.touchdown & s.plan.leap, s.height_bias, height_bias)
@@ -238,7 +238,8 @@ def plan_apex(plan: JumpState, robot: Robot, leg) -> jax.Array:
 def jump(robot: Robot, config: raibert.RaibertConfig | None = None) -> Controller:
     """`jump`: Raibert's gait that leaps what lies ahead (the module's docstring); params: `raibert_params(...)`."""
     key = repr((STEP_UP, CLEARANCE, TUCK_AHEAD, TUCK_KNEE, FACE_MARGIN, LAND_BEYOND, LEAP_REACH, LEAP_GAIN, LAND_AHEAD,
-                MAX_BOOST, SAMPLES, LOOK_SPAN, stroke.LOW_MARGIN, stroke.RELEASE_KNEE, stroke.HIP_SHARE))
+                MAX_BOOST, SAMPLES, LOOK_SPAN, stroke.LOW_MARGIN, stroke.RELEASE_KNEE, stroke.HIP_SHARE,
+                stroke.READY_TILT, stroke.READY_RATE, stroke.SPIN_DAMPING, stroke.FULL_MARGIN))
     return raibert.gait(robot, config, name="jump", plan=Leap(robot), key=key)
 
 

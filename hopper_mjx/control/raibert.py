@@ -443,13 +443,18 @@ def stance_torque(leg: LegGeometry, gains: RaibertConfig, phase, body: Body, spi
     return jnp.where(phase == UNLOADING, brake, push + jnp.where(servo, attitude, 0.0))
 
 
+def speed_placement(body: Body, speed: Speed) -> jax.Array:
+    """(2,) m, heading frame: part 2's foot placement from the COM, v·T_s/2 + k_v·(v - v_ref) + x_i, bounded."""
+    placement = body.v * speed.stance_time / 2 + speed.gain * speed.error + speed.offset
+    return body.unturn[:2, :2] @ jnp.clip(placement, -MAX_PLACEMENT, MAX_PLACEMENT)
+
+
 def flight_torque(leg: LegGeometry, gains: RaibertConfig, body: Body, spin, speed: Speed, g,
                  inertia: Inertia, scale: PDScale | None = None, ground=None, base_xy=None) -> jax.Array:
     """Joint torques (3,) N·m in flight: PD to the joint angles that place the foot (part 2). On a
     terrain (`ground`, `signals.SensedGround`; `base_xy` the base's world position) the time left to
     touchdown is the foot's fall to the ground where it will land."""
-    placement = body.v * speed.stance_time / 2 + speed.gain * speed.error + speed.offset
-    placement = body.unturn[:2, :2] @ jnp.clip(placement, -MAX_PLACEMENT, MAX_PLACEMENT)
+    placement = speed_placement(body, speed)
     foot = body.rot @ (body.foot - jnp.array([0.0, 0.0, leg.haa_below_base]))  # from the base, world axes
     foot_height = body.z + foot[2] - leg.foot_radius
     retract, hold = gains.retract, False

@@ -17,9 +17,8 @@ hop turns it through about 0.45, so asked for more it gets a fifth to a third of
   thrust: the leg is as heavy in rotation as the body, so as the knee unfolds in a tenth of a second the hip must
   turn the body back by some 0.3 rad with no spin at all (the robot's shape, not its rotation). A servo that
   levelled that tilt would give the robot the spin it tumbles with in the flight.
-- *In the flight after it* the leg returns to the touchdown pose in the body's own frame, not the world's: with no
-  spin, returning the shape turns the body back level. It lands hopping in place: the full stroke has no speed
-  control.
+- *In the flight after it* the leg is set at the release length, its foot where Raibert's speed loop places it,
+  in the body's own frame, not the world's: with no spin, returning the shape turns the body back level.
 
 Unloading is Raibert's but for its hip brake (a hip torque while the foot is down would spin the body); a hop the
 ordinary stroke gives stays Raibert's.
@@ -33,7 +32,7 @@ import jax.numpy as jnp
 from hopper_mjx.control import kinematics
 from hopper_mjx.control.foothold import placement_angles
 from hopper_mjx.control.plan import OwnPush
-from hopper_mjx.control.raibert import COMPRESSION, MAX_PLACEMENT, MIN_SQUEEZE, flight_pd
+from hopper_mjx.control.raibert import COMPRESSION, MIN_SQUEEZE, flight_pd, speed_placement
 from hopper_mjx.model.world import EARTH_GRAVITY
 
 KNEE, HFE = 2, 1  # in (haa, hfe, kfe)
@@ -92,8 +91,8 @@ def thrust(leg, body, target_z, g, mass: float, lowest_knee: float, effort) -> j
     return jnp.maximum(energy, 0.0) / stroke
 
 
-def push(leg, body, phase, thrust_force, g, mass: float, lowest_knee: float, effort) -> OwnPush:
-    """The full stroke's stance (where: all of it): the leg force in compression (brake to rest at its bottom) or
+def push(full, leg, body, phase, thrust_force, g, mass: float, lowest_knee: float, effort) -> OwnPush:
+    """The full stroke's stance where `full`: the leg force in compression (brake to rest at its bottom) or
     thrust (`thrust_force`), capped where the knee, or the hip's share, reaches `effort` (3,) N·m."""
     compressing = phase == COMPRESSION
     squeeze = jnp.maximum(body.length - kinematics.leg_length(leg, lowest_knee + LOW_MARGIN), MIN_SQUEEZE)
@@ -103,7 +102,7 @@ def push(leg, body, phase, thrust_force, g, mass: float, lowest_knee: float, eff
     cap = jnp.minimum(effort[KNEE] / jnp.maximum(per_newton[KNEE], 1e-6),
                       HIP_SHARE * effort[HFE] / jnp.maximum(per_newton[HFE], 1e-6))
     force = jnp.clip(jnp.where(compressing, brake, thrust_force), 0.0, cap)
-    return OwnPush(where=jnp.bool_(True), force=force, stiffness=jnp.where(compressing, 1.0, 0.0),
+    return OwnPush(where=full, force=force, stiffness=jnp.where(compressing, 1.0, 0.0),
                    damping=jnp.where(compressing, 1.0, SPIN_DAMPING), braked=jnp.array([0.0, 0.0, 1.0]))
 
 
@@ -111,7 +110,5 @@ def flight(leg, body, speed, scale) -> jax.Array:
     """Joint torques (3,) N·m in the flight after a full stroke: the leg at the release length, its foot where
     Raibert's speed loop places it from the COM, in the body's frame (the body's tilt from the push undone by the
     shape's return)."""
-    placement = body.v * speed.stance_time / 2 + speed.gain * speed.error + speed.offset
-    placement = body.unturn[:2, :2] @ jnp.clip(placement, -MAX_PLACEMENT, MAX_PLACEMENT)
-    shape = placement_angles(leg, jnp.eye(3), placement, release_length(leg), body.com)
+    shape = placement_angles(leg, jnp.eye(3), speed_placement(body, speed), release_length(leg), body.com)
     return flight_pd(body, shape, scale)
