@@ -501,11 +501,16 @@ class Viewer:
             lines.append(self.lines.get())
         return "".join(lines)
 
-    def key(self, *keys: str) -> None:
+    def find_window(self) -> str:
+        """The viewer's X window (looked up once: the search takes a while on a loaded machine)."""
         if self.window is None:
             found = subprocess.run(["xdotool", "search", "--sync", "--name", "MuJoCo"], env=self.env,
                                    capture_output=True, text=True, timeout=60)
             self.window = found.stdout.split()[0]
+        return self.window
+
+    def key(self, *keys: str) -> None:
+        self.find_window()
         for key in keys:
             subprocess.run(["xdotool", "key", "--window", self.window, key], env=self.env, check=True)
             time.sleep(0.3)
@@ -545,9 +550,12 @@ class Viewer:
 
 def test_view_shows_the_robots_labelled_with_their_gravity_and_obeys_its_keys(xvfb, tmp_path):
     display, screen = xvfb
-    viewer = Viewer(display, [*ARGS, "--speed-factor", "4"])
+    # At real time: `hold` keeps a robot up for about 3 s at Earth, so the pause after LANDED must come within that
+    # (at 4x real time it had 0.7 s of wall time, and a loaded machine once took longer: the robot showed "fallen").
+    viewer = Viewer(display, ARGS)
     try:
         assert viewer.wait_for("view: running") is not None, "the viewer never started"
+        viewer.find_window()  # before the race, not in it
         viewer.status_when(lambda s: s["time"] >= LANDED)
         paused = viewer.press_until("space", lambda s: s["paused"])
         stepped = viewer.press_until("Return", lambda s: s["time"] != paused["time"])  # one recorded instant
