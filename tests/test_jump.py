@@ -15,6 +15,7 @@ from hopper_mjx.model.robot import Robot
 from hopper_mjx.sim import gravity_vectors
 
 BLOCK = "obstacle:height={h},x=0.6,length=0.1,size=8x4"  # the obstacle sweep's block, on its 4 cm grid
+GAP = "gaps:width={w},spacing=8,depth=1,x=0.6,size=8x4"  # the gaps sweep's trench, on the same grid
 
 
 def _sensed(spec: str) -> SensedGround:
@@ -39,6 +40,31 @@ def test_the_obstacle_ahead_is_the_block_as_the_engine_collides_with_it():
     assert not jump.obstacle(ground, jnp.array([0.9, 0.0]), ahead, 0.03)[0]  # past it
     assert not jump.obstacle(ground, jnp.array([0.3, 0.0]), -ahead, 0.03)[0]  # going the other way
     assert not jump.obstacle(ground, jnp.array([0.3, 0.0]), jnp.zeros(2), 0.03)[0]  # hopping in place
+
+
+def test_a_gap_ahead_is_found_from_its_lip_to_its_far_side_and_a_drop_with_none_in_view_is_not():
+    """A 0.45 m gap from x = 0.6, 1 m deep: ground 5 cm down starts 2 mm into the near ramp (x = 0.562) and the far
+    side is back within 5 cm of the lip at 1.078; its top is the lip's level, the ground under the foot. A gap whose
+    far side is beyond `LOOK_SPAN` is a step down, hopped down, not leapt."""
+    ahead = jnp.array([1.0, 0.0])
+    spacing = (jump.LOOK_SPAN + 0.03) / (jump.SAMPLES - 1)
+    ground = _sensed(GAP.format(w=0.45))
+    for foot_x in (0.1, 0.3, 0.45):
+        seen, face, far, top = (float(v) for v in jump.obstacle(ground, jnp.array([foot_x, 0.0]), ahead, 0.03))
+        assert seen == 1.0 and top == pytest.approx(0.0, abs=1e-6)
+        assert foot_x + face == pytest.approx(0.562, abs=spacing)
+        assert foot_x + far == pytest.approx(1.078, abs=spacing)
+    assert not jump.obstacle(_sensed(GAP.format(w=1.5)), jnp.array([0.3, 0.0]), ahead, 0.03)[0]
+
+
+def test_a_gaps_leap_rises_as_high_as_carrying_it_over_needs_with_the_most_boost():
+    """`carry_speed`: the flight 2·up/g at the lift-off speed v plus the boost's share of the stance's vertical speed
+    change carries the COM exactly `travel` with the boost at `MAX_BOOST`; nothing to carry needs no rise."""
+    travel, v, push, length, g = 0.6, 0.3, 1.5, 0.64, 9.81
+    up = float(jump.carry_speed(travel, v, push, length, g))
+    assert (v + jump.MAX_BOOST / length * (up + push)) * 2.0 * up / g == pytest.approx(travel, rel=1e-5)
+    assert float(jump.carry_speed(0.0, v, push, length, g)) == pytest.approx(0.0, abs=1e-6)
+    assert float(jump.carry_speed(2 * travel, v, push, length, g)) > up
 
 
 def test_the_drawn_up_leg_drops_the_foot_as_much_as_tuck_drop_says_in_mujoco_c(mj_model):
@@ -110,28 +136,31 @@ def leaps():
     from hopper_mjx.sim import gravity_vectors
     from hopper_mjx.sweep.runner import recorded
 
-    cells = ((0.8, 1.62), (0.3, 3.71), (0.2, 9.81))
+    cells = ((BLOCK, 0.8, 1.62), (BLOCK, 0.3, 3.71), (BLOCK, 0.2, 9.81),
+             (GAP, 0.45, 1.62), (GAP, 0.45, 3.71), (GAP, 0.45, 9.81))
     physics = Physics(ground=terrain.parse(BLOCK.format(h=0.3)), motor="dc", engine="chain")
     sim = physics.sim(chunk=len(cells))
-    grids = np.stack([terrain.parse(BLOCK.format(h=h)).terrain().heights for h, _ in cells])
+    grids = np.stack([terrain.parse(spec.format(h=size, w=size)).terrain().heights for spec, size, _ in cells])
     controller, params = control.make("jump", sim.robot, len(cells), height=0.1, speed=(0.3, 0.0))
-    final, traj = sim.run(gravity_vectors([g for _, g in cells]), controller, params, duration=10.0,
+    final, traj = sim.run(gravity_vectors([g for *_, g in cells]), controller, params, duration=10.0,
                           sensors=recorded(physics.timestep), key=0, ground=grids)
     return cells, sim, jax.tree_util.tree_map(np.asarray, traj)
 
 
-def test_the_jump_leaps_the_sweeps_blocks(leaps):
+def test_the_jump_leaps_the_sweeps_blocks_and_gaps(leaps):
     """Each robot's foot comes down beyond the block's far edge (the sweep's `cleared`), and the base rose at
-    least as high as the drawn-up foot needs to pass over the top."""
+    least as high as the drawn-up foot needs to pass over the top; each gap's robot lands beyond a 0.45 m gap, which
+    none of Raibert's robots crossed at Mars and Earth in the gaps sweep of 3 Dec (docs/sweeps.md)."""
     from hopper_mjx.metrics import hops
 
     cells, sim, traj = leaps
-    bands = np.array([[[0.6, 0.7, h]] for h, _ in cells])
+    bands = np.array([[[0.6, 0.7, size] if spec == BLOCK else [0.6, 0.6 + size, -1.0]] for spec, size, _ in cells])
     cleared = hops.terrain_metrics(traj, command_speed=(0.3, 0.0), obstacles=bands)["obstacles_cleared"]
-    assert list(cleared) == [1, 1, 1]
+    assert list(cleared) == [1] * len(cells)
     drop = float(jump.tuck_drop(sim.robot, sim.robot.leg))
-    for (h, _), z in zip(cells, traj.qpos[:, :, 2]):
-        assert z.max() >= h + drop
+    for (spec, h, _), z in zip(cells, traj.qpos[:, :, 2]):
+        if spec == BLOCK:
+            assert z.max() >= h + drop
 
 
 def test_a_block_or_gaps_sweep_runs_the_jump_unless_told_raibert():

@@ -13,10 +13,10 @@ from hopper_mjx.hardware.signals import Observation
 class OwnPush(NamedTuple):
     """A plan's stance in place of the spring's (`control.stroke`), per instance."""
 
-    where: jax.Array  # bool: this stance is the plan's
+    where: jax.Array  # bool: the leg force and the unloading brake are the plan's
     force: jax.Array  # N, the leg force along the foot -> COM line
-    stiffness: jax.Array  # factor on the attitude servo's stiffness on the body's tilt
-    damping: jax.Array  # factor on its damping of the whole robot's spin
+    stiffness: jax.Array  # factor on the attitude servo's stiffness on the body's tilt (1: Raibert's)
+    damping: jax.Array  # factor on its damping of the whole robot's spin (1: Raibert's)
     braked: jax.Array  # (3,) 1 where unloading brakes the joint, 0 where it lets it turn
 
 

@@ -429,8 +429,7 @@ def stance_torque(leg: LegGeometry, gains: RaibertConfig, phase, body: Body, spi
         roll_kp, roll_kd = scaled(roll_kp, roll_kd, PDScale(scale.kp[0], scale.kd[0]))
         pitch_kp, pitch_kd = scaled(pitch_kp, pitch_kd, PDScale(scale.kp[1], scale.kd[1]))
     if own is not None:
-        lean = lean * jnp.where(own.where, own.stiffness, 1.0)
-        spin = spin * jnp.where(own.where, own.damping, 1.0)
+        lean, spin = lean * own.stiffness, spin * own.damping
     attitude = jnp.stack([lean * roll_kp * (body.roll - lean_ref[0]) + roll_kd * spin[0],
                           lean * pitch_kp * (body.pitch - lean_ref[1]) + pitch_kd * spin[1], 0.0])
     # A hip torque τ pushes the foot sideways with τ/L: beyond the floor's grip the foot slides.

@@ -102,8 +102,9 @@ def push(full, leg, body, phase, thrust_force, g, mass: float, lowest_knee: floa
     cap = jnp.minimum(effort[KNEE] / jnp.maximum(per_newton[KNEE], 1e-6),
                       HIP_SHARE * effort[HFE] / jnp.maximum(per_newton[HFE], 1e-6))
     force = jnp.clip(jnp.where(compressing, brake, thrust_force), 0.0, cap)
-    return OwnPush(where=full, force=force, stiffness=jnp.where(compressing, 1.0, 0.0),
-                   damping=jnp.where(compressing, 1.0, SPIN_DAMPING), braked=jnp.array([0.0, 0.0, 1.0]))
+    thrusting = full & ~compressing
+    return OwnPush(where=full, force=force, stiffness=jnp.where(thrusting, 0.0, 1.0),
+                   damping=jnp.where(thrusting, SPIN_DAMPING, 1.0), braked=jnp.array([0.0, 0.0, 1.0]))
 
 
 def flight(leg, body, speed, scale) -> jax.Array:
