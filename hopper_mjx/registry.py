@@ -18,7 +18,7 @@ CONTROLLERS = {
     "hold": "keep the initial joint angles",
     "pid": "the seed's joint position controllers, holding them",
     "raibert": "hop to --height and --speed",
-    "jump": "Raibert's gait, each hop sized to the ground ahead and the leg drawn up over obstacles",
+    "jump": "Raibert's gait, each hop sized to the ground ahead: leaps over blocks and across gaps",
     "balance": "stand still on the foot: an LQR about the stance (holds it at rest; kicks topple it, docs/control.md)",
 }
 # The controllers with joint PD gains that `--randomize kp_scale=...,kd_scale=...` scales (and `policy:PATH`).

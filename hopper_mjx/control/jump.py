@@ -119,9 +119,13 @@ def obstacle(ground, foot_xy, along, radius) -> tuple[jax.Array, ...]:
     after = jnp.min(jnp.where(~odd & (offsets > face), offsets, jnp.inf))  # the first sample past it
     run = odd & (offsets < after)
     far = jnp.minimum(after, LOOK_SPAN) - (LOOK_SPAN + radius) / (SAMPLES - 1) / 2
-    gap = jnp.any(low & (offsets == face))
-    seen = jnp.where(gap, after < jnp.inf, odd.any())
+    seen = jnp.where(jnp.any(low & (offsets == face)), after < jnp.inf, odd.any())  # a gap needs its far side
     return seen, face, far, jnp.maximum(jnp.max(jnp.where(run, heights, -jnp.inf)), here)
+
+
+def is_gap(top, floor) -> jax.Array:
+    """Is the obstacle whose top `obstacle` found a gap (its top the lip, at the `floor` the foot stands on)?"""
+    return top < floor + STEP_UP
 
 
 def carry_speed(travel, v, push, leg_length, g) -> jax.Array:
@@ -158,8 +162,9 @@ class Leap:
         time_left = (body.zdot + sink) / g
         touch = com_xy + body.v * time_left + along * v * speed.stance_time / 2  # where the foot comes down
         seen, face, far, top = obstacle(ground, touch, along, leg.foot_radius)
-        rise = jnp.maximum(top + tuck_drop(self.robot, leg) + CLEARANCE - standing - ground.height(*touch), 0.0)
-        gap = top < ground.height(*touch) + STEP_UP  # its top is the lip
+        floor = ground.height(*touch)
+        rise = jnp.maximum(top + tuck_drop(self.robot, leg) + CLEARANCE - standing - floor, 0.0)
+        gap = is_gap(top, floor)
         # The COM leaves v·T_s/2 ahead of the foot, and must come down within LAND_AHEAD of the landing past the far
         # edge. A foot set b behind the neutral point gives the stance a forward push of about b/L of its vertical.
         # A gap's lip asks no rise: its leap rises as carrying the COM across with the most boost needs. A block too
@@ -223,7 +228,7 @@ class Leap:
         own = stroke.push(full, leg, body, phase, thrust_force, g, mass, lowest, effort)
         # A leap's launching stance starts the body tilted by the flight's boost, a shape the leap's flight undoes:
         # its servo only damps the spin, so that the leap leaves the floor without one.
-        own = own._replace(stiffness=jnp.where(plan.leap & (plan.top < plan.base + STEP_UP), 0.0, own.stiffness))
+        own = own._replace(stiffness=jnp.where(plan.leap & is_gap(plan.top, plan.base), 0.0, own.stiffness))
         return own, thrust_force, plan._replace(full=full)
 
     def bias(self, s, ev, height_bias):
