@@ -180,7 +180,8 @@ def test_terrain_metrics_distance_obstacles_and_where_the_falls_happened():
 def test_landing_metrics_read_the_tilt_and_the_impact_at_each_touchdown():
     """Instance 0 lands every 0.6 s, its body tilted 5° at the 4th landing only, each landing's force rising to
     300 N in its first 0.03 s (the 2nd's to 900 N at 0.04 s, and 2000 N at 0.1 s: outside the window); 2 falls at
-    5 s, and a 20° tilt at a landing after it does not count; 1 never lands."""
+    5 s, and a 20° tilt at a landing after it does not count; 1 never lands. Past a band, the same at the first
+    landing beyond it alone."""
     traj, t = _trajectory()
     n = len(t)
     qpos = traj.qpos.copy()
@@ -203,6 +204,14 @@ def test_landing_metrics_read_the_tilt_and_the_impact_at_each_touchdown():
     assert np.isnan(out["landing_tilt"][1]) and np.isnan(out["impact_force"][1])  # standing: no touchdown
     assert out["landing_tilt"][2] == pytest.approx(0.0, abs=1e-6)  # the 20° landing came after its fall
     assert out["impact_force"][2] == pytest.approx(900.0)
+    # The landing past an obstacle: the first touchdown whose foot is beyond its far end (the 4th here), alone.
+    far = SPEED * (t[touchdowns[2]] + t[touchdowns[3]]) / 2
+    past = hops.landing_metrics(landing, np.array([[far - 0.1, far, 0.3]]))
+    np.testing.assert_allclose(past["past_tilt"], [5.0, np.nan, 0.0, 0.0], atol=1e-6)
+    np.testing.assert_allclose(past["past_impact"], [300.0, np.nan, 300.0, 300.0])
+    never = hops.landing_metrics(landing, np.array([[0.0, 1e3, 0.3]]))
+    assert np.isnan(never["past_tilt"]).all() and np.isnan(never["past_impact"]).all()
+    assert np.isnan(out["past_tilt"]).all()  # no obstacle given
 
 
 def test_actuator_metrics_read_each_joints_peak_torque_power_and_share_of_its_motor_line():

@@ -12,7 +12,7 @@ from hopper_mjx.scenario import Physics
 
 # A label's unit: one comma-separated part of a parenthesised group ("x (m), the start at 0", "duty factor
 # (stance / period, 1)"); "1" for a pure number, "% of ..." for a share.
-UNITS = {"m", "s", "m/s", "m/s²", "rad/s", "N", "J/kg", "1", "min", "steps/s", "instances", "policy steps"}
+UNITS = {"m", "s", "m/s", "m/s²", "rad/s", "N", "J/kg", "1", "min", "°", "steps/s", "instances", "policy steps"}
 CHANGED = Physics(motor="dc", action_delay=0.004, push=(2.0, 0.3))  # what a run's subtitle must then say
 CHANGED_WORDS = ("dc motors", "action delay 4 ms", "pushes of 0.3 m/s every 2 s")
 
@@ -92,7 +92,7 @@ def _spec(**kw):
 
 def test_sweep_plots():
     from hopper_mjx import terrain
-    from hopper_mjx.sweep import report
+    from hopper_mjx.sweep import limits, report
 
     rows = [{"gravity": g, "survival": 1.0, "apex_height": 0.1, "apex_height_std": 0.01, "flight_time": 0.3,
              "hop_period": 0.5, "duty_factor": 0.4, "energy_per_hop": 0.4 * g, "ballistic_flight_time": 0.3}
@@ -107,8 +107,8 @@ def test_sweep_plots():
     assert_reads_alone(report.terrain_figure(obstacle, [dict(r, obstacle_height=v, cleared=0.5, reached=1.0,
                                                              distance_made_good=0.9, mean_speed=0.2)
                                                         for r in rows for v in obstacle.values]))
-    limits = [dict(r, obstacle_height=v, cleared=0.5) for r in rows for v in obstacle.values]
-    fig = report.limits_figure(obstacle, limits, report.bound_columns(obstacle))
+    passed = [dict(r, obstacle_height=v, cleared=0.5) for r in rows for v in obstacle.values]
+    fig = limits.figure(obstacle, passed, limits.bound_columns(obstacle))
     assert_reads_alone(fig)
     assert "the URDF's robot" in _titles(fig)  # the physics subtitle
 

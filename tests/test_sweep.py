@@ -174,7 +174,7 @@ def test_gains_heatmap_reads_at_a_glance():
     """Survival in % on a fixed 0-100 scale, as the table prints it (all survived is the top colour, not the middle
     of 90-110), labels dark on pale cells and light on dark ones, both axes ascending, each with its unit, each
     colour bar labelled."""
-    from hopper_mjx.sweep import report
+    from hopper_mjx.sweep import plotting, report
 
     spec = _spec(kind="gains", param="speed_gain", values=(0.6, 0.1))
     groups = [{"speed_gain": v, "gravity": g, "survival": 1.0, "tracking_error": 0.01 * g} for v in spec.values
@@ -190,11 +190,11 @@ def test_gains_heatmap_reads_at_a_glance():
     assert {t.get_color() for t in survival.texts} == {"k"}  # every cell pale yellow (viridis at 1)
     colours = {t.get_text(): t.get_color() for t in tracking.texts}
     assert colours["0.02"] == "k" and colours["0.10"] == "w"  # magma_r: pale at the low end, black at the top
-    report.save(fig, "/dev/null")
+    plotting.save(fig, "/dev/null")
 
 
 def test_gravity_figure_shows_energy_per_hop_in_place_and_cot_with_a_speed_command():
-    from hopper_mjx.sweep import report
+    from hopper_mjx.sweep import plotting, report
 
     groups = [{"gravity": g, "survival": 1.0, "energy_per_hop": 0.4 * g, "cost_of_transport": None}
               for g in (9.81, 1.62, 3.71)]
@@ -203,10 +203,10 @@ def test_gravity_figure_shows_energy_per_hop_in_place_and_cot_with_a_speed_comma
     assert energy.get_ylabel() == "motor work per hop (J/kg)"
     x, y = energy.lines[0].get_data()
     assert list(x) == [1.62, 3.71, 9.81] and np.allclose(y, [0.648, 1.484, 3.924])  # ascending g, values follow
-    report.save(in_place, "/dev/null")
+    plotting.save(in_place, "/dev/null")
     moving = report.gravity_figure(_spec(speed=(0.5, 0.0)), groups)
     assert moving.axes[5].get_ylabel() == "cost of transport (work / (m·g·distance), 1)"
-    report.save(moving, "/dev/null")
+    plotting.save(moving, "/dev/null")
     # Survival in % as the table prints it; the bars named; the defaults said, so that runs never look alike.
     survival = in_place.axes[4]
     assert survival.get_ylabel() == "survival (% of replicates)" and list(survival.lines[0].get_ydata()) == [100] * 3
@@ -218,18 +218,18 @@ def test_gravity_figure_shows_energy_per_hop_in_place_and_cot_with_a_speed_comma
 def test_a_plots_title_carries_every_physics_option_the_run_changed():
     from hopper_mjx import terrain
     from hopper_mjx.scenario import Physics
-    from hopper_mjx.sweep import report
+    from hopper_mjx.sweep import plotting
     from hopper_mjx.variation.spec import Spec
 
     physics = Physics(motor="dc", action_delay=0.005, push=(2.0, 0.3), variation=Spec.parse("foot_friction=0.4..1"),
                       ground=terrain.parse("rough:amp=0.02,seed=1"))
-    title = report.physics_label(_spec(physics=physics, speed=(0.3, 0.0), kick=0.3))
+    title = plotting.physics_label(_spec(physics=physics, speed=(0.3, 0.0), kick=0.3))
     for part in ("dc motors", "action delay 5 ms", "pushes of 0.3 m/s every 2 s", "randomised foot_friction",
                  "terrain rough:amp=0.02", "kick std 0.3", "speed 0.3,0 m/s"):
         assert part in title, (part, title)
     assert "ideal motors" not in title and "no delay" not in title
     # What the sweep varies is its axis, not a setting: an action delay sweep's title claims no delay.
-    delays = report.physics_label(_spec(kind="param", param="action_delay", values=(0.0, 5.0)))
+    delays = plotting.physics_label(_spec(kind="param", param="action_delay", values=(0.0, 5.0)))
     assert "delay" not in delays and "ideal motors; no pushes; the URDF's robot; flat ground" in delays
 
 
@@ -284,7 +284,7 @@ def test_a_parameter_sweep_gives_each_value_its_own_robots_and_keeps_the_others_
 def test_an_obstacle_sweeps_figure_shows_the_share_cleared_and_each_ground():
     from hopper_mjx import terrain
     from hopper_mjx.scenario import Physics
-    from hopper_mjx.sweep import report
+    from hopper_mjx.sweep import plotting, report
 
     grounds = tuple(str(terrain.parse(f"obstacle:height={h},x=0.6,size=2x1")) for h in (0.05, 0.2))
     spec = _spec(kind="obstacle", param="obstacle_height", values=(0.05, 0.2), speed=(0.3, 0.0), grounds=grounds,
@@ -303,7 +303,7 @@ def test_an_obstacle_sweeps_figure_shows_the_share_cleared_and_each_ground():
     assert [p.max() for p in profiles] == pytest.approx([0.05, 0.2])  # each value's block, at y = 0
     x = ground.lines[1].get_xdata()
     assert x[profiles[1] > 0].min() == pytest.approx(0.6, abs=0.04)  # where the block starts
-    report.save(fig, "/dev/null")
+    plotting.save(fig, "/dev/null")
 
 
 def _table(spec, inst, **values):
@@ -413,13 +413,13 @@ def test_a_block_or_gaps_sweep_answers_beside_the_motors_bound(kind):
     limits.png, with units on both axes."""
     from hopper_mjx.hardware import bound
     from hopper_mjx.model.robot import standing_height
-    from hopper_mjx.sweep import report
+    from hopper_mjx.sweep import limits, report
     from hopper_mjx.sweep.grid import expand
 
     spec = _band_spec(kind, (0.1, 0.2, 0.3))
     m = spec.physics.mj_model
     per_g = bound.bounds(m, "dc", spec.gravity)
-    bounds = report.bound_columns(spec)
+    bounds = limits.bound_columns(spec)
     name = "height_bound" if kind == "obstacle" else "width_bound"
     assert set(bounds) == {"apex_bound", name}
     for g, b in per_g.items():
@@ -437,15 +437,32 @@ def test_a_block_or_gaps_sweep_answers_beside_the_motors_bound(kind):
     share = {(1.62, 0.1): 1.0, (1.62, 0.2): 0.5, (1.62, 0.3): 0.25, (3.71, 0.1): 0.75, (3.71, 0.2): 0.25}
     groups = [{spec.param: v, "gravity": g, "cleared": share.get((g, v), 0.0), "survival": 1.0}
               for v in spec.values for g in spec.gravity]
-    lines = report.limits(spec, groups, bounds)
+    lines = limits.lines(spec, groups, bounds)
     standing = standing_height(m)
     assert lines[1] == (f"  Earth g 9.81 m/s²: none of the grid's; bound {bounds[name][9.81]:.2f} m "
                         f"({bounds[name][9.81] / standing:.2f}), from an apex rise of {per_g[9.81].apex_rise:.2f} m")
     assert lines[2].startswith(f"  Moon  g 1.62 m/s²: 0.2 m ({0.2 / standing:.2f} standing heights); bound")
     assert lines[3].startswith("  Mars  g 3.71 m/s²: 0.1 m (")
-    ax = report.limits_figure(spec, groups, bounds).axes[0]
+    ax = limits.figure(spec, groups, bounds).axes[0]
     assert ax.get_xlabel() == "gravity (m/s²)" and ax.get_ylabel().endswith("(m)")
     assert ax.child_axes[0].get_ylabel() == "in standing heights (1)"
     np.testing.assert_allclose(ax.lines[0].get_ydata(), [bounds[name][g] for g in sorted(spec.gravity)])
     np.testing.assert_allclose(ax.lines[1].get_ydata(), [0.2, 0.1, np.nan])
-    assert report.bound_columns(_spec()) == {} and report.limits(_spec(), groups, {}) == []
+    assert limits.bound_columns(_spec()) == {} and limits.lines(_spec(), groups, {}) == []
+    # What getting past the answer asked, where the groups carry it: the Moon's at 0.2 m, not its 0.1 m's.
+    asked = {"past_tilt": 12.5, "past_impact": 300.0, "peak_torque_kfe": 70.0, "peak_power_kfe": 900.0,
+             "line_use_kfe": 0.9}
+    for r in groups:
+        r["past"] = asked if (r["gravity"], r[spec.param]) == (1.62, 0.2) else dict(asked, past_tilt=40.0)
+    lines = limits.lines(spec, groups, bounds)
+    weight = float(m.body_mass.sum()) * 1.62
+    assert lines[4].startswith("what getting past it asked") and len(lines) == 7
+    assert lines[5] == (f"  Moon  g 1.62 m/s²: landed tilted 12.5°, impact 300 N ({300.0 / weight:.1f} body weights); "
+                        f"knee 70 N·m, 900 W, 0.90 of its motor's line")
+    assert lines[6].startswith("  Mars  g 3.71 m/s²: landed tilted 40.0°")
+    fig = limits.figure(spec, groups, bounds)
+    np.testing.assert_allclose(fig.axes[1].lines[0].get_ydata(), [12.5, 40.0, np.nan])
+    np.testing.assert_allclose(fig.axes[2].lines[0].get_ydata(), [300.0 / weight, 300.0 / (weight / 1.62 * 3.71),
+                                                                   np.nan])
+    assert [ax.get_ylabel() for ax in fig.axes[1:]] == ["landing tilt (°)", "impact (body weights, 1)",
+                                                       "knee torque / motor line (1)"]

@@ -229,13 +229,15 @@ def terrain_metrics(traj, *, command_speed=(0.0, 0.0), obstacles=None) -> dict[s
 IMPACT_WINDOW = 0.05  # s after a touchdown over which its impact force is read
 
 
-def landing_metrics(traj) -> dict[str, np.ndarray]:
+def landing_metrics(traj, obstacles=None) -> dict[str, np.ndarray]:
     """Per-instance landing measures, each (N,), over the touchdowns before any fall (NaN without one):
 
     - landing_tilt: deg, the largest tilt of the body from upright (the angle of its z axis from the vertical) at a
       touchdown: how well the flights before them were held level;
     - impact_force: N, the largest foot contact force (its norm) within IMPACT_WINDOW of a touchdown: what a landing
-      asks of the leg and its motors.
+      asks of the leg and its motors;
+    - past_tilt, past_impact: the same at the first touchdown whose foot is beyond the first of `obstacles` (its far
+      end; rows as `terrain_metrics`'): the landing of the jump that got past it, NaN where none did.
 
     Uses the state stream for the tilt (the sample at or before each touchdown) and the contact stream's force.
     """
@@ -249,14 +251,29 @@ def landing_metrics(traj) -> dict[str, np.ndarray]:
     x, y = qpos[..., 4], qpos[..., 5]
     tilt = np.degrees(np.arccos(np.clip(1.0 - 2.0 * (x * x + y * y), -1.0, 1.0)))  # [w, x, y, z] quaternions
     at = np.clip(np.searchsorted(t_state, t_contact, side="right") - 1, 0, len(t_state) - 1)
-    landing_tilt = np.where(down, tilt[:, at], -np.inf).max(axis=1)
+    tilt = tilt[:, at]  # at each contact sample
+    out = _landings(down, tilt, force, t_contact, fall.t_fall)
+    n = qpos.shape[0]
+    given = np.full((1, 3), np.nan) if obstacles is None else np.asarray(obstacles, dtype=float)
+    far = np.broadcast_to(given, (n, *given.shape[-2:]))[:, 0, 1]
+    with np.errstate(invalid="ignore"):
+        beyond = down & (np.asarray(traj.contact.pos, dtype=float)[:, :, 0] > far[:, None])
+    first = beyond & (np.cumsum(beyond, axis=1) == 1)
+    past = _landings(first, tilt, force, t_contact, fall.t_fall)
+    return {"landing_tilt": out[0], "impact_force": out[1], "past_tilt": past[0], "past_impact": past[1]}
+
+
+def _landings(down, tilt, force, t_contact, t_fall) -> tuple[np.ndarray, np.ndarray]:
+    """(N,) the largest tilt at the touchdowns `down` marks, and the largest force within IMPACT_WINDOW of one,
+    before the fall; NaN where none."""
+    landing_tilt = np.where(down, tilt, -np.inf).max(axis=1)
     # Each contact sample's most recent touchdown time, then the force while within the window after it.
     last = np.maximum.accumulate(np.where(down, np.arange(len(t_contact))[None, :], -1), axis=1)
     since = t_contact[None, :] - np.where(last >= 0, t_contact[np.maximum(last, 0)], np.inf)
-    near = (last >= 0) & (since <= IMPACT_WINDOW) & (t_contact[None, :] <= fall.t_fall[:, None])
+    near = (last >= 0) & (since <= IMPACT_WINDOW) & (t_contact[None, :] <= t_fall[:, None])
     impact = np.where(near, force, -np.inf).max(axis=1)
-    return {"landing_tilt": np.where(np.isfinite(landing_tilt), landing_tilt, np.nan),
-            "impact_force": np.where(np.isfinite(impact), impact, np.nan)}
+    return (np.where(np.isfinite(landing_tilt), landing_tilt, np.nan),
+            np.where(np.isfinite(impact), impact, np.nan))
 
 
 JOINT_NAMES = ("haa", "hfe", "kfe")  # the joints in the columns' names, joint order

@@ -33,6 +33,7 @@ KICK = 0.03
 TERRAIN_KINDS = ("obstacle", "gaps", "terrain")  # sweeps over a terrain's parameter: one ground per value
 # The terrain sweeps whose ground holds one band across the way to get past, and what the band is called.
 BAND_KINDS = {"obstacle": "block", "gaps": "gap"}
+PASSED = {"obstacle": "cleared", "gaps": "crossed"}  # what getting past a band sweep's band is called
 KINDS = ("gravity", "gains", "param", *TERRAIN_KINDS)
 
 

@@ -13,8 +13,10 @@ import numpy as np
 
 from hopper_mjx import registry
 from hopper_mjx.metrics.thresholds import SPEED_TOLERANCE
-from hopper_mjx.shell.files import atomic_write, atomic_write_text
-from hopper_mjx.sweep.grid import BAND_KINDS, KICK, PLANETS, Instances, SweepSpec
+from hopper_mjx.shell.files import atomic_write_text
+from hopper_mjx.sweep import limits
+from hopper_mjx.sweep.grid import BAND_KINDS, PASSED, PLANETS, Instances, SweepSpec
+from hopper_mjx.sweep.plotting import physics_label, pyplot, save
 
 INTEGER_COLUMNS = {"replicate", "seed", "hops", "fell", "diverged", "obstacles_cleared"}
 # The action delay Raibert stops taking: docs/variation.md measured it (`sweep param --param action_delay --values
@@ -30,12 +32,6 @@ BALANCE_FIGURE = ("balance, an LQR stance, keeps none of a sweep's kicked robots
                   "per gravity, 10 s: docs/control.md); raibert --height 0.05 hops in place and keeps them all")
 REACH = 0.1  # m: a base this close to an obstacle's near edge has reached it (its foot lands ahead of it)
 UNITS = {"obstacle_height": "m", "gap_width": "m", "roughness": "m, peak |height|"}  # a terrain sweep's value
-PASSED = {"obstacle": "cleared", "gaps": "crossed"}  # what getting past a band sweep's band is called
-# A band sweep's answer: (its bound's results.csv column, the answer in words, the quantity on its axis).
-ANSWER = {"obstacle": ("height_bound", "highest block", "block height"),
-          "gaps": ("width_bound", "widest gap", "gap width")}
-
-
 def rows(spec: SweepSpec, inst: Instances, table: np.ndarray, columns: tuple[str, ...],
          bounds: dict | None = None) -> tuple[list[str], list[list]]:
     """results.csv's header and rows; `bounds` (`bound_columns`) adds a column per bound."""
@@ -49,82 +45,6 @@ def rows(spec: SweepSpec, inst: Instances, table: np.ndarray, columns: tuple[str
         row += [v[i] for v in inst.robot.values()]
         out.append(row + list(table[i]) + [v[i] for v in bounds.values()])
     return header, out
-
-
-def bound_columns(spec: SweepSpec) -> dict[str, dict[float, float]]:
-    """A block or gaps sweep's bounds per gravity (`hardware.bound`, the model's robot with the sweep's motors):
-    apex_bound, m of apex rise over standing, and the tallest block (height_bound) or widest gap (width_bound) it
-    allows, m. {} for other sweeps."""
-    if spec.kind not in BAND_KINDS:
-        return {}
-    from hopper_mjx.hardware import bound
-    from hopper_mjx.model.robot import standing_height
-
-    m = spec.physics.mj_model
-    per_g = bound.bounds(m, spec.physics.motor, spec.gravity)
-    if spec.kind == "obstacle":
-        standing, drop = standing_height(m), bound.tucked_drop(m)
-        past = {g: bound.highest_block(b, standing, drop) for g, b in per_g.items()}
-    else:
-        reach = bound.leg_reach(m)
-        past = {g: bound.widest_gap(b, reach) for g, b in per_g.items()}
-    return {"apex_bound": {g: b.apex_rise for g, b in per_g.items()}, ANSWER[spec.kind][0]: past}
-
-
-def best_passed(spec: SweepSpec, groups: list[dict]) -> dict[float, float]:
-    """{g: the highest block (widest gap) at least half the replicates got past, m; NaN for none of the grid's}."""
-    out = {}
-    for g in spec.gravity:
-        passed = [r[spec.param] for r in groups if r["gravity"] == g and r.get("cleared", 0) >= 0.5]
-        out[float(g)] = max(passed) if passed else math.nan
-    return out
-
-
-def limits(spec: SweepSpec, groups: list[dict], bounds: dict) -> list[str]:
-    """A block or gaps sweep's answer, per gravity: the highest block (widest gap) at least half the replicates got
-    past, in m and in standing heights, beside the bound's (`bound_columns`)."""
-    if not bounds:
-        return []
-    from hopper_mjx.model.robot import standing_height
-
-    standing = standing_height(spec.physics.mj_model)
-    name, what, _ = ANSWER[spec.kind]
-    lines = [f"the {what} at least half the replicates {PASSED[spec.kind]}, beside the bound the {spec.physics.motor} "
-             f"motors put on it (docs/sweeps.md; standing height {standing:.3g} m):"]
-    for g, best in best_passed(spec, groups).items():
-        got = f"{best:g} m ({best / standing:.2f} standing heights)" if np.isfinite(best) else "none of the grid's"
-        limit = bounds[name][g]
-        lines.append(f"  {PLANETS.get(g, ''):5} g {g:g} m/s²: {got}; bound {limit:.2f} m ({limit / standing:.2f}), "
-                     f"from an apex rise of {bounds['apex_bound'][g]:.2f} m")
-    return lines
-
-
-def limits_figure(spec: SweepSpec, groups: list[dict], bounds: dict):
-    """limits.png of a block or gaps sweep: the highest block (widest gap) half the replicates got past against
-    gravity, beside the motors' bound, in m and in standing heights."""
-    from hopper_mjx.model.robot import standing_height
-
-    plt = _pyplot()
-    standing = standing_height(spec.physics.mj_model)
-    name, answer, what = ANSWER[spec.kind]
-    best = best_passed(spec, groups)
-    g = np.array(sorted(best))
-    fig, ax = plt.subplots(figsize=(8.5, 5.0))
-    ax.plot(g, [bounds[name][v] for v in g], "k--", label=f"bound: the {spec.physics.motor} motors' best jump")
-    ax.plot(g, [best[v] for v in g], "C0o-", label=f"{PASSED[spec.kind]} by ≥ half the replicates (grid's values)")
-    ax.plot(g, np.full(len(g), max(spec.values)), ":", color="0.5", label="the grid's largest value")
-    ax.set_xscale("log")
-    ax.minorticks_off()
-    ax.set_xticks(g, [f"{v:g}" for v in g])
-    ax.set_xlabel("gravity (m/s²)")
-    ax.set_ylabel(f"{what} (m)")
-    twin = ax.secondary_yaxis("right", functions=(lambda m: m / standing, lambda h: h * standing))
-    twin.set_ylabel("in standing heights (1)")
-    ax.legend(fontsize=8, loc="upper right")
-    ax.grid(alpha=0.3)
-    ax.set_title(f"the {answer} vs gravity: "
-                 f"{spec.controller}, {spec.num} replicates per point\n{physics_label(spec)}", fontsize=9)
-    return fig
 
 
 def _cell(name: str, value) -> str:
@@ -162,6 +82,8 @@ def group_summary(spec: SweepSpec, inst: Instances, table: np.ndarray, columns: 
             if "obstacles_cleared" in columns:  # over every replicate, as survival: a fall before it is a miss
                 record["cleared"] = float((table[sel, columns.index("obstacles_cleared")] > 0).mean())
                 record["reached"] = float(reached(spec, table[sel], columns).mean())
+            if "past_tilt" in columns:
+                record["past"] = limits.past_medians(table[sel], columns)
             # Hop metrics describe steady hopping: the survivors' (a fallen run's last hops are its collapse).
             steady = sel & alive
             error = np.abs(table[steady, columns.index("apex_height")] - spec.height)
@@ -287,35 +209,6 @@ def table_text(spec: SweepSpec, groups: list[dict], label: str | None = None) ->
     return "\n".join([lines[0], "-" * len(lines[0])] + lines[1:])
 
 
-def _pyplot():
-    import matplotlib
-
-    matplotlib.use("Agg")  # files only, never a window
-    import matplotlib.pyplot as plt
-
-    return plt
-
-
-def save(fig, path: Path) -> None:
-    atomic_write(path, lambda f: fig.savefig(f, dpi=90, format=Path(path).suffix[1:] or None))
-    _pyplot().close(fig)
-
-
-def physics_label(spec: SweepSpec) -> str:
-    """The run's command (apex rise, speed) and physics in words (a plot's subtitle): `Physics.described`, and the
-    kick where not the default, so that two different experiments never look alike. What the sweep varies is left
-    to its axis."""
-    words = spec.physics.described()
-    if spec.param == "action_delay":
-        del words["action_delay"]
-    elif spec.sweeps_robot:
-        words["variation"] += f" but its {spec.param}"
-    if spec.grounds:  # a terrain sweep's ground is its axis
-        del words["ground"]
-    return "; ".join([f"command: apex rise {spec.height:g} m, speed {spec.speed[0]:g},{spec.speed[1]:g} m/s",
-                      *words.values()] + ([f"kick std {spec.kick:g}"] if spec.kick != KICK else []))
-
-
 def param_label(name: str) -> str:
     """A swept value's axis label with its unit."""
     from hopper_mjx.control.raibert import GAIN_UNITS
@@ -332,7 +225,7 @@ def _column(groups: list[dict], key: str) -> np.ndarray:
 def gravity_figure(spec: SweepSpec, groups: list[dict], series: list | None = None):
     """The gravity sweep's figure (a matplotlib Figure; `write` saves it as gravity.png); `series`
     [(label, groups)] draws several controllers in one figure."""
-    plt = _pyplot()
+    plt = pyplot()
     # The x axis ascends whatever order --gravity had.
     series = [(name, sorted(rows_, key=lambda r: r["gravity"])) for name, rows_ in (series or [("measured", groups)])]
     # Hopping in place travels (almost) nowhere, so work / (m·g·distance) is empty or noise there;
@@ -383,18 +276,18 @@ def _label_colour(rgba) -> str:
 def gains_figure(spec: SweepSpec, groups: list[dict], second=None, panels: int = 2):
     """The gains sweep's figure (a matplotlib Figure; `write` saves it as gains.png): survival and `second`
     (key, title, colour map, limits; default the speed tracking error) against the value and gravity."""
-    plt = _pyplot()
+    plt = pyplot()
     gravity, values = sorted(spec.gravity), sorted(spec.values)  # both axes ascend
     at = {(r[spec.param], r["gravity"]): r for r in groups}
     fig, axes = plt.subplots(1, panels, figsize=(6 * panels, 4.5), constrained_layout=True)
     # Shares are in % as the table prints them, on a fixed 0-100 scale, so that all-survived reads as the top colour.
     second = second or ("tracking_error", "speed tracking error (m/s)", "magma_r", (None, None))
     heatmaps = ((axes[0], "survival", "survival (% of replicates)", "viridis", (0.0, 100.0)), (axes[1], *second))
-    for ax, key, label, cmap, limits in heatmaps:
-        scale = 100.0 if limits[1] == 100.0 else 1.0
+    for ax, key, label, cmap, span in heatmaps:
+        scale = 100.0 if span[1] == 100.0 else 1.0
         grid = np.array([[np.nan if at[v, g].get(key) is None else scale * at[v, g][key] for g in gravity]
                          for v in values])
-        im = ax.imshow(grid, origin="lower", aspect="auto", cmap=cmap, vmin=limits[0], vmax=limits[1])
+        im = ax.imshow(grid, origin="lower", aspect="auto", cmap=cmap, vmin=span[0], vmax=span[1])
         ax.set_xticks(range(len(gravity)), [f"{g:g}" for g in gravity])
         ax.set_yticks(range(len(values)), [f"{v:g}" for v in values])
         ax.set_xlabel("gravity g (m/s²)")
@@ -459,7 +352,7 @@ def terrain_figure(spec: SweepSpec, groups: list[dict]):
 def write(out: Path, spec: SweepSpec, inst: Instances, table: np.ndarray, columns: tuple[str, ...],
           facts: dict) -> tuple[str, list[str]]:
     """Writes every output into OUT; returns the terminal table and its notes (`notes`, in table.txt below it)."""
-    bounds = bound_columns(spec)
+    bounds = limits.bound_columns(spec)
     header, body = rows(spec, inst, table, columns, bounds)
     write_csv(out / "results.csv", header, body)
     groups = group_summary(spec, inst, table, columns)
@@ -472,8 +365,8 @@ def write(out: Path, spec: SweepSpec, inst: Instances, table: np.ndarray, column
     figure = {"gravity": gravity_figure, "gains": gains_figure, "param": gains_figure}.get(spec.kind, terrain_figure)
     save(figure(spec, groups), out / f"{spec.kind}.png")
     if bounds:
-        save(limits_figure(spec, groups, bounds), out / "limits.png")
-    text = "\n".join([table_text(spec, groups), *limits(spec, groups, bounds)])
+        save(limits.figure(spec, groups, bounds), out / "limits.png")
+    text = "\n".join([table_text(spec, groups), *limits.lines(spec, groups, bounds)])
     atomic_write_text(out / "table.txt", "\n".join([text, *said]) + "\n")
     return text, said
 

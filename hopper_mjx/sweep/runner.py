@@ -39,7 +39,7 @@ COLUMNS = ("apex_height", "flight_rise", "flight_time", "ballistic_flight_time",
 # An obstacle, gaps or terrain sweep's extra columns (`hops.terrain_metrics`).
 TERRAIN_COLUMNS = ("distance_made_good", "obstacles_cleared", "highest_cleared", "fall_x", "fall_y")
 # A block or gaps sweep's, besides: how its landings went (`hops.landing_metrics`).
-LANDING_COLUMNS = ("landing_tilt", "impact_force")
+LANDING_COLUMNS = ("landing_tilt", "impact_force", "past_tilt", "past_impact")
 # And what its jumps asked of each joint's motor (`hops.actuator_metrics`).
 ACTUATOR_COLUMNS = tuple(f"{m}_{j}" for m in ("peak_torque", "peak_power", "line_use") for j in hops.JOINT_NAMES)
 def recorded(timestep: float, torque: bool = False) -> signals.SensorConfig:
@@ -149,7 +149,7 @@ class ChunkRunner:
         if self.grounds:
             result |= hops.terrain_metrics(traj, command_speed=self.spec.speed, obstacles=obstacles)
         if self.spec.kind in BAND_KINDS:
-            result |= hops.landing_metrics(traj) | hops.actuator_metrics(traj, self.sim.layout.joint_dof,
+            result |= hops.landing_metrics(traj, obstacles) | hops.actuator_metrics(traj, self.sim.layout.joint_dof,
                                                                           *motor_figures(final, self.sim.layout))
         return np.stack([np.asarray(result[c], dtype=np.float64) for c in self.columns], axis=1)[:n]
 

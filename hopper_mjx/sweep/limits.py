@@ -1,0 +1,144 @@
+"""What a block or gaps sweep answers: the highest block (widest gap) the robots got past at each gravity, beside
+the bound the motors put on it (`hardware.bound`), and what getting past it asked of the landing and the knee."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from hopper_mjx.sweep.grid import BAND_KINDS, PASSED, PLANETS, SweepSpec
+from hopper_mjx.sweep.plotting import physics_label, pyplot
+
+# A band sweep's answer: (its bound's results.csv column, the answer in words, the quantity on its axis).
+ANSWER = {"obstacle": ("height_bound", "highest block", "block height"),
+          "gaps": ("width_bound", "widest gap", "gap width")}
+
+# What the jump past a band asked, its medians over the replicates that got past (`past_medians`): the landing
+# beyond it (`hops.landing_metrics`) and the knee's peaks over the run (`hops.actuator_metrics`).
+PAST_COLUMNS = ("past_tilt", "past_impact", "peak_torque_kfe", "peak_power_kfe", "line_use_kfe")
+
+
+def past_medians(table: np.ndarray, columns: tuple[str, ...]) -> dict[str, float | None]:
+    """{PAST_COLUMNS name: its median over the rows that got past the band (fallen later or not), None if none}."""
+    got = table[:, columns.index("obstacles_cleared")] > 0
+    out = {}
+    for name in PAST_COLUMNS:
+        values = table[got, columns.index(name)]
+        values = values[np.isfinite(values)]
+        out[name] = float(np.median(values)) if values.size else None
+    return out
+
+
+def bound_columns(spec: SweepSpec) -> dict[str, dict[float, float]]:
+    """A block or gaps sweep's bounds per gravity (`hardware.bound`, the model's robot with the sweep's motors):
+    apex_bound, m of apex rise over standing, and the tallest block (height_bound) or widest gap (width_bound) it
+    allows, m. {} for other sweeps."""
+    if spec.kind not in BAND_KINDS:
+        return {}
+    from hopper_mjx.hardware import bound
+    from hopper_mjx.model.robot import standing_height
+
+    m = spec.physics.mj_model
+    per_g = bound.bounds(m, spec.physics.motor, spec.gravity)
+    if spec.kind == "obstacle":
+        standing, drop = standing_height(m), bound.tucked_drop(m)
+        past = {g: bound.highest_block(b, standing, drop) for g, b in per_g.items()}
+    else:
+        reach = bound.leg_reach(m)
+        past = {g: bound.widest_gap(b, reach) for g, b in per_g.items()}
+    return {"apex_bound": {g: b.apex_rise for g, b in per_g.items()}, ANSWER[spec.kind][0]: past}
+
+
+def best_passed(spec: SweepSpec, groups: list[dict]) -> dict[float, float]:
+    """{g: the highest block (widest gap) at least half the replicates got past, m; NaN for none of the grid's}."""
+    out = {}
+    for g in spec.gravity:
+        passed = [r[spec.param] for r in groups if r["gravity"] == g and r.get("cleared", 0) >= 0.5]
+        out[float(g)] = max(passed) if passed else math.nan
+    return out
+
+
+def lines(spec: SweepSpec, groups: list[dict], bounds: dict) -> list[str]:
+    """A block or gaps sweep's answer, per gravity: the highest block (widest gap) at least half the replicates got
+    past, in m and in standing heights, beside the bound's (`bound_columns`); then what getting past it asked
+    (`past_medians`), where the groups carry it."""
+    if not bounds:
+        return []
+    from hopper_mjx.model.robot import standing_height
+
+    m = spec.physics.mj_model
+    standing, weight = standing_height(m), float(m.body_mass.sum())
+    name, what, _ = ANSWER[spec.kind]
+    lines = [f"the {what} at least half the replicates {PASSED[spec.kind]}, beside the bound the {spec.physics.motor} "
+             f"motors put on it (docs/sweeps.md; standing height {standing:.3g} m):"]
+    asked = []
+    for g, best in best_passed(spec, groups).items():
+        got = f"{best:g} m ({best / standing:.2f} standing heights)" if np.isfinite(best) else "none of the grid's"
+        limit = bounds[name][g]
+        lines.append(f"  {PLANETS.get(g, ''):5} g {g:g} m/s²: {got}; bound {limit:.2f} m ({limit / standing:.2f}), "
+                     f"from an apex rise of {bounds['apex_bound'][g]:.2f} m")
+        past = _at_answer(spec, groups, g, best)
+        if past.get("past_tilt") is not None:
+            asked.append(f"  {PLANETS.get(g, ''):5} g {g:g} m/s²: landed tilted {past['past_tilt']:.1f}°, impact "
+                         f"{past['past_impact']:.0f} N ({past['past_impact'] / (weight * g):.1f} body weights); "
+                         f"knee {past['peak_torque_kfe']:.0f} N·m, {past['peak_power_kfe']:.0f} W, "
+                         f"{past['line_use_kfe']:.2f} of its motor's line")
+    if asked:
+        lines += ["what getting past it asked, medians of the replicates that did: the body's tilt and the foot's "
+                  "impact at the first landing beyond it, the knee's peak torque, power and share of its line "
+                  "over the run:", *asked]
+    return lines
+
+
+def _at_answer(spec: SweepSpec, groups: list[dict], g: float, best: float) -> dict:
+    """`past_medians` at gravity g's answer (the group of value `best`); {} without one."""
+    return next((r.get("past") or {} for r in groups if r["gravity"] == g and r[spec.param] == best), {})
+
+
+def figure(spec: SweepSpec, groups: list[dict], bounds: dict):
+    """limits.png of a block or gaps sweep: the highest block (widest gap) half the replicates got past against
+    gravity, beside the motors' bound, in m and in standing heights; and at that answer, what getting past asked
+    (`past_medians`): the landing's tilt and impact, the knee's share of its motor's line."""
+    from hopper_mjx.model.robot import standing_height
+
+    plt = pyplot()
+    m = spec.physics.mj_model
+    standing, weight = standing_height(m), float(m.body_mass.sum())
+    name, answer, what = ANSWER[spec.kind]
+    best = best_passed(spec, groups)
+    g = np.array(sorted(best))
+    fig, axes = plt.subplots(2, 2, figsize=(11.0, 8.0))
+    ax = axes[0, 0]
+    ax.plot(g, [bounds[name][v] for v in g], "k--", label=f"bound: the {spec.physics.motor} motors' best jump")
+    ax.plot(g, [best[v] for v in g], "C0o-", label=f"{PASSED[spec.kind]} by ≥ half the replicates (grid's values)")
+    ax.plot(g, np.full(len(g), max(spec.values)), ":", color="0.5", label="the grid's largest value")
+    ax.set_ylabel(f"{what} (m)")
+    twin = ax.secondary_yaxis("right", functions=(lambda v: v / standing, lambda h: h * standing))
+    twin.set_ylabel("in standing heights (1)")
+    ax.legend(fontsize=8, loc="upper right")
+    ax.set_title(f"the {answer} vs gravity", fontsize=9)
+    past = [_at_answer(spec, groups, v, best[v]) for v in g]
+    value = lambda key, scale=lambda v, x: x: np.array([np.nan if p.get(key) is None else scale(v, p[key])
+                                                        for v, p in zip(g, past)])
+    axes[0, 1].plot(g, value("past_tilt"), "C1o-", label="the body's tilt at the landing beyond it")
+    axes[0, 1].axhline(9.7, color="0.5", ls=":", label="SpaceHopper on hardware, 9.7°")
+    axes[0, 1].set_ylabel("landing tilt (°)")
+    axes[1, 0].plot(g, value("past_impact", lambda v, x: x / (weight * v)), "C3o-",
+                    label="the foot's peak force, that landing's first 50 ms")
+    axes[1, 0].set_ylabel("impact (body weights, 1)")
+    axes[1, 1].plot(g, value("line_use_kfe"), "C2o-", label="the knee's peak torque over its motor's line")
+    axes[1, 1].axhline(1.0, color="0.5", ls=":", label="on the line")
+    axes[1, 1].set_ylabel("knee torque / motor line (1)")
+    for panel in (axes[0, 1], axes[1, 0], axes[1, 1]):
+        panel.set_title(f"getting past the {answer}: medians of the replicates that did", fontsize=9)
+        panel.legend(fontsize=8)
+    for panel in axes.flat:
+        panel.set_xscale("log")
+        panel.minorticks_off()
+        panel.set_xticks(g, [f"{v:g}" for v in g])
+        panel.set_xlabel("gravity (m/s²)")
+        panel.grid(alpha=0.3)
+    fig.suptitle(f"{spec.controller}, {spec.num} replicates per point\n{physics_label(spec)}", fontsize=9)
+    fig.tight_layout()
+    return fig
