@@ -466,3 +466,31 @@ def test_a_block_or_gaps_sweep_answers_beside_the_motors_bound(kind):
                                                                    np.nan])
     assert [ax.get_ylabel() for ax in fig.axes[1:]] == ["landing tilt (°)", "impact (body weights, 1)",
                                                        "knee torque / motor line (1)"]
+
+
+def test_a_gravity_sweep_asked_past_the_motors_bound_reports_the_highest_hop_beside_it():
+    """Asked for a rise above the bound at some gravity, a gravity sweep carries the bound per gravity (the
+    model's robot, its motors: `bound.bounds`), ends its table with each gravity's median highest hop against it, and
+    draws both in the apex panel; asked for less than the lowest bound (the highest gravity's), nothing of it."""
+    from hopper_mjx.hardware import bound
+    from hopper_mjx.scenario import Physics
+    from hopper_mjx.sweep import limits, report
+
+    spec = _spec(height=1.0, physics=Physics(motor="dc"))  # above Earth's 0.28 m and Mars's 0.80 m, below the Moon's
+    per_g = bound.bounds(spec.physics.mj_model, "dc", spec.gravity)
+    bounds = limits.bound_columns(spec)
+    assert bounds == {"apex_bound": {g: b.apex_rise for g, b in per_g.items()}}
+    assert limits.bound_columns(_spec(height=0.2, physics=Physics(motor="dc"))) == {}
+    groups = [{"gravity": g, "highest_median": h} for g, h in ((9.81, 0.25), (1.62, 1.5), (3.71, None))]
+    lines = limits.apex_lines(spec, groups, bounds)
+    assert lines[0].startswith("asked for a 1 m rise: the highest hop before any fall")
+    assert lines[1].startswith(f"  Moon  g 1.62 m/s²: 1.50 m ({1.5 / per_g[1.62].apex_rise:.0%} of the bound;")
+    assert lines[2] == f"  Mars  g 3.71 m/s²: none; bound {per_g[3.71].apex_rise:.2f} m"
+    assert lines[3].startswith(f"  Earth g 9.81 m/s²: 0.25 m ({0.25 / per_g[9.81].apex_rise:.0%}")
+    assert limits.apex_lines(spec, groups, {}) == []
+    rows = [dict(r, apex_height=0.1, apex_height_std=0.0, survival=0.5) for r in groups]
+    ax = report.gravity_figure(spec, rows, bounds=bounds).axes[0]
+    drawn = {line.get_label(): line.get_ydata() for line in ax.lines}
+    np.testing.assert_allclose(drawn["bound: the dc motors' best jump"],
+                               [per_g[g].apex_rise for g in (1.62, 3.71, 9.81)])
+    np.testing.assert_allclose(drawn["highest hop before any fall (median of every replicate)"], [1.5, np.nan, 0.25])

@@ -33,7 +33,9 @@ def past_medians(table: np.ndarray, columns: tuple[str, ...]) -> dict[str, float
 def bound_columns(spec: SweepSpec) -> dict[str, dict[float, float]]:
     """A block or gaps sweep's bounds per gravity (`hardware.bound`, the model's robot with the sweep's motors):
     apex_bound, m of apex rise over standing, and the tallest block (height_bound) or widest gap (width_bound) it
-    allows, m. {} for other sweeps."""
+    allows, m; a gravity sweep's, where it asks for more than the motors give (`apex_bounds`); {} for other sweeps."""
+    if spec.kind == "gravity":
+        return apex_bounds(spec)
     if spec.kind not in BAND_KINDS:
         return {}
     from hopper_mjx.hardware import bound
@@ -48,6 +50,39 @@ def bound_columns(spec: SweepSpec) -> dict[str, dict[float, float]]:
         reach = bound.leg_reach(m)
         past = {g: bound.widest_gap(b, reach) for g, b in per_g.items()}
     return {"apex_bound": {g: b.apex_rise for g, b in per_g.items()}, ANSWER[spec.kind][0]: past}
+
+
+def apex_bounds(spec: SweepSpec) -> dict[str, dict[float, float]]:
+    """A gravity sweep's {"apex_bound": {g: m of apex rise over standing}}, the motors' bound for the model's robot,
+    when its command asks for a higher rise than that at one of its gravities at least; else {} (nor where the knee's
+    motor bounds nothing: its URDF gives no limit)."""
+    from hopper_mjx.hardware import bound
+
+    m = spec.physics.mj_model
+    try:  # the highest gravity's bound is the lowest: one integration tells whether any is asked past
+        if spec.height <= bound.bounds(m, spec.physics.motor, (max(spec.gravity),))[max(spec.gravity)].apex_rise:
+            return {}
+    except ValueError:
+        return {}
+    return {"apex_bound": {g: b.apex_rise for g, b in bound.bounds(m, spec.physics.motor, spec.gravity).items()}}
+
+
+def apex_lines(spec: SweepSpec, groups: list[dict], bounds: dict) -> list[str]:
+    """A gravity sweep asked past the bound: per gravity the highest hop before any fall, the median of every
+    replicate (`highest_median`), beside the bound's apex rise."""
+    if not bounds:
+        return []
+    from hopper_mjx.model.robot import standing_height
+
+    standing = standing_height(spec.physics.mj_model)
+    lines = [f"asked for a {spec.height:g} m rise: the highest hop before any fall (the median replicate's) beside the "
+             f"bound the {spec.physics.motor} motors put on it (docs/sweeps.md; standing height {standing:.3g} m):"]
+    for r in sorted(groups, key=lambda r: r["gravity"]):
+        g, limit, got = r["gravity"], bounds["apex_bound"][r["gravity"]], r.get("highest_median")
+        reached = "none" if got is None else f"{got:.2f} m ({got / limit:.0%} of the bound; {got / standing:.2f} " \
+                                              "standing heights)"
+        lines.append(f"  {PLANETS.get(g, ''):5} g {g:g} m/s²: {reached}; bound {limit:.2f} m")
+    return lines
 
 
 def best_passed(spec: SweepSpec, groups: list[dict]) -> dict[float, float]:

@@ -82,6 +82,9 @@ def group_summary(spec: SweepSpec, inst: Instances, table: np.ndarray, columns: 
             if "obstacles_cleared" in columns:  # over every replicate, as survival: a fall before it is a miss
                 record["cleared"] = float((table[sel, columns.index("obstacles_cleared")] > 0).mean())
                 record["reached"] = float(reached(spec, table[sel], columns).mean())
+            highest = table[sel, columns.index("highest_apex")]  # over every replicate: a fall ends the count
+            highest = highest[np.isfinite(highest)]
+            record["highest_median"] = float(np.median(highest)) if highest.size else None
             if "past_tilt" in columns:
                 record["past"] = limits.past_medians(table[sel], columns)
             # Hop metrics describe steady hopping: the survivors' (a fallen run's last hops are its collapse).
@@ -222,9 +225,10 @@ def _column(groups: list[dict], key: str) -> np.ndarray:
     return np.array([np.nan if r.get(key) is None else r[key] for r in groups])
 
 
-def gravity_figure(spec: SweepSpec, groups: list[dict], series: list | None = None):
+def gravity_figure(spec: SweepSpec, groups: list[dict], series: list | None = None, bounds: dict | None = None):
     """The gravity sweep's figure (a matplotlib Figure; `write` saves it as gravity.png); `series`
-    [(label, groups)] draws several controllers in one figure."""
+    [(label, groups)] draws several controllers in one figure; `bounds` (`limits.apex_bounds`), a command past the
+    motors' bound: its apex panel draws the bound and the highest hop before any fall."""
     plt = pyplot()
     # The x axis ascends whatever order --gravity had.
     series = [(name, sorted(rows_, key=lambda r: r["gravity"])) for name, rows_ in (series or [("measured", groups)])]
@@ -252,6 +256,13 @@ def gravity_figure(spec: SweepSpec, groups: list[dict], series: list | None = No
         rows_ = series[0][1]
         axes[0, 1].plot(_column(rows_, "gravity"), _column(rows_, "ballistic_flight_time"), "C3x--",
                         label="ballistic 2√(2h/g), h = each hop's measured rise")
+    if bounds:
+        rows_ = sorted(groups, key=lambda r: r["gravity"])
+        g = _column(rows_, "gravity")
+        axes[0, 0].plot(g, [bounds["apex_bound"][v] for v in g], "k:", label=f"bound: the {spec.physics.motor} "
+                        "motors' best jump")
+        axes[0, 0].plot(g, _column(rows_, "highest_median"), "C2s-", label="highest hop before any fall (median of "
+                        "every replicate)")
     axes[0, 0].legend(fontsize=8)
     axes[0, 1].legend(fontsize=8)
     axes[1, 1].set_ylim(-5, 105)
@@ -362,11 +373,15 @@ def write(out: Path, spec: SweepSpec, inst: Instances, table: np.ndarray, column
                   if bounds else {}),
                "notes": said, "arguments": spec.to_json(), "versions": versions(), "run": facts}
     atomic_write_text(out / "summary.json", json.dumps(summary, indent=1))
-    figure = {"gravity": gravity_figure, "gains": gains_figure, "param": gains_figure}.get(spec.kind, terrain_figure)
-    save(figure(spec, groups), out / f"{spec.kind}.png")
-    if bounds:
+    if spec.kind == "gravity":
+        save(gravity_figure(spec, groups, bounds=bounds), out / "gravity.png")
+    else:
+        save({"gains": gains_figure, "param": gains_figure}.get(spec.kind, terrain_figure)(spec, groups),
+             out / f"{spec.kind}.png")
+    if bounds and spec.kind in BAND_KINDS:
         save(limits.figure(spec, groups, bounds), out / "limits.png")
-    text = "\n".join([table_text(spec, groups), *limits.lines(spec, groups, bounds)])
+    answer = limits.lines(spec, groups, bounds) if spec.kind in BAND_KINDS else limits.apex_lines(spec, groups, bounds)
+    text = "\n".join([table_text(spec, groups), *answer])
     atomic_write_text(out / "table.txt", "\n".join([text, *said]) + "\n")
     return text, said
 
