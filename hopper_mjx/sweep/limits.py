@@ -68,19 +68,21 @@ def apex_bounds(spec: SweepSpec) -> dict[str, dict[float, float]]:
 
 
 def apex_lines(spec: SweepSpec, groups: list[dict], bounds: dict) -> list[str]:
-    """A gravity sweep asked past the bound: per gravity the highest hop before any fall, the median of every
-    replicate (`highest_median`), beside the bound's apex rise."""
+    """A gravity sweep asked past the bound: per gravity the highest hop before any fall, the median replicate's
+    (`highest_median`) and the best's (`highest_best`), beside the bound's apex rise."""
     if not bounds:
         return []
     from hopper_mjx.model.robot import standing_height
 
     standing = standing_height(spec.physics.mj_model)
-    lines = [f"asked for a {spec.height:g} m rise: the highest hop before any fall (the median replicate's) beside the "
-             f"bound the {spec.physics.motor} motors put on it (docs/sweeps.md; standing height {standing:.3g} m):"]
+    lines = [f"asked for a {spec.height:g} m rise: the highest hop before any fall (the median replicate's, the "
+             f"best's) beside the bound the {spec.physics.motor} motors put on it (docs/sweeps.md; standing height "
+             f"{standing:.3g} m):"]
     for r in sorted(groups, key=lambda r: r["gravity"]):
-        g, limit, got = r["gravity"], bounds["apex_bound"][r["gravity"]], r.get("highest_median")
-        reached = "none" if got is None else f"{got:.2f} m ({got / limit:.0%} of the bound; {got / standing:.2f} " \
-                                              "standing heights)"
+        g, limit, got, best = (r["gravity"], bounds["apex_bound"][r["gravity"]], r.get("highest_median"),
+                               r.get("highest_best"))
+        reached = "none" if got is None else (f"{got:.2f} m ({got / limit:.0%} of the bound; {got / standing:.2f} "
+                                              f"standing heights), the best {best:.2f} m ({best / limit:.0%})")
         lines.append(f"  {PLANETS.get(g, ''):5} g {g:g} m/s²: {reached}; bound {limit:.2f} m")
     return lines
 

@@ -85,6 +85,7 @@ def group_summary(spec: SweepSpec, inst: Instances, table: np.ndarray, columns: 
             highest = table[sel, columns.index("highest_apex")]  # over every replicate: a fall ends the count
             highest = highest[np.isfinite(highest)]
             record["highest_median"] = float(np.median(highest)) if highest.size else None
+            record["highest_best"] = float(highest.max()) if highest.size else None
             if "past_tilt" in columns:
                 record["past"] = limits.past_medians(table[sel], columns)
             # Hop metrics describe steady hopping: the survivors' (a fallen run's last hops are its collapse).
