@@ -12,7 +12,7 @@ from hopper_mjx.scenario import Physics
 
 # A label's unit: one comma-separated part of a parenthesised group ("x (m), the start at 0", "duty factor
 # (stance / period, 1)"); "1" for a pure number, "% of ..." for a share.
-UNITS = {"m", "s", "m/s", "m/s²", "rad/s", "N", "J/kg", "1", "min", "°", "steps/s", "instances", "policy steps"}
+UNITS = {"m", "s", "m/s", "m/s²", "rad/s", "N", "J/kg", "1", "min", "°", "W", "steps/s", "instances", "policy steps"}
 CHANGED = Physics(motor="dc", action_delay=0.004, push=(2.0, 0.3))  # what a run's subtitle must then say
 CHANGED_WORDS = ("dc motors", "action delay 4 ms", "pushes of 0.3 m/s every 2 s")
 

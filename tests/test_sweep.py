@@ -462,10 +462,9 @@ def test_a_block_or_gaps_sweep_answers_beside_the_motors_bound(kind):
     assert lines[6].startswith("  Mars  g 3.71 m/s²: landed tilted 40.0°")
     fig = limits.figure(spec, groups, bounds)
     np.testing.assert_allclose(fig.axes[1].lines[0].get_ydata(), [12.5, 40.0, np.nan])
-    np.testing.assert_allclose(fig.axes[2].lines[0].get_ydata(), [300.0 / weight, 300.0 / (weight / 1.62 * 3.71),
-                                                                   np.nan])
-    assert [ax.get_ylabel() for ax in fig.axes[1:]] == ["landing tilt (°)", "impact (body weights, 1)",
-                                                       "knee torque / motor line (1)"]
+    np.testing.assert_allclose(fig.axes[2].lines[0].get_ydata(), [300.0, 300.0, np.nan])
+    np.testing.assert_allclose(fig.axes[3].lines[0].get_ydata(), [900.0, 900.0, np.nan])
+    assert [ax.get_ylabel() for ax in fig.axes[1:]] == ["landing tilt (°)", "impact (N)", "knee power (W)"]
 
 
 def test_a_gravity_sweep_asked_past_the_motors_bound_reports_the_highest_hop_beside_it():

@@ -105,7 +105,7 @@ def lines(spec: SweepSpec, groups: list[dict], bounds: dict) -> list[str]:
     from hopper_mjx.model.robot import standing_height
 
     m = spec.physics.mj_model
-    standing, weight = standing_height(m), float(m.body_mass.sum())
+    standing, mass = standing_height(m), float(m.body_mass.sum())
     name, what, _ = ANSWER[spec.kind]
     lines = [f"the {what} at least half the replicates {PASSED[spec.kind]}, beside the bound the {spec.physics.motor} "
              f"motors put on it (docs/sweeps.md; standing height {standing:.3g} m):"]
@@ -118,7 +118,7 @@ def lines(spec: SweepSpec, groups: list[dict], bounds: dict) -> list[str]:
         past = _at_answer(spec, groups, g, best)
         if past.get("past_tilt") is not None:
             asked.append(f"  {PLANETS.get(g, ''):5} g {g:g} m/s²: landed tilted {past['past_tilt']:.1f}°, impact "
-                         f"{past['past_impact']:.0f} N ({past['past_impact'] / (weight * g):.1f} body weights); "
+                         f"{past['past_impact']:.0f} N ({past['past_impact'] / (mass * g):.1f} body weights); "
                          f"knee {past['peak_torque_kfe']:.0f} N·m, {past['peak_power_kfe']:.0f} W, "
                          f"{past['line_use_kfe']:.2f} of its motor's line")
     if asked:
@@ -136,12 +136,12 @@ def _at_answer(spec: SweepSpec, groups: list[dict], g: float, best: float) -> di
 def figure(spec: SweepSpec, groups: list[dict], bounds: dict):
     """limits.png of a block or gaps sweep: the highest block (widest gap) half the replicates got past against
     gravity, beside the motors' bound, in m and in standing heights; and at that answer, what getting past asked
-    (`past_medians`): the landing's tilt and impact, the knee's share of its motor's line."""
+    (`past_medians`): the landing's tilt and impact, the knee's peak power."""
     from hopper_mjx.model.robot import standing_height
 
     plt = pyplot()
     m = spec.physics.mj_model
-    standing, weight = standing_height(m), float(m.body_mass.sum())
+    standing, mass = standing_height(m), float(m.body_mass.sum())
     name, answer, what = ANSWER[spec.kind]
     best = best_passed(spec, groups)
     g = np.array(sorted(best))
@@ -161,12 +161,13 @@ def figure(spec: SweepSpec, groups: list[dict], bounds: dict):
     axes[0, 1].plot(g, value("past_tilt"), "C1o-", label="the body's tilt at the landing beyond it")
     axes[0, 1].axhline(9.7, color="0.5", ls=":", label="SpaceHopper on hardware, 9.7°")
     axes[0, 1].set_ylabel("landing tilt (°)")
-    axes[1, 0].plot(g, value("past_impact", lambda v, x: x / (weight * v)), "C3o-",
-                    label="the foot's peak force, that landing's first 50 ms")
-    axes[1, 0].set_ylabel("impact (body weights, 1)")
-    axes[1, 1].plot(g, value("line_use_kfe"), "C2o-", label="the knee's peak torque over its motor's line")
-    axes[1, 1].axhline(1.0, color="0.5", ls=":", label="on the line")
-    axes[1, 1].set_ylabel("knee torque / motor line (1)")
+    axes[1, 0].plot(g, value("past_impact"), "C3o-", label="the foot's peak force, that landing's first 50 ms")
+    axes[1, 0].plot(g, mass * g, ":", color="0.5", label="the robot's weight")
+    axes[1, 0].set_ylabel("impact (N)")
+    axes[1, 0].set_yscale("log")
+    axes[1, 1].plot(g, value("peak_power_kfe"), "C2o-", label="the knee's peak power, driving or braking")
+    axes[1, 1].set_ylabel("knee power (W)")
+    axes[1, 1].set_ylim(bottom=0.0)
     for panel in (axes[0, 1], axes[1, 0], axes[1, 1]):
         panel.set_title(f"getting past the {answer}: medians of the replicates that did", fontsize=9)
         panel.legend(fontsize=8)
