@@ -75,7 +75,7 @@ def apex_lines(spec: SweepSpec, groups: list[dict], bounds: dict) -> list[str]:
     from hopper_mjx.model.robot import standing_height
 
     standing = standing_height(spec.physics.mj_model)
-    lines = [f"asked for a {spec.height:g} m rise: the highest hop before any fall (the median replicate's, the "
+    out = [f"asked for a {spec.height:g} m rise: the highest hop before any fall (the median replicate's, the "
              f"best's) beside the bound the {spec.physics.motor} motors put on it (docs/sweeps.md; standing height "
              f"{standing:.3g} m):"]
     for r in sorted(groups, key=lambda r: r["gravity"]):
@@ -83,8 +83,8 @@ def apex_lines(spec: SweepSpec, groups: list[dict], bounds: dict) -> list[str]:
                                r.get("highest_best"))
         reached = "none" if got is None else (f"{got:.2f} m ({got / limit:.0%} of the bound; {got / standing:.2f} "
                                               f"standing heights), the best {best:.2f} m ({best / limit:.0%})")
-        lines.append(f"  {PLANETS.get(g, ''):5} g {g:g} m/s²: {reached}; bound {limit:.2f} m")
-    return lines
+        out.append(f"  {PLANETS.get(g, ''):5} g {g:g} m/s²: {reached}; bound {limit:.2f} m")
+    return out
 
 
 def best_passed(spec: SweepSpec, groups: list[dict]) -> dict[float, float]:
@@ -107,13 +107,13 @@ def lines(spec: SweepSpec, groups: list[dict], bounds: dict) -> list[str]:
     m = spec.physics.mj_model
     standing, mass = standing_height(m), float(m.body_mass.sum())
     name, what, _ = ANSWER[spec.kind]
-    lines = [f"the {what} at least half the replicates {PASSED[spec.kind]}, beside the bound the {spec.physics.motor} "
+    out = [f"the {what} at least half the replicates {PASSED[spec.kind]}, beside the bound the {spec.physics.motor} "
              f"motors put on it (docs/sweeps.md; standing height {standing:.3g} m):"]
     asked = []
     for g, best in best_passed(spec, groups).items():
         got = f"{best:g} m ({best / standing:.2f} standing heights)" if np.isfinite(best) else "none of the grid's"
         limit = bounds[name][g]
-        lines.append(f"  {PLANETS.get(g, ''):5} g {g:g} m/s²: {got}; bound {limit:.2f} m ({limit / standing:.2f}), "
+        out.append(f"  {PLANETS.get(g, ''):5} g {g:g} m/s²: {got}; bound {limit:.2f} m ({limit / standing:.2f}), "
                      f"from an apex rise of {bounds['apex_bound'][g]:.2f} m")
         past = _at_answer(spec, groups, g, best)
         if past.get("past_tilt") is not None:
@@ -122,10 +122,10 @@ def lines(spec: SweepSpec, groups: list[dict], bounds: dict) -> list[str]:
                          f"knee {past['peak_torque_kfe']:.0f} N·m, {past['peak_power_kfe']:.0f} W, "
                          f"{past['line_use_kfe']:.2f} of its motor's line")
     if asked:
-        lines += ["what getting past it asked, medians of the replicates that did: the body's tilt and the foot's "
+        out += ["what getting past it asked, medians of the replicates that did: the body's tilt and the foot's "
                   "impact at the first landing beyond it, the knee's peak torque, power and share of its line "
                   "over the run:", *asked]
-    return lines
+    return out
 
 
 def _at_answer(spec: SweepSpec, groups: list[dict], g: float, best: float) -> dict:
