@@ -119,7 +119,9 @@ def parser() -> argparse.ArgumentParser:
                                 "=timestep or =solver takes that part alone (the other stays the core's)")
         s.add_argument("--num", type=int, default=num, help=f"replicates per grid point (default {num})")
         s.add_argument("--duration", type=float, default=duration, help="simulated seconds per instance")
-        s.add_argument("--height", type=float, default=0.10, help="commanded apex rise over standing height, m")
+        s.add_argument("--height", type=float, default=0.10,
+                       help="commanded apex rise over standing height, m; above the motors' bound (gravity sweeps), "
+                       "the table and plot give each gravity's highest hop beside it")
         s.add_argument("--speed", type=cli.floats("--speed"), default=[0.3 if kind in BAND_KINDS else 0.0, 0.0],
                        help="VX,VY m/s" + (" (default 0.3,0: the approach)" if kind in BAND_KINDS else ""))
         s.add_argument("--kick", type=float, default=KICK, help="std of the random initial velocity, m/s and rad/s")

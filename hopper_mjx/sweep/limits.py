@@ -99,7 +99,9 @@ def best_passed(spec: SweepSpec, groups: list[dict]) -> dict[float, float]:
 def lines(spec: SweepSpec, groups: list[dict], bounds: dict) -> list[str]:
     """A block or gaps sweep's answer, per gravity: the highest block (widest gap) at least half the replicates got
     past, in m and in standing heights, beside the bound's (`bound_columns`); then what getting past it asked
-    (`past_medians`), where the groups carry it."""
+    (`past_medians`), where the groups carry it. A gravity sweep's is `apex_lines`."""
+    if spec.kind == "gravity":
+        return apex_lines(spec, groups, bounds)
     if not bounds:
         return []
     from hopper_mjx.model.robot import standing_height

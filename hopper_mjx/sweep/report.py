@@ -32,6 +32,8 @@ BALANCE_FIGURE = ("balance, an LQR stance, keeps none of a sweep's kicked robots
                   "per gravity, 10 s: docs/control.md); raibert --height 0.05 hops in place and keeps them all")
 REACH = 0.1  # m: a base this close to an obstacle's near edge has reached it (its foot lands ahead of it)
 UNITS = {"obstacle_height": "m", "gap_width": "m", "roughness": "m, peak |height|"}  # a terrain sweep's value
+
+
 def rows(spec: SweepSpec, inst: Instances, table: np.ndarray, columns: tuple[str, ...],
          bounds: dict | None = None) -> tuple[list[str], list[list]]:
     """results.csv's header and rows; `bounds` (`bound_columns`) adds a column per bound."""
@@ -387,8 +389,7 @@ def write(out: Path, spec: SweepSpec, inst: Instances, table: np.ndarray, column
              out / f"{spec.kind}.png")
     if bounds and spec.kind in BAND_KINDS:
         save(limits.figure(spec, groups, bounds), out / "limits.png")
-    answer = limits.lines(spec, groups, bounds) if spec.kind in BAND_KINDS else limits.apex_lines(spec, groups, bounds)
-    text = "\n".join([table_text(spec, groups), *answer])
+    text = "\n".join([table_text(spec, groups), *limits.lines(spec, groups, bounds)])
     atomic_write_text(out / "table.txt", "\n".join([text, *said]) + "\n")
     return text, said
 

@@ -149,8 +149,8 @@ class ChunkRunner:
         if self.grounds:
             result |= hops.terrain_metrics(traj, command_speed=self.spec.speed, obstacles=obstacles)
         if self.spec.kind in BAND_KINDS:
-            result |= hops.landing_metrics(traj, obstacles) | hops.actuator_metrics(traj, self.sim.layout.joint_dof,
-                                                                          *motor_figures(final, self.sim.layout))
+            result |= hops.landing_metrics(traj, obstacles)
+            result |= hops.actuator_metrics(traj, self.sim.layout.joint_dof, *motor_figures(final, self.sim.layout))
         return np.stack([np.asarray(result[c], dtype=np.float64) for c in self.columns], axis=1)[:n]
 
 
