@@ -138,7 +138,10 @@ def run_record(run: Path, do_sweep: bool, num: int, duration: float) -> dict:
     record = _json(run / "metrics.json")
     args = record["args"]
     height, speed = command(args)
-    ground = args.get("terrain") or "flat"  # the run's own ground (hop_terrain's rough ground); runs before it: flat
+    from hopper_mjx.envs.curriculum import judged_on
+
+    # The run's own ground (a course's: `judged_on`); runs before the option: flat.
+    ground = judged_on(args.get("terrain") or "flat")
     found = _json(run / "threshold.json") if (run / "threshold.json").is_file() else None
     rates = [r["training/sps"] for r in record["history"] if r.get("training/sps")]
     if do_sweep and not (run / SWEEP / "summary.json").is_file():

@@ -20,6 +20,7 @@ from __future__ import annotations
 import hopper_mjx  # noqa: F401  # isort: skip
 
 import argparse
+import dataclasses
 import json
 import sys
 from pathlib import Path
@@ -87,6 +88,11 @@ def _train_and_report(args, physics) -> int:
         record = train(args, physics)
     except ValueError as err:
         return cli.fail(err)
+    from hopper_mjx import terrain
+    from hopper_mjx.envs.curriculum import judged_on
+
+    # Judged in the core on its own ground, but for a course: one ground, from the origin (`judged_on`).
+    physics = dataclasses.replace(physics, ground=terrain.parse(judged_on(str(physics.ground))))
     print(f"wrote {args.out}/policy (step {record['final_step']:,}), {HISTORY}, reward_curve.png; "
           f"{record['wall_time'] / 60:.1f} min of training")
     if args.scan_checkpoints:  # first: the policy evaluated below is the one the scan selects

@@ -50,13 +50,14 @@ TERRAINS = {  # --terrain NAME:KEY=VALUE,...; the keys are in hopper_mjx/terrain
     "gaps": "trenches across the ground at a spacing",
     "obstacle": "a block of a height across the ground at a distance ahead",
     "crater": "a bowl with a raised rim",
+    "course": "the training course: tiles of rough ground, steps, gaps and blocks, one row per level of difficulty",
     "heightmap": "a greyscale PNG, black low, white high",
 }
 TASKS = {
     "stand": "stay up, upright and in place; small hops allowed",
     "hop": "hop in place to a commanded apex",
     "hop_velocity": "hop to a commanded apex at a commanded (vx, vy)",
-    "hop_terrain": "hop_velocity over rough ground, reading a height scan around the base",
+    "hop_terrain": "hop_velocity over the training course's levels, reading a height scan around the base",
 }
 
 

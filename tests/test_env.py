@@ -389,3 +389,44 @@ def test_env_and_metrics_falls_are_different_measures(mj_model):
     assert max(roll, pitch) < hops.FALL_ROLL_PITCH
 
 
+
+
+def test_on_the_course_each_episode_starts_on_a_tile_of_its_level_and_the_level_follows_the_last_episode():
+    """The terrain curriculum (`envs.curriculum`): a first episode starts on the pad of a tile of the course's
+    lower half, at z over the pad as at the origin; an episode that lasted moves up a level, one that fell down
+    (not below 0), and past the top one goes to a random level."""
+    from hopper_mjx import terrain
+    from hopper_mjx.envs.curriculum import JITTER, Curriculum, judged_on
+    from hopper_mjx.terrain import spec
+
+    env = envs.make("hop_terrain", terrain="course:levels=5,tile=2,seed=3,cell=0.1")
+    assert env.task_info[-1] == "level" and env.curriculum.levels == 5
+    keys = jax.random.split(jax.random.PRNGKey(0), 400)
+    first = jax.jit(jax.vmap(env.reset))(keys)
+    level, xy = np.asarray(first.info["level"]), np.asarray(first.pipeline_state.qpos[:, :2])
+    assert set(level) == {0, 1, 2}  # the lower half, the middle level with it
+    centres = spec.tile_centres(env.config.ground)[level]  # (n, kinds, 2): each episode's level's tiles
+    off = np.abs(xy[:, None, :] - centres).max(axis=2)
+    kind = off.argmin(axis=1)
+    assert off.min(axis=1).max() <= JITTER and set(kind) == {0, 1, 2, 3}  # every kind, on the pad
+    lift = np.asarray(first.pipeline_state.qpos[:, 2]) - env.standing_height  # over the pad, at z = 0
+    assert lift.min() >= -1e-6 and lift.max() <= env.config.initial_clearance[1] + 1e-6
+    # The scan zeroed (`observe_scan=False`, the ablation): the same observation but for the scan.
+    blind = envs.make("hop_terrain", terrain="course:levels=5,tile=2,seed=3,cell=0.1", observe_scan=False)
+    seen, unseen = (jax.jit(e.reset)(keys[0]).obs for e in (env, blind))
+    assert blind.observation_size == env.observation_size and np.asarray(seen[-len(SCAN):]).min() > 0.8
+    np.testing.assert_array_equal(np.asarray(unseen[:-len(SCAN)]), np.asarray(seen[:-len(SCAN)]))
+    assert not np.asarray(unseen[-len(SCAN):]).any()
+    placed = jax.jit(jax.vmap(env.reset_at))(keys, jnp.full(400, 4, jnp.int32))
+    np.testing.assert_array_less(np.abs(np.asarray(placed.pipeline_state.qpos[:, 1]) - 4.0), JITTER + 1e-6)
+
+    course = Curriculum.of(env.config.ground)
+    step = jax.jit(jax.vmap(course.next_level))
+    levels = jnp.array([0, 0, 2, 2, 3, 4] * 100, jnp.int32)
+    survived = jnp.array([True, False, True, False, True, True] * 100)
+    after = np.asarray(step(levels, survived, jax.random.split(jax.random.PRNGKey(1), 600))).reshape(100, 6)
+    assert (after[:, :5] == [1, 0, 3, 1, 4]).all()
+    assert set(after[:, 5]) == {0, 1, 2, 3, 4}  # past the top: anywhere
+    assert Curriculum.of(terrain.parse("rough:amp=0.02,seed=1")) is None
+    assert judged_on(str(env.config.ground)) == "rough:amp=0.02,wavelength=0.4,seed=1,size=24x24"
+    assert judged_on("obstacle:height=0.1") == "obstacle:height=0.1"

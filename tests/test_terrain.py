@@ -17,6 +17,7 @@ SPECS = {  # one of each generator but flat and heightmap
     "gaps": "gaps:width=0.12,spacing=0.5,depth=0.2,x=0.5",
     "obstacle": "obstacle:height=0.15,x=0.6",
     "crater": "crater:radius=0.5,depth=0.1,rim=0.03,x=1",
+    "course": "course:levels=2,tile=2.5,seed=1,cell=0.05",
 }
 
 
@@ -147,6 +148,8 @@ def test_heightmap_is_laid_out_as_mujoco_reads_a_png(tmp_path):
     ("steps:cell=0.04,cell=0.04", "cell is given twice"),
     ("rough:seed=1,seed=2", "seed is given twice"),
     ("rough:amp", "'amp' is not key=value; rough takes amp, wavelength, seed, size, cell"),
+    ("course:size=4", "course has no key 'size'; it takes levels, tile, amp, step, gap, block, seed, cell"),
+    ("course:tile=1.5", "course: tile=1.5 m is too small; a tile needs at least 2 m"),
 ])
 def test_bad_specs_are_one_line(text, message):
     with pytest.raises(terrain.TerrainError, match=None) as err:
@@ -206,3 +209,38 @@ def test_an_instances_own_ground_goes_into_mjxs_height_field_as_mujoco_reads_it(
     data = np.asarray(engine.on_ground(engine.model, other).hfield_data)
     m.hfield_data[:] = data
     np.testing.assert_allclose(terrain.from_model(m).heights, other, atol=1e-7)
+
+
+def test_the_course_lays_out_its_levels_and_kinds_as_tiles():
+    """The training course: a tile per level (row) and kind (column), each with a flat pad at its centre and flat
+    ground at its edge; each kind's ground grows with the level as (level + 1) / levels of the hardest."""
+    from hopper_mjx.terrain import spec
+
+    ground = terrain.parse("course:levels=4,tile=4,amp=0.04,step=0.08,gap=0.3,block=0.15,seed=2")
+    assert ground.size == (16.0, 16.0) and terrain.parse(str(ground)) == ground
+    t = ground.terrain()
+    xs, ys = t.axes()
+    centres = spec.tile_centres(ground)
+    assert centres.shape == (4, 4, 2) and tuple(centres[0, 0]) == (-6.0, -6.0)
+
+    def tile(level, kind):
+        (cx, cy), half = centres[level, kind], 2.0
+        inside_x, inside_y = np.abs(xs - cx) < half - 1e-9, np.abs(ys - cy) < half - 1e-9
+        ring = np.maximum(np.abs(xs - cx)[None, :], np.abs(ys - cy)[:, None])[np.ix_(inside_y, inside_x)]
+        return t.heights[np.ix_(inside_y, inside_x)], ring
+
+    for level in range(4):
+        share = (level + 1) / 4
+        for kind, name in enumerate(generators.COURSE_KINDS):
+            h, ring = tile(level, kind)
+            assert np.abs(h[ring < generators.COURSE_PAD - 1e-9]).max() == 0.0, (level, name)  # the pad
+            assert np.abs(h[ring > 2.0 - generators.COURSE_EDGE + 0.01]).max() == 0.0, (level, name)  # the edge
+            hardest = {"rough": 0.04 * share, "steps": 0.08 * share * 2, "gaps": -0.2, "blocks": 0.15 * share}[name]
+            if name == "rough":  # its peak is the whole grid's: a tile's is near it, never over
+                assert 0.7 * hardest < np.abs(h).max() <= hardest + 1e-12, level
+            else:
+                assert (h.min() if hardest < 0 else h.max()) == pytest.approx(hardest, rel=1e-9), (level, name)
+        # The gaps' trenches widen with the level: the deep vertices along a line out from the centre.
+        h, ring = tile(level, 2)
+        row = h[h.shape[0] // 2]
+        assert (row < 0).sum() * 0.04 == pytest.approx(4 * 0.3 * share, abs=4 * 0.04 + 1e-9), level

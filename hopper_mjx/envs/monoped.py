@@ -55,6 +55,7 @@ from brax.envs.base import Env, State
 from hopper_mjx import engine as engines
 from hopper_mjx import model as hopper_model
 from hopper_mjx.control.base import PDScale, Servo
+from hopper_mjx.envs.curriculum import Curriculum
 from hopper_mjx.envs.task_config import MonopedConfig, decimation, training_model
 from hopper_mjx.envs.terms import (
     DROPPING,
@@ -151,6 +152,7 @@ class MonopedEnv(Env):
             mj_model = hopper_model.load(hopper_model.DEFAULT_URDF, terrain=ground.terrain())
         config = dataclasses.replace(config, robot=robot.same_robot(config.robot, mj_model, "this task's config"))
         self.terrain = same_ground(ground, mj_model, "this task's config")
+        self.curriculum = Curriculum.of(ground)  # None but on a course: every episode starts at the origin
         trained = training_model(mj_model, config)
         self.config = config
         self.layout = Layout.of(trained)
@@ -229,6 +231,7 @@ class MonopedEnv(Env):
         """The `State.info` keys a fresh episode replaces (`wrappers.ResampleAutoReset`)."""
         on = (bool(self.config.variation), self.motors is not None, self.sensors is not None, self.counts_steps)
         flight = FLIGHT_INFO if self.config.apex_reward == "flight" else ()
+        flight += () if self.curriculum is None else ("level",)
         return TASK_INFO + flight + tuple(k for k, used in zip(EPISODE_INFO, on) if used)
 
     def reward_terms(self, d, g, command, action, last_action, effort, fell, apex=None) -> dict[str, jax.Array]:
@@ -238,18 +241,26 @@ class MonopedEnv(Env):
                 **posture_terms(self.config, d, action, last_action, effort, fell)}
 
     def reset(self, rng: jax.Array) -> State:
+        return self.reset_at(rng)
+
+    def reset_at(self, rng: jax.Array, level: jax.Array | None = None) -> State:
+        """A fresh episode from `rng`; on a course, on a tile of `level` (None: a first episode's draw)."""
         cfg, lay = self.config, self.layout
         rng, k_cmd, k_lift, k_joint, k_g = jax.random.split(rng, 5)
         gravity = gravity_vector(log_uniform(k_g, cfg.gravity_range))
         lift = jax.random.uniform(k_lift, (), minval=cfg.initial_clearance[0], maxval=cfg.initial_clearance[1])
         joints = jnp.asarray(self.stance) + cfg.initial_joint_noise * jax.random.normal(k_joint, (3,))
         qpos = jnp.asarray(self.standing_qpos).at[2].add(lift).at[jnp.asarray(lay.joint_qpos)].set(joints)
+        course = {}
+        if self.curriculum is not None:  # on its level's tile's pad, at z = 0 as the origin is
+            course["level"] = self.curriculum.first(rng) if level is None else level
+            qpos = qpos.at[:2].set(self.curriculum.start(course["level"], rng))
         # As the core's reset: no forward yet, so the first observation's contact is the engine's
         # "none yet" and the physics is traced only in `physics` (the auto-reset runs this in every step).
         data = self.engine.make_data(qpos, jnp.zeros(lay.nv, qpos.dtype))
         command = self.sample_command(k_cmd)
         last_action = jnp.zeros(3)
-        info = {"command": command, "gravity": gravity, "last_action": last_action, "rng": rng}
+        info = {"command": command, "gravity": gravity, "last_action": last_action, "rng": rng, **course}
         if cfg.apex_reward == "flight":  # no hop yet: judged at the standing height until the first lift-off
             info |= {"apex": jnp.float32(self.standing_height), "flight_top": jnp.float32(DROPPING)}
         info |= self._start_episode(rng, self.observe_signals(self.engine.model, data))

@@ -84,6 +84,8 @@ class MonopedConfig:
     action_delay: float = 0.0  # s from the PD torque to the motors', whole steps of `timestep`; a drawn one wins
     push: tuple[float, float] | None = None  # (interval s, speed m/s) of random horizontal pushes in an episode
     terrain: str = ""  # a --terrain spec with a fixed seed: the ground of every episode ("" the flat plane)
+    # On a terrain: the policy reads the height scan; False zeros it (the same network, blind: what the scan adds).
+    observe_scan: bool = True
 
     def __post_init__(self):
         for name in RANGES:

@@ -5,7 +5,7 @@
 | `stand` | none: stay up in place, small hops allowed | alive, height band (crouch to a small apex), speed (to zero) |
 | `hop` | apex height, zero speed | apex (ballistic), speed (to zero) |
 | `hop_velocity` | apex height and (vx, vy) | apex (ballistic), speed (to the command) |
-| `hop_terrain` | apex height and (vx, vy), on rough ground | as `hop_velocity`; the height scan is observed |
+| `hop_terrain` | apex height and (vx, vy), on the training course | as `hop_velocity`; the height scan is observed |
 
 Every task also pays `terms.posture_terms` (upright, effort, smoothness, spin, fall).
 """
@@ -103,14 +103,17 @@ class HopVelocity(Hop):
                              w_apex=2.0, apex_scale=0.04)
 
 
-# Rough ground as Raibert is asked to cross it (docs/control.md), wide enough that no episode reaches its edge:
-# 20 s at the command box's fastest (0.5, 0.3) m/s is 11.7 m from the start.
-HOP_TERRAIN = "rough:amp=0.02,wavelength=0.4,seed=1,size=24x24"
+# The training course (`terrain.generators.course`): five levels of rough ground, steps, gaps and blocks, the
+# hardest 0.04 m rough, 0.08 m risers, 0.3 m gaps and 0.15 m blocks; episodes start on a tile of their level
+# (`envs.curriculum`). Until 3 Dec 2026 it was one rough ground, now the ground its policies are judged on
+# (`curriculum.JUDGE_GROUND`).
+HOP_TERRAIN = "course:seed=1"
 
 
 class HopTerrain(HopVelocity):
-    """`hop_velocity` over rough ground, reading the ground's height around the base (the height scan,
-    `terms.SCAN`). The apex is the base's height in the world, as the evaluation measures it."""
+    """`hop_velocity` over the training course, reading the ground's height around the base (the height scan,
+    `terms.SCAN`), each episode on a tile of its curriculum level (`envs.curriculum`). The apex is the base's
+    height in the world, as the evaluation measures it."""
 
     @classmethod
     def default_config(cls) -> MonopedConfig:

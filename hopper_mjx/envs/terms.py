@@ -76,7 +76,8 @@ def observe(layout: Layout, cfg: MonopedConfig, obs: Observation, gravity: jax.A
     if cfg.terrain:  # the base's height over the ground at each scan point, from where the odometry puts it
         ground = terrain_scan.measured_heights(obs.ground.heights, obs.ground.size, obs.qpos[:3], obs.qpos[3:7],
                                                jnp.asarray(SCAN, obs.qpos.dtype))
-        parts.append(obs.qpos[2] - ground)
+        over = obs.qpos[2] - ground
+        parts.append(over if cfg.observe_scan else jnp.zeros_like(over))
     return jnp.nan_to_num(jnp.concatenate(parts), posinf=0.0, neginf=0.0)
 
 

@@ -41,8 +41,14 @@ class ResampleAutoReset(Wrapper):
             steps = jnp.where(state.done, jnp.zeros_like(state.info["steps"]), state.info["steps"])
             state = state.replace(info={**state.info, "steps": steps})
         state = self.env.step(state.replace(done=jnp.zeros_like(state.done)), action)
-        fresh = self.env.reset(jax.vmap(lambda k: jax.random.split(k)[1])(state.info["rng"]))
+        keys = jax.vmap(lambda k: jax.random.split(k)[1])(state.info["rng"])
         done = state.done > 0
+        if "level" in state.info:  # the terrain curriculum: the next episode's level from how this one ended
+            survived = state.info["truncation"] > 0
+            level = jax.vmap(self.env.curriculum.next_level)(state.info["level"], survived, keys)
+            fresh = jax.vmap(self.env.reset_at)(keys, level)
+        else:
+            fresh = self.env.reset(keys)
         info = {**state.info, **{k: where_done(done, fresh.info[k], state.info[k]) for k in self.env.task_info}}
         return state.replace(pipeline_state=where_done(done, fresh.pipeline_state, state.pipeline_state),
                              obs=where_done(done, fresh.obs, state.obs), info=info)

@@ -64,3 +64,68 @@ def heightmap(grey, *, height):
     """A greyscale image (rows top to bottom, values in [0, 1]) as heights: black 0, white `height`, its
     top row at +y (as Gazebo's <heightmap> and MuJoCo's PNG hfield lay it)."""
     return height * np.asarray(grey, dtype=np.float64)[::-1]
+
+
+# The training course (`course`): a grid of square tiles, one column per kind of ground and one row per level of
+# difficulty, as legged_gym's terrain curriculum lays its sub-terrains out. Every tile has a flat pad at its centre
+# (where an episode starts) and its shape in square rings around it, so a robot meets it going any way.
+COURSE_KINDS = ("rough", "steps", "gaps", "blocks")  # the columns, west to east
+COURSE_PAD = 0.4  # m: the half-width of the flat pad at a tile's centre
+COURSE_RAMP = 0.3  # m over which rough ground rises from the pad (and from the edge) to its full amplitude
+COURSE_STEP_DEPTH = 0.3  # m: the tread of the steps' rings
+COURSE_GAP_SPACING = 0.8  # m between the gaps' trenches, edge to edge of their starts
+COURSE_GAP_DEPTH = 0.2  # m
+COURSE_EDGE = 0.1  # m of flat ground inside a tile's edge (steps end there too, at z = 0)
+COURSE_BLOCKS = 24  # blocks scattered on a blocks tile
+COURSE_BLOCK_SIDE = (0.2, 0.6)  # m: the range of a block's sides
+
+
+def course_difficulty(level, levels):
+    """The share of the hardest ground a level gets: (level + 1) / levels, so that level 0 is gentle, not flat."""
+    return (np.asarray(level) + 1.0) / levels
+
+
+def course(x, y, *, levels, tile, amp, step, gap, block, seed):
+    """The training course: `levels` rows of tiles `tile` m square (row 0 at -y), one column per `COURSE_KINDS`;
+    the grid is centred on the origin. A tile of level i has `course_difficulty` f of the hardest ground:
+    rough ground of peak `amp`·f (wavelength 0.4 m); rings of steps `step`·f high, up three treads and down again
+    to the tile's edge; trenches `gap`·f wide and `COURSE_GAP_DEPTH` deep; blocks `block`·f high. Its centre is a
+    flat pad at z = 0, and so is its edge, where it meets the next tile."""
+    width, height = len(COURSE_KINDS) * tile, levels * tile
+    col = np.clip(np.floor((x + width / 2) / tile), 0, len(COURSE_KINDS) - 1)
+    row = np.clip(np.floor((y + height / 2) / tile), 0, levels - 1)
+    u, v = x + width / 2 - (col + 0.5) * tile, y + height / 2 - (row + 0.5) * tile  # from the tile's centre
+    out = np.maximum(np.abs(u), np.abs(v)) - COURSE_PAD  # m beyond the pad's edge, in square rings
+    f = course_difficulty(row, levels)
+    room = tile / 2 - COURSE_PAD  # m from the pad to the tile's edge
+    rings = int(room // COURSE_STEP_DEPTH)
+    tread = np.where(out >= 0, np.floor(out / COURSE_STEP_DEPTH) + 1, 0)
+    steps_h = step * f * np.clip(np.minimum(tread, rings - tread), 0, None)
+    start = np.maximum(out - COURSE_RAMP, 0.0)
+    trench = (out >= COURSE_RAMP) & (np.mod(start, COURSE_GAP_SPACING) < gap * f) \
+        & (out - np.mod(start, COURSE_GAP_SPACING) + gap * f < room - COURSE_EDGE)
+    ramp = np.clip(np.minimum(out, room - COURSE_EDGE - out) / COURSE_RAMP, 0, 1)  # 0 on the pad and the edge
+    ground = {"rough": amp * f * ramp * rough(x, y, amp=1.0, wavelength=0.4, seed=seed),
+              "steps": steps_h, "gaps": np.where(trench, -COURSE_GAP_DEPTH, 0.0),
+              "blocks": _course_blocks(u, v, row, levels, tile, block, seed)}
+    return np.select([col == i for i in range(len(COURSE_KINDS))], [ground[k] for k in COURSE_KINDS])
+
+
+def _course_blocks(u, v, row, levels, tile, block, seed):
+    """The blocks of every level's blocks tile (u, v from each tile's centre): `COURSE_BLOCKS` of them at a
+    level's own draw, beyond the pad and within the tile's edge, `block`·f high."""
+    h = np.zeros_like(u)
+    for level in range(levels):
+        rng = np.random.default_rng([int(seed), level])
+        sides = rng.uniform(*COURSE_BLOCK_SIDE, (COURSE_BLOCKS, 2))
+        reach = tile / 2 - COURSE_BLOCK_SIDE[1] / 2 - COURSE_EDGE
+        centres = rng.uniform(-reach, reach, (COURSE_BLOCKS, 2))
+        # Pushed out of the pad: a block's near side at least 0.2 m beyond the pad's edge.
+        clear = COURSE_PAD + 0.2 + sides / 2
+        inside = np.all(np.abs(centres) < clear, axis=1)
+        centres[inside, 0] = np.sign(centres[inside, 0] + 1e-9) * clear[inside, 0]
+        here = row == level
+        for (cu, cv), (su, sv) in zip(centres, sides):
+            on = here & (np.abs(u - cu) < su / 2) & (np.abs(v - cv) < sv / 2)
+            h = np.where(on, block * course_difficulty(level, levels), h)
+    return h

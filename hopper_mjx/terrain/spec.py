@@ -50,6 +50,10 @@ KEYS = {
     "obstacle": (Key("height", 0.15, "height"), Key("x", 0.6, "position", "x0"), Key("length", 0.1, "length")),
     "crater": (Key("radius", 0.5, "length"), Key("depth", 0.1, "height"), Key("rim", 0.03, "height"),
                Key("x", 0.0, "position", "x0")),
+    # The training course: its size is its tiles' (`course_size`), not a key.
+    "course": (Key("levels", 5, "count"), Key("tile", 5.0, "length"), Key("amp", 0.04, "height"),
+               Key("step", 0.08, "height"), Key("gap", 0.3, "length"), Key("block", 0.15, "height"),
+               Key("seed", 0, "seed")),
     "heightmap": (Key("size", DEFAULT_SIZE[0], "length"), Key("height", 0.3, "height")),
 }
 assert list(KEYS) == list(registry.TERRAINS)  # one list of names
@@ -73,7 +77,7 @@ class Ground:
     def __str__(self) -> str:
         items = [self.path] if self.path else []
         items += [f"{k}=each" if k == "seed" and self.each else f"{k}={v:g}" for k, v in self.values]
-        if self.name != "flat":
+        if self.name not in ("flat", "course"):  # a course's size is its tiles'
             items.append(f"size={self.size[0]:g}x{self.size[1]:g}")
         if self.name not in ("flat", "heightmap"):
             items.append(f"cell={self.cell:g}")
@@ -156,6 +160,26 @@ class Ground:
 
 
 FLAT = Ground()
+MIN_TILE = 2.0  # m: the smallest course tile
+
+
+def grid_keys(name: str) -> tuple[str, ...]:
+    """The grid keys a generator takes: a course's size follows from its tiles."""
+    return ("cell",) if name == "course" else tuple(k.name for k in GRID_KEYS)
+
+
+def course_size(values: dict) -> tuple[float, float]:
+    """m, full extents of a course: a column of tiles per kind of ground, a row per level."""
+    return (len(generators.COURSE_KINDS) * values["tile"], values["levels"] * values["tile"])
+
+
+def tile_centres(ground: Ground) -> np.ndarray:
+    """(levels, kinds, 2) m: the world (x, y) of each course tile's centre, where its episodes start."""
+    v = dict(ground.values)
+    levels, kinds, tile = int(v["levels"]), len(generators.COURSE_KINDS), v["tile"]
+    x = (np.arange(kinds) + 0.5) * tile - kinds * tile / 2
+    y = (np.arange(levels) + 0.5) * tile - levels * tile / 2
+    return np.stack(np.meshgrid(x, y), axis=-1)
 
 
 def _number(key: Key, text: str) -> float:
@@ -197,7 +221,7 @@ def parse(text: str) -> Ground:
     except ValueError as err:
         raise TerrainError(str(err)) from None
     keys = {k.name: k for k in KEYS[name]}
-    grid = {} if name in ("flat", "heightmap") else {k.name: k for k in GRID_KEYS}
+    grid = {} if name in ("flat", "heightmap") else {k.name: k for k in GRID_KEYS if k.name in grid_keys(name)}
     known = [*keys, *(k for k in grid if k not in keys)]
     values, size, cell, path, seen, each = {}, DEFAULT_SIZE, DEFAULT_CELL, None, set(), False
     for item in filter(None, (i.strip() for i in rest.split(","))):
@@ -225,6 +249,11 @@ def parse(text: str) -> Ground:
     if name == "heightmap" and path is None:
         raise TerrainError("heightmap needs a PNG file: heightmap:FILE.png,size=4x4,height=0.3")
     filled = tuple((k.name, values.get(k.name, k.default)) for k in KEYS[name] if k.name != "size")
+    if name == "course":
+        size = course_size(dict(filled))
+        if dict(filled)["tile"] < MIN_TILE:
+            raise TerrainError(f"course: tile={dict(filled)['tile']:g} m is too small; a tile needs at least "
+                               f"{MIN_TILE:g} m (its pad, a ring of ground and its edge)")
     ground = Ground(name, filled, size, cell, path, each)
     if name not in ("flat", "heightmap"):
         for extent in size:
