@@ -109,9 +109,12 @@ def check(args):
     if args.num * math.floor(args.seconds * config.policy_rate) < MIN_OBSERVATIONS:
         raise ValueError(f"--num {args.num} x --seconds {args.seconds:g} at the policy's {config.policy_rate:g} Hz "
                          f"gives fewer than {MIN_OBSERVATIONS} observations to check; raise either")
-    # The core's physics for the policy (1 ms, converged), with the motor, delay and ground it recorded.
+    from hopper_mjx.envs.curriculum import judged_on
+
+    # The core's physics for the policy (1 ms, converged), with the motor, delay and ground it recorded (a course's
+    # policy on the ground it is judged on: the course's centre is flat, and its scan would read nothing).
     physics = cli.check_physics(argparse.Namespace(
-        urdf=args.urdf, engine=registry.DEFAULT_ENGINE, terrain=config.terrain or "flat", randomize=None,
+        urdf=args.urdf, engine=registry.DEFAULT_ENGINE, terrain=judged_on(config.terrain or "flat"), randomize=None,
         motor=config.motor, action_delay=config.action_delay * 1e3, push=None))
     same_robot(config.robot, physics.mj_model, f"the policy {path}")
     decimation(Layout.of(physics.mj_model), config)  # the policy rate must divide the core's 1 kHz

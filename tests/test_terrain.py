@@ -244,3 +244,18 @@ def test_the_course_lays_out_its_levels_and_kinds_as_tiles():
         h, ring = tile(level, 2)
         row = h[h.shape[0] // 2]
         assert (row < 0).sum() * 0.04 == pytest.approx(4 * 0.3 * share, abs=4 * 0.04 + 1e-9), level
+
+
+def test_the_map_draws_a_terrain_from_above_and_refuses_the_plane(tmp_path, capsys):
+    """`python -m hopper_mjx.model --map`: a PNG of the heights; the flat plane or a name not .png is one line."""
+    import imageio.v3 as iio
+
+    path = tmp_path / "course.png"
+    assert model_main.main(["--map", str(path), "--terrain", "course:levels=2,tile=2,cell=0.1"]) == 0
+    image = iio.imread(path)
+    assert image.ndim == 3 and image.shape[0] > 400 and image[..., :3].std() > 10  # drawn, not blank
+    assert model_main.main(["--map", str(tmp_path / "flat.png")]) == 2
+    assert model_main.main(["--map", str(tmp_path / "x.txt"), "--terrain", "rough"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 2 and "the flat plane has none" in err[0] and ".png" in err[1]
+    assert not (tmp_path / "flat.png").exists() and not (tmp_path / "x.txt").exists()

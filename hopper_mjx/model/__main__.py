@@ -1,9 +1,11 @@
 """python -m hopper_mjx.model --export monoped.xml [--urdf PATH] [--timestep S] [--terrain SPEC]
 python -m hopper_mjx.model --export-urdf monoped_display.urdf [--urdf PATH] [--frame-prefix monoped_0/]   (- for stdout)
+python -m hopper_mjx.model --map ground.png --terrain SPEC
 
 --export writes the simulated model as MJCF (on a terrain, its height field's data beside it in
 FILE_terrain.bin, MuJoCo's binary hfield format, which MuJoCo reads back exactly); --export-urdf writes
-the URDF the simulation loads, with colours and resolvable mesh paths, for a viewer such as Foxglove's 3D panel."""
+the URDF the simulation loads, with colours and resolvable mesh paths, for a viewer such as Foxglove's 3D panel;
+--map draws the --terrain's heights from above (a course's tiles labelled by kind and level)."""
 
 import sys
 
@@ -30,6 +32,7 @@ def main(argv=None) -> int:
     out = parser.add_mutually_exclusive_group(required=True)
     out.add_argument("--export", metavar="FILE.xml", help="where to write the MJCF")
     out.add_argument("--export-urdf", metavar="FILE.urdf", help="where to write the URDF for display (- for stdout)")
+    out.add_argument("--map", metavar="FILE.png", help="where to draw the --terrain's plan view (its heights in m)")
     parser.add_argument("--urdf", default=None, help="monoped URDF (default: the shipped seed monoped)")
     parser.add_argument("--frame-prefix", default="", metavar="PREFIX",
                         help="with --export-urdf: prefix every link name (monoped_0/: a robot of a multi-robot stream)")
@@ -44,6 +47,16 @@ def main(argv=None) -> int:
                 checks.check_writable("--export-urdf", args.export_urdf, suffixes=(".urdf",))
             check_urdf(args.urdf)
             return export_urdf(args)
+        if args.map is not None:
+            checks.check_writable("--map", args.map, suffixes=(".png",))
+            ground = check_terrain(args.terrain)
+            if ground.is_flat:
+                raise ValueError("--map draws a --terrain's heights; the flat plane has none: give --terrain")
+            from hopper_mjx.terrain.plan import save_map
+
+            save_map(ground, args.map)
+            print(f"wrote {args.map}: the plan view of {ground}")
+            return 0
         checks.check_writable("--export", args.export, suffixes=(".xml",))
         checks.check_range("--timestep", args.timestep, low=0, high=checks.MAX_TIMESTEP, open_low=True)
         ground = check_terrain(args.terrain)
