@@ -18,11 +18,12 @@ and so are runs whose learner's settings differ (epochs per batch, minibatches, 
 the settings they differ in.
 Each task's reference controller
 (`registry.TASK_REFERENCES`: Raibert at the runs' command for the hopping tasks, Raibert at a 5 cm apex for stand)
-is swept the same way (OUT's folder, reference-<task>/). Every sweep runs on the run's own ground (`--terrain`:
-hop_terrain's rough ground; flat for the others). Stand's apex column is its reference's error against its own
-command. With --sweep the missing sweeps are run (each resumable); without it a run without a sweep shows n/a; ∞
-marks an error with no survivor or no hop to measure it on. One plot beside the table (OUT with .png): every seed's
-evaluation reward against training minutes."""
+is swept the same way (OUT's folder, reference-<task>/). Every sweep runs on the run's own ground (`--terrain`;
+a course's runs on the rough ground they are judged on, `curriculum.JUDGE_GROUND`; flat for most tasks).
+Stand's apex column is its reference's error against its own command. With --sweep the missing sweeps are run
+(each resumable); without it a run without a sweep shows n/a; ∞ marks an error with no survivor or no hop to measure
+it on. One plot beside the table (OUT with .png): every seed's evaluation reward against training minutes.
+"""
 
 from __future__ import annotations
 

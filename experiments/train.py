@@ -4,7 +4,7 @@ physics on the chain engine (`--engine mjx` for MuJoCo MJX).
     nice -n 5 python experiments/train.py --task hop --algo ppo --out runs/hop-ppo --observe-gravity
     python experiments/train.py --task hop --algo ppo --out runs/hop-ppo --observe-gravity   # again: resumes
     python experiments/train.py --task hop_velocity --algo sac --out runs/hopv-sac
-    python experiments/train.py --task hop_terrain --algo ppo --out runs/hopt-ppo   # its rough ground, a height scan
+    python experiments/train.py --task hop_terrain --algo ppo --out runs/hopt-ppo   # its terrain course, a height scan
     python experiments/train.py --task hop --out runs/hop-ppo --observe-gravity --scan-checkpoints --eval-num 64
     python -m hopper_mjx.simulate --controller policy:runs/hop-ppo --gravity 9.81,3.71,1.62 --duration 10
 

@@ -69,8 +69,8 @@ def parser() -> argparse.ArgumentParser:
                    help="set a field of the task's config (envs.task_config.MonopedConfig: reward weights and "
                         "kernels, command ranges, ...; a pair as low,high), e.g. --config apex_reward=flight; "
                         "repeatable. Saved with the policy")
-    cli.add_physics_options(p, terrain=None, terrain_default="the task's own: hop_terrain's rough ground, flat for "
-                                                             "the others")
+    cli.add_physics_options(p, terrain=None, terrain_default="the task's own: hop_terrain's course (its policies are "
+                                                             "judged on rough ground), flat for the others")
     p.add_argument("--sac-replay", type=int, default=1_000_000, help="SAC: replay buffer size (env steps)")
     p.add_argument("--sac-min-replay", type=int, default=8192, help="SAC: env steps collected before learning")
     p.add_argument("--sac-grad-updates", type=int, default=8, help="SAC: gradient updates per env step batch")
