@@ -19,7 +19,7 @@ the settings they differ in.
 Each task's reference controller
 (`registry.TASK_REFERENCES`: Raibert at the runs' command for the hopping tasks, Raibert at a 5 cm apex for stand)
 is swept the same way (OUT's folder, reference-<task>/). Every sweep runs on the run's own ground (`--terrain`;
-a course's runs on the rough ground they are judged on, `curriculum.JUDGE_GROUND`; flat for most tasks).
+a course's runs on each ground they are judged on, `curriculum.JUDGE_GROUNDS`, a row each; flat for most tasks).
 Stand's apex column is its reference's error against its own command. With --sweep the missing sweeps are run
 (each resumable); without it a run without a sweep shows n/a; ∞ marks an error with no survivor or no hop to measure
 it on. One plot beside the table (OUT with .png): every seed's evaluation reward against training minutes.
@@ -134,15 +134,31 @@ def run_sweep(controller: str, folder: Path, height: float, speed, num: int, dur
         raise ValueError(f"the sweep of {controller} into {folder} failed")
 
 
-def run_record(run: Path, do_sweep: bool, num: int, duration: float) -> dict:
-    """One run's row: its task, algorithm, seed and measures."""
+def run_records(run: Path, do_sweep: bool, num: int, duration: float) -> list[dict]:
+    """One run's records, one per ground it is judged on (`curriculum.judge_grounds`: its own; a course's, rough
+    ground and a block ahead), each swept into its own folder (the first `SWEEP`, the others `SWEEP-<i>`); the
+    training physics' sweeps and the gap on the first only."""
+    from hopper_mjx.envs.curriculum import judge_grounds
+
+    args = _json(run / "metrics.json")["args"]
+    grounds = judge_grounds(args.get("terrain") or "flat")  # runs before the option: flat
+    first = run_record(run, do_sweep, num, duration, grounds[0])
+    others = []
+    for i, ground in enumerate(grounds[1:], start=2):
+        height, speed = command(args)
+        folder = run / f"{SWEEP}-{i}"
+        if do_sweep and not (folder / "summary.json").is_file():
+            run_sweep(f"policy:{run}", folder, height, speed, num, duration, ground)
+        blank = {k: None for k in (*(f"trained_{k}" for k in sweep_measures(folder, height)), *GAP)}
+        others.append({**first, **sweep_measures(folder, height), **blank, "parts": {}, "ground": ground})
+    return [first, *others]
+
+
+def run_record(run: Path, do_sweep: bool, num: int, duration: float, ground: str) -> dict:
+    """One run's row on `ground` (a --terrain spec): its task, algorithm, seed and measures."""
     record = _json(run / "metrics.json")
     args = record["args"]
     height, speed = command(args)
-    from hopper_mjx.envs.curriculum import judged_on
-
-    # The run's own ground (a course's: `judged_on`); runs before the option: flat.
-    ground = judged_on(args.get("terrain") or "flat")
     found = _json(run / "threshold.json") if (run / "threshold.json").is_file() else None
     rates = [r["training/sps"] for r in record["history"] if r.get("training/sps")]
     if do_sweep and not (run / SWEEP / "summary.json").is_file():
@@ -212,6 +228,7 @@ def rows_of(records: list[dict]) -> list[tuple[str, list[dict]]]:
     other rows of the same task, algorithm and physics."""
     physics = lambda r: (r["task"], r["algo"], r.get("training", ""))
     settings = lambda r: tuple(sorted((k, str(v)) for k, v in r.get("learner", {}).items()))
+    grounds = lambda rs: list(dict.fromkeys(r.get("ground", "flat") for r in rs))  # in the runs' judging order
     rows = []
     for group in sorted({physics(r) for r in records}):
         runs = [r for r in records if physics(r) == group]
@@ -220,7 +237,11 @@ def rows_of(records: list[dict]) -> list[tuple[str, list[dict]]]:
             mine = [r for r in runs if settings(r) == own]
             said = "".join(f", {LEARNER[k]} {mine[0]['learner'][k]}" for k in varied)
             on = f", trained on a {group[2]}" if group[2] else ""
-            rows.append((f"{group[0]} × {group[1].upper()}{on}{said}", mine))
+            several = len(grounds(mine)) > 1  # judged on several grounds (a course's): a row for each
+            for ground in grounds(mine):
+                judged = f", judged on {ground}" if several else ""
+                rows.append((f"{group[0]} × {group[1].upper()}{on}{said}{judged}",
+                             [r for r in mine if r.get("ground", "flat") == ground]))
     return rows
 
 
@@ -320,16 +341,20 @@ def plot(records: list[dict], path: Path) -> None:
 
 def build(paths: list[Path], out: Path, *, do_sweep: bool, num: int, duration: float) -> str:
     """Reads (and with `do_sweep` sweeps) every run, writes OUT (.md), OUT .json and OUT .png; returns the table."""
-    records = [run_record(run, do_sweep, num, duration) for run in runs_of(paths)]
+    records = [r for run in runs_of(paths) for r in run_records(run, do_sweep, num, duration)]
     references = {}
-    for task in sorted({r["task"] for r in records}):
-        first = next(r for r in records if r["task"] == task)
+    pairs = list(dict.fromkeys((r["task"], r["ground"]) for r in records))  # in the runs' judging order
+    for task, ground in pairs:
+        first = next(r for r in records if r["task"] == task and r["ground"] == ground)
         ref = registry.TASK_REFERENCES[task]
         height = first["height"] if ref.height is None else ref.height  # stand's runs command no apex
-        folder = out.parent / f"reference-{task}"
+        grounds = [g for t, g in pairs if t == task]  # a course's runs: each judge ground its own reference
+        index = grounds.index(ground)
+        folder = out.parent / (f"reference-{task}" + (f"-{index + 1}" if index else ""))
         if do_sweep and not (folder / "summary.json").is_file():
-            run_sweep(ref.controller, folder, height, first["speed"], num, duration, first["ground"])
-        references[task] = {"controller": f"{ref.controller} at {height:g} m", "height": height,
+            run_sweep(ref.controller, folder, height, first["speed"], num, duration, ground)
+        name = task + (f", on {ground}" if len(grounds) > 1 else "")
+        references[name] = {"controller": f"{ref.controller} at {height:g} m", "height": height,
                             **sweep_measures(folder, height)}
     text = table(records, references)
     out.write_text(f"{text}\n")

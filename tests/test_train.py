@@ -419,6 +419,34 @@ def test_the_results_table_gives_the_gap_between_training_physics_and_the_core(t
     (sweep_core / "summary.json").write_text((run / results.TRAINED / "summary.json").read_text())
     assert results.gap(sweep_core, run / results.TRAINED, 0.10) == {"survival_gap": 0.0, "apex_gap": 0.0}
 
+def test_a_course_run_is_a_row_per_ground_it_is_judged_on(tmp_path):
+    """A hop_terrain run trained on the course is judged on rough ground and on a block ahead
+    (`curriculum.JUDGE_GROUNDS`): a row each, each with its own sweep's survival, the threshold's columns on both;
+    the reference Raibert on each ground too."""
+    import json
+
+    from hopper_mjx.envs.curriculum import JUDGE_GROUNDS
+
+    results = importlib.import_module("results")
+    run = tmp_path / "run"
+    run.mkdir()
+    args = {"task": "hop_terrain", "algo": "ppo", "seed": 0, "eval_height": 0.10, "eval_speed": [0.5, 0.0],
+            "terrain": "course:seed=1"}
+    (run / "metrics.json").write_text(json.dumps({"args": args, "history": []}))
+    for folder, alive in ((results.SWEEP, 1.0), (f"{results.SWEEP}-2", 0.25)):
+        (run / folder).mkdir()
+        groups = [{"gravity": g, "survival": alive, "apex_height": 0.1, "tracking_error": 0.05}
+                  for g in (9.81, 3.71, 1.62)]
+        (run / folder / "summary.json").write_text(json.dumps({"groups": groups}))
+    out = tmp_path / "results.md"
+    assert results.main([str(run), "--out", str(out)]) == 0
+    rows = [line for line in out.read_text().splitlines() if line.startswith("| hop_terrain × PPO")]
+    assert [row.split("|")[1].strip() for row in rows] == [f"hop_terrain × PPO, judged on {g}" for g in JUDGE_GROUNDS]
+    assert [row.split("|")[7].strip() for row in rows] == ["n/a / 100%", "n/a / 25%"]
+    references = json.loads(out.with_suffix(".json").read_text())["references"]
+    assert list(references) == [f"hop_terrain, on {g}" for g in JUDGE_GROUNDS]
+
+
 def test_the_results_table_puts_each_tasks_registered_reference_beside_it(tmp_path):
     """results.py takes each task's reference from the registry: Raibert at the runs' evaluation command for the
     hopping tasks, at stand's own small apex for stand (whose runs command none). Run folders as train.py writes

@@ -53,11 +53,17 @@ class Curriculum(NamedTuple):
         return self.centres[level, kind] + jax.random.uniform(k_jitter, (2,), minval=-JITTER, maxval=JITTER)
 
 
-# A policy trained on the course is judged in the core, every robot from the origin, on the rough ground
-# hop_terrain's policies trained on until the course (its amplitude about the middle level's, 0.024 m).
-JUDGE_GROUND = "rough:amp=0.02,wavelength=0.4,seed=1,size=24x24"
+# A policy trained on the course is judged in the core, every robot from the origin, on each of these: the rough
+# ground hop_terrain's policies trained on until the course (its amplitude about the middle level's, 0.024 m), and a
+# 0.10 m block ahead (the course's blocks at level 2 are 0.09 m). The first is the one its threshold is judged on.
+JUDGE_GROUNDS = ("rough:amp=0.02,wavelength=0.4,seed=1,size=24x24", "obstacle:height=0.1,x=0.6,size=24x24")
+
+
+def judge_grounds(terrain: str) -> tuple[str, ...]:
+    """The --terrain specs a policy trained on `terrain` is judged on in the core: its own, but for a course."""
+    return JUDGE_GROUNDS if terrain.split(":")[0].strip() == "course" else (terrain,)
 
 
 def judged_on(terrain: str) -> str:
-    """The --terrain spec a policy trained on `terrain` is judged on in the core: its own, but for a course."""
-    return JUDGE_GROUND if terrain.split(":")[0].strip() == "course" else terrain
+    """The ground a policy trained on `terrain` meets its threshold on (`judge_grounds`' first)."""
+    return judge_grounds(terrain)[0]

@@ -105,8 +105,8 @@ class HopVelocity(Hop):
 
 # The training course (`terrain.generators.course`): five levels of rough ground, steps, gaps and blocks, the
 # hardest 0.04 m rough, 0.08 m risers, 0.3 m gaps and 0.15 m blocks; episodes start on a tile of their level
-# (`envs.curriculum`). Until 3 Dec 2026 it was one rough ground, now the ground its policies are judged on
-# (`curriculum.JUDGE_GROUND`).
+# (`envs.curriculum`). Until 3 Dec 2026 it was one rough ground, now the first its policies are judged on
+# (`curriculum.JUDGE_GROUNDS`).
 HOP_TERRAIN = "course:seed=1"
 
 
