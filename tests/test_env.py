@@ -400,7 +400,7 @@ def test_on_the_course_each_episode_starts_on_a_tile_of_its_level_and_the_level_
     from hopper_mjx.terrain import spec
 
     env = envs.make("hop_terrain", terrain="course:levels=5,tile=2,seed=3,cell=0.1")
-    assert env.task_info[-1] == "level" and env.curriculum.levels == 5
+    assert env.task_info[-2:] == ("level", "start") and env.curriculum.levels == 5
     keys = jax.random.split(jax.random.PRNGKey(0), 400)
     first = jax.jit(jax.vmap(env.reset))(keys)
     level, xy = np.asarray(first.info["level"]), np.asarray(first.pipeline_state.qpos[:, :2])
@@ -409,6 +409,7 @@ def test_on_the_course_each_episode_starts_on_a_tile_of_its_level_and_the_level_
     off = np.abs(xy[:, None, :] - centres).max(axis=2)
     kind = off.argmin(axis=1)
     assert off.min(axis=1).max() <= JITTER and set(kind) == {0, 1, 2, 3}  # every kind, on the pad
+    np.testing.assert_array_equal(np.asarray(first.info["start"]), xy)  # what the next level's distance is from
     lift = np.asarray(first.pipeline_state.qpos[:, 2]) - env.standing_height  # over the pad, at z = 0
     assert lift.min() >= -1e-6 and lift.max() <= env.config.initial_clearance[1] + 1e-6
     # The scan zeroed (`observe_scan=False`, the ablation): the same observation but for the scan.
@@ -422,11 +423,15 @@ def test_on_the_course_each_episode_starts_on_a_tile_of_its_level_and_the_level_
 
     course = Curriculum.of(env.config.ground)
     step = jax.jit(jax.vmap(course.next_level))
-    levels = jnp.array([0, 0, 2, 2, 3, 4] * 100, jnp.int32)
-    survived = jnp.array([True, False, True, False, True, True] * 100)
-    after = np.asarray(step(levels, survived, jax.random.split(jax.random.PRNGKey(1), 600))).reshape(100, 6)
-    assert (after[:, :5] == [1, 0, 3, 1, 4]).all()
-    assert set(after[:, 5]) == {0, 1, 2, 3, 4}  # past the top: anywhere
+    # (level, lasted, m travelled, m the command asked for): across its tile (1 m on a 2 m tile) up; a fall, or
+    # less than half the asked distance, down; in place where nothing was asked, or part-way, stays; past the top.
+    cases = [(0, True, 3.0, 2.0), (0, False, 0.1, 2.0), (2, True, 1.2, 2.0), (2, True, 0.2, 0.0),
+             (2, True, 0.2, 2.0), (3, False, 3.0, 2.0), (3, True, 0.8, 1.0), (4, True, 3.0, 2.0)]
+    levels, lasted, travelled, asked = (jnp.asarray(np.tile(np.array(c), 100)) for c in zip(*cases))
+    after = np.asarray(step(levels.astype(jnp.int32), lasted.astype(bool), travelled, asked,
+                            jax.random.split(jax.random.PRNGKey(1), len(levels)))).reshape(100, len(cases))
+    assert (after[:, :-1] == [1, 0, 3, 2, 1, 2, 3]).all()
+    assert set(after[:, -1]) == {0, 1, 2, 3, 4}  # past the top: anywhere
     assert Curriculum.of(terrain.parse("rough:amp=0.02,seed=1")) is None
     assert judged_on(str(env.config.ground)) == "rough:amp=0.02,wavelength=0.4,seed=1,size=24x24"
     assert judged_on("obstacle:height=0.1") == "obstacle:height=0.1"

@@ -1,7 +1,9 @@
 """The terrain curriculum: on a `course` ground (`terrain.generators.course`), each episode starts on the pad of
 a tile of its own level, and the level follows how the last episode went, as legged_gym's terrain curriculum does.
 
-- An episode that lasts to its end moves up a level; one that falls moves down (not below 0).
+- An episode that lasts to its end and has hopped out of its tile (half a tile from its start) moves up a level;
+  one that falls, or goes less than half as far as its commanded speed asked, moves down (not below 0); any other
+  stays. So hopping in place on the pad earns no level: the robot must cross the tile's ground.
 - Past the top level an episode goes to a random level, so the hardest ground does not crowd out the rest.
 - The first episodes start on a random level of the lower half.
 - The kind of ground (a column: rough, steps, gaps, blocks) is drawn per episode; the start is jittered on the pad.
@@ -24,13 +26,14 @@ STREAM = 3  # folded into an episode's key for its level's and tile's draws (1 i
 
 class Curriculum(NamedTuple):
     centres: jax.Array  # (levels, kinds, 2) m, world (x, y) of each tile's centre
+    tile: float  # m, a tile's side
 
     @classmethod
     def of(cls, ground) -> Curriculum | None:
         """The curriculum of a `course` ground; None on any other (every episode starts at the origin)."""
         if ground.name != "course":
             return None
-        return cls(jnp.asarray(spec.tile_centres(ground), jnp.float32))
+        return cls(jnp.asarray(spec.tile_centres(ground), jnp.float32), float(dict(ground.values)["tile"]))
 
     @property
     def levels(self) -> int:
@@ -40,9 +43,13 @@ class Curriculum(NamedTuple):
         """() int32: a first episode's level, uniform over the lower half (the middle one included)."""
         return jax.random.randint(jax.random.fold_in(key, STREAM), (), 0, (self.levels - 1) // 2 + 1)
 
-    def next_level(self, level: jax.Array, survived: jax.Array, key: jax.Array) -> jax.Array:
-        """The level of the episode after one at `level` that `survived` to its end (up) or fell (down)."""
-        moved = jnp.where(survived, level + 1, jnp.maximum(level - 1, 0))
+    def next_level(self, level: jax.Array, survived: jax.Array, travelled: jax.Array, asked: jax.Array,
+                   key: jax.Array) -> jax.Array:
+        """The level of the episode after one at `level` that `survived` to its end or fell, its base `travelled`
+        m from its start where its command `asked` for that many (speed times the episode's time)."""
+        up = survived & (travelled >= self.tile / 2)
+        down = ~survived | (travelled < asked / 2)
+        moved = jnp.where(up, level + 1, jnp.where(down, jnp.maximum(level - 1, 0), level))
         anywhere = jax.random.randint(jax.random.fold_in(key, STREAM + 1), (), 0, self.levels)
         return jnp.where(moved >= self.levels, anywhere, moved).astype(jnp.int32)
 

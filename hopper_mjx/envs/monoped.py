@@ -231,7 +231,7 @@ class MonopedEnv(Env):
         """The `State.info` keys a fresh episode replaces (`wrappers.ResampleAutoReset`)."""
         on = (bool(self.config.variation), self.motors is not None, self.sensors is not None, self.counts_steps)
         flight = FLIGHT_INFO if self.config.apex_reward == "flight" else ()
-        flight += () if self.curriculum is None else ("level",)
+        flight += () if self.curriculum is None else ("level", "start")
         return TASK_INFO + flight + tuple(k for k, used in zip(EPISODE_INFO, on) if used)
 
     def reward_terms(self, d, g, command, action, last_action, effort, fell, apex=None) -> dict[str, jax.Array]:
@@ -254,7 +254,8 @@ class MonopedEnv(Env):
         course = {}
         if self.curriculum is not None:  # on its level's tile's pad, at z = 0 as the origin is
             course["level"] = self.curriculum.first(rng) if level is None else level
-            qpos = qpos.at[:2].set(self.curriculum.start(course["level"], rng))
+            course["start"] = self.curriculum.start(course["level"], rng)
+            qpos = qpos.at[:2].set(course["start"])
         # As the core's reset: no forward yet, so the first observation's contact is the engine's
         # "none yet" and the physics is traced only in `physics` (the auto-reset runs this in every step).
         data = self.engine.make_data(qpos, jnp.zeros(lay.nv, qpos.dtype))

@@ -44,8 +44,11 @@ class ResampleAutoReset(Wrapper):
         keys = jax.vmap(lambda k: jax.random.split(k)[1])(state.info["rng"])
         done = state.done > 0
         if "level" in state.info:  # the terrain curriculum: the next episode's level from how this one ended
-            survived = state.info["truncation"] > 0
-            level = jax.vmap(self.env.curriculum.next_level)(state.info["level"], survived, keys)
+            info = state.info
+            travelled = jnp.linalg.norm(state.pipeline_state.qpos[:, :2] - info["start"], axis=-1)
+            asked = jnp.linalg.norm(info["command"][:, 1:3], axis=-1) * info["steps"] * self.env.dt
+            level = jax.vmap(self.env.curriculum.next_level)(info["level"], info["truncation"] > 0, travelled,
+                                                             asked, keys)
             fresh = jax.vmap(self.env.reset_at)(keys, level)
         else:
             fresh = self.env.reset(keys)
