@@ -19,7 +19,8 @@ A task (`hopper_mjx.envs.tasks`) is a `MonopedEnv` that says what it commands
   gravity only when `observe_gravity` is set; on a `terrain`, the base's height over the ground at
   the height scan's points (`SCAN`, legged_gym's measured_heights).
 - **Terrain** (`terrain`, a --terrain spec; "" the flat plane): one fixed ground every episode
-  starts on, at the origin, as the core's instances start (train.py's --terrain check keeps it below the foot there).
+  starts on, at the origin, as the core's instances start (train.py's --terrain check keeps it below the foot there);
+  on a `course`, each episode starts on a tile of its curriculum level instead (`envs.curriculum`).
 - **Gravity** is drawn per episode at `reset`, log-uniformly over `gravity_range`, and kept
   in `State.info["gravity"]`; `wrappers.wrap_for_training` makes Brax's auto-reset draw a
   fresh episode (gravity, command, initial state) instead of replaying the first one.
@@ -231,8 +232,8 @@ class MonopedEnv(Env):
         """The `State.info` keys a fresh episode replaces (`wrappers.ResampleAutoReset`)."""
         on = (bool(self.config.variation), self.motors is not None, self.sensors is not None, self.counts_steps)
         flight = FLIGHT_INFO if self.config.apex_reward == "flight" else ()
-        flight += () if self.curriculum is None else ("level", "start")
-        return TASK_INFO + flight + tuple(k for k, used in zip(EPISODE_INFO, on) if used)
+        course = () if self.curriculum is None else ("level", "start")
+        return TASK_INFO + flight + course + tuple(k for k, used in zip(EPISODE_INFO, on) if used)
 
     def reward_terms(self, d, g, command, action, last_action, effort, fell, apex=None) -> dict[str, jax.Array]:
         """Per-step reward terms (already weighted); their sum is the reward. `apex`: the apex the task judges

@@ -34,7 +34,8 @@ class BatchWrapper(Wrapper):
 
 class ResampleAutoReset(Wrapper):
     """On `done`, the environment's pipeline state, observation and task info come from a fresh
-    `reset` (keyed by the episode's own `info["rng"]`); the episode bookkeeping stays as stepped."""
+    `reset` (keyed by the episode's own `info["rng"]`); the episode bookkeeping stays as stepped. On a course the
+    fresh episode's level follows from how the finished one went (`curriculum.Curriculum.next_level`)."""
 
     def step(self, state: State, action: jax.Array) -> State:
         if "steps" in state.info:  # EpisodeWrapper's counter restarts after a reset, as in Brax
