@@ -140,12 +140,12 @@ def run_records(run: Path, do_sweep: bool, num: int, duration: float) -> list[di
     training physics' sweeps and the gap on the first only."""
     from hopper_mjx.envs.curriculum import judge_grounds
 
-    args = _json(run / "metrics.json")["args"]
-    grounds = judge_grounds(args.get("terrain") or "flat")  # runs before the option: flat
-    first = run_record(run, do_sweep, num, duration, grounds[0])
+    record = _json(run / "metrics.json")
+    grounds = judge_grounds(record["args"].get("terrain") or "flat")  # runs before the option: flat
+    first = run_record(run, record, do_sweep, num, duration, grounds[0])
+    height, speed = command(record["args"])
     others = []
     for i, ground in enumerate(grounds[1:], start=2):
-        height, speed = command(args)
         folder = run / f"{SWEEP}-{i}"
         if do_sweep and not (folder / "summary.json").is_file():
             run_sweep(f"policy:{run}", folder, height, speed, num, duration, ground)
@@ -154,9 +154,9 @@ def run_records(run: Path, do_sweep: bool, num: int, duration: float) -> list[di
     return [first, *others]
 
 
-def run_record(run: Path, do_sweep: bool, num: int, duration: float, ground: str) -> dict:
-    """One run's row on `ground` (a --terrain spec): its task, algorithm, seed and measures."""
-    record = _json(run / "metrics.json")
+def run_record(run: Path, record: dict, do_sweep: bool, num: int, duration: float, ground: str) -> dict:
+    """One run's row on `ground` (a --terrain spec), from its `record` (metrics.json): its task, algorithm, seed
+    and measures."""
     args = record["args"]
     height, speed = command(args)
     found = _json(run / "threshold.json") if (run / "threshold.json").is_file() else None

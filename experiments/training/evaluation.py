@@ -118,7 +118,9 @@ def scan_checkpoints(args, physics) -> list[dict]:
     done = {s["step"]: s for s in saved.get("checkpoints", [])} if saved.get("settings") == settings else {}
     scanned, reuse = [], {}  # one core and one compiled rollout for every checkpoint
     # Brax's evaluation episodes fall on harder ground than the core judges a course's policy on: no skipping there.
-    skips = args.terrain.split(":")[0] != "course"
+    from hopper_mjx.envs.curriculum import is_course
+
+    skips = not is_course(args.terrain)
     for path in sorted((out / "checkpoints").glob("[0-9]" * 12)):
         step = int(path.name)
         row = rows.get(step, {})

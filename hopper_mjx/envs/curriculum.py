@@ -66,9 +66,14 @@ class Curriculum(NamedTuple):
 JUDGE_GROUNDS = ("rough:amp=0.02,wavelength=0.4,seed=1,size=24x24", "obstacle:height=0.1,x=0.6,size=24x24")
 
 
+def is_course(terrain: str) -> bool:
+    """Is the --terrain spec `terrain` a training course (read as text: no JAX, nothing built)?"""
+    return terrain.split(":")[0].strip() == "course"
+
+
 def judge_grounds(terrain: str) -> tuple[str, ...]:
     """The --terrain specs a policy trained on `terrain` is judged on in the core: its own, but for a course."""
-    return JUDGE_GROUNDS if terrain.split(":")[0].strip() == "course" else (terrain,)
+    return JUDGE_GROUNDS if is_course(terrain) else (terrain,)
 
 
 def judged_on(terrain: str) -> str:
