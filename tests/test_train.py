@@ -419,6 +419,18 @@ def test_the_results_table_gives_the_gap_between_training_physics_and_the_core(t
     (sweep_core / "summary.json").write_text((run / results.TRAINED / "summary.json").read_text())
     assert results.gap(sweep_core, run / results.TRAINED, 0.10) == {"survival_gap": 0.0, "apex_gap": 0.0}
 
+def test_a_course_runs_curriculum_level_is_filed_with_the_next_evaluation():
+    """Brax's log of finished training episodes comes between evaluations; its mean curriculum level is kept for
+    the next evaluation's history row, and an evaluation's own metrics pass on to the row."""
+    from training import loop
+
+    carried = {}
+    assert loop.training_log({loop.TRAINING_LEVEL: 1.75, "episode/length": 500.0, "episode/sps": 2e3}, carried)
+    assert loop.training_log({loop.TRAINING_LEVEL: 2.25}, carried) and carried == {loop.LEVEL: 2.25}
+    assert not loop.training_log({"eval/episode_reward": 12.0, "training/sps": 2e3}, carried)
+    assert carried == {loop.LEVEL: 2.25}
+
+
 def test_a_course_run_is_a_row_per_ground_it_is_judged_on(tmp_path):
     """A hop_terrain run trained on the course is judged on rough ground and on a block ahead
     (`curriculum.JUDGE_GROUNDS`): a row each, each with its own sweep's survival, the threshold's columns on both;

@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 import math
 import shutil
+import textwrap
 import time
 from pathlib import Path
 
@@ -15,6 +16,20 @@ from hopper_mjx.shell import files, process
 from hopper_mjx.shell.files import atomic_write_text
 from training.learners import learner_settings, networks, run_ppo, run_sac, task_config
 from training.options import HISTORY, check, latest_checkpoint, read_history
+
+# A course's curriculum: Brax's name for the mean level of the finished training episodes it logged
+# (`envs.monoped.LEVEL_METRIC`), and the history's.
+TRAINING_LEVEL = "episode/level_per_step"
+LEVEL = "training/level"
+
+
+def training_log(metrics: dict, carried: dict) -> bool:
+    """Whether `metrics` is Brax's log of finished training episodes, which comes between evaluations; if so, the
+    mean curriculum level it reports goes into `carried`, to be filed with the next evaluation's row."""
+    if TRAINING_LEVEL not in metrics:
+        return False
+    carried[LEVEL] = float(metrics[TRAINING_LEVEL])
+    return True
 
 
 class OutOfTime(Exception):
@@ -54,16 +69,21 @@ def train(args, physics=None) -> dict:
     started, wall_before = time.perf_counter(), record["wall_time"]
     board = tfevents.EventWriter(out / "tensorboard")  # the same curves for TensorBoard: tensorboard --logdir OUT
 
+    trained = {}  # the latest log of finished training episodes (a course's curriculum level), for the next row
+
     def progress(step, metrics):
+        if training_log(metrics, trained):
+            return
         row = {"step": start_step + int(step), "wall_time": wall_before + time.perf_counter() - started,
-               **{k: float(v) for k, v in metrics.items() if k.startswith(("eval/", "training/sps"))}}
+               **{k: float(v) for k, v in metrics.items() if k.startswith(("eval/", "training/sps"))}, **trained}
         record["history"].append(row)
         board.scalars(row["step"], {k: v for k, v in row.items() if k not in ("step", "wall_time")})
         record["wall_time"] = row["wall_time"]
         atomic_write_text(record_path, json.dumps(record, indent=1))
         print(f"step {row['step']:>10,} | reward {row.get('eval/episode_reward', math.nan):8.1f} | "
               f"episode {row.get('eval/avg_episode_length', math.nan):5.0f} steps | "
-              f"{row.get('training/sps', math.nan):6.0f} steps/s | {row['wall_time'] / 60:5.1f} min", flush=True)
+              f"{row.get('training/sps', math.nan):6.0f} steps/s | {row['wall_time'] / 60:5.1f} min"
+              + (f" | level {row[LEVEL]:.2f}" if LEVEL in row else ""), flush=True)
         # Brax files an evaluation's checkpoint before reporting it, so stopping here keeps it.
         if args.minutes is not None and step > 0 and row["wall_time"] >= 60 * args.minutes:
             raise OutOfTime
@@ -126,8 +146,18 @@ def reward_figure(history: list[dict], title: str, physics, policy_rate: float, 
         ax.fill_between(step, mean - std, mean + std, alpha=0.25, lw=0, label="± 1 standard deviation over them")
     ax.set_xlabel(f"environment steps (policy steps, {policy_rate:g} Hz)")
     ax.set_ylabel("episode reward (1, summed per episode)")
-    ax.set_title(f"{title}, the batched monoped\n{'; '.join(physics.described().values())}", fontsize=9)
-    ax.legend(fontsize=8)
+    subtitle = textwrap.fill("; ".join(physics.described().values()), 110)  # a course's spec is long
+    ax.set_title(f"{title}, the batched monoped\n{subtitle}", fontsize=9)
+    handles = ax.get_legend_handles_labels()
+    levels = [r for r in history if LEVEL in r]
+    if levels:  # a course: the curriculum's level beside the reward
+        twin = ax.twinx()
+        twin.plot([r["step"] for r in levels], [r[LEVEL] for r in levels], "s--", color="tab:green", ms=3,
+                  label="mean curriculum level of finished training episodes")
+        twin.set_ylabel("curriculum level (0 the easiest)")
+        twin.set_ylim(bottom=0)
+        handles = [a + b for a, b in zip(handles, twin.get_legend_handles_labels())]
+    ax.legend(*handles, fontsize=8)
     ax.grid(alpha=0.3)
     fig.tight_layout()
     return fig

@@ -88,6 +88,7 @@ TASK_INFO = ("command", "gravity", "last_action", "rng")
 # state (`sensing.SensorState`: figures and delay line; drawn sensor delay or noise), and the physics steps
 # since the episode's start (pushes, sensor noise).
 EPISODE_INFO = ("robot", "drive", "sense", "physics_steps")
+LEVEL_METRIC = "level_per_step"  # on a course: the episode's curriculum level (`MonopedEnv._course_metrics`)
 ROBOT_POOL = 256  # robots a randomised task draws once; an episode runs one of them
 EPISODE_STREAM = 2  # folded into an episode's key: the pushes' directions and the sensor noise
 
@@ -269,7 +270,12 @@ class MonopedEnv(Env):
         obs = observe(lay, cfg, self.read(data, info), gravity, command, last_action)
         zero = jnp.zeros(())
         terms = self.reward_terms(data, -gravity[2], command, last_action, last_action, zero, zero > 0)
-        return State(data, obs, zero, zero, {k: zero for k in terms}, info)
+        return State(data, obs, zero, zero, {k: zero for k in terms} | self._course_metrics(info), info)
+
+    def _course_metrics(self, info: dict) -> dict:
+        """On a course, the episode's curriculum level as a metric: Brax's training log divides a `_per_step`
+        metric's episode sum by the episode's length, so it reports the mean level of finished episodes."""
+        return {} if self.curriculum is None else {LEVEL_METRIC: info["level"].astype(jnp.float32)}
 
     def _start_episode(self, rng: jax.Array, first: Observation) -> dict:
         """The `EPISODE_INFO` of an episode from its key: its robot, its motors at rest with their delay line
@@ -392,4 +398,4 @@ class MonopedEnv(Env):
         obs = observe(lay, cfg, sensed, gravity, command, action)
         info = {**info, "last_action": action}
         return state.replace(pipeline_state=data, obs=obs, reward=reward, done=fell.astype(jnp.float32),
-                             metrics={**state.metrics, **terms}, info=info)
+                             metrics={**state.metrics, **terms, **self._course_metrics(info)}, info=info)
