@@ -400,7 +400,7 @@ def test_on_the_course_each_episode_starts_on_a_tile_of_its_level_and_the_level_
     from hopper_mjx.envs.monoped import LEVEL_METRIC
     from hopper_mjx.terrain import spec
 
-    env = envs.make("hop_terrain", terrain="course:levels=5,tile=2,seed=3,cell=0.1")
+    env = envs.make("hop_terrain", terrain="course:levels=5,tile=2,gap=0.15,seed=3,cell=0.1")
     assert env.task_info[-2:] == ("level", "start") and env.curriculum.levels == 5
     keys = jax.random.split(jax.random.PRNGKey(0), 400)
     first = jax.jit(jax.vmap(env.reset))(keys)
@@ -416,7 +416,7 @@ def test_on_the_course_each_episode_starts_on_a_tile_of_its_level_and_the_level_
     lift = np.asarray(first.pipeline_state.qpos[:, 2]) - env.standing_height  # over the pad, at z = 0
     assert lift.min() >= -1e-6 and lift.max() <= env.config.initial_clearance[1] + 1e-6
     # The scan zeroed (`observe_scan=False`, the ablation): the same observation but for the scan.
-    blind = envs.make("hop_terrain", terrain="course:levels=5,tile=2,seed=3,cell=0.1", observe_scan=False)
+    blind = envs.make("hop_terrain", terrain="course:levels=5,tile=2,gap=0.15,seed=3,cell=0.1", observe_scan=False)
     seen, unseen = (jax.jit(e.reset)(keys[0]).obs for e in (env, blind))
     assert blind.observation_size == env.observation_size and np.asarray(seen[-len(SCAN):]).min() > 0.8
     np.testing.assert_array_equal(np.asarray(unseen[:-len(SCAN)]), np.asarray(seen[:-len(SCAN)]))

@@ -150,6 +150,10 @@ def test_heightmap_is_laid_out_as_mujoco_reads_a_png(tmp_path):
     ("rough:amp", "'amp' is not key=value; rough takes amp, wavelength, seed, size, cell"),
     ("course:size=4", "course has no key 'size'; it takes levels, tile, amp, step, gap, block, seed, cell"),
     ("course:tile=1.5", "course: tile=1.5 m is too small; a tile needs at least 2 m"),
+    # The widest trench must fit its tile (here 0.2 m between the pad's ramp and the edge) and its spacing.
+    ("course:tile=2", "course: gap=0.3 m must be less than 0.2 m"),
+    ("course:gap=0.9", "course: gap=0.9 m must be less than 0.8 m"),
+    ("course:cell=0.3", "course: cell=0.3 m cannot hold its rough ground's 0.4 m waves; at most 0.2 m"),
 ])
 def test_bad_specs_are_one_line(text, message):
     with pytest.raises(terrain.TerrainError, match=None) as err:
@@ -251,7 +255,7 @@ def test_the_map_draws_a_terrain_from_above_and_refuses_the_plane(tmp_path, caps
     import imageio.v3 as iio
 
     path = tmp_path / "course.png"
-    assert model_main.main(["--map", str(path), "--terrain", "course:levels=2,tile=2,cell=0.1"]) == 0
+    assert model_main.main(["--map", str(path), "--terrain", "course:levels=2,tile=2,gap=0.15,cell=0.1"]) == 0
     image = iio.imread(path)
     assert image.ndim == 3 and image.shape[0] > 400 and image[..., :3].std() > 10  # drawn, not blank
     assert model_main.main(["--map", str(tmp_path / "flat.png")]) == 2

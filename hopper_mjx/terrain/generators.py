@@ -72,6 +72,7 @@ def heightmap(grey, *, height):
 COURSE_KINDS = ("rough", "steps", "gaps", "blocks")  # the columns, west to east
 COURSE_PAD = 0.4  # m: the half-width of the flat pad at a tile's centre
 COURSE_RAMP = 0.3  # m over which rough ground rises from the pad (and from the edge) to its full amplitude
+COURSE_WAVELENGTH = 0.4  # m: the rough tiles' waves
 COURSE_STEP_DEPTH = 0.3  # m: the tread of the steps' rings
 COURSE_GAP_SPACING = 0.8  # m between the gaps' trenches, edge to edge of their starts
 COURSE_GAP_DEPTH = 0.2  # m
@@ -88,7 +89,7 @@ def course_difficulty(level, levels):
 def course(x, y, *, levels, tile, amp, step, gap, block, seed):
     """The training course: `levels` rows of tiles `tile` m square (row 0 at -y), one column per `COURSE_KINDS`;
     the grid is centred on the origin. A tile of level i has `course_difficulty` f of the hardest ground:
-    rough ground of peak `amp`·f (wavelength 0.4 m); rings of steps `step`·f high, up three treads and down again
+    rough ground of peak `amp`·f (`COURSE_WAVELENGTH`); rings of steps `step`·f high, up three treads and down again
     to the tile's edge; trenches `gap`·f wide and `COURSE_GAP_DEPTH` deep; blocks `block`·f high. Its centre is a
     flat pad at z = 0, and so is its edge, where it meets the next tile."""
     width, height = len(COURSE_KINDS) * tile, levels * tile
@@ -105,7 +106,7 @@ def course(x, y, *, levels, tile, amp, step, gap, block, seed):
     trench = (out >= COURSE_RAMP) & (np.mod(start, COURSE_GAP_SPACING) < gap * f) \
         & (out - np.mod(start, COURSE_GAP_SPACING) + gap * f < room - COURSE_EDGE)
     ramp = np.clip(np.minimum(out, room - COURSE_EDGE - out) / COURSE_RAMP, 0, 1)  # 0 on the pad and the edge
-    ground = {"rough": amp * f * ramp * rough(x, y, amp=1.0, wavelength=0.4, seed=seed),
+    ground = {"rough": amp * f * ramp * rough(x, y, amp=1.0, wavelength=COURSE_WAVELENGTH, seed=seed),
               "steps": steps_h, "gaps": np.where(trench, -COURSE_GAP_DEPTH, 0.0),
               "blocks": _course_blocks(u, v, row, levels, tile, block, seed)}
     return np.select([col == i for i in range(len(COURSE_KINDS))], [ground[k] for k in COURSE_KINDS])

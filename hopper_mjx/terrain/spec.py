@@ -168,6 +168,25 @@ def grid_keys(name: str) -> tuple[str, ...]:
     return ("cell",) if name == "course" else tuple(k.name for k in GRID_KEYS)
 
 
+def _check_course(values: dict, cell: float) -> None:
+    """A course whose every kind of ground is there at every level: the tile holds its pad, a ring and its edge; the
+    widest trench fits between the pad's ramp and the edge and stays apart from the next; the grid resolves the rough
+    ground's waves."""
+    g = generators
+    tile, gap = values["tile"], values["gap"]
+    if tile < MIN_TILE:
+        raise TerrainError(f"course: tile={tile:g} m is too small; a tile needs at least {MIN_TILE:g} m (its pad, "
+                           "a ring of ground and its edge)")
+    room = tile / 2 - g.COURSE_PAD - g.COURSE_RAMP - g.COURSE_EDGE  # where a tile's trenches lie
+    if gap >= min(room, g.COURSE_GAP_SPACING):
+        raise TerrainError(f"course: gap={gap:g} m must be less than {min(room, g.COURSE_GAP_SPACING):g} m, the "
+                           f"trenches' spacing or the room for one on a {tile:g} m tile (without it the gaps tiles "
+                           "would be flat or one pit); lower gap or raise tile")
+    if cell > g.COURSE_WAVELENGTH / 2:
+        raise TerrainError(f"course: cell={cell:g} m cannot hold its rough ground's {g.COURSE_WAVELENGTH:g} m "
+                           f"waves; at most {g.COURSE_WAVELENGTH / 2:g} m")
+
+
 def course_size(values: dict) -> tuple[float, float]:
     """m, full extents of a course: a column of tiles per kind of ground, a row per level."""
     return (len(generators.COURSE_KINDS) * values["tile"], values["levels"] * values["tile"])
@@ -251,9 +270,7 @@ def parse(text: str) -> Ground:
     filled = tuple((k.name, values.get(k.name, k.default)) for k in KEYS[name] if k.name != "size")
     if name == "course":
         size = course_size(dict(filled))
-        if dict(filled)["tile"] < MIN_TILE:
-            raise TerrainError(f"course: tile={dict(filled)['tile']:g} m is too small; a tile needs at least "
-                               f"{MIN_TILE:g} m (its pad, a ring of ground and its edge)")
+        _check_course(dict(filled), cell)
     ground = Ground(name, filled, size, cell, path, each)
     if name not in ("flat", "heightmap"):
         for extent in size:
