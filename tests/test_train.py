@@ -206,6 +206,15 @@ def test_train_rejects_bad_input_in_one_line_before_anything_runs(trained, capsy
                               "got 30 Hz"),
     (["--policy-rate", "0"], "--policy-rate must divide the training's physics rate (1000 Hz) into whole steps, "
                              "got 0 Hz"),
+    # The scan ablation's switch on the plane, where nothing is scanned: by --config or by --terrain flat.
+    (["--config", "observe_scan=false"], "--config: observe_scan=false zeros the height scan, which a policy reads "
+                                         "only on a terrain; this one trains on the flat plane"),
+    (["--task", "hop_terrain", "--terrain", "flat", "--config", "observe_scan=false"],
+     "observe_scan=false zeros the height scan, which a policy reads only on a terrain; this one trains on the flat "
+     "plane"),
+    (["--task", "hop_terrain", "--terrain", "course:tile=2"],
+     "--terrain: course: gap=0.3 m must be less than 0.2 m, the trenches' spacing or the room for one on a 2 m tile "
+     "(without it the gaps tiles would be flat or one pit); lower gap or raise tile"),
     # The episode is counted in policy steps at the given rate: 20 steps at 100 Hz are 0.2 s.
     (["--policy-rate", "100", "--action-delay", "200", "--episode-length", "20"],
      "--action-delay 200 ms is not shorter than an episode (--episode-length 20 at 100 Hz) 0.2 s: no command would "

@@ -3,29 +3,19 @@
 
 from __future__ import annotations
 
-import dataclasses
 import functools
 import math
 from pathlib import Path
 
 from hopper_mjx.metrics.thresholds import APEX_TOLERANCE, MIN_HOPS, SPEED_TOLERANCE  # noqa: F401 (one definition)
-from training.options import OWNED_FIELDS, parse_layers, parse_pair
+from training.options import parse_layers, run_config
 
 
 def task_config(args, physics):
+    """The env a run trains: its task's config as the options set it (`options.run_config`) on `physics`' model."""
     from hopper_mjx import envs
 
-    overrides = {"observe_gravity": args.observe_gravity, "engine": physics.engine, "motor": physics.motor,
-                 "action_delay": physics.action_delay, "push": physics.push,
-                 "terrain": "" if physics.ground.is_flat else str(physics.ground)}
-    if physics.variation:  # the robots episodes run: drawn once, with the run's seed
-        overrides |= {"randomize": str(physics.variation), "randomize_seed": args.seed}
-    if args.gravity_range is not None:
-        overrides["gravity_range"] = parse_pair(args.gravity_range, "--gravity-range")
-    if args.policy_rate is not None:
-        overrides["policy_rate"] = args.policy_rate
-    config = envs.default_config(args.task).overridden(args.config, OWNED_FIELDS)
-    return envs.from_config(dataclasses.replace(config, **overrides), physics.mj_model)
+    return envs.from_config(run_config(args, physics), physics.mj_model)
 
 
 

@@ -223,6 +223,7 @@ def check(args):
     except ValueError as err:
         raise ValueError(f"--config: {err}") from None
     check_task_physics(args, physics, config)
+    run_config(args, physics)  # whole: --config against the other options (a scan zeroed on the plane)
     # The evaluation's options too: a mistake there would otherwise surface after the whole training run.
     for flag in ("--eval-gravity", "--select-gravity"):
         for g in parse_floats(getattr(args, flag[2:].replace("-", "_")), flag):
@@ -260,6 +261,26 @@ def check(args):
                                  f"{','.join(map(str, saved))} to resume it, or use another --out")
     return physics
 
+
+
+def run_config(args, physics):
+    """The task's config as a run's options set it: its defaults, --config's fields, and the fields other options
+    own (`OWNED_FIELDS`) from them and from `physics`. Raises ValueError for a combination it refuses."""
+    import dataclasses
+
+    from hopper_mjx import envs
+
+    overrides = {"observe_gravity": args.observe_gravity, "engine": physics.engine, "motor": physics.motor,
+                 "action_delay": physics.action_delay, "push": physics.push,
+                 "terrain": "" if physics.ground.is_flat else str(physics.ground)}
+    if physics.variation:  # the robots episodes run: drawn once, with the run's seed
+        overrides |= {"randomize": str(physics.variation), "randomize_seed": args.seed}
+    if args.gravity_range is not None:
+        overrides["gravity_range"] = parse_pair(args.gravity_range, "--gravity-range")
+    if args.policy_rate is not None:
+        overrides["policy_rate"] = args.policy_rate
+    config = envs.default_config(args.task).overridden(args.config, OWNED_FIELDS)
+    return dataclasses.replace(config, **overrides)
 
 
 def check_task_physics(args, physics, config) -> None:

@@ -113,6 +113,9 @@ class MonopedConfig:
         ground = self.ground  # raises TerrainError (a ValueError) for a bad spec
         if ground.each:
             raise ValueError(f"terrain {self.terrain!r}: training puts every episode on one ground; give a fixed seed")
+        if not self.observe_scan and not self.terrain:
+            raise ValueError("observe_scan=false zeros the height scan, which a policy reads only on a terrain; "
+                             "this one trains on the flat plane")
         dc_only = [name for name in self.variation.controls if registry.CONTROL_PARAMETERS[name].needs == "dc"]
         if dc_only and self.motor != "dc":
             raise ValueError(f"randomize: {', '.join(dc_only)} are a dc motor's figures; set motor='dc'")
