@@ -14,8 +14,8 @@ and the Moon, held to 5 points of survival and 5 % of the commanded apex; where 
 part of the training physics alone (`--as-trained=timestep` and `=solver`, the other part the core's:
 RUN/sweep-trained-timestep/, RUN/sweep-trained-solver/), and the row names the part whose gap stays over. The row
 names the step and solver cap its policies were trained on, so runs on other training physics are rows of their own,
-and so are runs whose learner's settings differ (epochs per batch, minibatches, learning rate...: `LEARNER`), named by
-the settings they differ in.
+and so are runs whose learner's settings differ (epochs per batch, minibatches, learning rate...: `LEARNER`) or
+whose task config does (`--config`, e.g. the scan ablation's observe_scan=false), named by what they differ in.
 Each task's reference controller
 (`registry.TASK_REFERENCES`: Raibert at the runs' command for the hopping tasks, Raibert at a 5 cm apex for stand)
 is swept the same way (OUT's folder, reference-<task>/). Every sweep runs on the run's own ground (`--terrain`;
@@ -184,6 +184,7 @@ def run_record(run: Path, record: dict, do_sweep: bool, num: int, duration: floa
                       if "eval/episode_reward" in r],
             **sweep_measures(run / SWEEP, height), **trained, **gaps, "parts": parts,
             "training": training_physics(run), "learner": {k: args.get(k) for k in LEARNER},
+            "config": sorted(args.get("config") or []),  # --config's task fields (the scan ablation's switch)
             "height": height, "speed": list(speed),
             "physics": list(physics_of(args).described().values())}
 
@@ -227,15 +228,19 @@ def rows_of(records: list[dict]) -> list[tuple[str, list[dict]]]:
     (`LEARNER`), named by the task, the algorithm, the physics and the settings its runs differ in from the
     other rows of the same task, algorithm and physics."""
     physics = lambda r: (r["task"], r["algo"], r.get("training", ""))
-    settings = lambda r: tuple(sorted((k, str(v)) for k, v in r.get("learner", {}).items()))
+    config = lambda r: " ".join(r.get("config", []))
+    settings = lambda r: (tuple(sorted((k, str(v)) for k, v in r.get("learner", {}).items())), config(r))
     grounds = lambda rs: list(dict.fromkeys(r.get("ground", "flat") for r in rs))  # in the runs' judging order
     rows = []
     for group in sorted({physics(r) for r in records}):
         runs = [r for r in records if physics(r) == group]
         varied = [k for k in LEARNER if len({str(r.get("learner", {}).get(k)) for r in runs}) > 1]
+        configs = len({config(r) for r in runs}) > 1
         for own in sorted({settings(r) for r in runs}):
             mine = [r for r in runs if settings(r) == own]
             said = "".join(f", {LEARNER[k]} {mine[0]['learner'][k]}" for k in varied)
+            if configs:
+                said += f", --config {config(mine[0])}" if config(mine[0]) else ", the task's own config"
             on = f", trained on a {group[2]}" if group[2] else ""
             several = len(grounds(mine)) > 1  # judged on several grounds (a course's): a row for each
             for ground in grounds(mine):

@@ -528,6 +528,33 @@ def test_runs_whose_learner_settings_differ_are_rows_of_their_own(tmp_path):
     assert "| hop × PPO | 2 | 2 of 2 scanned | 5.0 [4.0–6.0] |" in out.read_text()
 
 
+def test_runs_whose_task_config_differs_are_rows_of_their_own(tmp_path):
+    """The scan ablation: a hop_terrain seed trained blind (`--config observe_scan=false`) and one with its scan are
+    rows of their own on each judging ground, the blind one named by its --config, the other by its task's own."""
+    import json
+
+    from hopper_mjx.envs.curriculum import JUDGE_GROUNDS
+
+    results = importlib.import_module("results")
+    runs = []
+    for name, config, wall in (("scan", [], 30.0), ("blind", ["observe_scan=false"], 40.0)):
+        run = tmp_path / name
+        run.mkdir()
+        args = {"task": "hop_terrain", "algo": "ppo", "seed": 0, "eval_height": 0.10, "eval_speed": [0.5, 0.0],
+                "terrain": "course:seed=1", "config": config}
+        (run / "metrics.json").write_text(json.dumps({"args": args, "history": []}))
+        (run / "threshold.json").write_text(json.dumps({"step": 4_000_000, "wall_time": 60 * wall}))
+        runs.append(str(run))
+    out = tmp_path / "results.md"
+    assert results.main([*runs, "--out", str(out)]) == 0
+    rows = {c[0]: c for c in ([x.strip() for x in line.split("|")[1:-1]] for line in out.read_text().splitlines()
+                               if line.startswith("| hop_terrain × PPO"))}
+    assert set(rows) == {f"hop_terrain × PPO, {said}, judged on {g}" for g in JUDGE_GROUNDS
+                         for said in ("--config observe_scan=false", "the task's own config")}
+    assert rows[f"hop_terrain × PPO, --config observe_scan=false, judged on {JUDGE_GROUNDS[0]}"][3] == "40.0"
+    assert rows[f"hop_terrain × PPO, the task's own config, judged on {JUDGE_GROUNDS[0]}"][3] == "30.0"
+
+
 def test_train_rejects_an_out_it_cannot_make_in_one_line(tmp_path, capsys):
     """Under a file: one line, nothing made. A missing parent (runs/ on a fresh clone, as the docs' commands
     write) is made with the run, so the check passes and still makes nothing."""
