@@ -12,9 +12,11 @@ jaxsetup.configure()  # before any JAX computation: 2 host devices here, persist
 # (`--dist loadfile --no-loadscope-reorder`): a long file handed out last would leave the other process idle at the end.
 LONGEST_FIRST = ("test_tour.py", "test_core.py", "test_terrain_physics.py", "test_chain.py", "test_control.py",
                  "test_bench.py", "test_chain_terrain.py", "test_chain_terrain_legs.py",  # 50-70 s warm, 140 s cold
-                 "test_jump.py", "test_leap_against_c.py", "test_latency.py",
+                 "test_jump.py", "test_latency.py",
                  "test_train.py", "test_policy.py", "test_actuators.py",
-                 "test_train_sac.py", "test_faults.py", "test_sweep.py", "test_chain_terrain_box.py", "test_step.py",
+                 "test_train_sac.py", "test_faults.py",
+                 "test_leap_against_c.py",  # well after test_jump.py: it reads back their run's stored program
+                 "test_sweep.py", "test_chain_terrain_box.py", "test_step.py",
                  "test_variation.py", "test_export_onnx.py", "test_programs.py", "test_cross_cpu.py", "test_env.py",
                  "test_raibert.py", "test_render.py", "test_bad_inputs.py", "test_hostile.py",
                  "test_control_variation.py", "test_balance.py", "test_record.py", "test_env_robot_io.py",
@@ -38,3 +40,12 @@ def sim(mj_model):
     from hopper_mjx.sim import Sim
 
     return Sim(mj_model)
+
+
+@pytest.fixture(scope="session")
+def jump_leaps():
+    """The jump's leaps over the sweeps' blocks and gaps, run once for the two files that check them (test_jump,
+    test_leap_against_c): its program on a terrain with DC motors takes minutes to trace and compile."""
+    from test_jump import leap_run
+
+    return leap_run()

@@ -13,35 +13,26 @@ import mujoco
 import numpy as np
 import pytest
 from test_chain_terrain import _step_fn
-from test_jump import BLOCK
+from test_jump import BLOCK, LEAP_CELLS, REPLAYED_CELLS
 
-from hopper_mjx import control, model, terrain
+from hopper_mjx import model, terrain
 from hopper_mjx.control import jump
 from hopper_mjx.engine import chain
 from hopper_mjx.shell import programs
 
-CELLS = ((0.6, 1.62), (0.7, 1.62))  # (block height m, gravity m/s²): on the Moon, leaps landed on the foot alone
-SPEED = (0.3, 0.0)  # m/s, the obstacle sweep's
-DURATION = 7.5  # s: the leaps launch at 5.1 s and land at 6.9-7.0 s
+CELLS = tuple((h, g) for _, h, g in REPLAYED_CELLS)  # (block height m, gravity m/s²)
 REPLAY = 2600  # steps (2.6 s) from the apex before the launch: past the landing stance and a leg's first touch
 FAR_EDGE = 0.7  # m, the block's far face (x = 0.6 m, 0.1 m long)
 
 
 @pytest.fixture(scope="module")
-def leap():
-    """The jump over the blocks on the chain engine with DC motors (as test_jump's `leaps`: one model, each instance's
-    block its ground), every state, foot contact and applied torque recorded at the physics rate."""
-    from hopper_mjx.scenario import Physics
-    from hopper_mjx.sim import gravity_vectors
-    from hopper_mjx.sweep.runner import recorded
-
-    physics = Physics(ground=terrain.parse(BLOCK.format(h=0.3)), motor="dc", engine="chain")
-    sim = physics.sim(chunk=1)
-    grids = np.stack([terrain.parse(BLOCK.format(h=h)).terrain().heights for h, _ in CELLS])
-    controller, params = control.make("jump", sim.robot, len(CELLS), height=0.1, speed=SPEED)
-    _, traj = sim.run(gravity_vectors([g for _, g in CELLS]), controller, params, duration=DURATION,
-                      sensors=recorded(physics.timestep, torque=True), key=0, ground=grids)
-    return physics.mj_model, sim.robot, grids, jax.tree_util.tree_map(np.asarray, traj)
+def leap(jump_leaps):
+    """The jump over these blocks in the core (conftest's `jump_leaps`, as test_jump's cells: one model, each
+    instance's block its ground), every state, foot contact and applied torque at the physics rate. The leaps launch
+    at about 5.1 s and land at 6.9-7.0 s."""
+    sim, mj_model, grids, traj = jump_leaps
+    cells = [LEAP_CELLS.index(cell) for cell in REPLAYED_CELLS]
+    return mj_model, sim.robot, grids[cells], jax.tree_util.tree_map(lambda x: x[cells], traj)
 
 
 def leap_start(z: np.ndarray, flag: np.ndarray) -> int:
