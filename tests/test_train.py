@@ -430,7 +430,7 @@ def test_the_results_table_gives_the_gap_between_training_physics_and_the_core(t
 
 def test_a_course_runs_curriculum_level_is_filed_with_the_next_evaluation():
     """Brax's log of finished training episodes comes between evaluations; its mean curriculum level is kept for
-    the next evaluation's history row, and an evaluation's own metrics pass on to the row."""
+    the next evaluation's history row, and an evaluation's own metrics pass on to the row, but for its own level."""
     from training import loop
 
     carried = {}
@@ -438,6 +438,9 @@ def test_a_course_runs_curriculum_level_is_filed_with_the_next_evaluation():
     assert loop.training_log({loop.TRAINING_LEVEL: 2.25}, carried) and carried == {loop.LEVEL: 2.25}
     assert not loop.training_log({"eval/episode_reward": 12.0, "training/sps": 2e3}, carried)
     assert carried == {loop.LEVEL: 2.25}
+    # The evaluation's own level is its first episodes' draw, the same at every evaluation: not filed.
+    evaluation = {"eval/episode_reward": 12.0, loop.EVAL_LEVEL: 0.0, "training/sps": 2e3, "training/walltime": 9.0}
+    assert loop.evaluation_metrics(evaluation) == {"eval/episode_reward": 12.0, "training/sps": 2e3}
 
 
 def test_a_course_run_is_a_row_per_ground_it_is_judged_on(tmp_path):

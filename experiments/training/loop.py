@@ -21,6 +21,9 @@ from training.options import HISTORY, check, latest_checkpoint, read_history
 # (`envs.monoped.LEVEL_METRIC`), and the history's.
 TRAINING_LEVEL = "episode/level_per_step"
 LEVEL = "training/level"
+# Brax's evaluation reports the same metric for its episodes, each a first episode drawn afresh (no curriculum
+# carries over between them): the level a course starts at, not progress. Not filed.
+EVAL_LEVEL = "eval/episode_level_per_step"
 
 
 def training_log(metrics: dict, carried: dict) -> bool:
@@ -30,6 +33,11 @@ def training_log(metrics: dict, carried: dict) -> bool:
         return False
     carried[LEVEL] = float(metrics[TRAINING_LEVEL])
     return True
+
+
+def evaluation_metrics(metrics: dict) -> dict:
+    """What an evaluation's row files of Brax's metrics: its evaluation's and the training's steps/s."""
+    return {k: float(v) for k, v in metrics.items() if k.startswith(("eval/", "training/sps")) and k != EVAL_LEVEL}
 
 
 class OutOfTime(Exception):
@@ -75,7 +83,7 @@ def train(args, physics=None) -> dict:
         if training_log(metrics, trained):
             return
         row = {"step": start_step + int(step), "wall_time": wall_before + time.perf_counter() - started,
-               **{k: float(v) for k, v in metrics.items() if k.startswith(("eval/", "training/sps"))}, **trained}
+               **evaluation_metrics(metrics), **trained}
         record["history"].append(row)
         board.scalars(row["step"], {k: v for k, v in row.items() if k not in ("step", "wall_time")})
         record["wall_time"] = row["wall_time"]
