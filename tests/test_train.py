@@ -439,7 +439,8 @@ def test_a_course_runs_curriculum_level_is_filed_with_the_next_evaluation():
     assert not loop.training_log({"eval/episode_reward": 12.0, "training/sps": 2e3}, carried)
     assert carried == {loop.LEVEL: 2.25}
     # The evaluation's own level is its first episodes' draw, the same at every evaluation: not filed.
-    evaluation = {"eval/episode_reward": 12.0, loop.EVAL_LEVEL: 0.0, "training/sps": 2e3, "training/walltime": 9.0}
+    evaluation = {"eval/episode_reward": 12.0, loop.EVAL_LEVEL: 0.0, loop.EVAL_LEVEL + "_std": 0.0,
+                  "training/sps": 2e3, "training/walltime": 9.0}
     assert loop.evaluation_metrics(evaluation) == {"eval/episode_reward": 12.0, "training/sps": 2e3}
 
 

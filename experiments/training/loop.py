@@ -37,7 +37,8 @@ def training_log(metrics: dict, carried: dict) -> bool:
 
 def evaluation_metrics(metrics: dict) -> dict:
     """What an evaluation's row files of Brax's metrics: its evaluation's and the training's steps/s."""
-    return {k: float(v) for k, v in metrics.items() if k.startswith(("eval/", "training/sps")) and k != EVAL_LEVEL}
+    return {k: float(v) for k, v in metrics.items() if k.startswith(("eval/", "training/sps"))
+            and not k.startswith(EVAL_LEVEL)}  # its mean and its _std
 
 
 class OutOfTime(Exception):
