@@ -223,7 +223,7 @@ def check(args):
     except ValueError as err:
         raise ValueError(f"--config: {err}") from None
     check_task_physics(args, physics, config)
-    run_config(args, physics)  # whole: --config against the other options (a scan zeroed on the plane)
+    run_config(args, physics, config)  # whole: --config against the other options (a scan zeroed on the plane)
     # The evaluation's options too: a mistake there would otherwise surface after the whole training run.
     for flag in ("--eval-gravity", "--select-gravity"):
         for g in parse_floats(getattr(args, flag[2:].replace("-", "_")), flag):
@@ -263,9 +263,10 @@ def check(args):
 
 
 
-def run_config(args, physics):
-    """The task's config as a run's options set it: its defaults, --config's fields, and the fields other options
-    own (`OWNED_FIELDS`) from them and from `physics`. Raises ValueError for a combination it refuses."""
+def run_config(args, physics, config=None):
+    """The task's config as a run's options set it: its defaults, --config's fields (`config`, when `check` has
+    applied them already), and the fields other options own (`OWNED_FIELDS`) from them and from `physics`. Raises
+    ValueError for a combination it refuses."""
     import dataclasses
 
     from hopper_mjx import envs
@@ -279,7 +280,8 @@ def run_config(args, physics):
         overrides["gravity_range"] = parse_pair(args.gravity_range, "--gravity-range")
     if args.policy_rate is not None:
         overrides["policy_rate"] = args.policy_rate
-    config = envs.default_config(args.task).overridden(args.config, OWNED_FIELDS)
+    if config is None:
+        config = envs.default_config(args.task).overridden(args.config, OWNED_FIELDS)
     return dataclasses.replace(config, **overrides)
 
 
