@@ -162,12 +162,12 @@ def test_the_jump_leaps_the_sweeps_blocks_and_gaps(jump_leaps):
     from hopper_mjx.metrics import hops
 
     sim, _, _, traj = jump_leaps
-    cells = LEAP_CELLS
-    bands = np.array([[[0.6, 0.7, size] if spec == BLOCK else [0.6, 0.6 + size, -1.0]] for spec, size, _ in cells])
-    cleared = hops.terrain_metrics(traj, command_speed=(0.3, 0.0), obstacles=bands)["obstacles_cleared"]
-    assert list(cleared) == [1] * len(cells)
+    bands = np.array([[[0.6, 0.7, size] if spec == BLOCK else [0.6, 0.6 + size, -1.0]]
+                      for spec, size, _ in LEAP_CELLS])
+    cleared = hops.terrain_metrics(traj, command_speed=LEAP_SPEED, obstacles=bands)["obstacles_cleared"]
+    assert list(cleared) == [1] * len(LEAP_CELLS)
     drop = float(jump.tuck_drop(sim.robot, sim.robot.leg))
-    for (spec, h, _), z in zip(cells, traj.qpos[:, :, 2]):
+    for (spec, h, _), z in zip(LEAP_CELLS, traj.qpos[:, :, 2]):
         if spec == BLOCK:
             assert z.max() >= h + drop
 
