@@ -32,7 +32,8 @@ lint: install
 
 # Two processes: XLA compiles on one core, so while one compiles the other runs. The tests that
 # measure wall-clock pacing or timing bounds then run alone. The longest files go first (tests/conftest.py);
-# the slowest 25 setups and tests are listed at the end, so that order can be checked against each run.
+# the slowest 25 setups and tests are listed at the end, so that order can be checked against each run, then how long
+# each spent building programs (tests/build_time.py).
 test: lint
 	$(PY) -m pytest -q -n 2 --dist loadfile --no-loadscope-reorder -m "not serial" --durations=25
 	$(PY) -m pytest -q -m serial

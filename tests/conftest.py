@@ -5,6 +5,7 @@ import pytest
 from hopper_mjx.shell import jaxsetup
 
 jaxsetup.configure()  # before any JAX computation: 2 host devices here, persistent compile cache
+pytest_plugins = ("build_time",)  # the report of how long each test spent building programs
 
 # The files that take longest with an empty compile cache, longest first: each file's setup, call and teardown times
 # summed from `make test`'s parallel phase run with `--durations=0` (1 Dec, 2 cores; the refusal files since made
