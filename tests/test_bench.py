@@ -221,3 +221,25 @@ def test_the_bench_counts_the_kernels_of_the_rollout_it_ran(record, flat_step_ke
     print(f"\nkernels a core step launches (bench): {record['kernels_per_step']}")
     assert flat_step_kernels < record["kernels_per_step"] < 5 * flat_step_kernels
     assert f"{record['kernels_per_step']:,}" in bench.format_table(record)
+
+
+def test_the_flat_chain_steps_equations_are_counted_inside_its_loops_and_by_writer(settling_chain):
+    """perf.profile's size of the step before XLA: 10,436 jaxpr equations flat (4 Dec; 43,757 on
+    `rough:amp=0.02,seed=1`). The count walks into the conditionals' branches and the loops' bodies (the Newton
+    solve is a while loop, every stored stage a conditional), so it is several times the top level's, and it names
+    the engine functions that wrote them: the solver's the most."""
+    import jax
+
+    from hopper_mjx.perf import kernels, profile
+
+    _, sim, standing, _, _ = settling_chain
+    counts = kernels.equations(sim.engine, standing.data, standing.gravity)
+    total = sum(counts.values())
+    top = len(jax.make_jaxpr(kernels._batched_step(sim.engine))(sim.engine.model, standing.data,
+                                                                 standing.gravity).jaxpr.eqns)
+    print(f"\njaxpr equations of a flat chain step: {total:,} ({top:,} at its top level)")
+    assert 5_000 <= total <= 20_000 and total > 3 * top
+    solver = sum(n for name, n in counts.items() if name.startswith("solver."))
+    assert solver > total / 3 and max(counts, key=counts.get).startswith(("solver.", "other"))
+    assert all(name.startswith(("solver.", "smooth.", "constraint.", "chain.", "other")) for name in counts), counts
+    assert f"{total:,}" in profile._equations(counts)

@@ -75,10 +75,44 @@ def count(hlo: str) -> int:
     return launches(entry)
 
 
-def per_step(engine, data, gravity) -> int:
-    """Kernels of one step (forward, then integrate) of `engine` over the batch `data` ((N, ...) leaves; its
-    gravity (N, 3)), compiled as the core compiles its step: vmapped over the instances, the model an argument,
-    the engine's XLA:CPU options."""
+def equations(engine, data, gravity) -> dict[str, int]:
+    """The jaxpr equations of one step, traced as `per_step` compiles it, by the engine function that wrote each
+    (`module.function`, the innermost frame in `hopper_mjx/engine/` other than its algebra and its stage wrapper;
+    "other" outside the engine), the programs nested in conditionals and loops counted once each. The step's size
+    before XLA: tracing, lowering and compiling it grow with it (docs/performance.md)."""
+    import collections
+
+    import jax
+
+    counts: collections.Counter = collections.Counter()
+
+    def walk(jaxpr):
+        for eqn in jaxpr.eqns:
+            counts[_writer(eqn)] += 1
+            for param in eqn.params.values():
+                for sub in param if isinstance(param, (tuple, list)) else (param,):
+                    if hasattr(sub, "eqns"):
+                        walk(sub)
+                    elif hasattr(sub, "jaxpr") and hasattr(sub.jaxpr, "eqns"):  # a closed jaxpr
+                        walk(sub.jaxpr)
+
+    walk(jax.make_jaxpr(_batched_step(engine))(engine.model, data, gravity).jaxpr)
+    return dict(counts.most_common())
+
+
+def _writer(eqn) -> str:
+    frames = eqn.source_info.traceback.frames if eqn.source_info.traceback is not None else []
+    for frame in frames:  # innermost first
+        path = frame.file_name.replace("\\", "/")
+        if "/hopper_mjx/engine/" in path and not path.endswith(("/algebra.py", "/stage.py")):
+            module = path.rsplit("/", 1)[1].removesuffix(".py")
+            module = path.rsplit("/", 2)[1] if module == "__init__" else module
+            return f"{module}.{frame.function_name.split('.')[0]}"
+    return "other"  # no engine frame: JAX's own, such as a batched conditional's selects
+
+
+def _batched_step(engine):
+    """One step (forward, then integrate) vmapped over the instances, the model an argument, as the core runs it."""
     import jax
 
     from hopper_mjx.engine import BATCH_AXIS
@@ -86,6 +120,14 @@ def per_step(engine, data, gravity) -> int:
     def step(m, d, g):
         return engine.integrate(m, engine.forward(m, d, g), g)
 
-    batched = jax.jit(jax.vmap(step, in_axes=(None, 0, 0), axis_name=BATCH_AXIS),
-                      compiler_options=engine.compiler_options)
+    return jax.vmap(step, in_axes=(None, 0, 0), axis_name=BATCH_AXIS)
+
+
+def per_step(engine, data, gravity) -> int:
+    """Kernels of one step (forward, then integrate) of `engine` over the batch `data` ((N, ...) leaves; its
+    gravity (N, 3)), compiled as the core compiles its step: vmapped over the instances, the model an argument,
+    the engine's XLA:CPU options."""
+    import jax
+
+    batched = jax.jit(_batched_step(engine), compiler_options=engine.compiler_options)
     return count(batched.lower(engine.model, data, gravity).compile().as_text())

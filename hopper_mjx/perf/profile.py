@@ -29,11 +29,14 @@ they are the physics' own), and how many its batch runs, since a vmapped loop
 runs until the batch's slowest instance is done.
 
 Both: the kernels one step launches, counted from its compiled program (`perf.kernels`):
-XLA:CPU pays a fixed cost for each, so their number bounds how fast a small step can be.
+XLA:CPU pays a fixed cost for each, so their number bounds how fast a small step can be. And
+the step's jaxpr equations by the engine function that wrote them: what tracing, lowering and
+compiling the step cost grows with.
 """
 
 from __future__ import annotations
 
+import collections
 import copy
 import sys
 import time
@@ -216,7 +219,8 @@ def measure(num: int, steps: int, settle: int, physics: Physics = Physics()) -> 
     mj_model = physics.mj_model
     sim, standing = standing_batch(num, settle, physics)
     record = {"num": num, "steps": steps, "engine": sim.engine.name, "terrain": str(physics.ground),
-              "kernels": kernels.per_step(sim.engine, standing.data, standing.gravity)}
+              "kernels": kernels.per_step(sim.engine, standing.data, standing.gravity),
+              "equations": kernels.equations(sim.engine, standing.data, standing.gravity)}
     if sim.engine.name == "chain":
         args = (sim.engine, standing.data.qpos, standing.data.qvel, standing.data.ctrl, standing.gravity, steps)
         niter, states = newton_iterations(*args)
@@ -236,8 +240,20 @@ def measure(num: int, steps: int, settle: int, physics: Physics = Physics()) -> 
 
 
 def table(record: dict) -> str:
-    return _table(record) + (f"\nkernels one step launches (compiled, one pass through its loops): "
-                             f"{record['kernels']:,}")
+    return (_table(record) + f"\nkernels one step launches (compiled, one pass through its loops): "
+            f"{record['kernels']:,}\n" + _equations(record["equations"]))
+
+
+def _equations(counts: dict, shown: int = 8) -> str:
+    """The step's jaxpr equations, and the engine functions that wrote the most of them."""
+    total = sum(counts.values())
+    modules = collections.Counter()
+    for name, n in counts.items():
+        modules[name.split(".")[0]] += n
+    lines = [f"jaxpr equations of one step (its size before XLA; tracing and compiling grow with it): {total:,}",
+             "  by module: " + ", ".join(f"{m} {n / total:.0%}" for m, n in modules.most_common())]
+    lines += [f"  {name:48s} {n:7,d} {n / total:6.0%}" for name, n in list(counts.items())[:shown]]
+    return "\n".join(lines)
 
 
 def _table(record: dict) -> str:
