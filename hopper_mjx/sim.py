@@ -370,7 +370,7 @@ class Sim:
         made from it, the motors, pushes and sensors, the controller's own key, the steps and the record."""
         return repr((programs.model_digest(self.mj_model), self.engine.program_key(), self.actuation.kind,
                      self.actuation.depth, self.pushes, self.sensing.depth, self.sensing.noisy, controller.key, steps,
-                     sensors, chunk))
+                     sensors.key(), chunk))
 
 
 def per_instance(controls: dict, actuation: Actuation, sensing: Sensing, timestep: float, delay_steps: int = 0) -> dict:

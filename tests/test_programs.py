@@ -7,6 +7,7 @@ import pytest
 
 from hopper_mjx import control, model
 from hopper_mjx.control.base import hold
+from hopper_mjx.hardware.signals import SensorConfig
 from hopper_mjx.model.world import gravity_vectors
 from hopper_mjx.shell import programs
 from hopper_mjx.sim import Sim
@@ -18,13 +19,13 @@ class Traced(Exception):
     pass
 
 
-def _run(mj_model, name="hold"):
+def _run(mj_model, name="hold", sensors=SensorConfig()):
     """A fresh core (nothing compiled in this process's Sim) and one rollout: (final qpos, recorded IMU)."""
     sim = Sim(mj_model)
     ctrl, params = control.make(name, sim.robot, 3)
     state = sim.reset(gravity_vectors([9.81, 3.71, 1.62]), key=3, controller=ctrl, params=params,
                       qvel=np.full(sim.layout.nv, 0.2))
-    final, traj = sim.rollout(state, ctrl, steps=STEPS)
+    final, traj = sim.rollout(state, ctrl, steps=STEPS, sensors=sensors)
     return np.asarray(final.data.qpos), np.asarray(traj.imu.accel)
 
 
@@ -64,6 +65,18 @@ def test_another_configuration_or_a_damaged_entry_is_traced_anew(store, monkeypa
     again = _run(mj_model)
     for a, b in zip(first, again):
         np.testing.assert_array_equal(a, b)
+
+
+def test_a_rate_written_as_a_whole_number_is_the_same_program(store, monkeypatch, mj_model):
+    """A sweep writes its rates as whole numbers (100), `simulate` as floats (100.0): equal configurations, one
+    stored program, read back without tracing. Another rate is another program."""
+    first = _run(mj_model)  # the default record: 50.0 Hz
+    _no_tracing(monkeypatch)
+    again = _run(mj_model, sensors=SensorConfig(imu_rate=50, odom_rate=50, contact_rate=50, state_rate=50))
+    for a, b in zip(first, again):
+        np.testing.assert_array_equal(a, b)
+    with pytest.raises(Traced):
+        _run(mj_model, sensors=SensorConfig(imu_rate=100))
 
 
 def test_a_controller_without_a_key_is_never_stored(store, mj_model):

@@ -168,6 +168,12 @@ class SensorConfig:
     scan_counts: tuple[int, int] = (5, 5)
     scan_spacing: tuple[float, float] = (0.1, 0.1)
 
+    def key(self) -> tuple:
+        """The configuration as a stored program's key (`shell.programs`): equal configurations, one key. Its repr
+        would not do: a rate of 100 and one of 100.0 are one rate, and trace to one program."""
+        number = lambda v: float(v) if type(v) is int else v  # not a bool: `torque` stays a flag
+        return tuple((f.name, number(getattr(self, f.name))) for f in dataclasses.fields(self))
+
     def scan_points(self):
         """(K, 2) m, the scan's points in the base's yaw frame (x ahead, y left)."""
         return terrain_scan.scan_points(tuple(int(c) for c in self.scan_counts), self.scan_spacing)
