@@ -237,9 +237,11 @@ def test_drops_onto_the_base_box_follow_c_until_it_lands(falls):
 
 
 def test_the_fallen_box_rests_on_the_ground(falls):
-    """At the end the fallen robots lie on the ground: C's own collision of the chain's final states finds
-    the box at most 4 mm deeper in the terrain than in C's final states (MuJoCo's soft contact, ~1 mm; lying
-    on a level top the chain's BOX_CONTACTS rows carry what C spreads over dozens: 4.7 mm against 1.1)."""
+    """At the end the fallen robots lie on the ground: C's own collision of the chain's states finds the box at
+    most 6 mm deeper in the terrain than in C's, each averaged over the last 0.2 s (MuJoCo's soft contact, ~1 mm).
+    The chain's BOX_CONTACTS rows carry what C spreads over dozens: lying on a level top 4.7 mm against 1.1; across
+    the step's edge, fewer prisms under it, the robots still rock at 1.2 s and the depth swings with them (the
+    step at 9.81 m/s^2, one instance from 0.8 s to 3 s: 2.6-6.4 mm, whichever the rows' summation order)."""
     cases, ours, theirs, _, _ = falls
     models = {name: hfield_model(terrain(name), HALF, HALF) for name in TERRAINS}
 
@@ -249,11 +251,16 @@ def test_the_fallen_box_rests_on_the_ground(falls):
         mujoco.mj_forward(m, d)
         return max([-c.dist for c in d.contact[:d.ncon] if c.geom2 == m.pair_geom2[0]], default=-np.inf)
 
-    ours_depth = [box_depth(models[name], ours[-1, i]) for i, (name, _) in enumerate(cases)]
-    c_depth = [box_depth(models[name], theirs[-1, i]) for i, (name, _) in enumerate(cases)]
-    print("\nfinal box depth in the ground, chain:", np.round(ours_depth, 4), "C:", np.round(c_depth, 4))
+    def mean_depth(states, i):
+        depths = [box_depth(models[cases[i][0]], q[i]) for q in states[-200::20]]
+        return np.mean(depths) if np.isfinite(depths).all() else -np.inf  # off the box at any of them: not resting
+
+    ours_depth = [mean_depth(ours, i) for i in range(len(cases))]
+    c_depth = [mean_depth(theirs, i) for i in range(len(cases))]
+    print("\nmean box depth in the ground over the last 0.2 s, chain:", np.round(ours_depth, 4), "C:",
+          np.round(c_depth, 4))
     assert np.isfinite(ours_depth).sum() >= len(cases) // 2, "most chain runs end on the base box"
-    assert max(ours_depth) <= max(c_depth) + 4e-3
+    assert max(ours_depth) <= max(c_depth) + 6e-3
 
 
 def test_a_fallen_instance_does_not_change_the_others(falls):
