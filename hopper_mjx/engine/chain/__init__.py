@@ -75,10 +75,6 @@ class ChainData:
         return dataclasses.replace(self, **fields)
 
 
-def _vector(values, dtype) -> jax.Array:
-    return jnp.stack([jnp.asarray(v, dtype) for v in values])
-
-
 def _smooth(cm: ChainModel, gate, pose, qpos, qvel, ctrl, gravity):
     """Mass matrix, qfrc_smooth and the unconstrained acceleration."""
     mass = chain_smooth.mass_matrix(cm, gate, pose)
@@ -192,9 +188,9 @@ class ChainEngine:
                                  cost_scale=cm.cost_scale, warmstart=cm.warmstart)
         upper = [mass[i, j] for i in range(cm.nv) for j in range(i, cm.nv)]
         return data.replace(
-            qacc=_vector(sol.qacc, dtype), mass=_vector(upper, dtype), qfrc_smooth=_vector(qfrc_smooth, dtype),
-            qfrc_constraint=_vector(sol.qfrc_constraint, dtype), foot_touching=foot.touching,
-            foot_force=_vector(_foot_force(foot, sol.force), dtype), foot_pos=_vector(foot.pos, dtype),
+            qacc=al.vector(sol.qacc, dtype), mass=al.vector(upper, dtype), qfrc_smooth=al.vector(qfrc_smooth, dtype),
+            qfrc_constraint=al.vector(sol.qfrc_constraint, dtype), foot_touching=foot.touching,
+            foot_force=al.vector(_foot_force(foot, sol.force), dtype), foot_pos=al.vector(foot.pos, dtype),
             solver_niter=sol.iterations.astype(jnp.int32),
         )
 
@@ -207,7 +203,7 @@ class ChainEngine:
             damped = {(i, j): next(upper) + (h * damping[i] if i == j else 0.0)
                       for i in range(cm.nv) for j in range(i, cm.nv)}
             total = data.qfrc_smooth + data.qfrc_constraint
-            qacc = _vector(chain_solver.solve_spd(model.gate, damped, tuple(total[i] for i in range(cm.nv))),
+            qacc = al.vector(chain_solver.solve_spd(model.gate, damped, tuple(total[i] for i in range(cm.nv))),
                            data.qvel.dtype)
         qvel = data.qvel + h * qacc
         return data.replace(qpos=_advance_qpos(cm, data.qpos, qvel), qvel=qvel, time=data.time + h,

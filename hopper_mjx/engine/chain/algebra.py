@@ -159,3 +159,8 @@ def axis_rotation(axis: Vec, c: Scalar, s: Scalar) -> Mat:
 
 def sqrt(x):
     return math.sqrt(x) if is_const(x) else jnp.sqrt(x)
+
+
+def vector(values, dtype) -> jax.Array:
+    """Scalars (numbers or traced) as one array of `dtype`."""
+    return jnp.stack([jnp.asarray(v, dtype) for v in values])

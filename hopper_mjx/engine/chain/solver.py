@@ -124,15 +124,10 @@ class LineRows(NamedTuple):
     bound: jax.Array  # (R,) a friction row's residual bound f R, 0 for a one-sided row
 
 
-def _stack(values, dtype) -> jax.Array:
-    return jnp.stack([jnp.asarray(x, dtype) for x in values])
-
-
 def line_rows(gate, rows: Rows, dtype) -> LineRows:
     """The rows' weights and friction bounds stacked, once a solve."""
-    none = (0.0, 0.0)
-    weight, f, bound = stored(gate, lambda w, loss: (_stack(w, dtype), _stack(((v or none)[0] for v in loss), dtype),
-                                                     _stack(((v or none)[1] for v in loss), dtype)),
+    bounds = lambda loss, k: al.vector(((v or (0.0, 0.0))[k] for v in loss), dtype)  # 0 for a one-sided row
+    weight, f, bound = stored(gate, lambda w, loss: (al.vector(w, dtype), bounds(loss, 0), bounds(loss, 1)),
                               rows.weight, rows.loss)
     return LineRows(np.array([v is not None for v in rows.loss]), weight, f, bound)
 
@@ -244,8 +239,8 @@ def _newton_step(gate, mass, qfrc_smooth, rows: Rows, lr: LineRows, ls_iteration
     search = tuple(-x for x in solve_spd(gate, hessian, it.grad))
 
     def along(search, ma, residual):
-        slope = _stack((al.dot(j, search) for j in rows.jac), lr.weight.dtype)
-        return (_stack(residual, lr.weight.dtype), slope, al.dot(search, al.vsub(ma, qfrc_smooth)),
+        slope = al.vector((al.dot(j, search) for j in rows.jac), lr.weight.dtype)
+        return (al.vector(residual, lr.weight.dtype), slope, al.dot(search, al.vsub(ma, qfrc_smooth)),
                 al.dot(search, sym_matvec(mass, search, n)))
     residual, slope, g1, g2 = stored(gate, along, search, it.ma, it.residual)
     gtol = ls_tol * jnp.sqrt(al.dot(search, search))  # MuJoCo's tolerance ls_tolerance |search| / scale
