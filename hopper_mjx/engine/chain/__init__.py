@@ -185,7 +185,8 @@ class ChainEngine:
         warm = tuple(data.qacc_warmstart[i] for i in range(cm.nv))
         sol = chain_solver.solve(gate, mass, qfrc_smooth, qacc_smooth, warm, rows, iterations=cm.iterations,
                                  ls_iterations=cm.ls_iterations, tolerance=cm.tolerance, ls_tolerance=cm.ls_tolerance,
-                                 cost_scale=cm.cost_scale, warmstart=cm.warmstart)
+                                 cost_scale=cm.cost_scale, warmstart=cm.warmstart,
+                                 stacked=cm.terrain is not None)  # a heightfield's many rows: solver.Stacked
         upper = [mass[i, j] for i in range(cm.nv) for j in range(i, cm.nv)]
         return data.replace(
             qacc=al.vector(sol.qacc, dtype), mass=al.vector(upper, dtype), qfrc_smooth=al.vector(qfrc_smooth, dtype),

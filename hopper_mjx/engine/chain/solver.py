@@ -11,9 +11,11 @@ unrolled) and an exact line search along it. The cost along a line is a convex p
 quadratic, so its derivative is piecewise linear: the search brackets the root and steps
 to the root of the bracketing pieces (Newton from either end, else the secant), which
 lands on the exact minimiser once the bracket holds one piece.
-Symmetric matrices are dicts {(i, j): value} over i <= j. The rows are scalars (folding their
-constant zeros) except along the line search, whose evaluations run many times a step: there the
-rows are stacked, so each evaluation is a few array operations, whatever the number of rows.
+Symmetric matrices are dicts {(i, j): value} over i <= j. The rows take one of two forms, the same
+arithmetic either way: on the plane per-row scalars (`PerRow`, folding the Jacobian's constant zeros),
+stacked only along the line search, whose evaluations run many times a step; on a heightfield, with
+dozens of rows, stacked for the whole solve (`Stacked`): each stage is then a few array operations,
+whatever the number of rows, where per-row code is traced and compiled once for each row.
 """
 
 from __future__ import annotations
@@ -78,10 +80,6 @@ def sym_matvec(a: dict, v, n: int) -> tuple:
     return tuple(al.total(al.mul(a[min(i, j), max(i, j)], v[j]) for j in range(n)) for i in range(n))
 
 
-def _residuals(rows: Rows, qacc):
-    return tuple(al.sub(al.dot(j, qacc), a) for j, a in zip(rows.jac, rows.aref))
-
-
 def _quadratic(r, loss):
     """Whether a row at residual r is in its quadratic piece (D counts in the Hessian)."""
     return r < 0 if loss is None else jnp.abs(r) < loss[1]
@@ -101,19 +99,6 @@ def _row_cost(w, r, loss):
     return jnp.where(_quadratic(r, loss), 0.5 * w * r * r, f * jnp.abs(r) - 0.5 * f * bound)
 
 
-def _forces(rows: Rows, residual):
-    """Row forces (`_force`) and their joint-space sum J' f."""
-    force = tuple(_force(w, r, loss) for w, r, loss in zip(rows.weight, residual, rows.loss))
-    nv = len(rows.jac[0])
-    return force, tuple(al.total(al.mul(j[i], f) for j, f in zip(rows.jac, force)) for i in range(nv))
-
-
-def _cost(gate, mass, qfrc_smooth, qacc_smooth, rows: Rows, qacc):
-    residual, ma = stored(gate, lambda r, x: (_residuals(r, x), sym_matvec(mass, x, len(x))), rows, qacc)
-    gauss = 0.5 * al.dot(al.vsub(ma, qfrc_smooth), al.vsub(qacc, qacc_smooth))
-    return gauss + al.total(_row_cost(w, r, loss) for w, r, loss in zip(rows.weight, residual, rows.loss))
-
-
 class LineRows(NamedTuple):
     """The rows' constants along a line search, stacked: the search's evaluations are then a few array
     operations for all rows, where per-row scalars traced each row once per unrolled evaluation."""
@@ -124,12 +109,115 @@ class LineRows(NamedTuple):
     bound: jax.Array  # (R,) a friction row's residual bound f R, 0 for a one-sided row
 
 
-def line_rows(gate, rows: Rows, dtype) -> LineRows:
-    """The rows' weights and friction bounds stacked, once a solve."""
-    bounds = lambda loss, k: al.vector(((v or (0.0, 0.0))[k] for v in loss), dtype)  # 0 for a one-sided row
-    weight, f, bound = stored(gate, lambda w, loss: (al.vector(w, dtype), bounds(loss, 0), bounds(loss, 1)),
-                              rows.weight, rows.loss)
-    return LineRows(np.array([v is not None for v in rows.loss]), weight, f, bound)
+class PerRow:
+    """The rows as per-row scalars: each row's expressions are traced on their own and fold the Jacobian's
+    constant zeros. The plane's few rows are cheapest so; the line search stacks them (`line_rows`)."""
+
+    def setup(self, gate, rows: Rows, dtype) -> Rows:
+        return rows
+
+    def residuals(self, rows: Rows, qacc) -> tuple:
+        return tuple(al.sub(al.dot(j, qacc), a) for j, a in zip(rows.jac, rows.aref))
+
+    def active(self, rows: Rows, residual) -> tuple:
+        return tuple(jnp.where(_quadratic(r, loss), w, 0.0) for w, r, loss in zip(rows.weight, residual, rows.loss))
+
+    def forces(self, rows: Rows, residual):
+        """Row forces (`_force`) and their joint-space sum J' f."""
+        force = tuple(_force(w, r, loss) for w, r, loss in zip(rows.weight, residual, rows.loss))
+        nv = len(rows.jac[0])
+        return force, tuple(al.total(al.mul(j[i], f) for j, f in zip(rows.jac, force)) for i in range(nv))
+
+    def cost(self, rows: Rows, residual):
+        return al.total(_row_cost(w, r, loss) for w, r, loss in zip(rows.weight, residual, rows.loss))
+
+    def hessian(self, mass: dict, active, rows: Rows) -> dict:
+        """M + J' diag(active) J, its upper triangle."""
+        n = len(rows.jac[0])
+        return {(i, j): al.add(mass[i, j], al.total(al.mul(w, al.mul(jr[i], jr[j])) for w, jr in zip(active, rows.jac)))
+                for i in range(n) for j in range(i, n)}
+
+    def along(self, rows: Rows, residual, search, dtype):
+        """The residuals and their slopes along `search`, as (R,) arrays."""
+        return al.vector(residual, dtype), al.vector((al.dot(j, search) for j in rows.jac), dtype)
+
+    def line_rows(self, gate, rows: Rows, dtype) -> LineRows:
+        """The rows' weights and friction bounds stacked, once a solve."""
+        bounds = lambda loss, k: al.vector(((v or (0.0, 0.0))[k] for v in loss), dtype)  # 0 for a one-sided row
+        weight, f, bound = stored(gate, lambda w, loss: (al.vector(w, dtype), bounds(loss, 0), bounds(loss, 1)),
+                                  rows.weight, rows.loss)
+        return LineRows(_huber(rows), weight, f, bound)
+
+
+class Stack(NamedTuple):
+    """The rows stacked along one axis (`Stacked`)."""
+
+    jac: jax.Array  # (nv, R): the rows' Jacobians by dof
+    aref: jax.Array  # (R,)
+    line: LineRows  # weights and friction bounds, as the line search takes them
+
+
+class Stacked:
+    """The rows stacked once a step: every stage of the solve is then a few array operations whatever the number of
+    rows, where per-row scalars are traced and compiled once for each. On a heightfield (dozens of rows) this halves
+    the step's program and speeds it up; on the plane the stacking costs more than it saves (docs/performance.md)."""
+
+    def __init__(self, rows: Rows):
+        self.huber = _huber(rows)
+
+    def setup(self, gate, rows: Rows, dtype) -> Stack:
+        def stack(rows):
+            col = lambda xs: al.vector(xs, dtype)
+            bound = lambda k: col((loss or (0.0, 0.0))[k] for loss in rows.loss)  # 0 for a one-sided row
+            jac = jnp.stack([col(j[i] for j in rows.jac) for i in range(len(rows.jac[0]))])
+            return Stack(jac, col(rows.aref), LineRows(None, col(rows.weight), bound(0), bound(1)))
+        return stored(gate, stack, rows)
+
+    def residuals(self, s: Stack, qacc):
+        return jnp.sum(s.jac * al.vector(qacc, s.jac.dtype)[:, None], axis=0) - s.aref
+
+    def _on(self, s: Stack, r):
+        return jnp.where(self.huber, jnp.abs(r) < s.line.bound, r < 0)  # `_quadratic`
+
+    def active(self, s: Stack, residual):
+        return jnp.where(self._on(s, residual), s.line.weight, 0.0)
+
+    def forces(self, s: Stack, residual):
+        lr = s.line
+        beyond = jnp.where(self.huber, jnp.where(residual < 0, lr.f, -lr.f), 0.0)
+        force = jnp.where(self._on(s, residual), -lr.weight * residual, beyond)  # `_force`
+        total = _row_sum(s.jac * force)
+        return force, tuple(total[i] for i in range(total.shape[0]))
+
+    def cost(self, s: Stack, residual):
+        lr = s.line
+        beyond = jnp.where(self.huber, lr.f * jnp.abs(residual) - 0.5 * lr.f * lr.bound, 0.0)
+        return _row_sum(jnp.where(self._on(s, residual), 0.5 * lr.weight * residual * residual, beyond))
+
+    def hessian(self, mass: dict, active, s: Stack) -> dict:
+        """M + J' diag(active) J, its upper triangle, every entry in one product over the rows."""
+        n = s.jac.shape[0]
+        upper = [(i, j) for i in range(n) for j in range(i, n)]
+        left, right = (np.array(k) for k in zip(*upper))
+        rows = _row_sum(s.jac[left] * s.jac[right] * active)
+        return {(i, j): al.add(mass[i, j], rows[k]) for k, (i, j) in enumerate(upper)}
+
+    def along(self, s: Stack, residual, search, dtype):
+        return residual, jnp.sum(s.jac * al.vector(search, dtype)[:, None], axis=0)
+
+    def line_rows(self, gate, s: Stack, dtype) -> LineRows:
+        return s.line._replace(huber=self.huber)
+
+
+def _huber(rows: Rows) -> np.ndarray:
+    """(R,) bool, a constant of the model: which rows are two-sided friction rows (`Rows.loss`)."""
+    return np.array([loss is not None for loss in rows.loss])
+
+
+def _cost(gate, form, mass, qfrc_smooth, qacc_smooth, rows, qacc):
+    residual, ma = stored(gate, lambda r, x: (form.residuals(r, x), sym_matvec(mass, x, len(x))), rows, qacc)
+    gauss = 0.5 * al.dot(al.vsub(ma, qfrc_smooth), al.vsub(qacc, qacc_smooth))
+    return gauss + form.cost(rows, residual)
 
 
 def _row_sum(x):
@@ -218,31 +306,27 @@ class _Iterate(NamedTuple):
     grad: tuple
 
 
-def _evaluate(gate, mass, qfrc_smooth, rows: Rows, qacc) -> _Iterate:
+def _evaluate(gate, form, mass, qfrc_smooth, rows, qacc) -> _Iterate:
     def residuals(rows, qacc):
-        residual = _residuals(rows, qacc)
-        active = tuple(jnp.where(_quadratic(r, loss), w, 0.0) for w, r, loss in zip(rows.weight, residual, rows.loss))
-        return residual, active, sym_matvec(mass, qacc, len(qacc))
+        residual = form.residuals(rows, qacc)
+        return residual, form.active(rows, residual), sym_matvec(mass, qacc, len(qacc))
     residual, active, ma = stored(gate, residuals, rows, qacc)
-    force, qfrc_c = stored(gate, _forces, rows, residual)
+    force, qfrc_c = stored(gate, form.forces, rows, residual)
     grad = stored(gate, lambda *a: tuple(al.sub(al.sub(m, s), c) for m, s, c in zip(*a)), ma, qfrc_smooth, qfrc_c)
     return _Iterate(tuple(qacc), residual, active, ma, force, qfrc_c, grad)
 
 
-def _newton_step(gate, mass, qfrc_smooth, rows: Rows, lr: LineRows, ls_iterations: int, it: _Iterate,
+def _newton_step(gate, form, mass, qfrc_smooth, rows, lr: LineRows, ls_iterations: int, it: _Iterate,
                  ls_tol: float):
     """The next point along the Newton direction of the current active set, and the cost's decrease."""
     n = len(it.qacc)
-    hessian = stored(gate, lambda act, jac: {
-        (i, j): al.add(mass[i, j], al.total(al.mul(w, al.mul(jr[i], jr[j])) for w, jr in zip(act, jac)))
-        for i in range(n) for j in range(i, n)}, it.active, rows.jac)
+    hessian = stored(gate, lambda act, rows: form.hessian(mass, act, rows), it.active, rows)
     search = tuple(-x for x in solve_spd(gate, hessian, it.grad))
 
-    def along(search, ma, residual):
-        slope = al.vector((al.dot(j, search) for j in rows.jac), lr.weight.dtype)
-        return (al.vector(residual, lr.weight.dtype), slope, al.dot(search, al.vsub(ma, qfrc_smooth)),
+    def along(search, ma, residual, rows):
+        return (*form.along(rows, residual, search, lr.weight.dtype), al.dot(search, al.vsub(ma, qfrc_smooth)),
                 al.dot(search, sym_matvec(mass, search, n)))
-    residual, slope, g1, g2 = stored(gate, along, search, it.ma, it.residual)
+    residual, slope, g1, g2 = stored(gate, along, search, it.ma, it.residual, rows)
     gtol = ls_tol * jnp.sqrt(al.dot(search, search))  # MuJoCo's tolerance ls_tolerance |search| / scale
     alpha, decrease = _line_search(gate, lr, residual, slope, g1, g2, ls_iterations, gtol)
     return tuple(al.add(a, al.mul(alpha, s)) for a, s in zip(it.qacc, search)), decrease
@@ -250,24 +334,28 @@ def _newton_step(gate, mass, qfrc_smooth, rows: Rows, lr: LineRows, ls_iteration
 
 def solve(gate, mass: dict, qfrc_smooth, qacc_smooth, qacc_warmstart, rows: Rows, *, iterations: int,
           ls_iterations: int, tolerance: float, cost_scale: float, ls_tolerance: float,
-          warmstart: bool = True) -> Solution:
+          warmstart: bool = True, stacked: bool = False) -> Solution:
     """The constrained accelerations, the rows' forces and the Newton iterations run. Like MuJoCo, an
     instance stops iterating once the scaled cost decrease or gradient falls below the tolerance, or
-    (float32) once the gradient is zero to within its rounding, and runs none from a start already there."""
+    (float32) once the gradient is zero to within its rounding, and runs none from a start already there.
+    `stacked`: the rows as arrays (`Stacked`, for many rows) rather than per-row scalars (`PerRow`)."""
+    form = Stacked(rows) if stacked else PerRow()
+    dtype = jnp.result_type(*(x for x in qacc_smooth if not al.is_const(x)))
+    rows = form.setup(gate, rows, dtype)
     qacc = qacc_smooth
     if warmstart:
-        better = _cost(gate, mass, qfrc_smooth, qacc_smooth, rows, qacc_warmstart) < _cost(
-            gate, mass, qfrc_smooth, qacc_smooth, rows, qacc_smooth)
+        better = _cost(gate, form, mass, qfrc_smooth, qacc_smooth, rows, qacc_warmstart) < _cost(
+            gate, form, mass, qfrc_smooth, qacc_smooth, rows, qacc_smooth)
         qacc = stored(gate, lambda w, s: tuple(jnp.where(better, a, b) for a, b in zip(w, s)),
                       qacc_warmstart, qacc_smooth)
-    start = _evaluate(gate, mass, qfrc_smooth, rows, tuple(jnp.asarray(x) for x in qacc))
-    lr = line_rows(gate, rows, start.grad[0].dtype)
+    start = _evaluate(gate, form, mass, qfrc_smooth, rows, tuple(jnp.asarray(x) for x in qacc))
+    lr = form.line_rows(gate, rows, dtype)
 
     def body(carry):
         it, _, count = carry
-        qacc, decrease = _newton_step(gate, mass, qfrc_smooth, rows, lr, ls_iterations, it,
+        qacc, decrease = _newton_step(gate, form, mass, qfrc_smooth, rows, lr, ls_iterations, it,
                                       tolerance * ls_tolerance / cost_scale)
-        it = _evaluate(gate, mass, qfrc_smooth, rows, qacc)
+        it = _evaluate(gate, form, mass, qfrc_smooth, rows, qacc)
         gradient = jnp.sqrt(al.dot(it.grad, it.grad))
         return it, ((cost_scale * decrease < tolerance) | (cost_scale * gradient < tolerance)
                     | _within_rounding(it, qfrc_smooth)), count + 1
