@@ -174,25 +174,21 @@ class Stacked:
         return stored(gate, stack, rows)
 
     def residuals(self, s: Stack, qacc):
-        return jnp.sum(s.jac * al.vector(qacc, s.jac.dtype)[:, None], axis=0) - s.aref
-
-    def _on(self, s: Stack, r):
-        return jnp.where(self.huber, jnp.abs(r) < s.line.bound, r < 0)  # `_quadratic`
+        return _jac_t(s, qacc) - s.aref
 
     def active(self, s: Stack, residual):
-        return jnp.where(self._on(s, residual), s.line.weight, 0.0)
+        return jnp.where(_on(self._lr(s), residual), s.line.weight, 0.0)
 
     def forces(self, s: Stack, residual):
-        lr = s.line
-        beyond = jnp.where(self.huber, jnp.where(residual < 0, lr.f, -lr.f), 0.0)
-        force = jnp.where(self._on(s, residual), -lr.weight * residual, beyond)  # `_force`
+        lr = self._lr(s)
+        beyond = jnp.where(lr.huber, jnp.where(residual < 0, lr.f, -lr.f), 0.0)
+        force = jnp.where(_on(lr, residual), -lr.weight * residual, beyond)  # `_force`
         total = _row_sum(s.jac * force)
         return force, tuple(total[i] for i in range(total.shape[0]))
 
     def cost(self, s: Stack, residual):
-        lr = s.line
-        beyond = jnp.where(self.huber, lr.f * jnp.abs(residual) - 0.5 * lr.f * lr.bound, 0.0)
-        return _row_sum(jnp.where(self._on(s, residual), 0.5 * lr.weight * residual * residual, beyond))
+        lr = self._lr(s)
+        return _row_sum(_costs(lr, residual, _on(lr, residual)))
 
     def hessian(self, mass: dict, active, s: Stack) -> dict:
         """M + J' diag(active) J, its upper triangle, every entry in one product over the rows."""
@@ -203,10 +199,18 @@ class Stacked:
         return {(i, j): al.add(mass[i, j], rows[k]) for k, (i, j) in enumerate(upper)}
 
     def along(self, s: Stack, residual, search, dtype):
-        return residual, jnp.sum(s.jac * al.vector(search, dtype)[:, None], axis=0)
+        return residual, _jac_t(s, search)
 
     def line_rows(self, gate, s: Stack, dtype) -> LineRows:
-        return s.line._replace(huber=self.huber)
+        return self._lr(s)
+
+    def _lr(self, s: Stack) -> LineRows:
+        return s.line._replace(huber=self.huber)  # the mask a constant, never a stage's input
+
+
+def _jac_t(s: Stack, v):
+    """(R,) each row's Jacobian times the dof vector `v` (scalars)."""
+    return jnp.sum(s.jac * al.vector(v, s.jac.dtype)[:, None], axis=0)
 
 
 def _huber(rows: Rows) -> np.ndarray:
@@ -226,15 +230,24 @@ def _row_sum(x):
     return x @ jnp.ones(x.shape[-1], x.dtype)
 
 
+def _on(lr: LineRows, x):
+    """(R,) whether each stacked row at residual x is in its quadratic piece (`_quadratic`)."""
+    return jnp.where(lr.huber, jnp.abs(x) < lr.bound, x < 0)
+
+
+def _costs(lr: LineRows, x, on):
+    """(R,) each stacked row's cost at residual x (`_row_cost`), `on` its `_on`."""
+    return jnp.where(on, 0.5 * lr.weight * x * x, jnp.where(lr.huber, lr.f * jnp.abs(x) - 0.5 * lr.f * lr.bound, 0.0))
+
+
 def _line(lr: LineRows, residual, slope, g1, g2, alpha):
     """(alpha, cost up to a constant, derivative, curvature, the derivative's terms' sum of magnitudes: its
     rounding scale) along the search direction; `residual` and `slope` (R,) arrays."""
     x = residual + alpha * slope
-    on = jnp.where(lr.huber, jnp.abs(x) < lr.bound, x < 0)  # `_quadratic`
+    on = _on(lr, x)
     beyond = jnp.where(lr.huber, jnp.where(x < 0, -lr.f * slope, lr.f * slope), 0.0)  # the slope of f |x|
     term = jnp.where(on, lr.weight * slope * x, beyond)
-    cost = jnp.where(on, 0.5 * lr.weight * x * x, jnp.where(lr.huber, lr.f * jnp.abs(x) - 0.5 * lr.f * lr.bound, 0.0))
-    sums = _row_sum(jnp.stack([term, jnp.abs(term), jnp.where(on, lr.weight * slope * slope, 0.0), cost]))
+    sums = _row_sum(jnp.stack([term, jnp.abs(term), jnp.where(on, lr.weight * slope * slope, 0.0), _costs(lr, x, on)]))
     d1, size = g1 + alpha * g2 + sums[0], jnp.abs(g1) + jnp.abs(alpha * g2) + sums[1]
     return alpha, alpha * (g1 + 0.5 * alpha * g2) + sums[3], d1, jnp.maximum(g2 + sums[2], MINVAL), size
 
