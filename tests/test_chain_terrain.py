@@ -117,17 +117,15 @@ def chain_contacts_fn(engine: chain.ChainEngine):
         qpos, qvel = tuple(q[i] for i in range(cm.nq)), tuple(v[i] for i in range(cm.nv))
         pose = chain_smooth.kinematics(cm, params.gate, qpos)
         every = chain_constraint._all_slots(cm, pose, params.terrain, None, params.gate)
-        slots = every[0]
+        exists, dist, point, _ = every[0]  # the foot's slots, as arrays
+        n = exists.shape[0]
         # The rows from these slots, as `rows` assembles them (it would collide the foot a second time).
-        rows, _ = chain_constraint._assemble(cm, pose, qpos, qvel, every)
-        first = len(rows.jac) - 4 * len(slots)
-        vec = lambda x: jnp.stack([jnp.asarray(e, q.dtype) for e in x])
+        block = chain_constraint._assemble(cm, pose, qpos, qvel, every)[0].block
+        first = block.weight.shape[0] - 4 * n
         return {
-            "exists": jnp.stack([s[0] for s in slots]), "dist": jnp.stack([s[1] for s in slots]),
-            "pos": jnp.stack([vec(s[2]) + q[:3] for s in slots]),
-            "jac": jnp.stack([vec(j) for j in rows.jac[first:]]).reshape(len(slots), 4, cm.nv),
-            "D": vec(rows.weight[first:]).reshape(len(slots), 4),
-            "aref": vec(rows.aref[first:]).reshape(len(slots), 4),
+            "exists": exists, "dist": dist, "pos": jnp.stack(point, -1) + q[:3],
+            "jac": block.jac[:, first:].T.reshape(n, 4, cm.nv),
+            "D": block.weight[first:].reshape(n, 4), "aref": block.aref[first:].reshape(n, 4),
         }
 
     return jax.jit(jax.vmap(one, in_axes=(None, 0, 0)))
@@ -374,8 +372,7 @@ def _sphere_contacts(t, params, centre, radius: float):
     """Every contact slot of a sphere of `radius` at `centre` on the terrain `t` with `params`' heights, stacked:
     (exists, dist, pos, normal)."""
     out = chain_hfield.sphere_contacts(t, params.terrain, tuple(centre[i] for i in range(3)), radius)
-    return (jnp.stack([o.exists for o in out]), jnp.stack([o.dist for o in out]),
-            jnp.stack([jnp.stack(o.pos) for o in out]), jnp.stack([jnp.stack(o.normal) for o in out]))
+    return out.exists, out.dist, jnp.stack(out.pos, -1), jnp.stack(out.normal, -1)
 
 
 def test_deep_contacts_within_ccd_tolerance(models):

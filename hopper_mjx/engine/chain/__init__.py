@@ -85,6 +85,9 @@ def _smooth(cm: ChainModel, gate, pose, qpos, qvel, ctrl, gravity):
 
 
 def _foot_force(foot: chain_constraint.FootContact, force) -> tuple:
+    if isinstance(foot.directions, jax.Array):  # a heightfield's rows, stacked: the solve's forces an array
+        total = jnp.sum(force[foot.rows[0]:foot.rows[-1] + 1, None] * foot.directions, 0)  # its rows are a run
+        return tuple(jnp.where(foot.touching, total[k], 0.0) for k in range(3))
     total = (0.0, 0.0, 0.0)
     for row, direction in zip(foot.rows, foot.directions):
         total = al.vadd(total, al.vscale(force[row], direction))

@@ -18,6 +18,7 @@ dof, at pos = margin = 0 with the dof's solref / solimp; the solver bounds its f
 
 from __future__ import annotations
 
+import dataclasses
 from typing import NamedTuple
 
 import jax
@@ -34,19 +35,28 @@ MINVAL = 1e-15  # mujoco.mjMINVAL
 MINIMP, MAXIMP = 0.0001, 0.9999  # mujoco.mjMINIMP, mjMAXIMP
 
 
+class Block(NamedTuple):
+    """Contact rows already stacked: a heightfield's dozens of slots are built as arrays, a pair at a time."""
+
+    jac: jax.Array  # (nv, R)
+    weight: jax.Array  # (R,) D, 0 where the row does not exist
+    aref: jax.Array  # (R,)
+
+
 class Rows(NamedTuple):
     jac: tuple  # per row: nv scalars (constant 0 where the row cannot reach the dof)
     weight: tuple  # per row: D, 0 when the row does not exist
     aref: tuple  # per row: reference acceleration
     loss: tuple  # per row: None (a one-sided row), or a friction row's (f, f R), its force bound and its
     #              residual's bound: the force is -D r inside |r| < f R and -+f beyond (MuJoCo's Huber cost)
+    block: Block | None = None  # on a heightfield, the contact rows, after the rows above (all one-sided)
 
 
 class FootContact(NamedTuple):
     touching: object  # () bool: foot-floor distance < 0
     pos: tuple  # contact point (the mean of several on a heightfield), world (zeros when not touching)
-    rows: tuple  # indices of the foot's rows in Rows
-    directions: tuple  # per foot row: world direction of its force on the foot
+    rows: tuple  # indices of the foot's rows in Rows (a Block's rows counted after the per-row ones)
+    directions: object  # per foot row: world direction of its force on the foot; (rows, 3) on a heightfield
 
 
 def _stiffness_damping(cm: ChainModel, sol: SolParams) -> tuple[float, float, float, float]:
@@ -179,33 +189,53 @@ def box_near(cm: ChainModel, box: BoxBlock, pose: Pose, terrain):
     return chain_hfield_box.box_near(cm.terrain, box, terrain, *box_frame(pair, pose), pair.size)
 
 
-def _terrain_slots(cm: ChainModel, p: int, pose: Pose, terrain, box_on, gate) -> list:
-    """Per heightfield contact slot of pair `p`: (exists, distance, point relative to O, contact frame).
-    A box's prisms are collided only where `box_on[p]` (that box of some instance of the batch is near its
-    ground)."""
+def _terrain_slots(cm: ChainModel, p: int, pose: Pose, terrain, gate, boxes: dict) -> tuple:
+    """Pair `p`'s heightfield contact slots, each field with the slots as leading axis: (exists, distance,
+    point relative to O, contact frame); a box's contacts from `boxes` ({pair: its contacts}, `_box_contacts`)."""
     pair = cm.pairs[p]
     if pair.kind == "box":
-        box = next(b for b in cm.terrain.boxes if b.pair == p)
-        centre, rot = box_frame(pair, pose)
-        collide = lambda c, r: chain_hfield_box.box_contacts(cm.terrain, box, terrain, c, r, pair.size)
-        dtype = centre.dtype
-        absent = lambda c, r: tuple(chain_hfield.PrismContact(jnp.zeros((), bool), jnp.zeros((), dtype),
-                                                         (jnp.zeros((), dtype),) * 3,
-                                                         (jnp.zeros((), dtype),) * 2 + (jnp.ones((), dtype),))
-                                    for _ in range(box.keep))
-        contacts = jax.lax.cond(box_on[p], collide, absent, centre, rot)
+        con = boxes[p]
     else:
         centre = al.vadd(pose.origin[pair.body], al.matvec(pose.rot[pair.body], pair.pos))
-        contacts = chain_hfield.sphere_contacts(cm.terrain, terrain, al.vadd(centre, pose.base_pos), pair.size[0],
-                                                gate)
-    return [(con.exists, con.dist, al.vsub(con.pos, pose.base_pos), chain_hfield.make_frame(con.normal))
-            for con in contacts]
+        con = chain_hfield.sphere_contacts(cm.terrain, terrain, al.vadd(centre, pose.base_pos), pair.size[0], gate)
+    return con.exists, con.dist, al.vsub(con.pos, pose.base_pos), chain_hfield.make_frame(con.normal)
+
+
+def _box_contacts(cm: ChainModel, pose: Pose, terrain, box_on) -> dict:
+    """{pair: its `keep` contacts} of every box pair on the heightfield, collided by one loop over the boxes,
+    so that the program holds the prism test once rather than once per box: each box's block is the largest
+    (extra cells lie beyond its reach, and the deepest `keep` are the same), and each box's prisms are tested
+    only where `box_on[pair]` (that box of some instance of the batch is near its ground)."""
+    boxes = cm.terrain.boxes
+    if not boxes:
+        return {}
+    shared = dataclasses.replace(boxes[0], block=tuple(max(b.block[i] for b in boxes) for i in range(2)),
+                                 keep=max(b.keep for b in boxes), candidates=max(b.candidates for b in boxes))
+    frames = [box_frame(cm.pairs[b.pair], pose) for b in boxes]
+    dtype = frames[0][0].dtype
+    each = (jnp.stack([f[0] for f in frames]), jnp.stack([f[1] for f in frames]),
+            jnp.stack([jnp.asarray(cm.pairs[b.pair].size, dtype) for b in boxes]),
+            jnp.asarray([b.radius for b in boxes], dtype), jnp.stack([box_on[b.pair] for b in boxes]))
+    keep = shared.keep
+
+    def one(args):
+        centre, rot, half, radius, on = args
+        collide = lambda c, r, h, rad: chain_hfield_box.box_contacts(cm.terrain, shared, terrain, c, r, h, rad)
+        absent = lambda c, r, h, rad: chain_hfield.PrismContact(
+            jnp.zeros(keep, bool), jnp.zeros(keep, dtype), (jnp.zeros(keep, dtype),) * 3,
+            (jnp.zeros(keep, dtype),) * 2 + (jnp.ones(keep, dtype),))
+        return jax.lax.cond(on, collide, absent, centre, rot, half, radius)  # unbatched `on`: a real branch
+
+    found = jax.lax.map(one, each)
+    return {b.pair: jax.tree_util.tree_map(lambda x, g=g, k=b.keep: x[g, :k], found) for g, b in enumerate(boxes)}
 
 
 def _all_slots(cm: ChainModel, pose: Pose, terrain, box_on=None, gate=None):
-    """Per pair, per slot: (exists, distance, point relative to O, contact frame: None for the plane's)."""
+    """Per pair, per slot: (exists, distance, point relative to O, contact frame: None for the plane's); on a
+    heightfield, per pair its slots as arrays (`_terrain_slots`)."""
     if cm.terrain is not None:
-        return tuple(tuple(_terrain_slots(cm, p, pose, terrain, box_on, gate)) for p in range(len(cm.pairs)))
+        boxes = _box_contacts(cm, pose, terrain, box_on)
+        return tuple(_terrain_slots(cm, p, pose, terrain, gate, boxes) for p in range(len(cm.pairs)))
     normal = cm.contact_frame[0:3]
     height = al.dot(normal, al.vsub(pose.base_pos, cm.floor_point))  # base origin above the floor
     return tuple(tuple((dist <= pair.include_margin, dist, point, None)
@@ -229,6 +259,10 @@ def _assemble(cm: ChainModel, pose: Pose, qpos, qvel, slots) -> tuple[Rows, Foot
     jac, weight, aref, loss = friction_rows(cm, qvel)
     limits = _limit_rows(cm, qpos, qvel)
     jac, weight, aref = jac + limits[0], weight + limits[1], aref + limits[2]
+    if cm.terrain is not None:  # the contacts as one block after these rows
+        block, foot = _terrain_block(cm, pose, qvel, slots, first=len(jac))
+        loss += [None] * (len(jac) - len(loss))  # the limits are one-sided
+        return Rows(tuple(jac), tuple(weight), tuple(aref), tuple(loss), block), foot
     foot = None
     for pair, pair_slots in zip(cm.pairs, slots):
         friction, invweight = pair.friction, pair.invweight  # constants, or an instance's (chain_model.instance)
@@ -244,6 +278,34 @@ def _assemble(cm: ChainModel, pose: Pose, qpos, qvel, slots) -> tuple[Rows, Foot
             foot = _foot(pose, pair_slots, tuple(range(first, len(jac))), pair_directions)
     loss += [None] * (len(jac) - len(loss))  # the limits and contacts are one-sided
     return Rows(tuple(jac), tuple(weight), tuple(aref), tuple(loss)), foot
+
+
+def _terrain_block(cm: ChainModel, pose: Pose, qvel, slots, first: int) -> tuple[Block, FootContact]:
+    """The heightfield contacts' rows, stacked: each pair's slots (arrays, `_terrain_slots`) go through the
+    per-row arithmetic together, once per pyramid direction, so the program holds a pair's rows once rather
+    than once per slot. Rows in MuJoCo's order, by slot then direction; `first`: the rows before them."""
+    dtype = slots[0][1].dtype
+    jac, weight, aref, foot = [], [], [], None
+    for pair, (exists, dist, point, frame) in zip(cm.pairs, slots):
+        n = exists.shape[0]
+        wide = lambda x: jnp.broadcast_to(jnp.asarray(x, dtype), (n,))
+        directions = _directions(cm, pair, pair.friction, frame)
+        per = [(_point_jacobian(cm, pose, pair.body, point, d), d) for d in directions]
+        built = [(row, d) + _row(cm, pair.sol, pair.invweight, row, qvel, dist - pair.include_margin, exists)
+                 for row, d in per]
+        # (nv, slots, directions) -> (nv, slots x directions): slot by slot, as MuJoCo orders them
+        jac.append(jnp.stack([jnp.stack([wide(x) for x in row]) for row, _, _, _ in built], -1).reshape(cm.nv, -1))
+        weight.append(jnp.stack([wide(w) for _, _, w, _ in built], -1).reshape(-1))
+        aref.append(jnp.stack([wide(a) for _, _, _, a in built], -1).reshape(-1))
+        if pair.is_foot:
+            start = first + sum(x.shape[0] for x in weight[:-1])
+            world = jnp.stack([jnp.stack([wide(x) for x in d], -1) for _, d, _, _ in built], 1).reshape(-1, 3)
+            touching = dist < 0
+            count = jnp.sum(touching.astype(dtype))
+            pos = al.vadd(point, pose.base_pos)
+            mean = tuple(1 / jnp.maximum(count, 1.0) * jnp.sum(jnp.where(touching, x, 0.0)) for x in pos)
+            foot = FootContact(count > 0, mean, tuple(range(start, start + weight[-1].shape[0])), world)
+    return Block(jnp.concatenate(jac, 1), jnp.concatenate(weight), jnp.concatenate(aref)), foot
 
 
 def rows(cm: ChainModel, gate, pose: Pose, qpos, qvel, terrain=None) -> tuple[Rows, FootContact]:

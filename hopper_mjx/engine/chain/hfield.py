@@ -46,10 +46,13 @@ class TerrainParams(NamedTuple):
 
 
 class PrismContact(NamedTuple):
-    exists: object  # () bool: the sphere penetrates this prism
+    """A body's contacts with its prisms, one slot each: every field has the slots as its leading axis (the
+    constraint rows are then built for all of a pair's slots at once), or is a scalar for one prism."""
+
+    exists: object  # bool: the body penetrates this prism
     dist: object  # -depth
-    pos: tuple  # world
-    normal: tuple  # unit, floor to foot
+    pos: tuple  # world, x y z
+    normal: tuple  # unit, floor to body, x y z
 
 
 def _safe_unit(v):
@@ -151,8 +154,8 @@ def prism_vertices(rows: int, cols: int) -> tuple:
 
 
 def sphere_contacts(t: HeightGrid, terrain: TerrainParams, centre, radius: float,
-                    gate=None) -> tuple[PrismContact, ...]:
-    """One contact slot per prism of the block around the sphere (world centre `centre`); with
+                    gate=None) -> PrismContact:
+    """One contact slot per prism of the block around the sphere (world centre `centre`), as (P,) arrays; with
     `HeightGrid.max_contacts`, the deepest that many. The prisms are tested together, each coordinate a
     vector over the block's prisms (one operation for all of them, where one per prism made this stage a
     fifth of the rough step's program), and stored once behind `gate` (chain_stage.stored): fused into
@@ -177,11 +180,10 @@ def sphere_contacts(t: HeightGrid, terrain: TerrainParams, centre, radius: float
     found = stored(jnp.array(True) if gate is None else gate, prisms, tuple(centre), block, x0, y0, terrain.bottom)
     if t.max_contacts is not None and t.max_contacts < found.exists.shape[0]:
         return deepest(found, t.max_contacts)
-    return tuple(PrismContact(found.exists[k], found.dist[k], tuple(x[k] for x in found.pos),
-                              tuple(x[k] for x in found.normal)) for k in range(found.exists.shape[0]))
+    return found
 
 
-def deepest(contacts: PrismContact, keep: int) -> tuple[PrismContact, ...]:
+def deepest(contacts: PrismContact, keep: int) -> PrismContact:
     """The `keep` deepest present contacts of the (P,) slots `contacts` (absent slots where fewer exist),
     deepest first, the earlier slot first among equals: fewer constraint rows, the same contacts as C
     whenever at most `keep` exist."""
@@ -190,8 +192,8 @@ def deepest(contacts: PrismContact, keep: int) -> tuple[PrismContact, ...]:
     top, idx = jax.lax.top_k(depth, keep)
     found = jnp.isfinite(top)
     picked = jnp.where(found[:, None], fields[idx], jnp.array([0.0, 0, 0, 0, 0, 0, 1], fields.dtype))
-    return tuple(PrismContact(found[k], picked[k, 0], tuple(picked[k, 1:4]), tuple(picked[k, 4:7]))
-                 for k in range(keep))
+    return PrismContact(found, picked[:, 0], tuple(picked[:, k] for k in range(1, 4)),
+                        tuple(picked[:, k] for k in range(4, 7)))
 
 
 def make_frame(normal) -> tuple:

@@ -211,25 +211,27 @@ def _candidates(t: HeightGrid, box: BoxBlock, terrain: TerrainParams, row, col, 
     return tops[idx], best > 0
 
 
-def box_contacts(t: HeightGrid, box: BoxBlock, terrain: TerrainParams, centre, rot, half) -> tuple[PrismContact, ...]:
-    """The deepest `box.keep` of the box's prism contacts (absent slots where fewer), deepest first.
-    `centre` (3,) world, `rot` (3, 3) the box's axes as columns, `half` its half sizes."""
+def box_contacts(t: HeightGrid, box: BoxBlock, terrain: TerrainParams, centre, rot, half,
+                 radius=None) -> PrismContact:
+    """The deepest `box.keep` of the box's prism contacts (absent slots where fewer), deepest first, as (keep,)
+    arrays. `centre` (3,) world, `rot` (3, 3) the box's axes as columns, `half` its half
+    sizes, `radius` its bounding radius (by default `box.radius`; a run-time value where the boxes share this
+    code, each on the largest block, `chain_constraint._box_contacts`)."""
     keep = box.keep
     centre, rot = jnp.asarray(centre), jnp.asarray(rot)
     dtype = centre.dtype
     half = jnp.asarray(half, dtype)
     axes = rot.T
-    row, col = block_start(t, centre, box.radius, box.block)
+    row, col = block_start(t, centre, box.radius if radius is None else radius, box.block)
     tops, may = _candidates(t, box, terrain, row, col, centre, axes, half)
     exists, depth, normal, pos = _box_prism(t, centre, axes, half, tops, jnp.asarray(terrain.bottom, dtype))
     score = jnp.where(exists & may, depth, -jnp.inf)
     top, idx = jax.lax.top_k(score, keep)
     found = jnp.isfinite(top)
     up = jnp.array([0.0, 0.0, 1.0], dtype)
-    normal = jnp.where(found[:, None], normal[idx], up)
-    pos = jnp.where(found[:, None], pos[idx], 0.0)
-    return tuple(PrismContact(found[k], jnp.where(found[k], -top[k], 0.0), tuple(pos[k]), tuple(normal[k]))
-                 for k in range(keep))
+    pos, normal = jnp.where(found[:, None], pos[idx], 0.0), jnp.where(found[:, None], normal[idx], up)
+    return PrismContact(found, jnp.where(found, -top, 0.0), tuple(pos[:, k] for k in range(3)),
+                        tuple(normal[:, k] for k in range(3)))
 
 
 def box_near(t: HeightGrid, box: BoxBlock, terrain: TerrainParams, centre, rot, half):

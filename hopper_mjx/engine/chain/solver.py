@@ -114,6 +114,8 @@ class PerRow:
     constant zeros. The plane's few rows are cheapest so; the line search stacks them (`line_rows`)."""
 
     def setup(self, gate, rows: Rows, dtype) -> Rows:
+        if rows.block is not None:
+            raise ValueError("stacked contact rows (a heightfield's) need the Stacked form")
         return rows
 
     def residuals(self, rows: Rows, qacc) -> tuple:
@@ -167,10 +169,17 @@ class Stacked:
 
     def setup(self, gate, rows: Rows, dtype) -> Stack:
         def stack(rows):
-            col = lambda xs: al.vector(xs, dtype)
-            bound = lambda k: col((loss or (0.0, 0.0))[k] for loss in rows.loss)  # 0 for a one-sided row
-            jac = jnp.stack([col(j[i] for j in rows.jac) for i in range(len(rows.jac[0]))])
-            return Stack(jac, col(rows.aref), LineRows(None, col(rows.weight), bound(0), bound(1)))
+            parts = []  # (jac, aref, weight, f, bound) of the per-row rows, then of the block
+            if rows.jac:
+                col = lambda xs: al.vector(xs, dtype)
+                bound = lambda k: col((loss or (0.0, 0.0))[k] for loss in rows.loss)  # 0 for a one-sided row
+                jac = jnp.stack([col(j[i] for j in rows.jac) for i in range(len(rows.jac[0]))])
+                parts.append((jac, col(rows.aref), col(rows.weight), bound(0), bound(1)))
+            if rows.block is not None:
+                zeros = jnp.zeros_like(rows.block.weight)  # contact rows are one-sided
+                parts.append((rows.block.jac, rows.block.aref, rows.block.weight, zeros, zeros))
+            jac, aref, weight, f, bound = (jnp.concatenate(x, -1) for x in zip(*parts))
+            return Stack(jac, aref, LineRows(None, weight, f, bound))
         return stored(gate, stack, rows)
 
     def residuals(self, s: Stack, qacc):
@@ -214,8 +223,10 @@ def _jac_t(s: Stack, v):
 
 
 def _huber(rows: Rows) -> np.ndarray:
-    """(R,) bool, a constant of the model: which rows are two-sided friction rows (`Rows.loss`)."""
-    return np.array([loss is not None for loss in rows.loss])
+    """(R,) bool, a constant of the model: which rows are two-sided friction rows (`Rows.loss`; a `Block`'s are
+    one-sided)."""
+    stacked = 0 if rows.block is None else rows.block.weight.shape[0]
+    return np.array([loss is not None for loss in rows.loss] + [False] * stacked, bool)
 
 
 def _cost(gate, form, mass, qfrc_smooth, qacc_smooth, rows, qacc):
