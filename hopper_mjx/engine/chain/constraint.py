@@ -242,17 +242,13 @@ def _all_slots(cm: ChainModel, pose: Pose, terrain, box_on=None, gate=None):
                        for dist, point in _slots(pair, pose, normal, height)) for pair in cm.pairs)
 
 
-def _foot(pose: Pose, slots, rows, directions) -> FootContact:
-    """The foot's contact from its slots (one on the plane; several on a heightfield, the
-    point then their mean) and its rows' directions."""
-    touching = [dist < 0 for _, dist, _, _ in slots]
-    world = [al.vadd(point, pose.base_pos) for _, _, point, _ in slots]
-    if len(slots) == 1:
-        return FootContact(touching[0], tuple(jnp.where(touching[0], x, 0.0) for x in world[0]), rows, directions)
-    count = al.total(jnp.where(t, 1.0, 0.0) for t in touching)
-    scale = 1 / jnp.maximum(count, 1.0)
-    pos = tuple(scale * al.total(jnp.where(t, w[k], 0.0) for t, w in zip(touching, world)) for k in range(3))
-    return FootContact(count > 0, pos, rows, directions)
+def _foot(pose: Pose, slot, rows, directions) -> FootContact:
+    """The foot's contact on the plane from its one slot (the foot is a sphere, `chain_model.describe`) and its
+    rows' directions; on a heightfield `_terrain_block` gives it."""
+    _, dist, point, _ = slot
+    touching = dist < 0
+    return FootContact(touching, tuple(jnp.where(touching, x, 0.0) for x in al.vadd(point, pose.base_pos)), rows,
+                       directions)
 
 
 def _assemble(cm: ChainModel, pose: Pose, qpos, qvel, slots) -> tuple[Rows, FootContact]:
@@ -275,7 +271,7 @@ def _assemble(cm: ChainModel, pose: Pose, qpos, qvel, slots) -> tuple[Rows, Foot
                 d, a = _row(cm, pair.sol, invweight, row, qvel, dist - pair.include_margin, exists)
                 jac.append(row), weight.append(d), aref.append(a)
         if pair.is_foot:
-            foot = _foot(pose, pair_slots, tuple(range(first, len(jac))), pair_directions)
+            foot = _foot(pose, pair_slots[0], tuple(range(first, len(jac))), pair_directions)
     loss += [None] * (len(jac) - len(loss))  # the limits and contacts are one-sided
     return Rows(tuple(jac), tuple(weight), tuple(aref), tuple(loss)), foot
 

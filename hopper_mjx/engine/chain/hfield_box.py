@@ -211,18 +211,17 @@ def _candidates(t: HeightGrid, box: BoxBlock, terrain: TerrainParams, row, col, 
     return tops[idx], best > 0
 
 
-def box_contacts(t: HeightGrid, box: BoxBlock, terrain: TerrainParams, centre, rot, half,
-                 radius=None) -> PrismContact:
+def box_contacts(t: HeightGrid, box: BoxBlock, terrain: TerrainParams, centre, rot, half, radius) -> PrismContact:
     """The deepest `box.keep` of the box's prism contacts (absent slots where fewer), deepest first, as (keep,)
     arrays. `centre` (3,) world, `rot` (3, 3) the box's axes as columns, `half` its half
-    sizes, `radius` its bounding radius (by default `box.radius`; a run-time value where the boxes share this
-    code, each on the largest block, `chain_constraint._box_contacts`)."""
+    sizes, `radius` its bounding radius (a run-time value: the boxes share this code, each on the largest block,
+    `chain_constraint._box_contacts`)."""
     keep = box.keep
     centre, rot = jnp.asarray(centre), jnp.asarray(rot)
     dtype = centre.dtype
     half = jnp.asarray(half, dtype)
     axes = rot.T
-    row, col = block_start(t, centre, box.radius if radius is None else radius, box.block)
+    row, col = block_start(t, centre, radius, box.block)
     tops, may = _candidates(t, box, terrain, row, col, centre, axes, half)
     exists, depth, normal, pos = _box_prism(t, centre, axes, half, tops, jnp.asarray(terrain.bottom, dtype))
     score = jnp.where(exists & may, depth, -jnp.inf)

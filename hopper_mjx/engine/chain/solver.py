@@ -145,9 +145,8 @@ class PerRow:
 
     def line_rows(self, gate, rows: Rows, dtype) -> LineRows:
         """The rows' weights and friction bounds stacked, once a solve."""
-        bounds = lambda loss, k: al.vector(((v or (0.0, 0.0))[k] for v in loss), dtype)  # 0 for a one-sided row
-        weight, f, bound = stored(gate, lambda w, loss: (al.vector(w, dtype), bounds(loss, 0), bounds(loss, 1)),
-                                  rows.weight, rows.loss)
+        weight, f, bound = stored(gate, lambda w, loss: (al.vector(w, dtype), _bounds(loss, 0, dtype),
+                                                         _bounds(loss, 1, dtype)), rows.weight, rows.loss)
         return LineRows(_huber(rows), weight, f, bound)
 
 
@@ -172,9 +171,9 @@ class Stacked:
             parts = []  # (jac, aref, weight, f, bound) of the per-row rows, then of the block
             if rows.jac:
                 col = lambda xs: al.vector(xs, dtype)
-                bound = lambda k: col((loss or (0.0, 0.0))[k] for loss in rows.loss)  # 0 for a one-sided row
                 jac = jnp.stack([col(j[i] for j in rows.jac) for i in range(len(rows.jac[0]))])
-                parts.append((jac, col(rows.aref), col(rows.weight), bound(0), bound(1)))
+                parts.append((jac, col(rows.aref), col(rows.weight), _bounds(rows.loss, 0, dtype),
+                              _bounds(rows.loss, 1, dtype)))
             if rows.block is not None:
                 zeros = jnp.zeros_like(rows.block.weight)  # contact rows are one-sided
                 parts.append((rows.block.jac, rows.block.aref, rows.block.weight, zeros, zeros))
@@ -220,6 +219,12 @@ class Stacked:
 def _jac_t(s: Stack, v):
     """(R,) each row's Jacobian times the dof vector `v` (scalars)."""
     return jnp.sum(s.jac * al.vector(v, s.jac.dtype)[:, None], axis=0)
+
+
+def _bounds(loss: tuple, k: int, dtype) -> jax.Array:
+    """(R,) each per-row row's friction force bound f (k = 0) or residual bound f R (k = 1), 0 for a one-sided
+    row (`Rows.loss`)."""
+    return al.vector(((v or (0.0, 0.0))[k] for v in loss), dtype)
 
 
 def _huber(rows: Rows) -> np.ndarray:
