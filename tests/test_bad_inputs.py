@@ -1,21 +1,21 @@
 """Bad input, typed as a user types it: each command refuses it in one line on stderr, with exit code 2,
 before building or compiling anything, without a traceback and without writing a file.
 
-"Before anything is compiled" is held by the refusing process's CPU time: at most `MARGIN` s more than
-importing every library a refusal may need (JAX, MuJoCo, Brax: 3.3 s on an idle 2-core machine, 5 s while
-the other test worker compiles), where a compile alone takes 15 s or more. The imports' cost is measured
-beside the cases, as many at once, since a loaded machine slows both alike. (CPU rather than wall time,
-because the machine may be shared: on an idle 2-core machine the wall time is the same, 0.3 to 3 s.)
+"Before anything is compiled" is held by the refusing command's CPU time: under `MAX_CPU` s, where a compile alone
+takes 15 s or more. (CPU rather than wall time, because the machine may be shared.)
 
-Every case runs `python -m hopper_mjx.<command>` (a few at once) in a fresh folder that holds a few prepared
-inputs (a file, a folder, a garbled world, a binary URDF, a lone .mcap file, a bag-less folder).
+Every case runs as `python -m hopper_mjx.<command>` would, in a fresh folder that holds a few prepared inputs (a
+file, a folder, a garbled world, a binary URDF, a lone .mcap file, a bag-less folder): as a fork of one process that
+has imported every library a refusal may need (tests/refuser.py), a few at once. A case then costs a fork, not a
+Python start-up and JAX's import (0.5-5 s of CPU each). That the commands check their arguments before importing
+JAX at all is held apart (`test_the_commands_check_their_arguments_without_importing_jax`).
 """
 
+import json
 import os
 import re
 import subprocess
 import sys
-import time
 from pathlib import Path
 from typing import NamedTuple
 
@@ -29,12 +29,11 @@ LOW_GRAVITY = str(world.LOW_GRAVITY_WORLD)
 ROOT = Path(__file__).resolve().parents[1]
 ENV = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT),
                                                     os.environ.get("PYTHONPATH", "")])}
-MAX_CPU = 5.0  # s of the refusing process's CPU time, at least
-MARGIN = 2.0  # s of CPU a refusal may spend beyond the imports it may need
+MAX_CPU = 5.0  # s of CPU time a refusal may take beyond the imports (a fork pays none)
 # Everything a command may import before it refuses (a policy folder's checks load its parameters).
-HEAVY_IMPORTS = "import hopper_mjx.envs.policy, brax.training.agents.ppo.train"
-TIMEOUT = 60.0  # s of wall time before a case's process counts as hung
-WORKERS = 4  # processes at once: start-ups wait on imports from disk as well as on the cores
+HEAVY_IMPORTS = "hopper_mjx.envs.policy,brax.training.agents.ppo.train"
+TIMEOUT = 60.0  # s of wall time before a case counts as hung
+WORKERS = 2  # forks at once, one per core
 
 # (command, arguments, what the one line must say)
 CASES = [
@@ -224,19 +223,7 @@ class Refusal(NamedTuple):
     stderr: str
     cpu: float  # s of the process's own CPU time
     unchanged: bool  # its folder holds what it held before
-    budget: float  # s of CPU time it may take (`import_cpu` + MARGIN, at least MAX_CPU)
-
-
-def _start(base: Path, k: int, case, prepare_folder):
-    command, args = case[0], case[1]
-    folder = base / f"case{k}"
-    folder.mkdir()
-    prepare_folder(folder)
-    before = listing(folder)  # before the process starts, so that nothing it writes is counted as there
-    with open(base / f"{k}.out", "w") as out, open(base / f"{k}.err", "w") as err:  # the child keeps its copies
-        proc = subprocess.Popen([sys.executable, *command_line(command), *args], cwd=folder, env=ENV,
-                                stdout=out, stderr=err)
-    return proc, folder, before, time.monotonic()
+    budget: float  # s of CPU time it may take (MAX_CPU)
 
 
 def command_line(command: str) -> list[str]:
@@ -244,36 +231,29 @@ def command_line(command: str) -> list[str]:
     return [str(ROOT / command)] if command.endswith(".py") else ["-m", f"hopper_mjx.{command}"]
 
 
-def import_cpu() -> float:
-    """The most CPU time (s) `HEAVY_IMPORTS` took in WORKERS processes started at once, as the cases run."""
-    procs = [subprocess.Popen([sys.executable, "-c", HEAVY_IMPORTS], env=ENV, stdout=subprocess.DEVNULL,
-                              stderr=subprocess.DEVNULL) for _ in range(WORKERS)]
-    usages = [os.wait4(proc.pid, 0)[2] for proc in procs]
-    return max(usage.ru_utime + usage.ru_stime for usage in usages)
-
-
 def refuse_all(base: Path, cases, prepare_folder=prepare) -> dict[int, Refusal]:
-    """Every case's process, each in its own fresh folder made by `prepare_folder`, run a few at a time
-    (each is one CPU-bound Python start-up); `os.wait4` gives each its own CPU time."""
-    budget = max(MAX_CPU, import_cpu() + MARGIN)
-    todo, running, done = list(range(len(cases))), [], {}
-    while todo or running:
-        while todo and len(running) < WORKERS:
-            k = todo.pop(0)
-            running.append((k, *_start(base, k, cases[k], prepare_folder)))
-        for entry in list(running):
-            k, proc, folder, before, started = entry
-            pid, status, usage = os.wait4(proc.pid, os.WNOHANG)
-            if pid == 0 and time.monotonic() - started < TIMEOUT:
-                continue
-            if pid == 0:  # hung: kill it and fail the case by its return code
-                proc.kill()
-                pid, status, usage = os.wait4(proc.pid, 0)
-            done[k] = Refusal(os.waitstatus_to_exitcode(status), (base / f"{k}.out").read_text(),
-                              (base / f"{k}.err").read_text(), usage.ru_utime + usage.ru_stime,
-                              listing(folder) == before, budget)
-            running.remove(entry)
-        time.sleep(0.02)
+    """Every case, each in its own fresh folder made by `prepare_folder`, run as a fork of one process that has
+    imported what the commands import before their checks (tests/refuser.py), a few at a time; `os.wait4` gives
+    each its own CPU time."""
+    folders, befores, lines = {}, {}, []
+    for k, (command, args, _) in enumerate(cases):
+        folders[k] = base / f"case{k}"
+        folders[k].mkdir()
+        prepare_folder(folders[k])
+        befores[k] = listing(folders[k])  # before the case runs, so that nothing it writes is counted as there
+        script = str(ROOT / command) if command.endswith(".py") else command
+        lines.append(json.dumps([k, str(folders[k]), script, args, str(base / f"{k}.out"), str(base / f"{k}.err")]))
+    server = subprocess.run([sys.executable, str(Path(__file__).with_name("refuser.py")), str(TIMEOUT), str(WORKERS),
+                             HEAVY_IMPORTS],
+                            input="\n".join(lines) + "\n", env=ENV, capture_output=True, text=True,
+                            timeout=TIMEOUT * (1 + len(cases) / WORKERS))
+    assert server.returncode == 0, server.stderr[-2000:]
+    done = {}
+    for line in server.stdout.splitlines():
+        k, code, cpu = json.loads(line)
+        done[k] = Refusal(code, (base / f"{k}.out").read_text(), (base / f"{k}.err").read_text(), cpu,
+                          listing(folders[k]) == befores[k], MAX_CPU)
+    assert sorted(done) == list(range(len(cases))), server.stderr[-2000:]
     return done
 
 
