@@ -113,7 +113,9 @@ def add_batch_options(p: argparse.ArgumentParser, *, gravity=(9.81, 3.71, 1.62),
                         "controller: raibert, urdf: my.urdf, ...; paths from the file's folder); the command "
                         "line wins over the file")
     p.add_argument("--timestep", type=float, default=None, help="physics step, s (default: the world's, or 0.001)")
-    p.add_argument("--chunk", type=int, default=256, help="instances per vmapped chunk on a device")
+    p.add_argument("--chunk", type=int, default=256,
+                   help="instances per vmapped chunk on a device (another size is another compiled program, whose "
+                        "numbers may differ in their last bits)")
     add_physics_options(p)
 
 
