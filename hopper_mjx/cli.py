@@ -83,6 +83,11 @@ def check_gains(args) -> dict | None:
 
 
 # -- the simulated batch of simulate, record and render -----------------------------------------
+# Every tool's --chunk: the size is part of the compiled program, so another size may move the numbers.
+CHUNK_HELP = ("instances per vmapped chunk on a device (another size is another compiled program, whose numbers "
+              "may differ in their last bits)")
+
+
 def add_batch_options(p: argparse.ArgumentParser, *, gravity=(9.81, 3.71, 1.62), duration: float = 2.0) -> None:
     """The options of a simulated batch: its gravities (or worlds), size, duration, controller and model."""
     p.add_argument("--gravity", type=floats("--gravity"), default=None,
@@ -113,9 +118,7 @@ def add_batch_options(p: argparse.ArgumentParser, *, gravity=(9.81, 3.71, 1.62),
                         "controller: raibert, urdf: my.urdf, ...; paths from the file's folder); the command "
                         "line wins over the file")
     p.add_argument("--timestep", type=float, default=None, help="physics step, s (default: the world's, or 0.001)")
-    p.add_argument("--chunk", type=int, default=256,
-                   help="instances per vmapped chunk on a device (another size is another compiled program, whose "
-                        "numbers may differ in their last bits)")
+    p.add_argument("--chunk", type=int, default=256, help=CHUNK_HELP)
     add_physics_options(p)
 
 

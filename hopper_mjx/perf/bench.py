@@ -425,7 +425,7 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--controller", default="hold",
                    help=f"{registry.listed({k: registry.CONTROLLERS[k] for k in CONTROLLERS})}; native runs "
                         "the same hold law as C servos for every one but none")
-    p.add_argument("--chunk", type=int, default=256, help="instances per vmapped chunk on a device")
+    p.add_argument("--chunk", type=int, default=256, help=cli.CHUNK_HELP)
     # with --scaling, --engine takes a comma-separated list (e.g. chain,mjx), run side by side
     cli.add_physics_options(p, engine_help="; with --scaling, several (chain,mjx) side by side")
     for flag in ("--motor", "--action-delay", "--push"):  # timed against MuJoCo C, which has no twin of them

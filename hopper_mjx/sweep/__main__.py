@@ -126,7 +126,7 @@ def parser() -> argparse.ArgumentParser:
                        help="VX,VY m/s" + (" (default 0.3,0: the approach)" if kind in BAND_KINDS else ""))
         s.add_argument("--kick", type=float, default=KICK, help="std of the random initial velocity, m/s and rad/s")
         s.add_argument("--seed", type=int, default=0)
-        s.add_argument("--chunk", type=int, default=256, help="instances per compiled call")
+        s.add_argument("--chunk", type=int, default=256, help=cli.CHUNK_HELP)
         cli.add_physics_options(s)
         if kind in TERRAIN_KINDS:
             s.refuse("--terrain", f"{'an' if kind == 'obstacle' else 'a'} {kind} sweep makes its own ground per value "
