@@ -238,7 +238,8 @@ class Scenario:
             else None
         latency = controls["action_delay"] * 1e-3 if "action_delay" in controls else self.physics.action_delay
         return control.make(self.controller, sim.robot, self.n, height=self.height, speed=self.speed, gains=self.gains,
-                            mj_model=sim.mj_model, pd=pd, legs=own, latency=latency)
+                            mj_model=sim.mj_model, pd=pd, legs=own, latency=latency,
+                            motor=sim.actuation.kind)
 
     def run(self, duration: float, sensors):
         """(Sim, final state, trajectory as NumPy) of the whole batch for `duration` s; prints the rate."""

@@ -15,9 +15,17 @@ NAMES = tuple(registry.CONTROLLERS)
 GAITS = {"raibert": raibert.raibert, "jump": jump.jump}  # registry.GAIT_CONTROLLERS' builders: robot -> Controller
 
 
+def gait(name: str, robot: Robot, motor: str = registry.DEFAULT_MOTOR) -> Controller:
+    """The gait `name` (`GAITS`) for `robot` driven by `motor` (a registry.MOTORS name): the jump ends its full
+    stroke's push where those motors' speed line runs out (`control.stroke.release`); Raibert's thrust is the
+    spring's, whatever the motors."""
+    return jump.jump(robot, motor=motor) if name == "jump" else GAITS[name](robot)
+
+
 def make(name: str, robot: Robot, n: int, *, height: float = raibert.DEFAULT_HEIGHT,
          speed=(0.0, 0.0), gains=None, mj_model=None, pd: PDScale | None = None,
-         legs: Sequence[Robot] | None = None, latency=None) -> tuple[Controller, object]:
+         legs: Sequence[Robot] | None = None, latency=None,
+         motor: str = registry.DEFAULT_MOTOR) -> tuple[Controller, object]:
     """(controller, per-instance params or None) for n instances of `robot`.
 
     none: limp; hold: PD to the initial joint angles; pid: the seed's joint position
@@ -30,6 +38,7 @@ def make(name: str, robot: Robot, n: int, *, height: float = raibert.DEFAULT_HEI
     own leg; hold and pid hold each instance's own start (its own stance) anyway; balance keeps the
     URDF's design. latency: s, each instance's action delay (scalar or (n,)), which the gaits that predict
     (`registry.PREDICTING_CONTROLLERS`) act over; the others, and these with none, take their torques as prompt.
+    motor: the motors the batch runs (`gait`).
     """
     registry.check("controller", registry.CONTROLLERS, name)
     if pd is not None and name not in registry.PD_CONTROLLERS:
@@ -48,7 +57,7 @@ def make(name: str, robot: Robot, n: int, *, height: float = raibert.DEFAULT_HEI
     if len(speed) != 2:  # raibert, jump
         raise ValueError(f"speed needs two values VX,VY in m/s, got {list(speed)}")
     leg = None if legs is None else raibert.legs(robot, legs)
-    return GAITS[name](robot), raibert.raibert_params(n, height=height, speed=speed, pd=pd, leg=leg,
+    return gait(name, robot, motor), raibert.raibert_params(n, height=height, speed=speed, pd=pd, leg=leg,
                                                       latency=predicted_latency(name, latency))
 
 
@@ -60,4 +69,4 @@ def predicted_latency(name: str, latency):
     return latency
 
 
-__all__ = ["GAITS", "NAMES", "Controller", "make", "predicted_latency"]
+__all__ = ["GAITS", "NAMES", "Controller", "gait", "make", "predicted_latency"]

@@ -39,10 +39,12 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 
+from hopper_mjx import registry
 from hopper_mjx.control import raibert, stroke
 from hopper_mjx.control.base import Controller
 from hopper_mjx.control.foothold import fall_time, placement_angles, sink_speed, within_tilt_budget
 from hopper_mjx.control.kinematics import leg_length
+from hopper_mjx.hardware.actuators import nominal_no_load
 from hopper_mjx.model.robot import Robot
 
 STEP_UP = 0.05  # m over the floor under the foot: ground the foot must be drawn up over
@@ -73,6 +75,8 @@ class JumpState(NamedTuple):
     top: jax.Array  # m, world z of its top
     full: jax.Array  # bool: this stance (decided at its touchdown) takes the full stroke (`control.stroke`)
     rise: jax.Array  # m over standing the leap must rise to carry its travel, decided with the launch
+    spin: stroke.SpinLoop  # the full stroke's steering of the whole robot's spin
+    spent: jax.Array  # bool: the full stroke's push was spent (`stroke.spent`), from then to lift-off
 
 
 def tuck_length(robot: Robot, leg) -> jax.Array:
@@ -140,15 +144,16 @@ def carry_speed(travel, v, push, leg_length, g) -> jax.Array:
 class Leap:
     """The jump's `plan.Plan`."""
 
-    def __init__(self, robot: Robot):
-        self.robot = robot
+    def __init__(self, robot: Robot, no_load):
+        self.robot, self.no_load = robot, jnp.asarray(no_load, jnp.float32)  # rad/s, its motors' (`stroke.release`)
 
     def initial(self, obs) -> JumpState:
         base = (jnp.float32(0.0) if obs.ground is None
                 else jnp.asarray(obs.ground.height(obs.qpos[0], obs.qpos[1]), jnp.float32))
         zero, no = jnp.float32(0.0), jnp.bool_(False)
         return JumpState(launch=no, boost=zero, leap=no, base=base, along=jnp.array([1.0, 0.0], jnp.float32),
-                         face=zero, far=zero, top=base, full=no, rise=zero)
+                         face=zero, far=zero, top=base, full=no, rise=zero, spin=stroke.SpinLoop.zero(),
+                         spent=no)
 
     def _launch(self, leg, body, ground, base_xy, speed, s, standing, g) -> tuple[jax.Array, ...]:
         """In a flight: (does the stance it lands in launch a leap, the boost m that stance's foot is set behind
@@ -211,7 +216,7 @@ class Leap:
         return aimed, plan
 
     def release(self, s, leg, body):
-        return (jnp.where(s.plan.full, stroke.release_length(leg), s.params.gains.leg_length),
+        return (jnp.where(s.plan.full, stroke.release(leg, body, self.no_load), s.params.gains.leg_length),
                 s.plan.full & ~stroke.steady(body))
 
     def push(self, leg, body, s, ev, phase, plan, height_bias, thrust_force, standing, g):
@@ -225,11 +230,14 @@ class Leap:
         full = jnp.where(ev.touchdown, needs, plan.full)
         thrust_force = jnp.where(full & ev.bottom, stroke.thrust(leg, body, target, g, mass, lowest, effort),
                                  thrust_force)
-        own = stroke.push(full, leg, body, phase, thrust_force, g, mass, lowest, effort)
+        pushing = full & ((phase == raibert.THRUST) | (phase == raibert.UNLOADING))
+        spent = pushing & (plan.spent | stroke.spent(body, self.no_load))
+        own, spin = stroke.push(full, leg, body, phase, thrust_force, g, mass, lowest, effort, plan.spin,
+                                lay.timestep, spent)
         # A leap's launching stance starts the body tilted by the flight's boost, a shape the leap's flight undoes:
         # its servo only damps the spin, so that the leap leaves the floor without one.
         own = own._replace(stiffness=jnp.where(plan.leap & is_gap(plan.top, plan.base), 0.0, own.stiffness))
-        return own, thrust_force, plan._replace(full=full)
+        return own, thrust_force, plan._replace(full=full, spin=spin, spent=spent)
 
     def bias(self, s, ev, height_bias):
         return jnp.where(ev.touchdown & s.plan.leap, s.height_bias, height_bias)
@@ -278,11 +286,14 @@ def plan_apex(plan: JumpState, robot: Robot, leg) -> jax.Array:
     return plan.top + tuck_drop(robot, leg) + CLEARANCE
 
 
-def jump(robot: Robot, config: raibert.RaibertConfig | None = None) -> Controller:
-    """`jump`: Raibert's gait that leaps what lies ahead (the module's docstring); params: `raibert_params(...)`."""
+def jump(robot: Robot, config: raibert.RaibertConfig | None = None, motor: str = registry.DEFAULT_MOTOR) -> Controller:
+    """`jump`: Raibert's gait that leaps what lies ahead (the module's docstring), for `motor`s (a registry.MOTORS
+    name, whose speed line ends the full stroke's push); params: `raibert_params(...)`."""
+    no_load = tuple(float(w) for w in nominal_no_load(robot.layout, motor))
     key = repr((STEP_UP, CLEARANCE, TUCK_AHEAD, TUCK_KNEE, FACE_MARGIN, LAND_BEYOND, LEAP_REACH, LEAP_GAIN, LAND_AHEAD,
                 MAX_BOOST, SAMPLES, LOOK_SPAN, stroke.LOW_MARGIN, stroke.RELEASE_KNEE, stroke.HIP_SHARE,
-                stroke.READY_TILT, stroke.READY_RATE, stroke.SPIN_DAMPING, stroke.FULL_MARGIN))
-    return raibert.gait(robot, config, name="jump", plan=Leap(robot), key=key)
+                stroke.READY_TILT, stroke.READY_RATE, stroke.SPIN_TIME, stroke.MAX_UNASKED, stroke.SPENT,
+                stroke.FULL_MARGIN, no_load))
+    return raibert.gait(robot, config, name="jump", plan=Leap(robot, no_load), key=key)
 
 

@@ -18,6 +18,7 @@ class OwnPush(NamedTuple):
     stiffness: jax.Array  # factor on the attitude servo's stiffness on the body's tilt (1: Raibert's)
     damping: jax.Array  # factor on its damping of the whole robot's spin (1: Raibert's)
     braked: jax.Array  # (3,) 1 where unloading brakes the joint, 0 where it lets it turn
+    turn: jax.Array  # (3,) N·m added to the joint torques from the thrust to lift-off: they steer the robot's spin
 
 
 class Plan(Protocol):

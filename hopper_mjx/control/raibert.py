@@ -436,10 +436,11 @@ def stance_torque(leg: LegGeometry, gains: RaibertConfig, phase, body: Body, spi
     grip = gains.traction * leg_force * body.length
     attitude = attitude * jnp.minimum(1.0, grip / (jnp.linalg.norm(attitude) + 1e-6))
     brake = -scaled(0.0, jnp.asarray(FLIGHT_KD), scale)[1] * body.qd  # unloading: coast to rest, no push
-    if own is not None:  # a plan's stance brakes the joints it says (the knee alone: no hip torque on the floor)
+    push = -kinematics.jacobian(leg, body.q).T @ floor_push + jnp.where(servo, attitude, 0.0)
+    if own is not None:  # a plan's stance brakes the joints it says, and steers the spin while the foot is down
         brake = jnp.where(own.where, brake * own.braked, brake)
-    push = -kinematics.jacobian(leg, body.q).T @ floor_push
-    return jnp.where(phase == UNLOADING, brake, push + jnp.where(servo, attitude, 0.0))
+        push, brake = (jnp.where(own.where, t + own.turn, t) for t in (push, brake))
+    return jnp.where(phase == UNLOADING, brake, push)
 
 
 def speed_placement(body: Body, speed: Speed) -> jax.Array:

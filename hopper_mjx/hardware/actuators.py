@@ -72,6 +72,13 @@ def electrical_power(motor: Motor, torque: jax.Array, speed: jax.Array) -> jax.A
     return torque * speed + torque * torque * motor.no_load_speed / motor.stall_torque
 
 
+def nominal_no_load(layout: Layout, kind: str) -> np.ndarray:
+    """(3,) rad/s: each joint's motor's no-load speed as the URDF gives it (its <limit velocity>); inf for ideal
+    motors, a torque source with no speed line and the effort limit as its only bound."""
+    registry.check("motor", registry.MOTORS, kind)
+    return np.full(3, np.inf) if kind == "ideal" else np.asarray(layout.speed_limit, dtype=float)
+
+
 class Actuation:
     """The static part of an actuator model: its kind and its delay line's length."""
 
@@ -93,8 +100,8 @@ class Actuation:
         lay = self.layout
         tau_s = np.broadcast_to(lay.effort_limit if stall_torque is None else stall_torque, (n, 3))
         limit = tau_s if torque_limit is None else np.broadcast_to(torque_limit, (n, 3))
-        w0 = np.broadcast_to(lay.speed_limit if no_load_speed is None else no_load_speed, (n, 3))
-        if self.kind == "ideal":  # a torque source: no speed line, the effort limit as its only bound
+        w0 = np.broadcast_to(nominal_no_load(lay, self.kind) if no_load_speed is None else no_load_speed, (n, 3))
+        if self.kind == "ideal":
             w0 = np.full((n, 3), np.inf)
         delay = np.broadcast_to(np.asarray(delay_steps, dtype=np.int32), (n,))
         if delay.min() < 0 or delay.max() >= self.depth:

@@ -187,7 +187,7 @@ def controller_pair(name: str, sim, gravity, stance: np.ndarray | None = None):
 
     layout = sim.layout
     registry.check("controller", dict.fromkeys(CONTROLLERS), name)
-    controller, params = control.make(name, sim.robot, len(gravity))
+    controller, params = control.make(name, sim.robot, len(gravity), motor=sim.actuation.kind)
     if name == "none":
         return controller, params, sim.mj_model, np.zeros(layout.nu)
     # raibert has no C twin: native keeps the (cheaper) hold law, see the module doc.

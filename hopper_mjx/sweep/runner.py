@@ -19,7 +19,7 @@ import numpy as np
 from tqdm import tqdm
 
 from hopper_mjx import registry, terrain
-from hopper_mjx.control import GAITS, predicted_latency
+from hopper_mjx.control import gait, predicted_latency
 from hopper_mjx.control.balance import balance
 from hopper_mjx.control.base import pd_scale
 from hopper_mjx.control.raibert import GAINS, raibert_params
@@ -73,7 +73,7 @@ class ChunkRunner:
         if spec.controller == "balance":  # commands nothing: it stands
             self.controller = balance(sim.robot, sim.mj_model)
         elif self.policy is None:
-            self.controller = GAITS[spec.controller](sim.robot)
+            self.controller = gait(spec.controller, sim.robot, sim.actuation.kind)
         else:  # brax is imported only when a policy is swept
             from hopper_mjx.envs.policy import policy_controller, read
 
