@@ -241,3 +241,24 @@ def test_actuator_metrics_read_each_joints_peak_torque_power_and_share_of_its_mo
     ideal = hops.actuator_metrics(traj, dof, full(40, 80, 80), full(np.inf, np.inf, np.inf), full(40, 80, 80))
     np.testing.assert_allclose(ideal["line_use_kfe"], 60.0 / 80.0)
     np.testing.assert_allclose(ideal["line_use_haa"], 20.0 / 40.0)  # no speed limit: no more than the effort
+
+
+def test_the_highest_hop_s_landing_tilt_is_read_at_its_own_touchdown():
+    """Instance 0's fifth hop flies 0.5 m higher than the rest and each touchdown is tilted by its own angle: the
+    highest hop's landing is the fifth touchdown's. A robot that never lifts off has none; one whose hops are all
+    alike takes its first (instance 2, level)."""
+    traj, t = _trajectory()
+    qpos, flag = traj.qpos.copy(), traj.contact.flag
+    touchdowns = np.flatnonzero(flag[0, 1:] & ~flag[0, :-1]) + 1
+    liftoffs = np.flatnonzero(~flag[0, 1:] & flag[0, :-1]) + 1
+    tilted = lambda deg: [np.cos(np.radians(deg) / 2), 0.0, np.sin(np.radians(deg) / 2), 0.0]
+    for j, k in enumerate(touchdowns):
+        qpos[0, k, 3:7] = tilted(j + 1.0)
+    flight = (t > t[liftoffs[liftoffs < touchdowns[4]][-1]]) & (t < t[touchdowns[4]])
+    qpos[0, flight, 2] += 0.5
+    tilt = hops.highest_landing_tilt(SimpleNamespace(qpos=qpos, contact=traj.contact, time=traj.time), STAND)
+    assert tilt[0] == pytest.approx(5.0)
+    assert np.isnan(tilt[1]) and tilt[2] == pytest.approx(0.0, abs=1e-6)
+    highest = hops.hop_metrics(SimpleNamespace(qpos=qpos, contact=traj.contact, time=traj.time), np.full(4, G),
+                               standing_height=STAND)["highest_apex"]
+    assert highest[0] == pytest.approx(G * (FLIGHT * DT / 2) ** 2 / 2 + 0.5)

@@ -480,12 +480,18 @@ def test_a_gravity_sweep_asked_past_the_motors_bound_reports_the_highest_hop_bes
     bounds = limits.bound_columns(spec)
     assert bounds == {"apex_bound": {g: b.apex_rise for g, b in per_g.items()}}
     assert limits.bound_columns(_spec(height=0.2, physics=Physics(motor="dc"))) == {}
-    groups = [{"gravity": g, "highest_median": h, "highest_best": b}
-              for g, h, b in ((9.81, 0.25, 0.27), (1.62, 1.5, 1.6), (3.71, None, None))]
+    # Such a sweep's rows carry how its highest hop landed; one asked for less, not (`make sweep`'s columns stay).
+    from hopper_mjx.sweep.runner import LIMIT_COLUMNS, columns
+
+    assert columns(spec)[-1:] == LIMIT_COLUMNS
+    assert not set(LIMIT_COLUMNS) & set(columns(_spec(height=0.2, physics=Physics(motor="dc"))))
+    groups = [{"gravity": g, "highest_median": h, "highest_best": b, "highest_tilt_median": t}
+              for g, h, b, t in ((9.81, 0.25, 0.27, 4.25), (1.62, 1.5, 1.6, 12.0), (3.71, None, None, None))]
     lines = limits.apex_lines(spec, groups, bounds)
     assert lines[0].startswith("asked for a 1 m rise: the highest hop before any fall")
     assert lines[1].startswith(f"  Moon  g 1.62 m/s²: 1.50 m ({1.5 / per_g[1.62].apex_rise:.0%} of the bound;")
     assert f"the best 1.60 m ({1.6 / per_g[1.62].apex_rise:.0%}); bound" in lines[1]
+    assert lines[1].endswith("; landed 12.0° off upright")
     assert lines[2] == f"  Mars  g 3.71 m/s²: none; bound {per_g[3.71].apex_rise:.2f} m"
     assert lines[3].startswith(f"  Earth g 9.81 m/s²: 0.25 m ({0.25 / per_g[9.81].apex_rise:.0%}")
     assert limits.apex_lines(spec, groups, {}) == []

@@ -248,10 +248,7 @@ def landing_metrics(traj, obstacles=None) -> dict[str, np.ndarray]:
     t_contact = np.asarray(traj.time["contact"], dtype=float)
     fall = _falls(qpos, t_state)
     down = _events(flag, rising=True) & (t_contact[None, :] <= fall.t_fall[:, None])
-    x, y = qpos[..., 4], qpos[..., 5]
-    tilt = np.degrees(np.arccos(np.clip(1.0 - 2.0 * (x * x + y * y), -1.0, 1.0)))  # [w, x, y, z] quaternions
-    at = np.clip(np.searchsorted(t_state, t_contact, side="right") - 1, 0, len(t_state) - 1)
-    tilt = tilt[:, at]  # at each contact sample
+    tilt = _tilt(qpos)[:, _state_at(t_state, t_contact)]  # at each contact sample
     out = _landings(down, tilt, force, t_contact, fall.t_fall)
     n = qpos.shape[0]
     given = np.full((1, 3), np.nan) if obstacles is None else np.asarray(obstacles, dtype=float)
@@ -261,6 +258,34 @@ def landing_metrics(traj, obstacles=None) -> dict[str, np.ndarray]:
     first = beyond & (np.cumsum(beyond, axis=1) == 1)
     past = _landings(first, tilt, force, t_contact, fall.t_fall)
     return {"landing_tilt": out[0], "impact_force": out[1], "past_tilt": past[0], "past_impact": past[1]}
+
+
+def highest_landing_tilt(traj, standing_height) -> np.ndarray:
+    """(N,) deg: the body's tilt from upright at the landing that ends each instance's highest hop before any fall
+    (the hop `highest_apex` counts), NaN where none: how well the longest flight was held level. Uses the state
+    sample at or before that touchdown, as `landing_metrics`."""
+    qpos = np.asarray(traj.qpos, dtype=float)
+    flag = np.asarray(traj.contact.flag, dtype=bool)
+    t_state = np.asarray(traj.time["state"], dtype=float)
+    t_contact = np.asarray(traj.time["contact"], dtype=float)
+    hops = _hops(flag, t_contact, _falls(qpos, t_state).t_fall)
+    rise, _ = _apexes(qpos[:, :, 2], flag, t_state, t_contact, hops.liftoff, standing_height)
+    keep = hops.complete & np.isfinite(rise)
+    rows = np.arange(qpos.shape[0])
+    best = np.where(keep, rise, -np.inf).argmax(axis=1)
+    landing = np.nan_to_num(hops.liftoff[rows, best] + hops.flight_time[rows, best])  # rows with none: masked below
+    return np.where(keep.any(axis=1), _tilt(qpos)[rows, _state_at(t_state, landing)], np.nan)
+
+
+def _tilt(qpos: np.ndarray) -> np.ndarray:
+    """(N, T) deg: the angle of the body's z axis from the vertical ([w, x, y, z] quaternions)."""
+    x, y = qpos[..., 4], qpos[..., 5]
+    return np.degrees(np.arccos(np.clip(1.0 - 2.0 * (x * x + y * y), -1.0, 1.0)))
+
+
+def _state_at(t_state: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """The index of the state sample at or before each time `t`."""
+    return np.clip(np.searchsorted(t_state, t, side="right") - 1, 0, len(t_state) - 1)
 
 
 def _landings(down, tilt, force, t_contact, t_fall) -> tuple[np.ndarray, np.ndarray]:

@@ -69,7 +69,8 @@ def apex_bounds(spec: SweepSpec) -> dict[str, dict[float, float]]:
 
 def apex_lines(spec: SweepSpec, groups: list[dict], bounds: dict) -> list[str]:
     """A gravity sweep asked past the bound: per gravity the highest hop before any fall, the median replicate's
-    (`highest_median`) and the best's (`highest_best`), beside the bound's apex rise."""
+    (`highest_median`) and the best's (`highest_best`), beside the bound's apex rise; then the median tilt its
+    landing had (`highest_tilt_median`)."""
     if not bounds:
         return []
     from hopper_mjx.model.robot import standing_height
@@ -83,7 +84,9 @@ def apex_lines(spec: SweepSpec, groups: list[dict], bounds: dict) -> list[str]:
                                r.get("highest_best"))
         reached = "none" if got is None else (f"{got:.2f} m ({got / limit:.0%} of the bound; {got / standing:.2f} "
                                               f"standing heights), the best {best:.2f} m ({best / limit:.0%})")
-        out.append(f"  {PLANETS.get(g, ''):5} g {g:g} m/s²: {reached}; bound {limit:.2f} m")
+        tilt = r.get("highest_tilt_median")
+        landed = "" if tilt is None else f"; landed {tilt:.1f}° off upright"
+        out.append(f"  {PLANETS.get(g, ''):5} g {g:g} m/s²: {reached}; bound {limit:.2f} m{landed}")
     return out
 
 

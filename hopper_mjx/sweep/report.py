@@ -88,6 +88,10 @@ def group_summary(spec: SweepSpec, inst: Instances, table: np.ndarray, columns: 
             highest = highest[np.isfinite(highest)]
             record["highest_median"] = float(np.median(highest)) if highest.size else None
             record["highest_best"] = float(highest.max()) if highest.size else None
+            if "highest_landing_tilt" in columns:  # of every replicate whose highest hop landed before a fall
+                tilt = table[sel, columns.index("highest_landing_tilt")]
+                tilt = tilt[np.isfinite(tilt)]
+                record["highest_tilt_median"] = float(np.median(tilt)) if tilt.size else None
             if "past_tilt" in columns:
                 record["past"] = limits.past_medians(table[sel], columns)
             # Hop metrics describe steady hopping: the survivors' (a fallen run's last hops are its collapse).

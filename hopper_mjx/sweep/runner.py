@@ -28,6 +28,7 @@ from hopper_mjx.hardware import signals
 from hopper_mjx.metrics import hops
 from hopper_mjx.shell.files import atomic_write
 from hopper_mjx.sim import Sim, gravity_vectors, steps_for
+from hopper_mjx.sweep import limits
 from hopper_mjx.sweep.folder import chunk_path, claim, read_chunk
 from hopper_mjx.sweep.grid import BAND_KINDS, Instances, SweepSpec, expand
 from hopper_mjx.variation import draw
@@ -42,6 +43,8 @@ TERRAIN_COLUMNS = ("distance_made_good", "obstacles_cleared", "highest_cleared",
 LANDING_COLUMNS = ("landing_tilt", "impact_force", "past_tilt", "past_impact")
 # And what its jumps asked of each joint's motor (`hops.actuator_metrics`).
 ACTUATOR_COLUMNS = tuple(f"{m}_{j}" for m in ("peak_torque", "peak_power", "line_use") for j in hops.JOINT_NAMES)
+# A gravity sweep asked past the motors' bound, besides: how its highest hop landed (`hops.highest_landing_tilt`).
+LIMIT_COLUMNS = ("highest_landing_tilt",)
 def recorded(timestep: float, torque: bool = False) -> signals.SensorConfig:
     """The streams a sweep records: contact and state at the physics rate (events, lift-off heights and apexes to
     the step, short flights too), the IMU and odometry at 100 Hz; the joints' torques where its metrics read them
@@ -53,7 +56,8 @@ def recorded(timestep: float, torque: bool = False) -> signals.SensorConfig:
 def columns(spec: SweepSpec) -> tuple[str, ...]:
     """The metrics a sweep's rows hold."""
     bands = LANDING_COLUMNS + ACTUATOR_COLUMNS if spec.kind in BAND_KINDS else ()
-    return COLUMNS + (TERRAIN_COLUMNS if spec.grounds else ()) + bands
+    limit = LIMIT_COLUMNS if spec.kind == "gravity" and limits.apex_bounds(spec) else ()
+    return COLUMNS + (TERRAIN_COLUMNS if spec.grounds else ()) + bands + limit
 
 
 class ChunkRunner:
@@ -151,6 +155,8 @@ class ChunkRunner:
         if self.spec.kind in BAND_KINDS:
             result |= hops.landing_metrics(traj, obstacles)
             result |= hops.actuator_metrics(traj, self.sim.layout.joint_dof, *motor_figures(final, self.sim.layout))
+        if LIMIT_COLUMNS[0] in self.columns:
+            result[LIMIT_COLUMNS[0]] = hops.highest_landing_tilt(traj, self.standing_height(row))
         return np.stack([np.asarray(result[c], dtype=np.float64) for c in self.columns], axis=1)[:n]
 
 
