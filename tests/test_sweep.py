@@ -496,8 +496,12 @@ def test_a_gravity_sweep_asked_past_the_motors_bound_reports_the_highest_hop_bes
     assert lines[3].startswith(f"  Earth g 9.81 m/s²: 0.25 m ({0.25 / per_g[9.81].apex_rise:.0%}")
     assert limits.apex_lines(spec, groups, {}) == []
     rows = [dict(r, apex_height=0.1, apex_height_std=0.0, survival=0.5) for r in groups]
-    ax = report.gravity_figure(spec, rows, bounds=bounds).axes[0]
-    drawn = {line.get_label(): line.get_ydata() for line in ax.lines}
+    fig = report.gravity_figure(spec, rows, bounds=bounds)
+    drawn = {line.get_label(): line.get_ydata() for line in fig.axes[0].lines}
     np.testing.assert_allclose(drawn["bound: the dc motors' best jump"],
                                [per_g[g].apex_rise for g in (1.62, 3.71, 9.81)])
     np.testing.assert_allclose(drawn["highest hop before any fall (median of every replicate)"], [1.5, np.nan, 0.25])
+    tilt = fig.axes[3]  # in place of the duty factor: how the highest hop landed, beside SpaceHopper's 9.7°
+    assert "landing tilt" in tilt.get_ylabel()
+    np.testing.assert_allclose(tilt.lines[0].get_ydata(), [12.0, np.nan, 4.25])
+    assert any(np.allclose(line.get_ydata(), 9.7) for line in tilt.lines)
