@@ -1,4 +1,4 @@
-"""Process settings: the compile cache is keyed by the CPU it compiled for."""
+"""Process settings: the compile cache is keyed by the CPU it compiled for, and its entries are written whole."""
 
 import jax
 
@@ -20,7 +20,7 @@ def test_compile_cache_is_one_folder_per_cpu_kind(monkeypatch, tmp_path):
 def test_a_cache_entry_whose_write_fails_is_not_left_cut_short(tmp_path):
     """A full disk (here a file-size limit, SIGXFSZ ignored so that the write fails with EFBIG) while JAX writes a
     cache entry: the entry is removed, so that a later run compiles and writes it whole instead of failing to
-    read a cut one forever. (conftest's `jaxsetup.configure` installed the removal.)"""
+    read a cut one forever. (conftest's `jaxsetup.configure` installed the whole writes.)"""
     import resource
     import signal
 
@@ -40,3 +40,25 @@ def test_a_cache_entry_whose_write_fails_is_not_left_cut_short(tmp_path):
         signal.signal(signal.SIGXFSZ, before)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["small-cache"]
     assert cache.get("small") == b"y" * 10 and cache.get("big") is None
+
+
+def test_a_cache_entry_is_found_whole_or_not_at_all_while_it_is_written(monkeypatch, tmp_path):
+    """Runs side by side on one cache: while one writes an entry, another looking it up finds nothing (and compiles)
+    rather than the part written so far, which it could not read. Once written, the entry is there whole, and
+    nothing else is left in the folder."""
+    from jax._src import lru_cache
+
+    cache = lru_cache.LRUCache(str(tmp_path), max_size=-1)
+    kind = type(cache.path)  # pathlib's, or etils' where it is installed
+    write, seen = kind.write_bytes, []
+
+    def half_then_look(path, data):
+        write(path, data[: len(data) // 2])
+        seen.append(cache.get("program"))  # another process looking it up now
+        return write(path, data)
+
+    monkeypatch.setattr(kind, "write_bytes", half_then_look)
+    cache.put("program", b"z" * 1000)
+    assert seen == [None]
+    assert cache.get("program") == b"z" * 1000
+    assert [p.name for p in tmp_path.iterdir()] == ["program-cache"]

@@ -16,8 +16,8 @@
 - The cache is an optimisation, never a failure: a folder that cannot be created or
   written is one warning line and the run compiles without it; entries JAX cannot read
   (damaged, cut short) or write (a full disk) are compiled afresh, and JAX's own warning
-  for them (two lines each, one per program) becomes one line per process; an entry whose
-  write failed is removed rather than left cut short for every later run to trip on.
+  for them (two lines each, one per program) becomes one line per process. Entries are written whole
+  (beside their place, then renamed into it), so that no reader, in this run or a later one, meets one cut short.
 """
 
 from __future__ import annotations
@@ -29,6 +29,7 @@ import platform
 import re
 import sys
 import tempfile
+import threading
 import warnings
 from pathlib import Path
 
@@ -83,26 +84,35 @@ def _cache_warnings_in_one_line() -> None:
     warnings.showwarning = showwarning
 
 
-def _no_cut_cache_entries() -> None:
-    """JAX writes a cache entry in place (jax/_src/lru_cache.py): one cut short by a full disk stayed there, and
-    every later run failed to read it (a warning each time) without ever rewriting it (`put` skips a key that
-    exists). A failed write now removes its entry."""
+def _whole_cache_entries() -> None:
+    """JAX writes a cache entry in place (jax/_src/lru_cache.py `put`). Another process reading it meanwhile read it
+    cut short (a warning, then a compile: seen with runs side by side on one cache), and one cut short by a full
+    disk or a kill stayed there for every later run to trip on (`put` skips a key that exists). Each entry is now
+    written beside its place and renamed into it: a reader finds it whole or not at all, and a failed write leaves
+    no entry."""
     from jax._src import lru_cache
 
     put = lru_cache.LRUCache.put
-    if getattr(put, "removes_a_cut_entry", False):
+    if getattr(put, "writes_whole", False):
         return
 
-    def put_or_remove(self, key, value):
-        try:
+    def put_whole(self, key, value):
+        if self.eviction_enabled or not key:  # JAX's own: under its lock, with a size limit (none is set here)
             return put(self, key, value)
-        except BaseException:
+        entry = self.path / f"{key}{lru_cache._CACHE_SUFFIX}"
+        if entry.exists():
+            return None
+        part = self.path / f".{key}.{os.getpid()}.{threading.get_ident()}.part"
+        try:
+            part.write_bytes(value)
+            os.replace(part, entry)
+        finally:
             with contextlib.suppress(OSError):
-                (self.path / f"{key}{lru_cache._CACHE_SUFFIX}").unlink()
-            raise
+                part.unlink()  # only where the write or the rename failed
+        return None
 
-    put_or_remove.removes_a_cut_entry = True
-    lru_cache.LRUCache.put = put_or_remove
+    put_whole.writes_whole = True
+    lru_cache.LRUCache.put = put_whole
 
 
 _configured: list = []  # set by the first `configure`: JAX takes the device count only before its first computation
@@ -129,6 +139,6 @@ def configure(*, devices: int | None = None, cache_dir: Path | str | None = CACH
         jax.config.update("jax_compilation_cache_dir", str(cpu_cache_dir(cache_dir)))
         jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
         _cache_warnings_in_one_line()
-        _no_cut_cache_entries()
+        _whole_cache_entries()
     # gloo lets jax.distributed run collectives between CPU processes.
     jax.config.update("jax_cpu_collectives_implementation", "gloo")
