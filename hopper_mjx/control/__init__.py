@@ -58,7 +58,7 @@ def make(name: str, robot: Robot, n: int, *, height: float = raibert.DEFAULT_HEI
         raise ValueError(f"speed needs two values VX,VY in m/s, got {list(speed)}")
     leg = None if legs is None else raibert.legs(robot, legs)
     return gait(name, robot, motor), raibert.raibert_params(n, height=height, speed=speed, pd=pd, leg=leg,
-                                                      latency=predicted_latency(name, latency))
+                                                            latency=predicted_latency(name, latency))
 
 
 def predicted_latency(name: str, latency):

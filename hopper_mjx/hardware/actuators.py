@@ -101,7 +101,7 @@ class Actuation:
         tau_s = np.broadcast_to(lay.effort_limit if stall_torque is None else stall_torque, (n, 3))
         limit = tau_s if torque_limit is None else np.broadcast_to(torque_limit, (n, 3))
         w0 = np.broadcast_to(nominal_no_load(lay, self.kind) if no_load_speed is None else no_load_speed, (n, 3))
-        if self.kind == "ideal":
+        if self.kind == "ideal":  # no speed line, whatever figures were given
             w0 = np.full((n, 3), np.inf)
         delay = np.broadcast_to(np.asarray(delay_steps, dtype=np.int32), (n,))
         if delay.min() < 0 or delay.max() >= self.depth:
