@@ -256,9 +256,9 @@ def test_the_highest_hop_s_landing_tilt_is_read_at_its_own_touchdown():
         qpos[0, k, 3:7] = tilted(j + 1.0)
     flight = (t > t[liftoffs[liftoffs < touchdowns[4]][-1]]) & (t < t[touchdowns[4]])
     qpos[0, flight, 2] += 0.5
-    tilt = hops.highest_landing_tilt(SimpleNamespace(qpos=qpos, contact=traj.contact, time=traj.time), STAND)
+    m = hops.hop_metrics(SimpleNamespace(qpos=qpos, contact=traj.contact, time=traj.time), np.full(4, G),
+                         standing_height=STAND)
+    tilt, highest = m["highest_landing_tilt"], m["highest_apex"]
     assert tilt[0] == pytest.approx(5.0)
     assert np.isnan(tilt[1]) and tilt[2] == pytest.approx(0.0, abs=1e-6)
-    highest = hops.hop_metrics(SimpleNamespace(qpos=qpos, contact=traj.contact, time=traj.time), np.full(4, G),
-                               standing_height=STAND)["highest_apex"]
     assert highest[0] == pytest.approx(G * (FLIGHT * DT / 2) ** 2 / 2 + 0.5)

@@ -12,14 +12,16 @@ from hopper_mjx.control.base import Controller, PDScale, hold, zero_torque
 from hopper_mjx.model.robot import Robot
 
 NAMES = tuple(registry.CONTROLLERS)
-GAITS = {"raibert": raibert.raibert, "jump": jump.jump}  # registry.GAIT_CONTROLLERS' builders: robot -> Controller
+# registry.GAIT_CONTROLLERS' builders: (robot, a registry.MOTORS name) -> Controller. The jump ends its full stroke's
+# push where those motors' speed line runs out (`control.stroke.release`); Raibert's thrust is the spring's, whatever
+# the motors.
+GAITS = {"raibert": lambda robot, motor: raibert.raibert(robot),
+         "jump": lambda robot, motor: jump.jump(robot, motor=motor)}
 
 
 def gait(name: str, robot: Robot, motor: str = registry.DEFAULT_MOTOR) -> Controller:
-    """The gait `name` (`GAITS`) for `robot` driven by `motor` (a registry.MOTORS name): the jump ends its full
-    stroke's push where those motors' speed line runs out (`control.stroke.release`); Raibert's thrust is the
-    spring's, whatever the motors."""
-    return jump.jump(robot, motor=motor) if name == "jump" else GAITS[name](robot)
+    """The gait `name` (`GAITS`) for `robot` driven by `motor` (a registry.MOTORS name)."""
+    return GAITS[name](robot, motor)
 
 
 def make(name: str, robot: Robot, n: int, *, height: float = raibert.DEFAULT_HEIGHT,

@@ -6,7 +6,8 @@ complete flight (its lift-off and touchdown both recorded) together with the
 stance before it, when that stance began inside the record. Per-hop values:
 
 - apex rise: highest base height in the flight minus the standing height (m); `highest_apex` is the
-  highest of all hops before the fall, the rest are means over the last hops;
+  highest of all hops before the fall, the rest are means over the last hops; `highest_landing_tilt` is the
+  body's tilt from upright (deg) at the landing of that highest hop: how well the longest flight was held level;
 - flight rise: the same apex minus the base height at lift-off (m), the height of
   the ballistic arc; `ballistic_flight_time` is 2·√(2·flight_rise/g) of each hop
   (averaged like the rest), the flight time a point mass would need for that arc;
@@ -163,6 +164,7 @@ def hop_metrics(
         "hops": hops.complete.sum(axis=1),
         "apex_height": mean(rise),
         "highest_apex": _highest(rise, hops.complete),
+        "highest_landing_tilt": _highest_landing_tilt(qpos, t_state, hops, rise),
         "flight_rise": mean(arc),
         "ballistic_flight_time": mean(2 * np.sqrt(np.maximum(arc, 0.0) * 2 / g[:, None])),
         "flight_time": mean(hops.flight_time),
@@ -260,16 +262,9 @@ def landing_metrics(traj, obstacles=None) -> dict[str, np.ndarray]:
     return {"landing_tilt": out[0], "impact_force": out[1], "past_tilt": past[0], "past_impact": past[1]}
 
 
-def highest_landing_tilt(traj, standing_height) -> np.ndarray:
+def _highest_landing_tilt(qpos, t_state, hops: "_Hops", rise) -> np.ndarray:
     """(N,) deg: the body's tilt from upright at the landing that ends each instance's highest hop before any fall
-    (the hop `highest_apex` counts), NaN where none: how well the longest flight was held level. Uses the state
-    sample at or before that touchdown, as `landing_metrics`."""
-    qpos = np.asarray(traj.qpos, dtype=float)
-    flag = np.asarray(traj.contact.flag, dtype=bool)
-    t_state = np.asarray(traj.time["state"], dtype=float)
-    t_contact = np.asarray(traj.time["contact"], dtype=float)
-    hops = _hops(flag, t_contact, _falls(qpos, t_state).t_fall)
-    rise, _ = _apexes(qpos[:, :, 2], flag, t_state, t_contact, hops.liftoff, standing_height)
+    (the hop `highest_apex` counts), NaN where none; the state sample at or before that touchdown."""
     keep = hops.complete & np.isfinite(rise)
     rows = np.arange(qpos.shape[0])
     best = np.where(keep, rise, -np.inf).argmax(axis=1)

@@ -43,8 +43,10 @@ TERRAIN_COLUMNS = ("distance_made_good", "obstacles_cleared", "highest_cleared",
 LANDING_COLUMNS = ("landing_tilt", "impact_force", "past_tilt", "past_impact")
 # And what its jumps asked of each joint's motor (`hops.actuator_metrics`).
 ACTUATOR_COLUMNS = tuple(f"{m}_{j}" for m in ("peak_torque", "peak_power", "line_use") for j in hops.JOINT_NAMES)
-# A gravity sweep asked past the motors' bound, besides: how its highest hop landed (`hops.highest_landing_tilt`).
+# A gravity sweep asked past the motors' bound, besides: how its highest hop landed (`hops.hop_metrics`).
 LIMIT_COLUMNS = ("highest_landing_tilt",)
+
+
 def recorded(timestep: float, torque: bool = False) -> signals.SensorConfig:
     """The streams a sweep records: contact and state at the physics rate (events, lift-off heights and apexes to
     the step, short flights too), the IMU and odometry at 100 Hz; the joints' torques where its metrics read them
@@ -155,8 +157,6 @@ class ChunkRunner:
         if self.spec.kind in BAND_KINDS:
             result |= hops.landing_metrics(traj, obstacles)
             result |= hops.actuator_metrics(traj, self.sim.layout.joint_dof, *motor_figures(final, self.sim.layout))
-        if LIMIT_COLUMNS[0] in self.columns:
-            result[LIMIT_COLUMNS[0]] = hops.highest_landing_tilt(traj, self.standing_height(row))
         return np.stack([np.asarray(result[c], dtype=np.float64) for c in self.columns], axis=1)[:n]
 
 
