@@ -563,7 +563,8 @@ def gait(robot: Robot, config: RaibertConfig | None = None, name: str = "raibert
                                                    standing, g)
         stance = stance_torque(leg, gains, phase, body, spin, speed, thrust_force, g, stiffness, mass,
                                inertia.swing_tilt, scale, own)
-        flight = flight_torque(leg, gains, body, spin, speed, g, inertia, scale, ground, base_xy)
+        placed = speed if plan is None else speed._replace(offset=speed.offset + plan.shift(s, planned, g))
+        flight = flight_torque(leg, gains, body, spin, placed, g, inertia, scale, ground, base_xy)
         if plan is not None:  # static
             height_bias = height_bias if ground is None else plan.bias(s, ev, height_bias)
             flight = plan.flight(leg, body, ground, base_xy, speed, s, planned, flight, g, scale, spin, inertia)
