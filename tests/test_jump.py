@@ -130,19 +130,21 @@ def test_asked_for_more_the_jump_takes_the_full_stroke_to_most_of_the_bound(sim,
 
 
 # The sweeps' cells the jump must get past (block or gap spec, its size m, gravity m/s²): the blocks beyond what half
-# of Raibert's robots clear there (docs/sweeps.md), the gaps none of Raibert's crossed at Mars and Earth; then the two
-# Moon blocks whose leaps tests/test_leap_against_c.py replays on C (their leaps land on the foot alone).
+# of Raibert's robots clear there (docs/sweeps.md), the gaps none of Raibert's crossed at Mars and Earth, and a block
+# at Ceres, where a slow lift-off's leap is launched and pushed as `jump`'s "slow hops" say; then the two Moon blocks
+# whose leaps tests/test_leap_against_c.py replays on C (their leaps land on the foot alone).
 SWEEP_CELLS = ((BLOCK, 0.8, 1.62), (BLOCK, 0.3, 3.71), (BLOCK, 0.2, 9.81),
-               (GAP, 0.45, 1.62), (GAP, 0.45, 3.71), (GAP, 0.45, 9.81))
+               (GAP, 0.45, 1.62), (GAP, 0.45, 3.71), (GAP, 0.45, 9.81), (BLOCK, 0.3, 0.28))
 REPLAYED_CELLS = ((BLOCK, 0.6, 1.62), (BLOCK, 0.7, 1.62))
 LEAP_CELLS = SWEEP_CELLS + REPLAYED_CELLS
 LEAP_SPEED = (0.3, 0.0)  # m/s, the sweeps'
+LEAP_DURATION = 12.0  # s: Ceres's robot reaches the block at about 7 s and its leap flies 2.5 s
 
 
 def leap_run():
     """The jump over `LEAP_CELLS` with DC motors on the chain engine, one model and each instance's ground its own,
-    10 s at the sweeps' speed, every state, foot contact and applied torque recorded at the physics rate: one compiled
-    program for both files (conftest's `jump_leaps`). Returns (sim, mj_model, grids, trajectory)."""
+    `LEAP_DURATION` at the sweeps' speed, every state, foot contact and applied torque recorded at the physics rate:
+    one compiled program for both files (conftest's `jump_leaps`). Returns (sim, mj_model, grids, trajectory)."""
     from hopper_mjx.scenario import Physics
     from hopper_mjx.sweep.runner import recorded
 
@@ -150,7 +152,7 @@ def leap_run():
     sim = physics.sim(chunk=len(LEAP_CELLS))
     grids = np.stack([terrain.parse(spec.format(h=size, w=size)).terrain().heights for spec, size, _ in LEAP_CELLS])
     controller, params = control.make("jump", sim.robot, len(LEAP_CELLS), height=0.1, speed=LEAP_SPEED)
-    _, traj = sim.run(gravity_vectors([g for *_, g in LEAP_CELLS]), controller, params, duration=10.0,
+    _, traj = sim.run(gravity_vectors([g for *_, g in LEAP_CELLS]), controller, params, duration=LEAP_DURATION,
                       sensors=recorded(physics.timestep, torque=True), key=0, ground=grids)
     return sim, physics.mj_model, grids, jax.tree_util.tree_map(np.asarray, traj)
 
@@ -158,7 +160,8 @@ def leap_run():
 def test_the_jump_leaps_the_sweeps_blocks_and_gaps(jump_leaps):
     """Each robot's foot comes down beyond the block's far edge (the sweep's `cleared`), and the base rose at
     least as high as the drawn-up foot needs to pass over the top; each gap's robot lands beyond a 0.45 m gap, which
-    none of Raibert's robots crossed at Mars and Earth in the gaps sweep of 3 Dec (docs/sweeps.md)."""
+    none of Raibert's robots crossed at Mars and Earth in the gaps sweep of 3 Dec (docs/sweeps.md); Ceres's robot clears
+    a 0.3 m block, which none of the jump's 16 did before its slow-hop rules (the five-gravity sweep of 3 Dec)."""
     from hopper_mjx.metrics import hops
 
     sim, _, _, traj = jump_leaps

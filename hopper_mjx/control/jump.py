@@ -265,8 +265,8 @@ class Leap:
         """(2,) m, world: where a hop lifts off slowly (`slow_lift`), the flight before a leap is Raibert's with its
         foot set `boost` further back along the way. Its speed loop keeps the foot near where it left the floor while
         the robot is still short of its speed: at 0.28 m/s² the body rises at 0.2 m/s, and the foot swung straight
-        to the neutral point scuffed the floor and set the robot spinning. Faster hops keep the leap's own foothold,
-        which keeps more robots up after the leap (Mars's 0.3 m block: 94 % against 38 % at 10 s)."""
+        to the neutral point scuffed the floor and set the robot spinning. Faster hops keep the leap's own foothold:
+        with Raibert's there, fewer of Mars's and Earth's robots were up after leaping a 0.3 m block."""
         return jnp.where(plan.launch & ~plan.leap & slow_lift(s, g), -_along(s) * plan.boost, 0.0)
 
     def flight(self, leg, body, ground, base_xy, speed, s, plan, torque, g, scale, spin, inertia):
