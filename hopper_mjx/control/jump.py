@@ -241,12 +241,12 @@ class Leap:
         needs = stroke.needs_full(leg, body, s.params.gains, target, g, mass, effort[KNEE]) & ~plan.leap
         full = jnp.where(ev.touchdown, needs, plan.full)
         # Raibert's thrust spreads its energy over at least MIN_SQUEEZE of stroke, to the touchdown length: a leap's
-        # stance squeezed less (a landing at 0.16 m/s at Ceres squeezes 8 mm) would give 40 % of it. Its force is
-        # what the stroke it has needs (the knee's effort limit caps it).
+        # stance squeezed less (a landing at 0.16 m/s at Ceres squeezes 8 mm) would give 40 % of it. That energy is
+        # spread over the stroke it has (the knee's effort limit caps the force).
         squeeze = s.params.gains.leg_length - body.length
+        energy = thrust_force * jnp.maximum(squeeze, raibert.MIN_SQUEEZE)  # J: what Raibert's thrust holds
         shallow = plan.leap & ev.bottom & (squeeze < raibert.MIN_SQUEEZE)
-        thrust_force = jnp.where(shallow, thrust_force * raibert.MIN_SQUEEZE / jnp.maximum(squeeze, SHALLOWEST),
-                                 thrust_force)
+        thrust_force = jnp.where(shallow, energy / jnp.maximum(squeeze, SHALLOWEST), thrust_force)
         thrust_force = jnp.where(full & ev.bottom, stroke.thrust(leg, body, target, g, mass, lowest, effort),
                                  thrust_force)
         pushing = full & ((phase == raibert.THRUST) | (phase == raibert.UNLOADING))
