@@ -67,6 +67,27 @@ def test_a_gaps_leap_rises_as_high_as_carrying_it_over_needs_with_the_most_boost
     assert float(jump.carry_speed(2 * travel, v, push, length, g)) > up
 
 
+def test_below_the_moon_a_gaps_leap_carries_across_by_height_not_boost():
+    """`gap_lift` for a slow hop (0.5 m/s²): where the lift-off that carries the COM `travel` at the speed it has,
+    boost-free, is within `LEVEL_LIFT`, the leap takes it, and the boost `_launch` sizes for it is nil; where it is
+    past `LEVEL_LIFT`, the boost gives the rest. Hops that are not slow (the Moon, Earth) keep `carry_speed`'s, with
+    the most boost."""
+    travel, v, push, length = 1.0, 0.3, 0.4, 0.64
+
+    def boost(up, v, g):  # m: as `_launch` sizes it
+        return (travel / (2.0 * up / g) - v) * length / (up + push)
+
+    up = float(jump.gap_lift(travel, v, push, length, 0.5, True))
+    assert v * 2.0 * up / 0.5 == pytest.approx(travel, rel=1e-5) and up <= jump.LEVEL_LIFT
+    assert boost(up, v, 0.5) == pytest.approx(0.0, abs=1e-6)
+    assert up > float(jump.carry_speed(travel, v, push, length, 0.5))
+    slow = float(jump.gap_lift(travel, 0.15, push, length, 0.5, True))  # boost-free would need 1.67 m/s
+    assert slow == pytest.approx(jump.LEVEL_LIFT)
+    assert 0.0 < boost(slow, 0.15, 0.5) < jump.MAX_BOOST / 2
+    for g, push in ((1.62, 0.8), (9.81, 1.5)):
+        assert float(jump.gap_lift(0.3, v, push, length, g, False)) == float(jump.carry_speed(0.3, v, push, length, g))
+
+
 def test_the_drawn_up_leg_drops_the_foot_as_much_as_tuck_drop_says_in_mujoco_c(mj_model):
     """The foot `TUCK_AHEAD` ahead of the hip on the shortest leg the knee allows less `TUCK_KNEE`: its joint angles
     are within their ranges, and MuJoCo C puts the foot's bottom `tuck_drop` below the level base origin."""
@@ -130,11 +151,12 @@ def test_asked_for_more_the_jump_takes_the_full_stroke_to_most_of_the_bound(sim,
 
 
 # The sweeps' cells the jump must get past (block or gap spec, its size m, gravity m/s²): the blocks beyond what half
-# of Raibert's robots clear there (docs/sweeps.md), the gaps none of Raibert's crossed at Mars and Earth, and a block
-# at Ceres, where a slow lift-off's leap is launched and pushed as `jump`'s "slow hops" say; then the two Moon blocks
+# of Raibert's robots clear there (docs/sweeps.md), the gaps none of Raibert's crossed at Mars and Earth, a block
+# at Ceres, where a slow lift-off's leap is launched and pushed as `jump`'s "slow hops" say, and a gap at 0.5 m/s²,
+# leapt by height (`gap_lift`); then the two Moon blocks
 # whose leaps tests/test_leap_against_c.py replays on C (their leaps land on the foot alone).
 SWEEP_CELLS = ((BLOCK, 0.8, 1.62), (BLOCK, 0.3, 3.71), (BLOCK, 0.2, 9.81),
-               (GAP, 0.45, 1.62), (GAP, 0.45, 3.71), (GAP, 0.45, 9.81), (BLOCK, 0.3, 0.28))
+               (GAP, 0.45, 1.62), (GAP, 0.45, 3.71), (GAP, 0.45, 9.81), (BLOCK, 0.3, 0.28), (GAP, 0.6, 0.5))
 REPLAYED_CELLS = ((BLOCK, 0.6, 1.62), (BLOCK, 0.7, 1.62))
 LEAP_CELLS = SWEEP_CELLS + REPLAYED_CELLS
 LEAP_SPEED = (0.3, 0.0)  # m/s, the sweeps'
@@ -161,7 +183,8 @@ def test_the_jump_leaps_the_sweeps_blocks_and_gaps(jump_leaps):
     """Each robot's foot comes down beyond the block's far edge (the sweep's `cleared`), and the base rose at
     least as high as the drawn-up foot needs to pass over the top; each gap's robot lands beyond a 0.45 m gap, which
     none of Raibert's robots crossed at Mars and Earth in the gaps sweep of 3 Dec (docs/sweeps.md); Ceres's robot clears
-    a 0.3 m block, which none of the jump's 16 did before its slow-hop rules (the five-gravity sweep of 3 Dec)."""
+    a 0.3 m block, which none of the jump's 16 did before its slow-hop rules (the five-gravity sweep of 3 Dec); and at
+    0.5 m/s² the robot lands beyond a 0.6 m gap, which none of 16 did before a gap's leap took height for boost."""
     from hopper_mjx.metrics import hops
 
     sim, _, _, traj = jump_leaps
