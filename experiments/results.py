@@ -48,7 +48,8 @@ GAP = {"survival_gap": 0.05, "apex_gap": 0.05}  # the most the core may differ f
 LEARNER = {"updates_per_batch": "epochs per batch", "num_minibatches": "minibatches", "batch_size": "batch size",
            "unroll_length": "unroll", "num_envs": "envs", "learning_rate": "learning rate",
            "entropy_cost": "entropy cost", "reward_scaling": "reward scaling", "policy_layers": "policy MLP",
-           "value_layers": "value MLP"}
+           "value_layers": "value MLP", "sac_grad_updates": "SAC updates per batch",
+           "sac_target_entropy": "SAC target entropy"}
 
 
 def parser() -> argparse.ArgumentParser:

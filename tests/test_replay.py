@@ -1,11 +1,12 @@
-"""The ring replay SAC trains with keeps what Brax's queue keeps and samples it uniformly, without the roll."""
+"""The ring replay SAC trains with keeps what Brax's queue keeps and samples it uniformly, without the roll; and
+SAC's temperature aims at the entropy train.py is given."""
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 from brax.training import replay_buffers
 
-from hopper_mjx.envs.replay import RingReplay, ring_replay_in_sac
+from hopper_mjx.envs.replay import RingReplay, ring_replay_in_sac, target_entropy_in_sac
 
 CAPACITY, BATCH, DRAWS = 8, 3, 4000
 
@@ -47,3 +48,31 @@ def test_sac_builds_the_ring_only_inside_the_context():
     with ring_replay_in_sac():
         assert sac.replay_buffers.UniformSamplingQueue is RingReplay
     assert sac.replay_buffers is replay_buffers and replay_buffers.UniformSamplingQueue is not RingReplay
+
+
+def _alpha_loss(log_alpha: float, target_nats):
+    """SAC's temperature loss as `train` builds it, for a tiny policy on a batch of 64 observations."""
+    from brax.training import types
+    from brax.training.agents.sac import networks
+    from brax.training.agents.sac import train as sac
+
+    net = networks.make_sac_networks(5, 3, hidden_layer_sizes=(8,))
+    policy_params = net.policy_network.init(jax.random.PRNGKey(1))
+    obs = jax.random.normal(jax.random.PRNGKey(2), (64, 5))
+    transitions = types.Transition(obs, jnp.zeros((64, 3)), jnp.zeros(64), jnp.ones(64), obs)
+    with target_entropy_in_sac(target_nats):
+        alpha_loss, _, _ = sac.sac_losses.make_losses(sac_network=net, reward_scaling=1.0, discounting=0.99,
+                                                      action_size=3)
+    return float(alpha_loss(jnp.float32(log_alpha), policy_params, None, transitions, jax.random.PRNGKey(3)))
+
+
+def test_sac_aims_its_temperature_at_the_given_entropy_only_inside_the_context():
+    """The loss is alpha * mean(-log_prob - target): at alpha = 2 a target 4.5 nats lower (-6 for Brax's -1.5 with 3
+    actions) adds exactly 2 * 4.5; None keeps Brax's, and Brax's losses are themselves again outside."""
+    from brax.training.agents.sac import losses
+    from brax.training.agents.sac import train as sac
+
+    brax = _alpha_loss(np.log(2.0), None)
+    np.testing.assert_allclose(_alpha_loss(np.log(2.0), -6.0) - brax, 2.0 * 4.5, rtol=1e-5)
+    np.testing.assert_allclose(_alpha_loss(np.log(2.0), -1.5), brax, rtol=1e-6)
+    assert sac.sac_losses is losses

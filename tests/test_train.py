@@ -188,6 +188,9 @@ def test_train_rejects_bad_input_in_one_line_before_anything_runs(trained, capsy
     (["--max-grad-norm", "nan"], "--max-grad-norm must be finite and >= 0, got nan"),
     (["--algo", "sac", "--max-grad-norm", "1"], "--max-grad-norm is for --algo ppo (Brax's SAC does not clip its "
                                                 "gradients)"),
+    (["--sac-target-entropy", "-3"], "--sac-target-entropy is for --algo sac (PPO has no temperature; see "
+                                     "--entropy-cost)"),
+    (["--algo", "sac", "--sac-target-entropy", "inf"], "--sac-target-entropy must be a finite number of nats, got inf"),
     # The robots' motors, delays and pushes: on the training's own physics step (here a coarser 2 ms), within an
     # episode.
     (["--config", "timestep=0.002", "--action-delay", "3"],

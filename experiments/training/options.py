@@ -74,6 +74,9 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--sac-replay", type=int, default=1_000_000, help="SAC: replay buffer size (env steps)")
     p.add_argument("--sac-min-replay", type=int, default=8192, help="SAC: env steps collected before learning")
     p.add_argument("--sac-grad-updates", type=int, default=8, help="SAC: gradient updates per env step batch")
+    p.add_argument("--sac-target-entropy", type=float, default=None, metavar="NATS",
+                   help="SAC: the policy entropy its temperature aims at (default Brax's, -0.5 per action: -1.5); "
+                        "lower keeps less exploration noise in the joint targets")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--seeds", type=int, default=None, metavar="K",
                    help="train K seeds, --seed, --seed+1, ..., one after another, each into --out/seed-<s>/ "
@@ -185,6 +188,11 @@ def _check_learner(args) -> None:
                                 ("reward_scaling", 0, True)):
         if getattr(args, flag) is not None:
             cli.check_range(f"--{flag.replace('_', '-')}", getattr(args, flag), low=low, open_low=open_low)
+    if args.sac_target_entropy is not None:
+        if args.algo != "sac":
+            raise ValueError("--sac-target-entropy is for --algo sac (PPO has no temperature; see --entropy-cost)")
+        if not math.isfinite(args.sac_target_entropy):
+            raise ValueError(f"--sac-target-entropy must be a finite number of nats, got {args.sac_target_entropy}")
 
 
 

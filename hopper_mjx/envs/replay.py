@@ -1,4 +1,5 @@
-"""A ring replay buffer for Brax's SAC, in place of its `UniformSamplingQueue`.
+"""Brax's SAC as train.py runs it: a ring replay buffer in place of its `UniformSamplingQueue`, and (below) the
+entropy its temperature aims at.
 
 Brax's queue keeps the newest `max_replay_size` transitions by rolling the whole buffer on every insert
 once it is full (`jnp.roll` inside the training step): a copy of the entire replay per batch of env steps.
@@ -52,3 +53,25 @@ def ring_replay_in_sac():
         yield
     finally:
         sac.replay_buffers = original
+
+
+@contextlib.contextmanager
+def target_entropy_in_sac(nats: float | None):
+    """Brax's SAC tunes its temperature towards a policy entropy of -0.5 nats per action dimension (the
+    `target_entropy` of `losses.make_losses`, which reads `action_size` for nothing else); within this context
+    its `train` aims at `nats` instead. None leaves Brax's target."""
+    from brax.training.agents.sac import train as sac
+
+    if nats is None:
+        yield
+        return
+    original = sac.sac_losses
+
+    def make_losses(*, action_size, **kwargs):
+        return original.make_losses(action_size=-2.0 * nats, **kwargs)
+
+    sac.sac_losses = types.SimpleNamespace(**{**vars(original), "make_losses": make_losses})
+    try:
+        yield
+    finally:
+        sac.sac_losses = original
