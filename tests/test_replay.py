@@ -1,12 +1,12 @@
 """The ring replay SAC trains with keeps what Brax's queue keeps and samples it uniformly, without the roll; and
-SAC's temperature aims at the entropy train.py is given."""
+SAC's temperature aims at the entropy train.py is given, and a resumed run's checkpoint is laid out as its state is."""
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 from brax.training import replay_buffers
 
-from hopper_mjx.envs.replay import RingReplay, ring_replay_in_sac, target_entropy_in_sac
+from hopper_mjx.envs.replay import RingReplay, replicated_restore_in_sac, ring_replay_in_sac, target_entropy_in_sac
 
 CAPACITY, BATCH, DRAWS = 8, 3, 4000
 
@@ -76,3 +76,28 @@ def test_sac_aims_its_temperature_at_the_given_entropy_only_inside_the_context()
     np.testing.assert_allclose(_alpha_loss(np.log(2.0), -6.0) - brax, 2.0 * 4.5, rtol=1e-5)
     np.testing.assert_allclose(_alpha_loss(np.log(2.0), -1.5), brax, rtol=1e-6)
     assert sac.sac_losses is losses
+
+
+def test_a_restored_checkpoint_is_replicated_over_the_devices_as_sacs_state_is(tmp_path):
+    """Brax's SAC replaces its replicated normaliser and policy with what its `checkpoint.load` returns, then reads
+    device 0's copy of each (`_unpmap`): inside the context every leaf has a leading axis of one copy a device,
+    each the saved value bit for bit; outside, Brax's own load is back."""
+    import functools
+
+    from brax.training.acme import running_statistics, specs
+    from brax.training.agents.sac import checkpoint, networks
+    from brax.training.agents.sac import train as sac
+
+    factory = functools.partial(networks.make_sac_networks, hidden_layer_sizes=(8,))
+    policy = factory(observation_size=5, action_size=3).policy_network.init(jax.random.PRNGKey(4))
+    normaliser = running_statistics.update(running_statistics.init_state(specs.Array((5,), jnp.float32)),
+                                           jax.random.normal(jax.random.PRNGKey(5), (7, 5)))
+    checkpoint.save(tmp_path, 40, (normaliser, policy), checkpoint.network_config(5, 3, True, factory))
+    saved = jax.tree_util.tree_leaves(checkpoint.load(tmp_path / f"{40:012d}"))
+    with replicated_restore_in_sac():
+        loaded = jax.tree_util.tree_leaves(sac.checkpoint.load(tmp_path / f"{40:012d}"))
+    assert sac.checkpoint is checkpoint and len(loaded) == len(saved)
+    for copies, value in zip(loaded, saved):
+        assert len(copies.addressable_shards) == jax.local_device_count()
+        for shard in copies.addressable_shards:
+            np.testing.assert_array_equal(np.asarray(shard.data).squeeze(0), np.asarray(value))

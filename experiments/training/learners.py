@@ -92,11 +92,11 @@ def run_sac(args, env, factory, remaining: int, start_step: int, resume, progres
     from brax.training import checkpoint as brax_checkpoint
     from brax.training.agents.sac import train as sac
 
-    from hopper_mjx.envs.replay import ring_replay_in_sac, target_entropy_in_sac
+    from hopper_mjx.envs.replay import replicated_restore_in_sac, ring_replay_in_sac, target_entropy_in_sac
 
     # The ring replay: Brax's own copies the whole replay on every insert once full (hopper_mjx.envs.replay).
     with (tempfile.TemporaryDirectory(dir=Path(args.out).resolve()) as scratch, ring_replay_in_sac(),
-          target_entropy_in_sac(args.sac_target_entropy)):
+          target_entropy_in_sac(args.sac_target_entropy), replicated_restore_in_sac()):
         def progress_and_file(step, metrics):
             if step > 0:
                 save_checkpoint(step, brax_checkpoint.load(Path(scratch) / f"{int(step):012d}"))

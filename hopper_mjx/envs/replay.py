@@ -1,5 +1,5 @@
 """Brax's SAC as train.py runs it: a ring replay buffer in place of its `UniformSamplingQueue`, and (below) the
-entropy its temperature aims at.
+entropy its temperature aims at and a resume that works.
 
 Brax's queue keeps the newest `max_replay_size` transitions by rolling the whole buffer on every insert
 once it is full (`jnp.roll` inside the training step): a copy of the entire replay per batch of env steps.
@@ -42,36 +42,46 @@ class RingReplay(replay_buffers.UniformSamplingQueue):
 
 
 @contextlib.contextmanager
-def ring_replay_in_sac():
-    """Brax's SAC `train` builds its replay as `replay_buffers.UniformSamplingQueue(...)`; within this context
-    its module sees `RingReplay` under that name (Brax's own module is left as it is)."""
+def _in_sac(module: str, **replaced):
+    """Within this context Brax's SAC `train` sees its imported module `module` with the attributes `replaced`;
+    the module itself, and every other user of it, is left as it is."""
     from brax.training.agents.sac import train as sac
 
-    original = sac.replay_buffers
-    sac.replay_buffers = types.SimpleNamespace(**{**vars(replay_buffers), "UniformSamplingQueue": RingReplay})
+    original = getattr(sac, module)
+    setattr(sac, module, types.SimpleNamespace(**{**vars(original), **replaced}))
     try:
         yield
     finally:
-        sac.replay_buffers = original
+        setattr(sac, module, original)
 
 
-@contextlib.contextmanager
+def ring_replay_in_sac():
+    """Brax's SAC `train` builds its replay as `replay_buffers.UniformSamplingQueue(...)`: here, a `RingReplay`."""
+    return _in_sac("replay_buffers", UniformSamplingQueue=RingReplay)
+
+
 def target_entropy_in_sac(nats: float | None):
     """Brax's SAC tunes its temperature towards a policy entropy of -0.5 nats per action dimension (the
-    `target_entropy` of `losses.make_losses`, which reads `action_size` for nothing else); within this context
-    its `train` aims at `nats` instead. None leaves Brax's target."""
-    from brax.training.agents.sac import train as sac
-
+    `target_entropy` of `losses.make_losses`, which reads `action_size` for nothing else); here it aims at `nats`
+    instead. None leaves Brax's target."""
     if nats is None:
-        yield
-        return
-    original = sac.sac_losses
+        return contextlib.nullcontext()
+    from brax.training.agents.sac import losses
 
     def make_losses(*, action_size, **kwargs):
-        return original.make_losses(action_size=-2.0 * nats, **kwargs)
+        return losses.make_losses(action_size=-2.0 * nats, **kwargs)
 
-    sac.sac_losses = types.SimpleNamespace(**{**vars(original), "make_losses": make_losses})
-    try:
-        yield
-    finally:
-        sac.sac_losses = original
+    return _in_sac("sac_losses", make_losses=make_losses)
+
+
+def replicated_restore_in_sac():
+    """Brax 0.14.2's SAC `train` puts a restored checkpoint's normaliser and policy into its training state as
+    `checkpoint.load` returns them, on no device axis, where the state is replicated over the devices: its first
+    evaluation then fails ('numpy.ndarray' object has no attribute 'addressable_shards'), so no SAC run could
+    resume. Here `checkpoint.load` returns them replicated, as the state is."""
+    from brax.training.agents.sac import checkpoint
+
+    def load(path):
+        return jax.device_put_replicated(checkpoint.load(path), jax.local_devices())
+
+    return _in_sac("checkpoint", load=load)
