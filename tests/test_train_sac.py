@@ -4,17 +4,14 @@ prefill, the training epoch and Brax's evaluation, so it has its own file)."""
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from test_train import _check_outputs, _checkpoints, _leaves, _train
+from test_train import TINY, _check_outputs, _checkpoints, _leaves, _train, learners, train_script
+
+SAC = ["--task", "stand", "--algo", "sac"]
 
 
 @pytest.fixture(scope="module")
 def trained_sac(tmp_path_factory):
-    """Trained in two legs, as a killed run is: 40 steps, then the same command with the full 80 resumes it from
-    the checkpoint at 40 (Brax's SAC could not restore one: `hopper_mjx.envs.replay.replicated_restore_in_sac`)."""
-    base = tmp_path_factory.mktemp("sac")
-    _, first = _train(base, "--task", "stand", "--algo", "sac", "--timesteps", "40")
-    assert first["final_step"] == 40
-    return _train(base, "--task", "stand", "--algo", "sac")
+    return _train(tmp_path_factory.mktemp("sac"), *SAC)
 
 
 def test_sac_tiny_run_changes_the_params_and_its_policy_acts(trained_sac):
@@ -25,8 +22,7 @@ def test_sac_tiny_run_changes_the_params_and_its_policy_acts(trained_sac):
     from hopper_mjx.envs import policy
 
     out, record = trained_sac
-    _check_outputs(out, record, legs=2)
-    assert [int(p.name) for p in _checkpoints(out)] == [40, 80] and record["final_step"] == 80
+    _check_outputs(out, record)
     assert all(np.isfinite(r["eval/episode_reward"]) for r in record["history"])
     first, last = (checkpoint.load(p) for p in _checkpoints(out))
     assert any(not np.array_equal(a, b) for a, b in zip(_leaves(first[1]), _leaves(last[1])))
@@ -36,3 +32,27 @@ def test_sac_tiny_run_changes_the_params_and_its_policy_acts(trained_sac):
     assert config.task == "stand" and policy.algorithm_of(out / "policy") == "sac"
     action = np.asarray(act(jnp.zeros(24)))
     assert action.shape == (3,) and (np.abs(action) <= 1).all()
+
+
+class _Evaluated(Exception):
+    """Raised from the progress callback at the resumed run's first evaluation, to stop there."""
+
+
+def test_a_resumed_sac_run_restores_its_checkpoint_and_evaluates_it(trained_sac):
+    """Resuming, Brax's SAC puts the newest checkpoint into its state and evaluates it before it trains on; it
+    failed there until train.py handed it the checkpoint replicated over the devices
+    (`hopper_mjx.envs.replay.replicated_restore_in_sac`). Stopped at that evaluation, so nothing more compiles."""
+    out, record = trained_sac
+    args = train_script.parser().parse_args([*TINY, *SAC, "--out", str(out)])
+    factory, _ = learners.networks(args)
+    seen = {}
+
+    def progress(step, metrics):
+        seen.update(metrics, step=step)
+        raise _Evaluated
+
+    with pytest.raises(_Evaluated):
+        learners.run_sac(args, learners.task_config(args, train_script.check(args)), factory, 40,
+                         record["final_step"], (_checkpoints(out)[-1], record["final_step"]), progress,
+                         save_checkpoint=lambda step, params: None)
+    assert seen["step"] == 0 and np.isfinite(seen["eval/episode_reward"])
