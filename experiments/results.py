@@ -49,7 +49,7 @@ LEARNER = {"updates_per_batch": "epochs per batch", "num_minibatches": "minibatc
            "unroll_length": "unroll", "num_envs": "envs", "learning_rate": "learning rate",
            "entropy_cost": "entropy cost", "reward_scaling": "reward scaling", "policy_layers": "policy MLP",
            "value_layers": "value MLP", "sac_grad_updates": "SAC updates per batch",
-           "sac_target_entropy": "SAC target entropy"}
+           "sac_target_entropy": "SAC target entropy", "start_from": "SAC started from"}
 
 
 def parser() -> argparse.ArgumentParser:

@@ -8,7 +8,7 @@ import math
 from pathlib import Path
 
 from hopper_mjx.metrics.thresholds import APEX_TOLERANCE, MIN_HOPS, SPEED_TOLERANCE  # noqa: F401 (one definition)
-from training.options import parse_layers, run_config
+from training.options import parse_layers, run_config, start_network
 
 
 def task_config(args, physics):
@@ -120,7 +120,12 @@ def networks(args):
 
         return functools.partial(networks.make_ppo_networks, policy_hidden_layer_sizes=parse_layers(args.policy_layers),
                                  value_hidden_layer_sizes=parse_layers(args.value_layers)), checkpoint
+    from brax.training import networks as brax_networks
     from brax.training.agents.sac import checkpoint, networks
 
-    factory = functools.partial(networks.make_sac_networks, hidden_layer_sizes=parse_layers(args.policy_layers))
+    start = start_network(args)  # a start's policy keeps its activation (Brax's PPO: SiLU; its SAC: ReLU)
+    activation = {} if start is None else {
+        "activation": brax_networks.ACTIVATION[start["network_factory_kwargs"]["activation"]]}
+    factory = functools.partial(networks.make_sac_networks, hidden_layer_sizes=parse_layers(args.policy_layers),
+                                **activation)
     return factory, checkpoint

@@ -15,7 +15,7 @@ from hopper_mjx.metrics.thresholds import APEX_TOLERANCE, MIN_HOPS, SPEED_TOLERA
 from hopper_mjx.shell import files, process
 from hopper_mjx.shell.files import atomic_write_text
 from training.learners import learner_settings, networks, run_ppo, run_sac, task_config
-from training.options import HISTORY, check, latest_checkpoint, read_history
+from training.options import HISTORY, check, latest_checkpoint, read_history, start_of
 
 # A course's curriculum: Brax's name for the mean level of the finished training episodes it logged
 # (`envs.monoped.LEVEL_METRIC`), and the history's.
@@ -75,6 +75,9 @@ def train(args, physics=None) -> dict:
     remaining = args.timesteps - start_step
     if resume:
         print(f"resuming from {resume[0]} (step {start_step:,})", flush=True)
+    elif start_of(args) is not None:  # SAC restores a normaliser and a policy, a PPO checkpoint's first two
+        resume = (policy.resolve(start_of(args)), 0)
+        print(f"starting SAC's policy from {resume[0]}", flush=True)
     started, wall_before = time.perf_counter(), record["wall_time"]
     board = tfevents.EventWriter(out / "tensorboard")  # the same curves for TensorBoard: tensorboard --logdir OUT
 

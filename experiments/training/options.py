@@ -74,6 +74,12 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--sac-replay", type=int, default=1_000_000, help="SAC: replay buffer size (env steps)")
     p.add_argument("--sac-min-replay", type=int, default=8192, help="SAC: env steps collected before learning")
     p.add_argument("--sac-grad-updates", type=int, default=8, help="SAC: gradient updates per env step batch")
+    p.add_argument("--start-from", default=None, metavar="RUN",
+                   help="SAC: start the policy and its observation normaliser from RUN's trained policy (a PPO or "
+                        "SAC run folder or checkpoint of the same task and observations; with --seeds a --seeds "
+                        "parent, seed s from RUN/seed-<s>), its hidden layers and activation becoming SAC's; the Q "
+                        "networks, temperature and replay start fresh. A folder with checkpoints of its own resumes "
+                        "from them instead")
     p.add_argument("--sac-target-entropy", type=float, default=None, metavar="NATS",
                    help="SAC: the policy entropy its temperature aims at (default Brax's, -0.5 per action: -1.5); "
                         "lower keeps less exploration noise in the joint targets")
@@ -247,6 +253,7 @@ def check(args):
         read_history(Path(args.out).resolve() / HISTORY)
     if args.no_eval and args.algo != "ppo":
         raise ValueError("--no-eval is for --algo ppo (Brax's SAC evaluates at every checkpoint)")
+    _check_start(args, physics)
     resume = latest_checkpoint(Path(args.out))
     if resume:  # a folder of another task or algorithm cannot be resumed into this one
         from hopper_mjx.envs import policy
@@ -269,6 +276,70 @@ def check(args):
                                  f"{','.join(map(str, saved))} to resume it, or use another --out")
     return physics
 
+
+
+def start_of(args) -> Path | None:
+    """The policy folder --start-from names for this run's seed: RUN itself, or a --seeds parent's seed-<s>/."""
+    if args.start_from is None:
+        return None
+    start = Path(args.start_from)
+    seeded = start / f"seed-{args.seed}"
+    return seeded if not (start / "policy").exists() and seeded.is_dir() else start
+
+
+def start_network(args) -> dict | None:
+    """The network config of --start-from's policy (JSON only), checked: None without --start-from."""
+    start = start_of(args)
+    if start is None:
+        return None
+    from hopper_mjx.envs import policy
+
+    try:
+        _, _, net, _ = policy.read(start)
+    except ValueError as err:
+        raise ValueError(f"--start-from: {err}") from None
+    return net
+
+
+def sac_policy_defaults() -> dict:
+    """What, besides its layers, makes Brax's SAC policy map its outputs to actions, as train.py builds it; PPO's
+    own `mean_clip_scale` (a clip SAC has not) must be off."""
+    import inspect
+
+    from brax.training.agents.sac import networks
+
+    defaults = inspect.signature(networks.make_sac_networks).parameters
+    return {"mean_clip_scale": None,
+            **{k: defaults[k].default for k in ("distribution_type", "noise_std_type", "state_dependent_std")}}
+
+
+def _check_start(args, physics) -> None:
+    """--start-from: a readable policy of this task, with this run's observations and SAC's action distribution,
+    whose policy layers are --policy-layers (Brax builds SAC's networks from the option). JSON reads only."""
+    if args.start_from is None:
+        return
+    if args.algo != "sac":
+        raise ValueError("--start-from is for --algo sac (a PPO run resumes from its own checkpoints)")
+    from hopper_mjx import envs
+    from hopper_mjx.envs import policy
+    from hopper_mjx.envs.terms import observation_size
+
+    net = start_network(args)
+    path, algo, _, config = policy.read(start_of(args))
+    size = observation_size(envs.tasks.task_class(args.task).command_size, args.observe_gravity,
+                            not physics.ground.is_flat)
+    if config.task != args.task or net["observation_size"] != size:
+        raise ValueError(f"--start-from {path} is a policy of task {config.task!r} with {net['observation_size']} "
+                         f"observations; --task {args.task} here needs {size}")
+    kwargs = net["network_factory_kwargs"]
+    for key, sac in sac_policy_defaults().items():  # how the network's outputs become actions: SAC's way
+        if kwargs.get(key, sac) != sac:
+            raise ValueError(f"--start-from {path}'s policy has {key}={kwargs[key]!r} where SAC's has {sac!r}")
+    saved = tuple(kwargs[LAYER_FLAGS[algo][0][1]])
+    if saved != parse_layers(args.policy_layers):
+        raise ValueError(f"--start-from {path} has {'-'.join(map(str, saved))} hidden layers where --policy-layers "
+                         f"asks {args.policy_layers}: pass --policy-layers {','.join(map(str, saved))}")
+    policy.check_stored(path)
 
 
 def run_config(args, physics, config=None):
