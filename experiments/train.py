@@ -57,9 +57,9 @@ def main(argv=None) -> int:
     runs = seed_runs(args)
     try:
         check(args)  # with --seeds: every option, and --out as the seeds' parent
-        if args.seeds is not None:
-            cli.make_folder("--out", args.out)
         physics = [check(run) for run in runs]  # each seed's folder (one of another task or algorithm is refused)
+        if args.seeds is not None:  # only once every seed is checked: a refused seed leaves nothing behind
+            cli.make_folder("--out", args.out)
     except ValueError as err:
         return cli.fail(err)
     for run, run_physics in zip(runs, physics):

@@ -147,3 +147,23 @@ def test_a_start_that_is_no_policy_is_refused_in_one_line(tmp_path, capsys):
                                        "hopper_env.json (expected an experiments/train.py output folder or one of its "
                                        "checkpoints)\n")
     assert not (tmp_path / "run").exists()
+
+
+def test_with_seeds_each_seed_starts_from_its_own_and_a_seed_missing_is_refused_first(trained_sac, tmp_path, capsys):
+    """A --seeds parent as the start: seed s starts from its seed-<s>/; one the parent lacks is refused by name
+    before any folder is made (the seeds' parent included)."""
+    import shutil
+
+    from training.options import start_of
+
+    start, _ = trained_sac
+    shutil.copytree(start / "policy", tmp_path / "parent" / "seed-0" / "policy")
+    args = train_script.parser().parse_args([*TINY, *SAC, "--start-from", str(tmp_path / "parent"), "--out", "x"])
+    assert start_of(args) == tmp_path / "parent" / "seed-0"
+    out = tmp_path / "runs"
+    assert train_script.main([*TINY, *SAC, "--start-from", str(tmp_path / "parent"), "--seeds", "2",
+                              "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"error: --start-from: {(tmp_path / 'parent' / 'seed-1').resolve()} is not a trained "
+                          "policy") and err.count("\n") == 1
+    assert not out.exists()

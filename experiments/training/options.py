@@ -282,9 +282,12 @@ def start_of(args) -> Path | None:
     """The policy folder --start-from names for this run's seed: RUN itself, or a --seeds parent's seed-<s>/."""
     if args.start_from is None:
         return None
+    from hopper_mjx.envs.policy import ENV_CONFIG
+
     start = Path(args.start_from)
-    seeded = start / f"seed-{args.seed}"
-    return seeded if not (start / "policy").exists() and seeded.is_dir() else start
+    if (start / "policy").exists() or (start / ENV_CONFIG).exists() or not any(start.glob("seed-*")):
+        return start
+    return start / f"seed-{args.seed}"  # a --seeds parent; a seed it lacks is refused by name
 
 
 def start_network(args) -> dict | None:
