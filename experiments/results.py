@@ -49,7 +49,7 @@ LEARNER = {"updates_per_batch": "epochs per batch", "num_minibatches": "minibatc
            "unroll_length": "unroll", "num_envs": "envs", "learning_rate": "learning rate",
            "entropy_cost": "entropy cost", "reward_scaling": "reward scaling", "policy_layers": "policy MLP",
            "value_layers": "value MLP", "sac_grad_updates": "SAC updates per batch",
-           "sac_target_entropy": "SAC target entropy", "start_from": "SAC started from"}
+           "sac_target_entropy": "SAC target entropy", "start_from": "started from"}
 
 
 def parser() -> argparse.ArgumentParser:
@@ -224,6 +224,13 @@ def _millions(steps):
     return None if steps is None else steps / 1e6
 
 
+def _setting(key: str, value) -> str:
+    """A learner setting as a row's name says it."""
+    if key == "start_from":
+        return f", started from {Path(value).name}'s policy" if value else ", from its own start"
+    return f", {LEARNER[key]} {value}"
+
+
 def rows_of(records: list[dict]) -> list[tuple[str, list[dict]]]:
     """The table's rows, (name, runs): one per task x algorithm x training physics x the learner's settings
     (`LEARNER`), named by the task, the algorithm, the physics and the settings its runs differ in from the
@@ -239,7 +246,9 @@ def rows_of(records: list[dict]) -> list[tuple[str, list[dict]]]:
         configs = len({config(r) for r in runs}) > 1
         for own in sorted({settings(r) for r in runs}):
             mine = [r for r in runs if settings(r) == own]
-            said = "".join(f", {LEARNER[k]} {mine[0]['learner'][k]}" for k in varied)
+            said = "".join(_setting(k, mine[0]["learner"][k]) for k in varied if k != "start_from")
+            if "start_from" in varied or mine[0]["learner"].get("start_from"):  # said always: another's start
+                said += _setting("start_from", mine[0]["learner"].get("start_from"))
             if configs:
                 said += f", --config {config(mine[0])}" if config(mine[0]) else ", the task's own config"
             on = f", trained on a {group[2]}" if group[2] else ""

@@ -535,6 +535,32 @@ def test_runs_whose_learner_settings_differ_are_rows_of_their_own(tmp_path):
     assert "| hop × PPO | 2 | 2 of 2 scanned | 5.0 [4.0–6.0] |" in out.read_text()
 
 
+def test_a_sac_row_started_from_another_policy_says_so_even_alone(tmp_path):
+    """SAC seeds started from a PPO run (--start-from) and SAC seeds from their own start are two rows, each
+    named by its start; the started ones alone still say where they started (their steps are not SAC's alone)."""
+    import json
+
+    results = importlib.import_module("results")
+    runs = []
+    for start in ("runs/ppo-hop", None):
+        for seed in (0, 1):
+            run = tmp_path / f"{start is None}-{seed}"
+            run.mkdir()
+            args = {"task": "hop", "algo": "sac", "seed": seed, "eval_height": 0.10, "eval_speed": [0.0, 0.0],
+                    "start_from": start}
+            (run / "metrics.json").write_text(json.dumps({"args": args, "history": []}))
+            runs.append(str(run))
+    out = tmp_path / "results.md"
+    named = lambda: {line.split("|")[1].strip() for line in out.read_text().splitlines()
+                     if line.startswith("| hop × SAC")}
+    assert results.main([*runs, "--out", str(out)]) == 0
+    assert named() == {"hop × SAC, started from ppo-hop's policy", "hop × SAC, from its own start"}
+    assert results.main([*runs[:2], "--out", str(out)]) == 0
+    assert named() == {"hop × SAC, started from ppo-hop's policy"}
+    assert results.main([*runs[2:], "--out", str(out)]) == 0
+    assert named() == {"hop × SAC"}
+
+
 def test_runs_whose_task_config_differs_are_rows_of_their_own(tmp_path):
     """The scan ablation: a hop_terrain seed trained blind (`--config observe_scan=false`) and one with its scan are
     rows of their own on each judging ground, the blind one named by its --config, the other by its task's own."""
