@@ -49,7 +49,8 @@ LEARNER = {"updates_per_batch": "epochs per batch", "num_minibatches": "minibatc
            "unroll_length": "unroll", "num_envs": "envs", "learning_rate": "learning rate",
            "entropy_cost": "entropy cost", "reward_scaling": "reward scaling", "policy_layers": "policy MLP",
            "value_layers": "value MLP", "sac_grad_updates": "SAC updates per batch",
-           "sac_target_entropy": "SAC target entropy", "start_from": "started from"}
+           "sac_target_entropy": "SAC target entropy", "start_from": "started from",
+           "sac_hold_policy": "SAC policy held for env steps"}
 
 
 def parser() -> argparse.ArgumentParser:

@@ -6,7 +6,13 @@ import jax.numpy as jnp
 import numpy as np
 from brax.training import replay_buffers
 
-from hopper_mjx.envs.replay import RingReplay, replicated_restore_in_sac, ring_replay_in_sac, target_entropy_in_sac
+from hopper_mjx.envs.replay import (
+    RingReplay,
+    held_policy_in_sac,
+    replicated_restore_in_sac,
+    ring_replay_in_sac,
+    target_entropy_in_sac,
+)
 
 CAPACITY, BATCH, DRAWS = 8, 3, 4000
 
@@ -101,3 +107,36 @@ def test_a_restored_checkpoint_is_replicated_over_the_devices_as_sacs_state_is(t
         assert len(copies.addressable_shards) == jax.local_device_count()
         for shard in copies.addressable_shards:
             np.testing.assert_array_equal(np.asarray(shard.data).squeeze(0), np.asarray(value))
+
+
+def test_sac_holds_its_policy_for_the_given_updates_and_trains_its_critic_meanwhile():
+    """Inside the context Brax's SAC builds an actor update that leaves the policy's parameters exactly as they were
+    for its first 3 steps and moves them from the 4th on; any other loss (the critic's) moves from its first step;
+    outside the context Brax's own update moves the actor at once."""
+    import optax
+    from brax.training import gradients
+    from brax.training.agents.sac import train as sac
+
+    def actor_loss(params, target):
+        return jnp.sum((params - target) ** 2)
+
+    def critic_loss(params, target):
+        return jnp.sum((params - target) ** 2)
+
+    optimizer, start, target = optax.adam(0.1), jnp.zeros(2), jnp.ones(2)
+
+    def trajectory(loss_fn, steps=5):
+        update = sac.gradients.gradient_update_fn(loss_fn, optimizer, pmap_axis_name=None)
+        params, state, seen = start, optimizer.init(start), []
+        for _ in range(steps):
+            _, params, state = update(params, target, optimizer_state=state)
+            seen.append(np.asarray(params))
+        return seen
+
+    with held_policy_in_sac(3):
+        actor, critic = trajectory(actor_loss), trajectory(critic_loss)
+    assert all(np.array_equal(p, start) for p in actor[:3]) and not np.array_equal(actor[3], start)
+    assert not np.array_equal(critic[0], start)
+    assert sac.gradients is gradients and not np.array_equal(trajectory(actor_loss)[0], start)
+    with held_policy_in_sac(0):
+        assert sac.gradients is gradients

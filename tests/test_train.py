@@ -191,6 +191,8 @@ def test_train_rejects_bad_input_in_one_line_before_anything_runs(trained, capsy
     (["--sac-target-entropy", "-3"], "--sac-target-entropy is for --algo sac (PPO has no temperature; see "
                                      "--entropy-cost)"),
     (["--algo", "sac", "--sac-target-entropy", "inf"], "--sac-target-entropy must be a finite number of nats, got inf"),
+    (["--sac-hold-policy", "1000"], "--sac-hold-policy is for --algo sac (PPO has no critic to wait for)"),
+    (["--algo", "sac", "--sac-hold-policy", "-5"], "--sac-hold-policy must be >= 0 env steps, got -5"),
     # The robots' motors, delays and pushes: on the training's own physics step (here a coarser 2 ms), within an
     # episode.
     (["--config", "timestep=0.002", "--action-delay", "3"],

@@ -92,11 +92,17 @@ def run_sac(args, env, factory, remaining: int, start_step: int, resume, progres
     from brax.training import checkpoint as brax_checkpoint
     from brax.training.agents.sac import train as sac
 
-    from hopper_mjx.envs.replay import replicated_restore_in_sac, ring_replay_in_sac, target_entropy_in_sac
+    from hopper_mjx.envs.replay import (
+        held_policy_in_sac,
+        replicated_restore_in_sac,
+        ring_replay_in_sac,
+        target_entropy_in_sac,
+    )
 
     # The ring replay: Brax's own copies the whole replay on every insert once full (hopper_mjx.envs.replay).
     with (tempfile.TemporaryDirectory(dir=Path(args.out).resolve()) as scratch, ring_replay_in_sac(),
-          target_entropy_in_sac(args.sac_target_entropy), replicated_restore_in_sac()):
+          target_entropy_in_sac(args.sac_target_entropy), replicated_restore_in_sac(),
+          held_policy_in_sac(held_policy_updates(args))):
         def progress_and_file(step, metrics):
             if step > 0:
                 save_checkpoint(step, brax_checkpoint.load(Path(scratch) / f"{int(step):012d}"))
@@ -111,6 +117,12 @@ def run_sac(args, env, factory, remaining: int, start_step: int, resume, progres
             progress_fn=progress_and_file,
         )
 
+
+
+def held_policy_updates(args) -> int:
+    """--sac-hold-policy's env steps as SAC's gradient steps: each batch of --num-envs env steps is followed by
+    --sac-grad-updates of them."""
+    return math.ceil((args.sac_hold_policy or 0) / args.num_envs) * args.sac_grad_updates
 
 
 def networks(args):

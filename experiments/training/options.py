@@ -80,6 +80,10 @@ def parser() -> argparse.ArgumentParser:
                         "parent, seed s from RUN/seed-<s>), its hidden layers and activation becoming SAC's; the Q "
                         "networks, temperature and replay start fresh. A folder with checkpoints of its own resumes "
                         "from them instead")
+    p.add_argument("--sac-hold-policy", type=int, default=None, metavar="STEPS",
+                   help="SAC: hold the policy as it is for the first STEPS env steps of learning, while the Q "
+                        "networks and the temperature learn (a --start-from policy is otherwise pulled wherever "
+                        "the fresh critic points); default none")
     p.add_argument("--sac-target-entropy", type=float, default=None, metavar="NATS",
                    help="SAC: the policy entropy its temperature aims at (default Brax's, -0.5 per action: -1.5); "
                         "lower keeps less exploration noise in the joint targets")
@@ -194,6 +198,11 @@ def _check_learner(args) -> None:
                                 ("reward_scaling", 0, True)):
         if getattr(args, flag) is not None:
             cli.check_range(f"--{flag.replace('_', '-')}", getattr(args, flag), low=low, open_low=open_low)
+    if args.sac_hold_policy is not None:
+        if args.algo != "sac":
+            raise ValueError("--sac-hold-policy is for --algo sac (PPO has no critic to wait for)")
+        if args.sac_hold_policy < 0:
+            raise ValueError(f"--sac-hold-policy must be >= 0 env steps, got {args.sac_hold_policy}")
     if args.sac_target_entropy is not None:
         if args.algo != "sac":
             raise ValueError("--sac-target-entropy is for --algo sac (PPO has no temperature; see --entropy-cost)")

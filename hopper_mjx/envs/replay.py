@@ -1,5 +1,5 @@
 """Brax's SAC as train.py runs it: a ring replay buffer in place of its `UniformSamplingQueue`, and (below) the
-entropy its temperature aims at and a resume that works.
+entropy its temperature aims at, a resume that works and a policy held while its critic first learns.
 
 Brax's queue keeps the newest `max_replay_size` transitions by rolling the whole buffer on every insert
 once it is full (`jnp.roll` inside the training step): a copy of the entire replay per batch of env steps.
@@ -85,3 +85,28 @@ def replicated_restore_in_sac():
         return jax.device_put_replicated(checkpoint.load(path), jax.local_devices())
 
     return _in_sac("checkpoint", load=load)
+
+
+def held_policy_in_sac(updates: int):
+    """Brax's SAC updates its policy from its first gradient step on, against Q networks just initialised: a policy
+    it starts from (train.py --start-from) is pulled wherever the untrained critic points. Here the policy's loss is
+    zeroed for its first `updates` gradient steps, while the Q networks and the temperature learn: Adam's step count
+    runs on, its moments stay zero, and the policy's parameters stay exactly as they were. 0 leaves Brax's SAC."""
+    if not updates:
+        return contextlib.nullcontext()
+    import optax
+    from brax.training import gradients
+
+    def gradient_update_fn(loss_fn, optimizer, pmap_axis_name, has_aux=False):
+        update = gradients.gradient_update_fn
+        if getattr(loss_fn, "__name__", "") != "actor_loss":  # Brax's alpha and critic losses are left alone
+            return update(loss_fn, optimizer, pmap_axis_name, has_aux)
+
+        def held(*args, optimizer_state):
+            on = (optax.tree_utils.tree_get(optimizer_state, "count") >= updates).astype(jnp.float32)
+            scaled = lambda *a: on * loss_fn(*a)
+            return update(scaled, optimizer, pmap_axis_name, has_aux)(*args, optimizer_state=optimizer_state)
+
+        return held
+
+    return _in_sac("gradients", gradient_update_fn=gradient_update_fn)
