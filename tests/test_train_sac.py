@@ -1,6 +1,8 @@
 """experiments/train.py: a tiny SAC run (SAC compiles three programs with the physics: the replay
 prefill, the training epoch and Brax's evaluation, so it has its own file)."""
 
+from pathlib import Path
+
 import jax.numpy as jnp
 import numpy as np
 import pytest
@@ -167,3 +169,31 @@ def test_with_seeds_each_seed_starts_from_its_own_and_a_seed_missing_is_refused_
     assert err.startswith(f"error: --start-from: {(tmp_path / 'parent' / 'seed-1').resolve()} is not a trained "
                           "policy") and err.count("\n") == 1
     assert not out.exists()
+
+
+def test_the_scan_passes_over_checkpoints_still_holding_the_start(trained_sac, tmp_path, monkeypatch):
+    """A run started from another's policy: its checkpoints that still hold that policy exactly (held by
+    --sac-hold-policy) are not scanned, so neither threshold.json nor policy/ can credit SAC with its start; a
+    checkpoint whose policy SAC changed is."""
+    import json
+    import shutil
+
+    from training import evaluation
+
+    start, _ = trained_sac
+    first, last = _checkpoints(start)  # policy/ is the last: the start a new run holds
+    out = tmp_path / "run"
+    shutil.copytree(last, out / "checkpoints" / "000000000010")
+    shutil.copytree(first, out / "checkpoints" / "000000000020")
+    history = [{"step": s, "wall_time": 1.0, "eval/avg_episode_length": 20.0} for s in (10, 20)]
+    (out / "metrics.json").write_text(json.dumps({"history": history, "wall_time": 1.0}))
+    scanned = []
+
+    def evaluate(path, *_, **__):
+        scanned.append(Path(path).name)
+        return {"policy": {"9.81": {"survival": 1.0, "min_hops": 5}}}
+
+    monkeypatch.setattr(evaluation, "evaluate", evaluate)
+    args = train_script.parser().parse_args([*TINY, *SAC, "--start-from", str(start), "--out", str(out)])
+    assert [row["step"] for row in evaluation.scan_checkpoints(args, train_script.check(args))] == [20]
+    assert scanned == ["000000000020"]

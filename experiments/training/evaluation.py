@@ -14,7 +14,7 @@ from hopper_mjx import registry
 from hopper_mjx.metrics import thresholds
 from hopper_mjx.metrics.thresholds import APEX_TOLERANCE, MIN_HOPS, SPEED_TOLERANCE  # noqa: F401 (one definition)
 from hopper_mjx.shell.files import atomic_write_text
-from training.options import HISTORY, parse_floats, read_history
+from training.options import HISTORY, parse_floats, read_history, start_of
 
 SCAN = "scan.json"  # every scanned checkpoint's evaluation
 
@@ -107,8 +107,11 @@ def scan_checkpoints(args, physics) -> list[dict]:
     """Every checkpoint's policy evaluated as --evaluate does (policy only), in step order, each with the
     training wall time at which it was saved; resumable (SCAN keeps those already run). Checkpoints whose
     Brax evaluation episodes lasted < 95 % of --episode-length already fell in training, and are not run (but on a
-    course, whose evaluation episodes are on its tiles, not on the ground the core judges)."""
+    course, whose evaluation episodes are on its tiles, not on the ground the core judges). Nor are checkpoints whose
+    policy is still the one --start-from handed SAC (held by --sac-hold-policy): what they would show is the start's,
+    not what SAC learned."""
     out = Path(args.out)
+    start = start_policy(args)
     rows = {r["step"]: r for r in read_history(out / HISTORY)["history"]}
     gravities = list(dict.fromkeys(parse_floats(args.eval_gravity, "--eval-gravity")
                                    + parse_floats(args.select_gravity, "--select-gravity")))
@@ -126,6 +129,8 @@ def scan_checkpoints(args, physics) -> list[dict]:
         row = rows.get(step, {})
         if skips and row.get("eval/avg_episode_length", args.episode_length) < 0.95 * args.episode_length:
             continue
+        if start is not None and same_policy(path, start):
+            continue
         if step not in done:
             result = evaluate(path, physics, gravities=gravities, duration=args.eval_duration,
                               height=args.eval_height, num=args.eval_num, seed=args.seed, speed=args.eval_speed,
@@ -138,6 +143,27 @@ def scan_checkpoints(args, physics) -> list[dict]:
         atomic_write_text(out / SCAN, json.dumps({"settings": settings, "checkpoints": scanned}, indent=1))
     return scanned
 
+
+
+def start_policy(args):
+    """The policy parameters --start-from handed this run (None without it)."""
+    from brax.training import checkpoint
+
+    from hopper_mjx.envs import policy
+
+    start = start_of(args)
+    return None if start is None else checkpoint.load(policy.resolve(start))[1]
+
+
+def same_policy(path: Path, params) -> bool:
+    """Whether the checkpoint at `path` holds exactly the policy parameters `params`."""
+    import jax
+    import numpy as np
+    from brax.training import checkpoint
+
+    saved = jax.tree.leaves(checkpoint.load(path)[1])
+    return len(saved) == len(jax.tree.leaves(params)) and all(
+        np.array_equal(a, b) for a, b in zip(saved, jax.tree.leaves(params)))
 
 
 def at_gravities(evaluation: dict, gravities: str, flag: str) -> dict:
