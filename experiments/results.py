@@ -50,7 +50,7 @@ LEARNER = {"updates_per_batch": "epochs per batch", "num_minibatches": "minibatc
            "entropy_cost": "entropy cost", "reward_scaling": "reward scaling", "policy_layers": "policy MLP",
            "value_layers": "value MLP", "sac_grad_updates": "SAC updates per batch",
            "sac_target_entropy": "SAC target entropy", "start_from": "started from",
-           "sac_hold_policy": "SAC policy held for env steps"}
+           "sac_hold_policy": "SAC policy held"}
 
 
 def parser() -> argparse.ArgumentParser:
@@ -229,6 +229,8 @@ def _setting(key: str, value) -> str:
     """A learner setting as a row's name says it."""
     if key == "start_from":
         return f", started from {Path(value).name}'s policy" if value else ", from its own start"
+    if key == "sac_hold_policy":
+        return f", SAC policy held for its first {value:,} env steps" if value else ", SAC policy not held"
     return f", {LEARNER[key]} {value}"
 
 
