@@ -249,9 +249,10 @@ def rows_of(records: list[dict]) -> list[tuple[str, list[dict]]]:
         configs = len({config(r) for r in runs}) > 1
         for own in sorted({settings(r) for r in runs}):
             mine = [r for r in runs if settings(r) == own]
-            said = "".join(_setting(k, mine[0]["learner"][k]) for k in varied if k != "start_from")
-            if "start_from" in varied or mine[0]["learner"].get("start_from"):  # said always: another's start
-                said += _setting("start_from", mine[0]["learner"].get("start_from"))
+            learner = mine[0].get("learner", {})
+            said = "".join(_setting(k, learner.get(k)) for k in varied if k != "start_from")
+            if "start_from" in varied or learner.get("start_from"):  # said always: another's start
+                said += _setting("start_from", learner.get("start_from"))
             if configs:
                 said += f", --config {config(mine[0])}" if config(mine[0]) else ", the task's own config"
             on = f", trained on a {group[2]}" if group[2] else ""
@@ -325,6 +326,18 @@ def physics_of(args: dict):
                    push=tuple(args["push"]) if args.get("push") else None)
 
 
+def _lines(parts: list[str], sep: str, width: int) -> str:
+    """The parts joined by `sep`, a new line begun between two parts (never within one) once a line passes `width`."""
+    lines = [""]
+    for part in parts:
+        if lines[-1] and len(lines[-1]) + len(sep) + len(part) > width:
+            lines[-1] += sep.rstrip()
+            lines.append(part)
+        else:
+            lines[-1] += (sep if lines[-1] else "") + part
+    return "\n".join(lines)
+
+
 def figure(records: list[dict]):
     """Every seed's evaluation reward against training minutes (a matplotlib Figure), a colour per task x
     algorithm; the physics every run shared in the subtitle, a group's own in its legend entry."""
@@ -339,13 +352,15 @@ def figure(records: list[dict]):
         for i, r in enumerate(rows):  # a row of the table
             t, reward = zip(*r["curve"]) if r["curve"] else ((), ())
             own = "".join(f"; {w}" for w in r["physics"] if w not in shared)
-            ax.plot(t, reward, "o-", ms=3, color=colour, alpha=0.8, label=f"{name}{own}" if i == 0 else None)
+            label = _lines(f"{name}{own}".split(", "), ", ", 90)  # a row named by many settings: several lines
+            ax.plot(t, reward, "o-", ms=3, color=colour, alpha=0.8, label=label if i == 0 else None)
     ax.set_xlabel("training wall time (min)")
     ax.set_ylabel("episode reward (1, summed per episode)")
-    ax.set_title(f"every seed's curve: the mean over its evaluation episodes\n{'; '.join(shared)}", fontsize=9)
+    ax.set_title(f"every seed's curve: the mean over its evaluation episodes\n"
+                 f"{_lines(shared, '; ', 100)}", fontsize=9)
     ax.grid(alpha=0.3)
-    ax.legend(fontsize=8)
-    fig.tight_layout()
+    # Below the axes, where long row names neither cover the curves nor squeeze the plot.
+    ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(0, -0.15))
     return fig
 
 
@@ -353,7 +368,7 @@ def plot(records: list[dict], path: Path) -> None:
     import matplotlib.pyplot as plt
 
     fig = figure(records)
-    fig.savefig(path, dpi=120)
+    fig.savefig(path, dpi=120, bbox_inches="tight")
     plt.close(fig)
 
 

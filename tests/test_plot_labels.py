@@ -163,6 +163,26 @@ def test_training_curves_name_their_physics_and_band():
         "hop × PPO; flat ground", "hop_terrain × PPO; terrain rough:amp=0.02"]
 
 
+def test_the_seeds_plot_keeps_long_row_names_below_its_axes_on_lines_of_their_own():
+    """Rows named by many settings (a SAC row started from another run) get a legend of short lines below the
+    axes: it covers no curve and leaves the axes their width."""
+    import results
+
+    args = {"task": "hop", "algo": "sac", "start_from": "runs/ppo-hop", "sac_hold_policy": 250_000,
+            "sac_target_entropy": -10.0, "sac_grad_updates": 32, "batch_size": 256}
+    records = [{"task": "hop", "algo": "sac", "curve": [(0.5, 10.0), (1.0, 20.0)], "training": "1 ms step",
+                "learner": {k: args.get(k) for k in results.LEARNER} | {"sac_hold_policy": hold},
+                "physics": list(results.physics_of(args).described().values())} for hold in (250_000, None)]
+    fig = results.figure(records)
+    fig.canvas.draw()
+    ax, legend = fig.axes[0], fig.axes[0].get_legend()
+    labels = [t.get_text() for t in legend.get_texts()]
+    assert len(labels) == 2 and all(len(line) <= 100 for label in labels for line in label.splitlines())
+    assert any("\n" in label for label in labels)
+    assert legend.get_window_extent().y1 <= ax.get_window_extent().y0
+    assert ax.get_window_extent().width >= 0.7 * fig.bbox.width
+
+
 def test_leg_energy_plot_says_what_its_sweeps_ran():
     import leg_energy
 
