@@ -266,11 +266,9 @@ def check(args):
     resume = latest_checkpoint(Path(args.out))
     if resume:  # a folder of another task or algorithm cannot be resumed into this one
         from hopper_mjx.envs import policy
-        from hopper_mjx.envs.terms import observation_size
 
         _, algo, net, config = policy.read(resume[0])
-        size = observation_size(envs.tasks.task_class(args.task).command_size, args.observe_gravity,
-                                        not physics.ground.is_flat)
+        size = observations(args, physics)
         if algo != args.algo or config.task != args.task or net["observation_size"] != size:
             raise ValueError(f"--out {args.out} holds a {algo} policy of task {config.task!r} with "
                              f"{net['observation_size']} observations; --task {args.task} --algo {args.algo} "
@@ -299,18 +297,33 @@ def start_of(args) -> Path | None:
     return start / f"seed-{args.seed}"  # a --seeds parent; a seed it lacks is refused by name
 
 
-def start_network(args) -> dict | None:
-    """The network config of --start-from's policy (JSON only), checked: None without --start-from."""
+def observations(args, physics) -> int:
+    """The observation count of the run's task as its options set it."""
+    from hopper_mjx import envs
+    from hopper_mjx.envs.terms import observation_size
+
+    return observation_size(envs.tasks.task_class(args.task).command_size, args.observe_gravity,
+                            not physics.ground.is_flat)
+
+
+def _read_start(args):
+    """`policy.read` of --start-from's policy (path, algorithm, network config, task config; JSON only), or None
+    without --start-from."""
     start = start_of(args)
     if start is None:
         return None
     from hopper_mjx.envs import policy
 
     try:
-        _, _, net, _ = policy.read(start)
+        return policy.read(start)
     except ValueError as err:
         raise ValueError(f"--start-from: {err}") from None
-    return net
+
+
+def start_network(args) -> dict | None:
+    """The network config of --start-from's policy, checked: None without --start-from."""
+    start = _read_start(args)
+    return None if start is None else start[2]
 
 
 def sac_policy_defaults() -> dict:
@@ -332,14 +345,10 @@ def _check_start(args, physics) -> None:
         return
     if args.algo != "sac":
         raise ValueError("--start-from is for --algo sac (a PPO run resumes from its own checkpoints)")
-    from hopper_mjx import envs
     from hopper_mjx.envs import policy
-    from hopper_mjx.envs.terms import observation_size
 
-    net = start_network(args)
-    path, algo, _, config = policy.read(start_of(args))
-    size = observation_size(envs.tasks.task_class(args.task).command_size, args.observe_gravity,
-                            not physics.ground.is_flat)
+    path, algo, net, config = _read_start(args)
+    size = observations(args, physics)
     if config.task != args.task or net["observation_size"] != size:
         raise ValueError(f"--start-from {path} is a policy of task {config.task!r} with {net['observation_size']} "
                          f"observations; --task {args.task} here needs {size}")
