@@ -50,7 +50,8 @@ LEARNER = {"updates_per_batch": "epochs per batch", "num_minibatches": "minibatc
            "entropy_cost": "entropy cost", "reward_scaling": "reward scaling", "policy_layers": "policy MLP",
            "value_layers": "value MLP", "sac_grad_updates": "SAC updates per batch",
            "sac_target_entropy": "SAC target entropy", "start_from": "started from",
-           "sac_hold_policy": "SAC policy held"}
+           "sac_hold_policy": "SAC policy held", "sac_policy_lr": "SAC policy learning rate",
+           "sac_anchor": "SAC anchored to its start with weight"}
 
 
 def parser() -> argparse.ArgumentParser:
@@ -231,6 +232,10 @@ def _setting(key: str, value) -> str:
         return f", started from {Path(value).name}'s policy" if value else ", from its own start"
     if key == "sac_hold_policy":
         return f", SAC policy held for its first {value:,} env steps" if value else ", SAC policy not held"
+    if key == "sac_anchor":
+        return f", SAC policy anchored to its start, weight {value:g}" if value else ", SAC policy not anchored"
+    if key == "sac_policy_lr":
+        return f", SAC policy learning rate {value:g}" if value else ", SAC policy at the critic's learning rate"
     return f", {LEARNER[key]} {value}"
 
 

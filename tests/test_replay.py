@@ -8,10 +8,10 @@ from brax.training import replay_buffers
 
 from hopper_mjx.envs.replay import (
     RingReplay,
-    held_policy_in_sac,
+    losses_in_sac,
+    policy_update_in_sac,
     replicated_restore_in_sac,
     ring_replay_in_sac,
-    target_entropy_in_sac,
 )
 
 CAPACITY, BATCH, DRAWS = 8, 3, 4000
@@ -66,7 +66,7 @@ def _alpha_loss(log_alpha: float, target_nats):
     policy_params = net.policy_network.init(jax.random.PRNGKey(1))
     obs = jax.random.normal(jax.random.PRNGKey(2), (64, 5))
     transitions = types.Transition(obs, jnp.zeros((64, 3)), jnp.zeros(64), jnp.ones(64), obs)
-    with target_entropy_in_sac(target_nats):
+    with losses_in_sac(target_nats):
         alpha_loss, _, _ = sac.sac_losses.make_losses(sac_network=net, reward_scaling=1.0, discounting=0.99,
                                                       action_size=3)
     return float(alpha_loss(jnp.float32(log_alpha), policy_params, None, transitions, jax.random.PRNGKey(3)))
@@ -81,6 +81,36 @@ def test_sac_aims_its_temperature_at_the_given_entropy_only_inside_the_context()
     brax = _alpha_loss(np.log(2.0), None)
     np.testing.assert_allclose(_alpha_loss(np.log(2.0), -6.0) - brax, 2.0 * 4.5, rtol=1e-5)
     np.testing.assert_allclose(_alpha_loss(np.log(2.0), -1.5), brax, rtol=1e-6)
+    assert sac.sac_losses is losses
+
+
+def test_the_anchor_adds_its_weight_times_the_mean_squared_gap_of_the_mean_actions():
+    """With an anchor (weight 2, a start policy) the policy's loss is Brax's plus 2 x the mean over the batch of the
+    squared distance between the two policies' mean actions (tanh of the network's means): exactly Brax's at the
+    start itself, Brax's plus that term elsewhere; Brax's losses are themselves again outside."""
+    from brax.training import types
+    from brax.training.agents.sac import losses, networks
+    from brax.training.agents.sac import train as sac
+
+    net = networks.make_sac_networks(5, 3, hidden_layer_sizes=(8,))
+    start, moved = (net.policy_network.init(jax.random.PRNGKey(k)) for k in (1, 6))
+    q_params = net.q_network.init(jax.random.PRNGKey(7))
+    obs = jax.random.normal(jax.random.PRNGKey(2), (64, 5))
+    transitions = types.Transition(obs, jnp.zeros((64, 3)), jnp.zeros(64), jnp.ones(64), obs)
+
+    def actor_loss(anchor, params):
+        with losses_in_sac(anchor=anchor):
+            actor = sac.sac_losses.make_losses(sac_network=net, reward_scaling=1.0, discounting=0.99,
+                                               action_size=3)[2]
+        assert actor.__name__ == "actor_loss"  # the name the policy's own update is found by
+        return float(actor(params, None, q_params, jnp.float32(0.5), transitions, jax.random.PRNGKey(3)))
+
+    mean = lambda params: np.tanh(np.asarray(net.policy_network.apply(None, params, obs))[:, :3])
+    gap = np.mean(np.sum((mean(moved) - mean(start)) ** 2, axis=1))
+    assert gap > 0.01
+    assert actor_loss((2.0, (None, start)), start) == actor_loss(None, start)
+    np.testing.assert_allclose(actor_loss((2.0, (None, start)), moved) - actor_loss(None, moved), 2.0 * gap,
+                               rtol=1e-4)
     assert sac.sac_losses is losses
 
 
@@ -109,6 +139,30 @@ def test_a_restored_checkpoint_is_replicated_over_the_devices_as_sacs_state_is(t
             np.testing.assert_array_equal(np.asarray(shard.data).squeeze(0), np.asarray(value))
 
 
+def _losses():
+    """An actor loss and a critic loss, as Brax's SAC names them, each pulling two parameters from 0 to 1."""
+    def actor_loss(params, target):
+        return jnp.sum((params - target) ** 2)
+
+    def critic_loss(params, target):
+        return jnp.sum((params - target) ** 2)
+
+    return actor_loss, critic_loss
+
+
+def _trajectory(loss_fn, optimizer, steps=5):
+    """The parameters after each of `steps` updates Brax's SAC builds for `loss_fn`, from 0 towards 1."""
+    from brax.training.agents.sac import train as sac
+
+    start, target = jnp.zeros(2), jnp.ones(2)
+    update = sac.gradients.gradient_update_fn(loss_fn, optimizer, pmap_axis_name=None)
+    params, state, seen = start, optimizer.init(start), []
+    for _ in range(steps):
+        _, params, state = update(params, target, optimizer_state=state)
+        seen.append(np.asarray(params))
+    return seen
+
+
 def test_sac_holds_its_policy_for_the_given_updates_and_trains_its_critic_meanwhile():
     """Inside the context Brax's SAC builds an actor update that leaves the policy's parameters exactly as they were
     for its first 3 steps and moves them from the 4th on; any other loss (the critic's) moves from its first step;
@@ -117,26 +171,28 @@ def test_sac_holds_its_policy_for_the_given_updates_and_trains_its_critic_meanwh
     from brax.training import gradients
     from brax.training.agents.sac import train as sac
 
-    def actor_loss(params, target):
-        return jnp.sum((params - target) ** 2)
-
-    def critic_loss(params, target):
-        return jnp.sum((params - target) ** 2)
-
-    optimizer, start, target = optax.adam(0.1), jnp.zeros(2), jnp.ones(2)
-
-    def trajectory(loss_fn, steps=5):
-        update = sac.gradients.gradient_update_fn(loss_fn, optimizer, pmap_axis_name=None)
-        params, state, seen = start, optimizer.init(start), []
-        for _ in range(steps):
-            _, params, state = update(params, target, optimizer_state=state)
-            seen.append(np.asarray(params))
-        return seen
-
-    with held_policy_in_sac(3):
+    (actor_loss, critic_loss), optimizer, start = _losses(), optax.adam(0.1), np.zeros(2)
+    trajectory = lambda loss: _trajectory(loss, optimizer)
+    with policy_update_in_sac(held_updates=3):
         actor, critic = trajectory(actor_loss), trajectory(critic_loss)
     assert all(np.array_equal(p, start) for p in actor[:3]) and not np.array_equal(actor[3], start)
     assert not np.array_equal(critic[0], start)
     assert sac.gradients is gradients and not np.array_equal(trajectory(actor_loss)[0], start)
-    with held_policy_in_sac(0):
+    with policy_update_in_sac(0):
         assert sac.gradients is gradients
+
+
+def test_sacs_policy_takes_its_own_adam_step_and_its_critic_keeps_braxs():
+    """Adam's first step moves each parameter by its learning rate (the gradient's sign times the rate): inside the
+    context the actor moves 0.01 where the optimizer Brax gave it says 0.1, the critic 0.1; outside, both 0.1."""
+    import optax
+    from brax.training import gradients
+    from brax.training.agents.sac import train as sac
+
+    (actor_loss, critic_loss), optimizer = _losses(), optax.adam(0.1)
+    with policy_update_in_sac(learning_rate=0.01):
+        actor, critic = _trajectory(actor_loss, optimizer, 1)[0], _trajectory(critic_loss, optimizer, 1)[0]
+    np.testing.assert_allclose(actor, [0.01, 0.01], rtol=1e-5)
+    np.testing.assert_allclose(critic, [0.1, 0.1], rtol=1e-5)
+    assert sac.gradients is gradients
+    np.testing.assert_allclose(_trajectory(actor_loss, optimizer, 1)[0], [0.1, 0.1], rtol=1e-5)

@@ -193,6 +193,11 @@ def test_train_rejects_bad_input_in_one_line_before_anything_runs(trained, capsy
     (["--algo", "sac", "--sac-target-entropy", "inf"], "--sac-target-entropy must be a finite number of nats, got inf"),
     (["--sac-hold-policy", "1000"], "--sac-hold-policy is for --algo sac (PPO has no critic to wait for)"),
     (["--algo", "sac", "--sac-hold-policy", "-5"], "--sac-hold-policy must be >= 0 env steps, got -5"),
+    (["--sac-policy-lr", "1e-5"], "--sac-policy-lr is for --algo sac (PPO's policy and value share --learning-rate)"),
+    (["--algo", "sac", "--sac-policy-lr", "0"], "--sac-policy-lr must be finite and > 0, got 0"),
+    (["--sac-anchor", "1"], "--sac-anchor is for --algo sac with --start-from (it pulls the policy towards its start)"),
+    (["--algo", "sac", "--sac-anchor", "1"], "--sac-anchor is for --algo sac with --start-from (it pulls the policy "
+                                             "towards its start)"),
     # The robots' motors, delays and pushes: on the training's own physics step (here a coarser 2 ms), within an
     # episode.
     (["--config", "timestep=0.002", "--action-delay", "3"],
@@ -561,6 +566,25 @@ def test_a_sac_row_started_from_another_policy_says_so_even_alone(tmp_path):
     assert named() == {"hop × SAC, started from ppo-hop's policy"}
     assert results.main([*runs[2:], "--out", str(out)]) == 0
     assert named() == {"hop × SAC"}
+
+
+def test_sac_rows_that_differ_in_the_policys_learning_rate_name_it(tmp_path):
+    """SAC seeds with --sac-policy-lr and seeds without it are two rows, named by the rate or by its absence."""
+    import json
+
+    results = importlib.import_module("results")
+    runs = []
+    for rate in (3e-5, None):
+        run = tmp_path / f"lr-{rate}"
+        run.mkdir()
+        args = {"task": "hop", "algo": "sac", "seed": 0, "eval_height": 0.10, "eval_speed": [0.0, 0.0],
+                "sac_policy_lr": rate}
+        (run / "metrics.json").write_text(json.dumps({"args": args, "history": []}))
+        runs.append(str(run))
+    out = tmp_path / "results.md"
+    assert results.main([*runs, "--out", str(out)]) == 0
+    assert {line.split("|")[1].strip() for line in out.read_text().splitlines() if line.startswith("| hop × SAC")} \
+        == {"hop × SAC, SAC policy learning rate 3e-05", "hop × SAC, SAC policy at the critic's learning rate"}
 
 
 def test_runs_whose_task_config_differs_are_rows_of_their_own(tmp_path):

@@ -93,16 +93,16 @@ def run_sac(args, env, factory, remaining: int, start_step: int, resume, progres
     from brax.training.agents.sac import train as sac
 
     from hopper_mjx.envs.replay import (
-        held_policy_in_sac,
+        losses_in_sac,
+        policy_update_in_sac,
         replicated_restore_in_sac,
         ring_replay_in_sac,
-        target_entropy_in_sac,
     )
 
     # The ring replay: Brax's own copies the whole replay on every insert once full (hopper_mjx.envs.replay).
     with (tempfile.TemporaryDirectory(dir=Path(args.out).resolve()) as scratch, ring_replay_in_sac(),
-          target_entropy_in_sac(args.sac_target_entropy), replicated_restore_in_sac(),
-          held_policy_in_sac(held_policy_updates(args))):
+          losses_in_sac(args.sac_target_entropy, start_anchor(args)), replicated_restore_in_sac(),
+          policy_update_in_sac(held_policy_updates(args), args.sac_policy_lr)):
         def progress_and_file(step, metrics):
             if step > 0:
                 save_checkpoint(step, brax_checkpoint.load(Path(scratch) / f"{int(step):012d}"))
@@ -117,6 +117,19 @@ def run_sac(args, env, factory, remaining: int, start_step: int, resume, progres
             progress_fn=progress_and_file,
         )
 
+
+
+def start_anchor(args) -> tuple | None:
+    """(--sac-anchor's weight, the --start-from policy's (normaliser, policy params)), or None without it."""
+    if not args.sac_anchor:
+        return None
+    from brax.training.agents.sac import checkpoint
+
+    from hopper_mjx.envs import policy
+    from training.options import start_of
+
+    normaliser, params = checkpoint.load(policy.resolve(start_of(args)))[:2]
+    return args.sac_anchor, (normaliser, params)
 
 
 def held_policy_updates(args) -> int:

@@ -84,6 +84,13 @@ def parser() -> argparse.ArgumentParser:
                    help="SAC: hold the policy as it is for the first STEPS env steps of learning, while the Q "
                         "networks and the temperature learn (a --start-from policy is otherwise pulled wherever "
                         "the fresh critic points); default none")
+    p.add_argument("--sac-policy-lr", type=float, default=None, metavar="LR",
+                   help="SAC: the policy's own Adam step (default --learning-rate, as the Q networks'); smaller "
+                        "keeps a --start-from policy near its start while the fresh critic learns")
+    p.add_argument("--sac-anchor", type=float, default=None, metavar="WEIGHT",
+                   help="SAC: add WEIGHT x the squared distance between the policy's mean action and its "
+                        "--start-from policy's to the policy's loss (a behaviour-cloning term towards the start); "
+                        "default none")
     p.add_argument("--sac-target-entropy", type=float, default=None, metavar="NATS",
                    help="SAC: the policy entropy its temperature aims at (default Brax's, -0.5 per action: -1.5); "
                         "lower keeps less exploration noise in the joint targets")
@@ -203,6 +210,14 @@ def _check_learner(args) -> None:
             raise ValueError("--sac-hold-policy is for --algo sac (PPO has no critic to wait for)")
         if args.sac_hold_policy < 0:
             raise ValueError(f"--sac-hold-policy must be >= 0 env steps, got {args.sac_hold_policy}")
+    if args.sac_policy_lr is not None:
+        if args.algo != "sac":
+            raise ValueError("--sac-policy-lr is for --algo sac (PPO's policy and value share --learning-rate)")
+        cli.check_range("--sac-policy-lr", args.sac_policy_lr, low=0, open_low=True)
+    if args.sac_anchor is not None:
+        if args.algo != "sac" or args.start_from is None:
+            raise ValueError("--sac-anchor is for --algo sac with --start-from (it pulls the policy towards its start)")
+        cli.check_range("--sac-anchor", args.sac_anchor, low=0)
     if args.sac_target_entropy is not None:
         if args.algo != "sac":
             raise ValueError("--sac-target-entropy is for --algo sac (PPO has no temperature; see --entropy-cost)")
