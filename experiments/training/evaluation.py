@@ -14,7 +14,7 @@ from hopper_mjx import registry
 from hopper_mjx.metrics import thresholds
 from hopper_mjx.metrics.thresholds import APEX_TOLERANCE, MIN_HOPS, SPEED_TOLERANCE  # noqa: F401 (one definition)
 from hopper_mjx.shell.files import atomic_write_text
-from training.options import HISTORY, parse_floats, read_history, start_of
+from training.options import HISTORY, parse_floats, read_history, start_params
 
 SCAN = "scan.json"  # every scanned checkpoint's evaluation
 
@@ -111,7 +111,8 @@ def scan_checkpoints(args, physics) -> list[dict]:
     policy is still the one --start-from handed SAC (held by --sac-hold-policy): what they would show is the start's,
     not what SAC learned."""
     out = Path(args.out)
-    start = start_policy(args)
+    start = start_params(args)
+    start = None if start is None else start[1]  # the policy's parameters
     rows = {r["step"]: r for r in read_history(out / HISTORY)["history"]}
     gravities = list(dict.fromkeys(parse_floats(args.eval_gravity, "--eval-gravity")
                                    + parse_floats(args.select_gravity, "--select-gravity")))
@@ -143,16 +144,6 @@ def scan_checkpoints(args, physics) -> list[dict]:
         atomic_write_text(out / SCAN, json.dumps({"settings": settings, "checkpoints": scanned}, indent=1))
     return scanned
 
-
-
-def start_policy(args):
-    """The policy parameters --start-from handed this run (None without it)."""
-    from brax.training import checkpoint
-
-    from hopper_mjx.envs import policy
-
-    start = start_of(args)
-    return None if start is None else checkpoint.load(policy.resolve(start))[1]
 
 
 def same_policy(path: Path, params) -> bool:

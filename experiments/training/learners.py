@@ -8,7 +8,7 @@ import math
 from pathlib import Path
 
 from hopper_mjx.metrics.thresholds import APEX_TOLERANCE, MIN_HOPS, SPEED_TOLERANCE  # noqa: F401 (one definition)
-from training.options import parse_layers, run_config, start_network
+from training.options import parse_layers, run_config, start_network, start_params
 
 
 def task_config(args, physics):
@@ -121,15 +121,7 @@ def run_sac(args, env, factory, remaining: int, start_step: int, resume, progres
 
 def start_anchor(args) -> tuple | None:
     """(--sac-anchor's weight, the --start-from policy's (normaliser, policy params)), or None without it."""
-    if not args.sac_anchor:
-        return None
-    from brax.training.agents.sac import checkpoint
-
-    from hopper_mjx.envs import policy
-    from training.options import start_of
-
-    normaliser, params = checkpoint.load(policy.resolve(start_of(args)))[:2]
-    return args.sac_anchor, (normaliser, params)
+    return (args.sac_anchor, start_params(args)) if args.sac_anchor else None
 
 
 def held_policy_updates(args) -> int:

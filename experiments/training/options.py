@@ -312,6 +312,19 @@ def start_of(args) -> Path | None:
     return start / f"seed-{args.seed}"  # a --seeds parent; a seed it lacks is refused by name
 
 
+def start_params(args):
+    """The --start-from policy's (observation normaliser, policy parameters) for this run's seed; None without it."""
+    start = start_of(args)
+    if start is None:
+        return None
+    from brax.training import checkpoint
+
+    from hopper_mjx.envs import policy
+
+    normaliser, params = checkpoint.load(policy.resolve(start))[:2]
+    return normaliser, params
+
+
 def observations(args, physics) -> int:
     """The observation count of the run's task as its options set it."""
     from hopper_mjx import envs
