@@ -17,15 +17,8 @@ from hopper_mjx.shell.files import atomic_write_text
 from training.options import HISTORY, parse_floats, read_history, start_params
 
 SCAN = "scan.json"  # every scanned checkpoint's evaluation
-
-
-SCAN = "scan.json"  # every scanned checkpoint's evaluation
 SELECTION = "selection.json"  # which checkpoint policy/ holds, and why
-
-
-
 COMPARED = ("survival", "hops", "apex_height", "hop_period", "tracking_error", "cost_of_transport")
-
 
 
 def evaluation_batch(gravities, num: int, seed: int, nv: int):
@@ -37,7 +30,6 @@ def evaluation_batch(gravities, num: int, seed: int, nv: int):
                      speed=(0.0, 0.0), seed=seed)
     instances = expand(spec, nv)
     return instances.gravity, instances.qvel
-
 
 
 def evaluate(policy_path, physics, *, gravities, duration: float, height: float, num: int, seed: int = 0,
@@ -92,15 +84,12 @@ def evaluate(policy_path, physics, *, gravities, duration: float, height: float,
     return out
 
 
-
 threshold = thresholds.describe
-
 
 
 def meets_threshold(task: str, row: dict, height: float) -> bool:
     """Does one gravity's `evaluate` row meet the task's threshold (`hopper_mjx.metrics.thresholds`)?"""
     return thresholds.meets(task, row, height)
-
 
 
 def scan_checkpoints(args, physics) -> list[dict]:
@@ -145,7 +134,6 @@ def scan_checkpoints(args, physics) -> list[dict]:
     return scanned
 
 
-
 def same_policy(path: Path, params) -> bool:
     """Whether the checkpoint at `path` holds exactly the policy parameters `params`."""
     import jax
@@ -162,7 +150,6 @@ def at_gravities(evaluation: dict, gravities: str, flag: str) -> dict:
     return {f"{g:g}": evaluation[f"{g:g}"] for g in parse_floats(gravities, flag)}
 
 
-
 def first_at_threshold(task: str, scanned: list[dict], height: float, gravities: str) -> dict | None:
     """The first scanned checkpoint that meets the task's threshold at every one of `gravities` (--eval-gravity);
     None if none does."""
@@ -171,7 +158,6 @@ def first_at_threshold(task: str, scanned: list[dict], height: float, gravities:
                                                                       "--eval-gravity").values()):
             return {**s, "threshold": threshold(task)}
     return None
-
 
 
 def select_policy(args, scanned: list[dict]) -> dict | None:
@@ -194,14 +180,12 @@ def select_policy(args, scanned: list[dict]) -> dict | None:
     return record
 
 
-
 def mean_defined(values) -> float | None:
     """Mean over instances of the defined (finite) values; None if there are none."""
     import numpy as np
 
     values = np.asarray(values, dtype=float)
     return float(values[np.isfinite(values)].mean()) if np.isfinite(values).any() else None
-
 
 
 def evaluation_table(result: dict, height: float) -> str:

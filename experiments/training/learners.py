@@ -18,10 +18,8 @@ def task_config(args, physics):
     return envs.from_config(run_config(args, physics), physics.mj_model)
 
 
-
 REWARD_SCALING = {"ppo": 0.1, "sac": 1.0}  # --reward-scaling's defaults
 LEARNING_RATE = {"ppo": 6e-4, "sac": 3e-4}  # --learning-rate's defaults
-
 
 
 def learner_settings(args) -> dict:
@@ -30,7 +28,6 @@ def learner_settings(args) -> dict:
     scaling = REWARD_SCALING[args.algo] if args.reward_scaling is None else args.reward_scaling
     clip = {} if args.algo != "ppo" else {"max_grad_norm": 1.0 if args.max_grad_norm is None else args.max_grad_norm}
     return {"learning_rate": rate, "reward_scaling": scaling, **clip}
-
 
 
 def _shared(args, env, factory, remaining: int, start_step: int, resume, per_train_step: int) -> dict:
@@ -58,7 +55,6 @@ def _shared(args, env, factory, remaining: int, start_step: int, resume, per_tra
     )
 
 
-
 def run_ppo(args, env, factory, remaining: int, start_step: int, resume, progress, save_checkpoint) -> None:
     """Brax PPO for the `remaining` environment steps, resuming from `resume` (path, step) if given."""
     from brax.training.agents.ppo import train as ppo
@@ -81,7 +77,6 @@ def run_ppo(args, env, factory, remaining: int, start_step: int, resume, progres
         run_evals=not args.no_eval,
         policy_params_fn=lambda step, make_policy, params: save_checkpoint(step, params),
     )
-
 
 
 def run_sac(args, env, factory, remaining: int, start_step: int, resume, progress, save_checkpoint) -> None:
@@ -116,7 +111,6 @@ def run_sac(args, env, factory, remaining: int, start_step: int, resume, progres
             checkpoint_logdir=scratch,
             progress_fn=progress_and_file,
         )
-
 
 
 def start_anchor(args) -> tuple | None:

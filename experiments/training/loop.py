@@ -45,7 +45,6 @@ class OutOfTime(Exception):
     """The --minutes budget is spent: training stops after the evaluation that found it so."""
 
 
-
 def train(args, physics=None) -> dict:
     """Trains (or resumes) as the arguments say on `physics` (`check`'s, checked here when not given);
     returns the metrics record also saved to metrics.json."""
@@ -136,7 +135,6 @@ def train(args, physics=None) -> dict:
              f"{config.solver_iterations} iterations)")
     plot_rewards(out / "reward_curve.png", record["history"], title, physics, config.policy_rate, args.num_eval_envs)
     return record
-
 
 
 def reward_figure(history: list[dict], title: str, physics, policy_rate: float, episodes: int):

@@ -16,7 +16,6 @@ HISTORY = "metrics.json"  # a run's record of its evaluations
 ALGORITHMS = ("ppo", "sac")
 
 
-
 def parser() -> argparse.ArgumentParser:
     p = cli.parser("experiments/train.py", __doc__)
     p.add_argument("--task", default="hop", help=registry.listed(registry.TASKS))
@@ -102,7 +101,6 @@ def parser() -> argparse.ArgumentParser:
     return p
 
 
-
 def _add_evaluation_options(p: argparse.ArgumentParser) -> None:
     """--evaluate's and --scan-checkpoints' options."""
     p.add_argument("--evaluate", action="store_true",
@@ -129,11 +127,9 @@ def _add_evaluation_options(p: argparse.ArgumentParser) -> None:
                         "checkpoints whose Brax evaluation episodes ended early are skipped")
 
 
-
 # The layer options each algorithm's network config records (`hopper_mjx.envs.policy.FACTORY_KEYS`).
 LAYER_FLAGS = {"ppo": (("policy_layers", "policy_hidden_layer_sizes"), ("value_layers", "value_hidden_layer_sizes")),
                "sac": (("policy_layers", "hidden_layer_sizes"),)}
-
 
 
 def parse_layers(text: str) -> tuple[int, ...]:
@@ -143,7 +139,6 @@ def parse_layers(text: str) -> tuple[int, ...]:
     return sizes
 
 
-
 def parse_floats(text: str, what: str) -> list[float]:
     try:
         return cli.parse_floats(text, what)
@@ -151,13 +146,11 @@ def parse_floats(text: str, what: str) -> list[float]:
         raise ValueError(str(err)) from None
 
 
-
 def parse_pair(text: str, what: str) -> tuple[float, float]:
     values = tuple(parse_floats(text, what))
     if len(values) != 2 or not all(math.isfinite(v) for v in values):
         raise ValueError(f"{what} must be two finite numbers 'low,high', got {text!r}")
     return values
-
 
 
 def read_history(path: Path) -> dict:
@@ -183,11 +176,9 @@ def latest_checkpoint(out: Path) -> tuple[Path, int] | None:
     return path, int(path.name)
 
 
-
 # Options Brax's SAC has no counterpart for, and why.
 PPO_ONLY = {"desired_kl": "Brax's SAC has no adaptive learning rate", "max_grad_norm": "Brax's SAC does not clip its "
             "gradients"}
-
 
 
 def _check_learner(args) -> None:
@@ -223,7 +214,6 @@ def _check_learner(args) -> None:
             raise ValueError("--sac-target-entropy is for --algo sac (PPO has no temperature; see --entropy-cost)")
         if not math.isfinite(args.sac_target_entropy):
             raise ValueError(f"--sac-target-entropy must be a finite number of nats, got {args.sac_target_entropy}")
-
 
 
 def check(args):
@@ -297,7 +287,6 @@ def check(args):
                                  f"where {option} asks {'-'.join(map(str, asked))}: pass {option} "
                                  f"{','.join(map(str, saved))} to resume it, or use another --out")
     return physics
-
 
 
 def start_of(args) -> Path | None:
