@@ -183,6 +183,29 @@ def test_the_seeds_plot_keeps_long_row_names_below_its_axes_on_lines_of_their_ow
     assert ax.get_window_extent().width >= 0.7 * fig.bbox.width
 
 
+def test_the_seeds_plot_draws_a_course_runs_curve_once_for_all_its_grounds():
+    """A course's run is a table row per ground it is judged on (rough ground, a block ahead), but it trained once:
+    the plot draws each run's curve once, named without the ground, and another run beside it as its own line."""
+    import results
+
+    from hopper_mjx.envs.curriculum import JUDGE_GROUNDS
+
+    args = {"task": "hop_terrain", "terrain": "course:seed=1"}
+    physics = list(results.physics_of(args).described().values())
+    records = [{"run": f"runs/{name}", "task": "hop_terrain", "algo": "ppo", "ground": ground, "config": config,
+                "curve": [(0.5, 10.0 + shift), (1.0, 20.0 + shift)], "physics": physics}
+               for name, config, shift in (("scan", [], 0.0), ("blind", ["observe_scan=false"], 5.0))
+               for ground in JUDGE_GROUNDS]
+    assert len(results.rows_of(records)) == 4  # the table: a row per run and ground
+    fig = results.figure(records)
+    assert_reads_alone(fig)
+    lines = fig.axes[0].get_lines()
+    assert sorted([float(y) for y in line.get_ydata()] for line in lines) == [[10.0, 20.0], [15.0, 25.0]]
+    labels = fig.axes[0].get_legend_handles_labels()[1]
+    assert len(labels) == 2 and not any("judged on" in label for label in labels)
+    assert any("observe_scan=false" in label for label in labels)
+
+
 def test_leg_energy_plot_says_what_its_sweeps_ran():
     import leg_energy
 
