@@ -1,5 +1,6 @@
 """The source holds no dead names: every module-level function, class and constant of the package is used
-somewhere (the package, the experiments, the tests) or documented (README, docs/). Pure Python."""
+somewhere (the package, the experiments, the tests) or documented (README, docs/); and the docs no dead links to a
+section. Pure Python."""
 
 import ast
 import re
@@ -50,3 +51,22 @@ def test_the_longest_first_order_names_test_files_that_exist():
 
     missing = [name for name in LONGEST_FIRST if not (ROOT / "tests" / name).is_file()]
     assert not missing and len(set(LONGEST_FIRST)) == len(LONGEST_FIRST), missing
+
+
+def heading_anchor(heading: str) -> str:
+    """The anchor GitHub gives a Markdown heading: lower case, punctuation but `-` and `_` dropped, spaces as `-`."""
+    return re.sub(r"[^\w\- ]", "", heading.strip().lower()).replace(" ", "-")
+
+
+def test_every_link_to_a_section_of_the_docs_finds_its_heading():
+    """A link `page.md#section` (or `#section` on its own page) in the README and docs/ names a heading that exists:
+    a heading renamed with its code (a module moved into a package) must take its links along."""
+    pages = [ROOT / "README.md", *sorted(ROOT.glob("docs/*.md"))]
+    anchors = {p.resolve(): {heading_anchor(h) for h in re.findall(r"^#+ (.*)$", p.read_text(), re.M)} for p in pages}
+    broken = []
+    for page in pages:
+        for target, anchor in re.findall(r"\]\(([^)#\s]*\.md)?#([^)\s]+)\)", page.read_text()):
+            linked = (page.parent / target).resolve() if target else page.resolve()
+            if linked in anchors and anchor not in anchors[linked]:
+                broken.append(f"{page.relative_to(ROOT)}: {target}#{anchor}")
+    assert not broken, "links to no heading:\n" + "\n".join(broken)
