@@ -38,7 +38,6 @@ from hopper_mjx import cli, registry
 from hopper_mjx.shell import process
 
 SWEEP = "sweep"  # the policy in the core
-JUDGED = ", judged on "  # a course's row: the ground it is judged on, after the row's name
 TRAINED = "sweep-trained"  # the same sweep on the physics the policy was trained on (`sweep --as-trained`)
 # Where a gap is over: the sweep on each part of the training physics alone (`sweep --as-trained=PART`), to say which.
 PARTS = {"timestep": "step", "solver": "solver cap"}
@@ -264,7 +263,7 @@ def rows_of(records: list[dict]) -> list[tuple[str, list[dict]]]:
             on = f", trained on a {group[2]}" if group[2] else ""
             several = len(grounds(mine)) > 1  # judged on several grounds (a course's): a row for each
             for ground in grounds(mine):
-                judged = f"{JUDGED}{ground}" if several else ""
+                judged = f", judged on {ground}" if several else ""
                 rows.append((f"{group[0]} × {group[1].upper()}{on}{said}{judged}",
                              [r for r in mine if r.get("ground", "flat") == ground]))
     return rows
@@ -354,14 +353,12 @@ def figure(records: list[dict]):
 
     fig, ax = plt.subplots(figsize=(7, 4.2))
     shared = [w for w in records[0]["physics"] if all(w in r["physics"] for r in records)]
-    # A course's run is a row per ground it is judged on, with one training curve: drawn once, named without the ground.
-    groups, drawn, run = [], set(), lambda r: r.get("run", id(r))
-    for name, rows in rows_of(records):
-        rows = [r for r in rows if run(r) not in drawn]
-        drawn.update(run(r) for r in rows)
-        if rows:
-            groups.append((name.split(JUDGED)[0], rows))
-    for colour, (name, rows) in zip(plt.rcParams["axes.prop_cycle"].by_key()["color"] * 4, groups):
+    # A course's run is a record per ground it is judged on, all with its one training curve: each run's first only,
+    # so that rows_of names its row without a ground.
+    first = {}
+    for r in records:
+        first.setdefault(r.get("run", id(r)), r)
+    for colour, (name, rows) in zip(plt.rcParams["axes.prop_cycle"].by_key()["color"] * 4, rows_of([*first.values()])):
         for i, r in enumerate(rows):  # a row of the table
             t, reward = zip(*r["curve"]) if r["curve"] else ((), ())
             own = "".join(f"; {w}" for w in r["physics"] if w not in shared)

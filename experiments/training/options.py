@@ -310,8 +310,7 @@ def start_params(args):
 
     from hopper_mjx.envs import policy
 
-    normaliser, params = checkpoint.load(policy.resolve(start))[:2]
-    return normaliser, params
+    return tuple(checkpoint.load(policy.resolve(start))[:2])
 
 
 def observations(args, physics) -> int:
