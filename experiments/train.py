@@ -50,7 +50,6 @@ def seed_runs(args) -> list[argparse.Namespace]:
             for s in range(args.seed, args.seed + args.seeds)]
 
 
-
 def main(argv=None) -> int:
     args = parser().parse_args(argv)
     jaxsetup.configure()
@@ -69,7 +68,6 @@ def main(argv=None) -> int:
         if code:
             return code
     return 0
-
 
 
 def train_and_report(args, physics) -> int:
@@ -113,7 +111,6 @@ def _train_and_report(args, physics) -> int:
         atomic_write_text(Path(args.out) / "evaluation.md", table + "\n")
         print(table)
     return 0
-
 
 
 if __name__ == "__main__":

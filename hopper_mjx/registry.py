@@ -78,8 +78,6 @@ TASK_REFERENCES = {
 }
 
 
-
-
 class Parameter(NamedTuple):
     """A robot parameter drawn per instance (`--randomize NAME=...`): the MuJoCo model field it sets,
     on which elements (variation.draw resolves them), its unit and the range a drawn value must lie in."""

@@ -68,7 +68,6 @@ def test_one_mjx_step_in_contact_equals_mujoco_c(mj_model):
     assert eng.freeze_fields == ("qpos", "qvel", "act", "qacc_warmstart")
 
 
-
 def test_each_engine_compiles_with_its_own_xla_emitters(mj_model):
     """The chain on a heightfield takes XLA:CPU's fusion emitters (faster there), the plane and mjx the classic
     ones; the chain wide vectors on either. (The core's terrain runs against MuJoCo C, in test_terrain_physics.py,

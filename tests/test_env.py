@@ -389,8 +389,6 @@ def test_env_and_metrics_falls_are_different_measures(mj_model):
     assert max(roll, pitch) < hops.FALL_ROLL_PITCH
 
 
-
-
 def test_on_the_course_each_episode_starts_on_a_tile_of_its_level_and_the_level_follows_the_last_episode():
     """The terrain curriculum (`envs.curriculum`): a first episode starts on the pad of a tile of the course's
     lower half, at z over the pad as at the origin; an episode that lasted moves up a level, one that fell down

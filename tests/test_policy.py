@@ -298,7 +298,6 @@ def test_a_damaged_policy_folder_is_one_line_naming_it(trained, tmp_path, capsys
     assert not npz.exists()
 
 
-
 def test_reading_a_policy_for_the_checks_leaves_jax_a_device_per_core(trained):
     """Every command checks its arguments, `policy:PATH` included, before it configures JAX for its run; reading
     the policy is then the process's first JAX computation, and JAX takes the device count only before that

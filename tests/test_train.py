@@ -270,7 +270,6 @@ def test_each_task_has_its_threshold():
         assert not meets(task, tracking_error=0.11) and not meets(task, apex_height=None)
 
 
-
 def _rows(**by_gravity):
     """Scan rows per gravity from (survival, apex rise m, drift m/s) triples, 10 hops each."""
     return {g: {"survival": s, "min_hops": 10, "apex_height": a, "tracking_error": e}
@@ -321,8 +320,6 @@ def test_the_selected_checkpoint_becomes_the_policy_and_the_choice_is_recorded(t
     for f in source.rglob("*"):
         if f.is_file():
             assert (out / "policy" / f.relative_to(source)).read_bytes() == f.read_bytes()
-
-
 
 
 def test_the_threshold_is_met_at_the_evaluation_gravities_and_the_policy_chosen_at_the_selection_ones(trained):

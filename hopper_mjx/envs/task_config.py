@@ -209,7 +209,6 @@ def decimation(layout: Layout, cfg: MonopedConfig) -> int:
     return steps
 
 
-
 def training_model(mj_model: mujoco.MjModel, cfg: MonopedConfig) -> mujoco.MjModel:
     """The model the environment steps: the configured timestep, MuJoCo's sensor stage off
     (signals come from the state), the constraint solver capped at the configured iterations."""

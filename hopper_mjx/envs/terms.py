@@ -22,8 +22,6 @@ NO_FLIGHT = -1e3
 DROPPING = -2e3
 
 
-
-
 def joint_targets(layout: Layout, cfg: MonopedConfig, stance: jax.Array, action: jax.Array) -> jax.Array:
     """Action in [-1, 1]³ -> joint position targets (rad), inside the joint ranges."""
     rng = jnp.asarray(layout.joint_range)
