@@ -62,3 +62,28 @@ def test_a_cache_entry_is_found_whole_or_not_at_all_while_it_is_written(monkeypa
     assert seen == [None]
     assert cache.get("program") == b"z" * 1000
     assert [p.name for p in tmp_path.iterdir()] == ["program-cache"]
+
+
+def test_the_cycle_collector_skips_the_libraries_and_still_frees_garbage_cycles():
+    """conftest's `jaxsetup.configure` froze what the process had imported (JAX among it) out of the cycle
+    collector's walks and raised its young generation's threshold; a garbage cycle made since is still freed by
+    the collector's own run, once that many new objects live."""
+    import gc
+    import weakref
+
+    assert gc.get_freeze_count() > 10_000  # JAX's and NumPy's modules, functions and types
+    threshold = gc.get_threshold()[0]
+    assert threshold == 10_000
+
+    class Node:
+        pass
+
+    gc.collect(0)  # an empty young generation to start from
+    cycle = Node()
+    cycle.itself = cycle  # reference counting alone never frees a cycle
+    freed = weakref.ref(cycle)
+    del cycle
+    alive = [[] for _ in range(threshold // 2)]
+    assert freed() is not None  # fewer new objects than the threshold: no collection yet (at 700 there was one)
+    alive += [[] for _ in range(threshold)]
+    assert freed() is None  # the collector ran by itself
