@@ -147,9 +147,10 @@ def configure(*, devices: int | None = None, cache_dir: Path | str | None = CACH
 
 def _collector_for_tracing() -> None:
     """Python's cycle collector tuned for tracing. A trace makes hundreds of thousands of objects that live on
-    (jaxprs, their equations, avals, cached traces), and each full collection walks every live object again:
-    a sixth of a test process's time went to it. The libraries imported so far are frozen out of the walks (they
-    are never garbage), and the young generation is collected every 10,000 new objects, not every 700."""
+    (jaxprs, their equations, avals, cached traces), and each full collection walks every live object again
+    (a sixth of two core test files' time with a warm cache, docs/performance.md). The libraries imported so far
+    are frozen out of the walks (they are never garbage), and the young generation is collected every 10,000 new
+    objects, not every 700."""
     import gc
 
     gc.freeze()
