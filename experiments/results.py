@@ -409,7 +409,7 @@ def build(paths: list[Path], out: Path, *, do_sweep: bool, num: int, duration: f
 def main(argv=None) -> int:
     args = parser().parse_args(argv)
     try:
-        cli.check_writable("--out", args.out)
+        cli.check_writable("--out", args.out, suffixes=(".md",))
         if args.num < 1 or not args.duration > 0:
             raise ValueError("--num must be >= 1 and --duration > 0 s")
         runs_of(args.runs)

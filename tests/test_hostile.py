@@ -165,6 +165,7 @@ def prepare_hostile(folder: Path) -> None:
 SIM = ["--out", "o.npz"]
 SWEEP = ["gravity", "--out", "s"]
 TRAIN = "experiments/train.py"
+RESULTS = "experiments/results.py"
 
 # (command, arguments, what the one line must say)
 CASES = [
@@ -216,6 +217,9 @@ CASES = [
     ("sweep", ["gravity", "--values", "1.62,3.71,1.62", "--out", "s"], "gravity values must differ"),
     ("sweep", ["gains", "--param", "speed_gain", "--values", "0.1,0.1", "--out", "s"], "--values must differ"),
     (TRAIN, ["--out", "run", "--timesteps", "1000"], "run/metrics.json is damaged"),
+    (RESULTS, ["run", "--out", "r.md"], "run/metrics.json: cannot be read"),
+    # results.py writes Markdown (and its .json and .png beside it): another suffix would hide it under that name
+    (RESULTS, ["run", "--out", "r.txt"], "--out r.txt: this tool writes .md files; give a name ending in .md"),
     (TRAIN, ["--out", "new", "--gravity-range", "nan,9.81"], "--gravity-range"),
     (TRAIN, ["--out", "new", "--episode-length", "-5"], "--episode-length"),
     (TRAIN, ["--out", "new", "--num-envs", "0"], "--num-envs"),
