@@ -36,6 +36,7 @@ from pathlib import Path
 
 from hopper_mjx import cli, registry
 from hopper_mjx.shell import process
+from hopper_mjx.shell.files import is_device
 
 SWEEP = "sweep"  # the policy in the core
 TRAINED = "sweep-trained"  # the same sweep on the physics the policy was trained on (`sweep --as-trained`)
@@ -410,6 +411,9 @@ def main(argv=None) -> int:
     args = parser().parse_args(argv)
     try:
         cli.check_writable("--out", args.out, suffixes=(".md",))
+        if is_device(args.out):  # the table's .json and .png are named after it, beside it
+            raise ValueError(f"--out {args.out}: results.py writes its .json and .png beside the table, named after "
+                             "it; give a file name ending in .md")
         if args.num < 1 or not args.duration > 0:
             raise ValueError("--num must be >= 1 and --duration > 0 s")
         runs_of(args.runs)

@@ -220,6 +220,7 @@ CASES = [
     (RESULTS, ["run", "--out", "r.md"], "run/metrics.json: cannot be read"),
     # results.py writes Markdown (and its .json and .png beside it): another suffix would hide it under that name
     (RESULTS, ["run", "--out", "r.txt"], "--out r.txt: this tool writes .md files; give a name ending in .md"),
+    (RESULTS, ["run", "--out", "/dev/null"], "--out /dev/null: results.py writes its .json and .png beside the table"),
     (TRAIN, ["--out", "new", "--gravity-range", "nan,9.81"], "--gravity-range"),
     (TRAIN, ["--out", "new", "--episode-length", "-5"], "--episode-length"),
     (TRAIN, ["--out", "new", "--num-envs", "0"], "--num-envs"),
