@@ -83,6 +83,25 @@ def run(args, batch: Scenario | None = None) -> dict[str, np.ndarray]:
                   batch.controls(sim.mj_model), sensors)
 
 
+def apex_note(batch: Scenario) -> str | None:
+    """A line saying at which gravities the gait's commanded rise (--height) is more than the motors can give
+    (`hardware.bound`: the model's robot, the knee's best push), so its robots hop lower or fall; None where
+    every gravity's bound holds it, or the controller hops to no height."""
+    from hopper_mjx import registry
+
+    gravities = sorted({float(g) for g in np.round(np.linalg.norm(batch.gravity, axis=1), 9) if g > 0})
+    if batch.controller not in registry.GAIT_CONTROLLERS or not gravities:
+        return None
+    from hopper_mjx.hardware import bound
+
+    past = bound.apex_bounds(batch.physics.mj_model, batch.physics.motor, gravities, batch.height)
+    over = ", ".join(f"{rise:.2f} m at g = {g:g} m/s²" for g, rise in past.items() if batch.height > rise)
+    if not over:
+        return None
+    return (f"note: --height {batch.height:g} m is a higher rise than the {batch.physics.motor} motors can give: at "
+            f"most {over} (their energy bound, docs/sweeps.md); its robots will hop lower, or fall")
+
+
 def run_live(args, batch: Scenario, stream) -> dict[str, np.ndarray]:
     """The same batch played live at --speed-factor x real time and streamed to Foxglove as it
     plays; returns the arrays `run` saves, joined from the played chunks."""
@@ -133,6 +152,9 @@ def main(argv=None) -> int:
         cli.check_writable("--out", args.out, suffixes=(".npz", ""))  # a bare name: NumPy's file as named
         batch = cli.check_batch(args)
         cli.check_rates("--rate", sensor_config(args), batch, args.duration)
+        note = apex_note(batch)
+        if note:
+            print(note, flush=True)
         with foxglove.listening(args, live.spread(len(batch.gravity), live.SHOWN)) as stream:
             jaxsetup.configure()
             saved = run(args, batch) if stream is None else run_live(args, batch, stream)

@@ -119,3 +119,25 @@ def test_a_bound_refuses_what_bounds_nothing(model, leg):
     m.actuator_ctrllimited[lay.actuator_of_joint[bound.KNEE]] = 0
     with pytest.raises(ValueError, match="no effort limit"):
         bound.knee_motor(m, "ideal")
+
+
+def test_a_command_past_the_bound_is_named_at_the_gravities_it_passes(model):
+    """`apex_bounds`: nothing for a rise within every gravity's bound; each gravity's bound once the rise passes the
+    lowest (the highest gravity's). simulate's note names the gravities whose bound the gait's --height passes,
+    with their bounds, and none for a controller that hops to no height."""
+    from hopper_mjx.scenario import Physics, Scenario
+    from hopper_mjx.sim import gravity_vectors
+    from hopper_mjx.simulate import apex_note
+
+    per_g = bound.bounds(model, "ideal", (1.62, 9.81))
+    earth, moon = per_g[9.81].apex_rise, per_g[1.62].apex_rise
+    assert 0.1 < earth < moon  # the default command is within it; lower gravity, higher bound
+    assert bound.apex_bounds(model, "ideal", (1.62, 9.81), 0.99 * earth) == {}
+    between = (earth + moon) / 2  # past Earth's bound, within the Moon's
+    assert bound.apex_bounds(model, "ideal", (1.62, 9.81), between) == {g: b.apex_rise for g, b in per_g.items()}
+    batch = Scenario(gravity_vectors([9.81, 1.62]), physics=Physics(), controller="raibert", height=between)
+    note = apex_note(batch)
+    assert note.startswith(f"note: --height {between:g} m") and f"at most {earth:.2f} m at g = 9.81 m/s² (" in note
+    assert "1.62" not in note
+    assert apex_note(Scenario(gravity_vectors([9.81, 1.62]), physics=Physics(), controller="raibert")) is None
+    assert apex_note(Scenario(gravity_vectors([9.81]), physics=Physics(), controller="hold", height=between)) is None

@@ -178,6 +178,19 @@ def bounds(mj_model: mujoco.MjModel, motor: str, gravity) -> dict[float, JumpBou
     return {float(g): jump_bound(leg, knee, float(g), standing) for g in gravity}
 
 
+def apex_bounds(mj_model: mujoco.MjModel, motor: str, gravity, height: float) -> dict[float, float]:
+    """{g: the bound's apex rise, m} at each of `gravity` (> 0) when a commanded rise of `height` m asks for more
+    than `motor` gives at one of them at least; {} when it asks for no more, or where the knee's motor bounds
+    nothing (its URDF gives no limit). The highest gravity's bound is the lowest: one integration tells."""
+    top = max(gravity)
+    try:
+        if height <= bounds(mj_model, motor, (top,))[top].apex_rise:
+            return {}
+    except ValueError:
+        return {}
+    return {g: b.apex_rise for g, b in bounds(mj_model, motor, gravity).items()}
+
+
 def tucked_drop(mj_model: mujoco.MjModel) -> float:
     """m from the base origin down to the foot's bottom with the leg drawn up as far as it goes (hips straight,
     the knee at its lower stop): the least the base must be above a block for the foot to pass over it."""

@@ -69,13 +69,8 @@ def apex_bounds(spec: SweepSpec) -> dict[str, dict[float, float]]:
 def _apex_bounds(spec: SweepSpec) -> dict[str, dict[float, float]]:
     from hopper_mjx.hardware import bound
 
-    m = spec.physics.mj_model
-    try:  # the highest gravity's bound is the lowest: one integration tells whether any is asked past
-        if spec.height <= bound.bounds(m, spec.physics.motor, (max(spec.gravity),))[max(spec.gravity)].apex_rise:
-            return {}
-    except ValueError:
-        return {}
-    return {"apex_bound": {g: b.apex_rise for g, b in bound.bounds(m, spec.physics.motor, spec.gravity).items()}}
+    past = bound.apex_bounds(spec.physics.mj_model, spec.physics.motor, spec.gravity, spec.height)
+    return {"apex_bound": past} if past else {}
 
 
 def apex_lines(spec: SweepSpec, groups: list[dict], bounds: dict) -> list[str]:
