@@ -174,21 +174,28 @@ def jump_bound(leg: Stroke, motor: KneeMotor, gravity: float, standing: float) -
 
 def bounds(mj_model: mujoco.MjModel, motor: str, gravity) -> dict[float, JumpBound]:
     """{g: its JumpBound} for each gravity, the model's robot with `motor` (a registry.MOTORS kind)."""
-    knee, leg, standing = knee_motor(mj_model, motor), stroke(mj_model), standing_height(mj_model)
+    knee, leg, standing = _robot(mj_model, motor)
     return {float(g): jump_bound(leg, knee, float(g), standing) for g in gravity}
+
+
+def _robot(mj_model: mujoco.MjModel, motor: str) -> tuple[KneeMotor, Stroke, float]:
+    """What every gravity's bound is integrated over: the knee's motor, the leg's stroke (sampled in MuJoCo C, the
+    costly part) and the standing height."""
+    return knee_motor(mj_model, motor), stroke(mj_model), standing_height(mj_model)
 
 
 def apex_bounds(mj_model: mujoco.MjModel, motor: str, gravity, height: float) -> dict[float, float]:
     """{g: the bound's apex rise, m} at each of `gravity` (> 0) when a commanded rise of `height` m asks for more
     than `motor` gives at one of them at least; {} when it asks for no more, or where the knee's motor bounds
-    nothing (its URDF gives no limit). The highest gravity's bound is the lowest: one integration tells."""
-    top = max(gravity)
+    nothing (its URDF gives no limit). The highest gravity's bound is the lowest: one integration tells. The robot
+    is sampled once for all of them."""
     try:
-        if height <= bounds(mj_model, motor, (top,))[top].apex_rise:
+        knee, leg, standing = _robot(mj_model, motor)
+        if height <= jump_bound(leg, knee, float(max(gravity)), standing).apex_rise:
             return {}
     except ValueError:
         return {}
-    return {g: b.apex_rise for g, b in bounds(mj_model, motor, gravity).items()}
+    return {float(g): jump_bound(leg, knee, float(g), standing).apex_rise for g in gravity}
 
 
 def tucked_drop(mj_model: mujoco.MjModel) -> float:
