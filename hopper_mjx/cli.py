@@ -99,12 +99,15 @@ def add_batch_options(p: argparse.ArgumentParser, *, gravity=(9.81, 3.71, 1.62),
                         "(e.g. hopper_mjx/model/low_gravity.world)")
     p.set_defaults(default_gravity=list(gravity))
     p.add_argument("--num", type=int, default=1, help="instances per gravity value or world")
-    p.add_argument("--duration", type=float, default=duration, help="simulated time, s")
+    p.add_argument("--duration", type=float, default=duration,
+                   help="simulated time, s; a run is whole samples of every stream, and a note says when that "
+                        "rounds it")
     p.add_argument("--controller", default="hold",
                    help=f"{registry.listed(registry.CONTROLLERS)} or {registry.POLICY_PREFIX}PATH (a policy trained "
                         "by experiments/train.py)")
     p.add_argument("--height", type=float, default=0.10,
-                   help="raibert, policy: commanded apex rise of the base above its standing height, m")
+                   help="raibert, policy: commanded apex rise of the base above its standing height, m; a note "
+                        "names each gravity where a gait's rise passes the motors' energy bound")
     p.add_argument("--speed", type=floats("--speed"), default=[0.0, 0.0],
                    help="raibert, policy: commanded horizontal speed VX,VY in m/s")
     p.add_argument("--seed", type=int, default=0)
@@ -362,11 +365,12 @@ def check_batch(args) -> Scenario:
 STREAM_FLOATS = {"state": 19, "imu": 10, "odom": 13, "contact": 7}
 
 
-def check_rates(flags: str | dict, sensors, batch: Scenario, duration: float | None = None) -> None:
+def check_rates(flags: str | dict, sensors, batch: Scenario, duration: float | None = None) -> str | None:
     """Every stream's rate divides the batch's physics rate; `flags` names the option that set the rates (one for
     all streams), or {stream: option} (imu, odom, contact, state), so that a refusal names what the user typed
     and the rates that would work. With a `duration`, the run must fit: its steps in one compiled loop, its
-    recording in this machine's memory (`budget`)."""
+    recording in this machine's memory (`budget`); returns the note to print where the run, whole samples of
+    every stream, is not `duration` s long."""
     rate = round(1 / batch.timestep)
     for stream in STREAM_FLOATS:
         hz = getattr(sensors, f"{stream}_rate")
@@ -381,6 +385,8 @@ def check_rates(flags: str | dict, sensors, batch: Scenario, duration: float | N
         steps = budget.check_steps("--duration", duration, batch.timestep)
         recorded = sum(STREAM_FLOATS[s] * steps / p for s, p in periods.items())
         budget.check_memory("--num, --duration", batch.n, recorded)
+        return budget.duration_note(duration, batch.timestep, sensors.whole(batch.timestep))
+    return None
 
 
 def check_whole_periods(option: str, steps: int, timestep: float) -> None:

@@ -159,7 +159,9 @@ def check_batch(args) -> Scenario:
     if args.video is None:
         return batch
     cli.check_indices("--instance", [args.instance], len(batch.gravity))
-    cli.check_rates("--fps", video_sensors(args), batch, args.duration)
+    note = cli.check_rates("--fps", video_sensors(args), batch, args.duration)
+    if note:
+        print(note, flush=True)
     return batch
 
 

@@ -34,7 +34,7 @@ from hopper_mjx.hardware.pushes import Pushes
 from hopper_mjx.hardware.sensor_noise import FIGURES, Sensing, SensorState
 from hopper_mjx.model import world
 from hopper_mjx.model.robot import Robot
-from hopper_mjx.shell import programs
+from hopper_mjx.shell import budget, programs
 from hopper_mjx.step import Plant, actuate, advance
 from hopper_mjx.terrain import from_model
 from hopper_mjx.variation import draw
@@ -86,8 +86,7 @@ def split_rollout_key(key: jax.Array) -> tuple[jax.Array, jax.Array]:
 
 def steps_for(duration: float, timestep: float, sensors: signals.SensorConfig) -> int:
     """Physics steps closest to `duration` s that hold a whole number of every stream's period (at least one)."""
-    whole = sensors.whole(timestep)
-    return max(1, int(round(duration / timestep / whole))) * whole
+    return budget.whole_steps(duration, timestep, sensors.whole(timestep))
 
 
 def _check_gravity(gravity) -> np.ndarray:

@@ -505,3 +505,26 @@ def test_a_gravity_sweep_asked_past_the_motors_bound_reports_the_highest_hop_bes
     assert "landing tilt" in tilt.get_ylabel()
     np.testing.assert_allclose(tilt.lines[0].get_ydata(), [12.0, np.nan, 4.25])
     assert any(np.allclose(line.get_ydata(), 9.7) for line in tilt.lines)
+
+
+def test_a_duration_between_samples_runs_whole_samples_and_says_so(tmp_path):
+    """A sweep runs whole 10 ms samples of its streams, as its runner steps them: --duration 0.015 runs 0.02 s, and
+    its spec (so its rows, folder and report) says 0.02 s, with a note naming both; 10 s and 3 s stay, silently."""
+    from hopper_mjx.shell import budget
+    from hopper_mjx.sim import steps_for
+    from hopper_mjx.sweep import runner
+    from hopper_mjx.sweep.__main__ import check, parser
+
+    def spec(duration):
+        args = parser().parse_args(["gravity", "--gravity", "9.81", "--duration", duration, "--out",
+                                    str(tmp_path / duration)])
+        return check(args)[0][0]
+
+    assert [spec(d).duration for d in ("0.015", "1e-9", "3", "10")] == [0.02, 0.01, 3.0, 10.0]
+    assert steps_for(spec("0.015").duration, 1e-3, runner.recorded(1e-3)) == 20 == steps_for(0.015, 1e-3,
+                                                                                              runner.recorded(1e-3))
+    assert budget.duration_note(0.015, 1e-3, 10) == ("note: --duration 0.015 s runs 0.02 s (20 steps of 1 ms): whole "
+                                                     "samples of every stream, one each 10 ms")
+    assert budget.duration_note(1e-9, 5e-4, 20) == ("note: --duration 1e-09 s runs 0.01 s (20 steps of 0.5 ms): "
+                                                    "whole samples of every stream, one each 10 ms")
+    assert budget.duration_note(10.0, 1e-3, 10) is None and budget.duration_note(3.0, 1e-3, 20) is None

@@ -44,6 +44,22 @@ def check_steps(flags: str, duration: float, timestep: float) -> int:
     return int(steps)
 
 
+def whole_steps(duration: float, timestep: float, whole: int) -> int:
+    """The physics steps of a run of `duration` s: the closest number that holds whole samples of every stream
+    (`whole` steps hold one of each), and at least one."""
+    return max(1, int(round(duration / timestep / whole))) * whole
+
+
+def duration_note(duration: float, timestep: float, whole: int) -> str | None:
+    """A line saying how long a run of `duration` s really runs (`whole_steps`), where that is not `duration`."""
+    steps = whole_steps(duration, timestep, whole)
+    ran = steps * timestep
+    if abs(ran - duration) <= 1e-9 * max(duration, 1.0):
+        return None
+    return (f"note: --duration {duration:g} s runs {ran:g} s ({steps:,} steps of {timestep * 1e3:g} ms): whole "
+            f"samples of every stream, one each {whole * timestep * 1e3:g} ms")
+
+
 def check_memory(flags: str, n: int, recorded_floats: float = 0.0, *, states: int = 1, held_floats: float = 0) -> None:
     """`n` instances each recording `recorded_floats` values and holding `held_floats` more (a terrain's
     heights), all held `states` times (e.g. by a benchmark's two sides): refused when they would not fit in

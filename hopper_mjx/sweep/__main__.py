@@ -28,7 +28,7 @@ from hopper_mjx import cli, registry
 from hopper_mjx.shell import budget, jaxsetup, process
 from hopper_mjx.shell.checks import DEFAULT_TIMESTEP, OutputError
 from hopper_mjx.sweep import folder
-from hopper_mjx.sweep.grid import BAND_KINDS, DEFAULT_GRAVITY, KICK, TERRAIN_KINDS
+from hopper_mjx.sweep.grid import BAND_KINDS, DEFAULT_GRAVITY, KICK, TERRAIN_KINDS, sample_steps
 
 PARAM = {"obstacle": "obstacle_height", "gaps": "gap_width", "terrain": "roughness"}  # a terrain sweep's value column
 VALUES = {"gains": "--values", "param": "--values", "obstacle": "--heights", "gaps": "--widths",
@@ -118,7 +118,8 @@ def parser() -> argparse.ArgumentParser:
                                 "and solver caps) instead of the core's, to measure what changes between the two; "
                                 "=timestep or =solver takes that part alone (the other stays the core's)")
         s.add_argument("--num", type=int, default=num, help=f"replicates per grid point (default {num})")
-        s.add_argument("--duration", type=float, default=duration, help="simulated seconds per instance")
+        s.add_argument("--duration", type=float, default=duration,
+                       help="simulated seconds per instance, whole 10 ms samples (a note says when it rounds)")
         s.add_argument("--height", type=float, default=0.10,
                        help="commanded apex rise over standing height, m; above the motors' bound (gravity sweeps), "
                        "the table and plot give each gravity's highest hop beside it")
@@ -194,10 +195,11 @@ def check(args):
     if len(set(names)) != len(names):
         raise ValueError(f"--controllers lists one twice: {args.controllers}")
     chunk = check_size(args, len(gravity))
+    duration = SweepSpec.whole_duration(args.duration, physics.timestep)
     specs = []
     for name in names:
         kind = args.kind if args.kind != "compare" else "gravity"
-        spec = SweepSpec(kind=kind, gravity=gravity, num=args.num, duration=args.duration, height=args.height,
+        spec = SweepSpec(kind=kind, gravity=gravity, num=args.num, duration=duration, height=args.height,
                          speed=tuple(args.speed), seed=args.seed, kick=args.kick, chunk=chunk, physics=physics,
                          param=PARAM.get(kind, getattr(args, "param", None)), controller=name,
                          values=tuple(swept_values(args)),
@@ -399,6 +401,9 @@ def main(argv=None) -> int:
         specs, out = check(args)
     except ValueError as err:
         return cli.fail(err)
+    if specs[0].duration != args.duration:  # the run is whole samples of its streams: say what it runs
+        timestep = specs[0].physics.timestep
+        print(budget.duration_note(args.duration, timestep, sample_steps(timestep)), flush=True)
     jaxsetup.configure()
     from hopper_mjx.sweep import report
     if args.coordinator:

@@ -20,7 +20,7 @@ import numpy as np
 
 from hopper_mjx import registry
 from hopper_mjx.scenario import Physics
-from hopper_mjx.shell import checks
+from hopper_mjx.shell import budget, checks
 from hopper_mjx.variation.spec import NAMES, Dist, Spec
 
 PLANETS = {1.62: "Moon", 3.71: "Mars", 9.81: "Earth"}
@@ -30,11 +30,17 @@ DEFAULT_GRAVITY = (0.5, 1.0, 1.62, 2.5, 3.71, 5.0, 7.5, 9.81, 12.0)  # m/s²
 # every gravity (README). Robustness is measured with --kick 0.3: 96.0 % survive over 1-12 m/s²
 # (docs/control.md).
 KICK = 0.03
+SAMPLE_HZ = 100  # a sweep's IMU and odometry rate (contact and state: the physics rate); a run is whole samples
 TERRAIN_KINDS = ("obstacle", "gaps", "terrain")  # sweeps over a terrain's parameter: one ground per value
 # The terrain sweeps whose ground holds one band across the way to get past, and what the band is called.
 BAND_KINDS = {"obstacle": "block", "gaps": "gap"}
 PASSED = {"obstacle": "cleared", "gaps": "crossed"}  # what getting past a band sweep's band is called
 KINDS = ("gravity", "gains", "param", *TERRAIN_KINDS)
+
+
+def sample_steps(timestep: float) -> int:
+    """Physics steps that hold one sample of every stream a sweep records."""
+    return round(1 / (SAMPLE_HZ * timestep))
 
 
 @dataclass(frozen=True)
@@ -53,6 +59,14 @@ class SweepSpec:
     controller: str = "raibert"  # or policy:PATH, a policy trained by experiments/train.py
     physics: Physics = Physics()  # the robot, its engine (and what else compiles), the same for every grid point
     grounds: tuple[str, ...] = ()  # obstacle / terrain sweeps: the --terrain spec of each of `values`
+
+    @staticmethod
+    def whole_duration(duration: float, timestep: float) -> float:
+        """The s a sweep of `duration` s runs: whole samples of its streams (`budget.whole_steps`), as its runner
+        steps it, so that its rows and report say the time run; `duration` itself where it cannot run at all."""
+        if not (math.isfinite(duration) and duration > 0):
+            return duration  # refused with the rest, below
+        return budget.whole_steps(duration, timestep, sample_steps(timestep)) * timestep
 
     def __post_init__(self):
         if self.kind not in KINDS:

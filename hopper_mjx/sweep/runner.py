@@ -30,7 +30,7 @@ from hopper_mjx.shell.files import atomic_write
 from hopper_mjx.sim import Sim, gravity_vectors, steps_for
 from hopper_mjx.sweep import limits
 from hopper_mjx.sweep.folder import chunk_path, claim, read_chunk
-from hopper_mjx.sweep.grid import BAND_KINDS, Instances, SweepSpec, expand
+from hopper_mjx.sweep.grid import BAND_KINDS, SAMPLE_HZ, Instances, SweepSpec, expand
 from hopper_mjx.variation import draw
 
 COLUMNS = ("apex_height", "flight_rise", "flight_time", "ballistic_flight_time", "stance_time", "hop_period",
@@ -52,7 +52,8 @@ def recorded(timestep: float, torque: bool = False) -> signals.SensorConfig:
     the step, short flights too), the IMU and odometry at 100 Hz; the joints' torques where its metrics read them
     (a block or gaps sweep's)."""
     rate = 1.0 / timestep
-    return signals.SensorConfig(imu_rate=100, odom_rate=100, contact_rate=rate, state_rate=rate, torque=torque)
+    return signals.SensorConfig(imu_rate=SAMPLE_HZ, odom_rate=SAMPLE_HZ, contact_rate=rate, state_rate=rate,
+                                torque=torque)
 
 
 def columns(spec: SweepSpec) -> tuple[str, ...]:
