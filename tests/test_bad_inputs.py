@@ -124,8 +124,8 @@ CASES = [
      "--randomize: action_delay drew"),
     ("sweep", ["param", "--param", "bogus", "--values", "1", "--out", "s"], "unknown --param 'bogus'; choose a "
                                                                               "Raibert gain"),
-    ("sweep", ["param", "--param", "kp_scale", "--values=-1,1", "--out", "s"], "--values: kp_scale drew a value "
-                                                                                    "of -1 for instance 0"),
+    ("sweep", ["param", "--param", "kp_scale", "--values=-1,1", "--out", "s"], "--values: kp_scale=-1 sets a value "
+                                                                                    "of -1; it must be >= 0"),
     # Terrain specs: a name, its keys and their values, the heightmap's file, the grid's memory at N.
     ("simulate", ["--terrain", "hills"], "--terrain: unknown terrain 'hills'; choose from: flat, rough, steps,"),
     ("simulate", ["--terrain", "rough:amp=0.03,bumps=2"], "--terrain: rough has no key 'bumps'; it takes amp,"),
@@ -175,11 +175,12 @@ CASES = [
     ("simulate", ["--randomize", "base_mass=normal(5,5)", "--num", "16"],
      "--randomize: base_mass drew a value of -"),
     ("simulate", ["--randomize", "foot_friction=-0.2..0.5", "--num", "16"],
-     "--randomize: foot_friction drew a value of -0."),
-    ("render", ["--video", "h.gif", "--randomize", "base_mass=0"], "--randomize: base_mass drew a value of 0 kg"),
-    ("simulate", ["--randomize", "thigh_length=0.2..2", "--num", "16"], "--randomize: thigh_length drew a value of "),
+     "--randomize: foot_friction=uniform(-0.2,0.5) can draw a value of -0.2; it must be >= 0 and <= 10"),
+    ("render", ["--video", "h.gif", "--randomize", "base_mass=0"], "--randomize: base_mass=0 sets a value of 0 kg"),
+    ("simulate", ["--randomize", "thigh_length=0.2..2", "--num", "16"],
+     "--randomize: thigh_length=uniform(0.2,2) can draw a value of 2 m; it must be > 0 and <= 1"),
     ("simulate", ["--randomize", "foot_radius=0", "--num", "4"],
-     "--randomize: foot_radius drew a value of 0 m for instance 0; it must be > 0 and <= 0.1"),
+     "--randomize: foot_radius=0 sets a value of 0 m; it must be > 0 and <= 0.1"),
     ("simulate", ["--randomize", "shank_length=uniform(0.01,0.02),thigh_length=0.05", "--num", "4"],
      "--randomize: the leg of instance 0 (thigh 0.05 m, shank 0.0"),
     ("ros.record", ["--randomize", "base_mass=5,base_mass=6"], "--randomize: base_mass given twice"),

@@ -263,8 +263,8 @@ CASES = [
     ("ros.record", ["--scenario", "itself.yaml", "--out", "r.bag"], "--scenario itself.yaml: not YAML (it expands"),
     ("simulate", ["--scenario", "scenario.yaml", *SIM], "--scenario scenario.yaml: is a folder, not a file"),
     # randomisation, motors, delays and pushes
-    ("simulate", ["--randomize", "base_mass=1e300", *SIM], "--randomize: base_mass drew a value of 1e+300 kg for "
-                                                           "instance 0; it must be > 0 (and within ±3.4e+38"),
+    ("simulate", ["--randomize", "base_mass=1e300", *SIM], "--randomize: base_mass=1e+300 sets a value of 1e+300 kg; "
+                                                           "it must be > 0 (and within ±3.4e+38"),
     ("simulate", ["--randomize", "body_mas=scale(0.9,1.1)", *SIM], "--randomize: unknown parameter 'body_mas'"),
     ("simulate", ["--randomize", "foot_friction=uniform(nan,1)", *SIM], "uniform(nan,1) has a non-finite bound"),
     ("simulate", ["--randomize", "body_mass=scale(1e30,1e30)", *SIM],

@@ -77,18 +77,26 @@ def draw(spec: Spec, mj_model: mujoco.MjModel, n: int, seed: int) -> dict[str, n
         at = nominal[index]
         # One draw per element (per row; per row and axis for the centre of mass), spread over its columns.
         shape = at.shape[:1] + (1,) if nominal.ndim == 2 and par.field not in _PER_AXIS else at.shape
-        drawn = dist.draw(spec.rng(seed, name), np.ones(shape), n)
-        if par.length:  # the row's length: drawn (or scaled from the nominal length), the direction kept
-            length = np.linalg.norm(at, axis=-1, keepdims=True)
+        if par.length:
             _check_link(mj_model, name, par)
-            drawn = length * drawn if dist.kind == "scale" else drawn
-            _check_range(name, par, drawn)
-            field[(slice(None), *index)] = at / length * drawn
-            continue
-        drawn = at * drawn if dist.kind == "scale" else np.broadcast_to(drawn, (n, *at.shape))
+        ends = dist.ends(shape)
+        if ends is not None:  # refused whatever the draws: the same spec must not pass at one --num and fail at another
+            _check_range(name, par, _field_values(par, dist, at, ends), dist)
+        drawn = _field_values(par, dist, at, dist.draw(spec.rng(seed, name), np.ones(shape), n))
         _check_range(name, par, drawn)
-        field[(slice(None), *index)] = at + drawn if par.offset else drawn
+        if par.length:  # the row's length: drawn (or scaled from the nominal length), the direction kept
+            field[(slice(None), *index)] = at / np.linalg.norm(at, axis=-1, keepdims=True) * drawn
+        else:
+            field[(slice(None), *index)] = at + drawn if par.offset else drawn
     return values
+
+
+def _field_values(par: registry.Parameter, dist, at: np.ndarray, raw: np.ndarray) -> np.ndarray:
+    """The values `raw` draws of `dist` give the elements `at` (nominal values): a factor times the nominal value
+    (or a length row's length), else the draw itself, one per element."""
+    if par.length:
+        return np.linalg.norm(at, axis=-1, keepdims=True) * raw if dist.kind == "scale" else raw
+    return at * raw if dist.kind == "scale" else np.broadcast_to(raw, (raw.shape[0], *at.shape))
 
 
 def _check_link(m: mujoco.MjModel, name: str, par: registry.Parameter) -> None:
@@ -155,6 +163,9 @@ def draw_controls(spec: Spec, mj_model: mujoco.MjModel, n: int, seed: int) -> di
     for name, dist in spec.controls.items():
         par = registry.CONTROL_PARAMETERS[name]
         nominal = nominal_control(name, lay)
+        ends = dist.ends(nominal.shape)
+        if ends is not None:
+            _check_range(name, par, nominal * ends if dist.kind == "scale" else ends, dist)
         drawn = dist.draw(spec.rng(seed, name), np.ones(nominal.shape), n)
         drawn = nominal * drawn if dist.kind == "scale" else drawn
         _check_range(name, par, drawn)
@@ -188,7 +199,10 @@ def _labels(m: mujoco.MjModel, elements: str, at: list[int]) -> list[str]:
 FLOAT32_MAX = float(np.finfo(np.float32).max)
 
 
-def _check_range(name: str, par: registry.Parameter | registry.ControlParameter, drawn: np.ndarray) -> None:
+def _check_range(name: str, par: registry.Parameter | registry.ControlParameter, drawn: np.ndarray,
+                 dist=None) -> None:
+    """Every value of `drawn` within the parameter's range; with `dist`, `drawn` are its least and greatest draws,
+    and the refusal names the distribution."""
     high = min(par.high, FLOAT32_MAX)  # the core computes in float32: a larger value would be inf there
     low_bad = drawn <= par.low if par.open_low else drawn < par.low
     bad = low_bad | (drawn > high) | ~np.isfinite(drawn) | (drawn < -FLOAT32_MAX)
@@ -201,7 +215,11 @@ def _check_range(name: str, par: registry.Parameter | registry.ControlParameter,
             upper += f" (and within ±{FLOAT32_MAX:.3g}: the core computes in float32)"
         kind = "an offset" if par.offset else "a value"
         unit = "" if par.unit == "1" else f" {par.unit}"  # a factor or a friction coefficient has none
-        raise ValueError(f"{name} drew {kind} of {value:g}{unit} for instance {i}; it must be {lower}{upper}")
+        if dist is None:
+            said = f"{name} drew {kind} of {value:g}{unit} for instance {i}"
+        else:
+            said = f"{name}={dist} {'sets' if dist.kind == 'fixed' else 'can draw'} {kind} of {value:g}{unit}"
+        raise ValueError(f"{said}; it must be {lower}{upper}")
 
 
 def instance_model(mj_model: mujoco.MjModel, values: dict[str, np.ndarray], i: int) -> mujoco.MjModel:

@@ -86,6 +86,14 @@ class Dist(NamedTuple):
             return math.inf if self.b > 0 else self.a
         return self.b * nominal if self.kind == "scale" else self.b
 
+    def ends(self, shape: tuple[int, ...]) -> np.ndarray | None:
+        """(2, *shape): the least and the greatest draws, as `draw` gives n = 2 of them; None for a normal, which
+        can draw any value."""
+        if self.kind == "normal":
+            return None
+        low, high = (self.a, self.a) if self.kind == "fixed" else (self.a, self.b)
+        return np.stack([np.full(shape, low), np.full(shape, high)])
+
     def __str__(self) -> str:
         return f"{self.a:g}" if self.kind == "fixed" else f"{self.kind}({self.a:g},{self.b:g})"
 
