@@ -230,6 +230,11 @@ CASES = [
     (TRAIN, ["--out", "/proc/hopper_mjx_no/run"], "--out /proc/hopper_mjx_no"),
     (TRAIN, ["--out", "/proc/hopper_mjx_no/run", "--seeds", "2"], "--out /proc/hopper_mjx_no"),
     ("sweep", ["gravity", "--out", "/proc/hopper_mjx_no/s"], "--out /proc/hopper_mjx_no"),
+    # a file there: refused before the run, where it ended in a traceback when the file was written
+    ("simulate", ["--gravity", "9.81", "--num", "1", "--duration", "0.05", "--out", "/proc/x.npz"],
+     "--out /proc/x.npz: cannot write in /proc"),
+    ("model", ["--export", "/proc/m.xml"], "--export /proc/m.xml: cannot write in /proc"),
+    ("ros.record", ["--out", "/sys/r.bag"], "--out /sys/r.bag: cannot write in /sys"),
     (TRAIN, ["--out", "new", "--seed", "-3"], "--seed must be in 0..4294967295"),
     (TRAIN, ["--out", "new", "--randomize", "kp_scale=0.8..1.2,sensor_delay=300..900", "--episode-length", "10"],
      "--randomize: sensor_delay drew"),

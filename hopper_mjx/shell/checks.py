@@ -236,10 +236,10 @@ def check_range(name: str, value: float, *, low: float | None = None, high: floa
 
 def check_writable(name: str, path: str | Path, *, folder: bool = False, may_exist: bool = True,
                    make_parents: bool = False, suffixes: tuple[str, ...] = ()) -> Path:
-    """An output path that can be written, checked without creating anything: its parent exists and is a
-    folder (with `make_parents`, its nearest existing ancestor); a file output is not a folder (a folder
-    output not a file); with `may_exist` False it must be new; with `suffixes`, a file's name ends in one of
-    them (the formats the tool writes; a device such as /dev/null is taken as it is)."""
+    """An output path that can be written, checked without leaving anything: its parent exists and is a
+    folder (with `make_parents`, its nearest existing ancestor) that takes a new file; a file output is not a
+    folder (a folder output not a file); with `may_exist` False it must be new; with `suffixes`, a file's name
+    ends in one of them (the formats the tool writes; a device such as /dev/null is taken as it is)."""
     path = Path(path)
     parent = path.parent
     while make_parents and not parent.exists() and parent != parent.parent:
@@ -256,9 +256,22 @@ def check_writable(name: str, path: str | Path, *, folder: bool = False, may_exi
         shown = [s for s in suffixes if s]  # "": a name without a suffix is written as given
         raise ValueError(f"{name} {path}: this tool writes {' or '.join(shown)} files; give a name ending in "
                          f"{shown[0]}")
-    if not os.access(parent, os.W_OK):
+    if not os.access(parent, os.W_OK) or not (is_device(path) or _takes_files(parent)):
         raise ValueError(f"{name} {path}: cannot write in {parent}")
     return path
+
+
+def _takes_files(folder: Path) -> bool:
+    """Whether a file can be made in `folder`, tried with a nameless one that is gone when closed. Root passes
+    `os.access` on a pseudo-filesystem such as /proc, where no file can be made: the run would end in a traceback
+    when it writes its output."""
+    import tempfile
+
+    try:
+        with tempfile.TemporaryFile(dir=folder):
+            return True
+    except OSError:
+        return False
 
 
 def make_folder(name: str, path: str | Path) -> Path:
