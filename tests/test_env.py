@@ -337,7 +337,16 @@ def test_a_task_config_takes_key_value_overrides_and_names_what_is_wrong():
                            (["apex_range=1.2,1.0"], "apex_range must be a finite"),
                            (["gravity_range=1,2"], "gravity_range is set by --gravity-range"),
                            (["task=stand"], "not KEY=VALUE with a task config field"),
-                           (["w_apex"], "not KEY=VALUE")):
+                           (["w_apex"], "not KEY=VALUE"),
+                           # a negative width made the apex kernel pay more the further off the hop (it trained)
+                           (["apex_scale=-1"], r"apex_scale must be finite and > 0 \(a kernel's width\), got -1.0"),
+                           (["upright_scale=0"], "upright_scale must be finite and > 0"),
+                           (["w_spin=inf"], "w_spin must be finite, got inf"),
+                           (["kd=6,6,nan"], r"kd must be finite and >= 0, got \(6.0, 6.0, nan\)"),
+                           (["action_scale=0.3,0,0.8"], "action_scale must be three finite values > 0"),
+                           (["timestep=inf"], "timestep must be finite and > 0 s, got inf"),
+                           (["max_tilt=4"], r"max_tilt must be in \(0, pi\] rad"),
+                           (["ls_iterations=0"], "solver_iterations and ls_iterations must be >= 1")):
         with pytest.raises(ValueError, match=message):
             hop.overridden(pairs, owned)
 

@@ -175,6 +175,10 @@ def test_train_rejects_bad_input_in_one_line_before_anything_runs(trained, capsy
     (["--select-gravity", "nan"], "--select-gravity must be finite and > 0, got nan"),
     (["--seed", "-1"], "--seed must be in 0..4294967295, got -1"),
     (["--desired-kl", "0"], "--desired-kl must be finite and > 0, got 0"),
+    # Each of these trained: a discount above 1 sums returns that grow without end, a nan entropy cost nan losses.
+    (["--discounting", "2"], "--discounting must be finite and > 0 and <= 1, got 2"),
+    (["--entropy-cost", "nan"], "--entropy-cost must be finite and >= 0, got nan"),
+    (["--config", "apex_scale=-1"], "--config: apex_scale must be finite and > 0 (a kernel's width), got -1.0"),
     # Zero epochs used to train a whole run that never updated its networks.
     (["--updates-per-batch", "0"], "--updates-per-batch must be >= 1, got 0"),
     (["--value-layers", "0,3"], "--value-layers must be comma-separated positive integers (hidden layer sizes), "

@@ -192,6 +192,8 @@ def _check_learner(args) -> None:
     for flag, why in PPO_ONLY.items():
         if getattr(args, flag) is not None and args.algo != "ppo":
             raise ValueError(f"--{flag.replace('_', '-')} is for --algo ppo ({why})")
+    cli.check_range("--discounting", args.discounting, low=0, high=1, open_low=True)  # a return's weight a step
+    cli.check_range("--entropy-cost", args.entropy_cost, low=0)  # nan ran, its losses nan from the first update
     for flag, low, open_low in (("learning_rate", 0, True), ("desired_kl", 0, True), ("max_grad_norm", 0, False),
                                 ("reward_scaling", 0, True)):
         if getattr(args, flag) is not None:

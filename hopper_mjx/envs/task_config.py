@@ -9,6 +9,7 @@ import dataclasses
 import math
 
 import mujoco
+import numpy as np
 
 from hopper_mjx import engine as engines
 from hopper_mjx import registry
@@ -24,6 +25,10 @@ RANGES = ("gravity_range", "apex_range", "speed_range", "lateral_speed_range", "
 # Fields of configs saved before stand was redefined (its foot-support term); a policy's hopper_env.json with
 # them still loads (they only shaped the reward it was trained on).
 RETIRED = ("w_support", "support_scale")
+# A kernel exp(-error / scale) with a scale of 0 or below pays more the larger the error.
+SCALES = ("height_scale", "apex_scale", "speed_scale", "upright_scale")
+WEIGHTS = ("w_alive", "w_height", "w_apex", "w_speed", "w_upright", "w_effort", "w_action_rate", "w_spin",
+           "fall_penalty")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -88,6 +93,7 @@ class MonopedConfig:
     observe_scan: bool = True
 
     def __post_init__(self):
+        self._check_numbers()
         for name in RANGES:
             pair = getattr(self, name)
             if pair is None:
@@ -119,6 +125,32 @@ class MonopedConfig:
         dc_only = [name for name in self.variation.controls if registry.CONTROL_PARAMETERS[name].needs == "dc"]
         if dc_only and self.motor != "dc":
             raise ValueError(f"randomize: {', '.join(dc_only)} are a dc motor's figures; set motor='dc'")
+
+    def _check_numbers(self) -> None:
+        """The reward's, the PD law's and the physics' numbers: finite, and positive where a sign would turn their
+        meaning around (a kernel's width, a gain, the step); raises ValueError naming the first that is not."""
+        def bad(name: str, why: str):
+            return ValueError(f"{name} must be {why}, got {getattr(self, name)}")
+
+        def numbers(name: str) -> np.ndarray:
+            return np.atleast_1d(np.asarray(getattr(self, name), dtype=float))
+
+        for name, low, why in ([(n, 0, "finite and > 0 (a kernel's width)") for n in SCALES]
+                               + [("timestep", 0, "finite and > 0 s"), ("policy_rate", 0, "finite and > 0 Hz"),
+                                  ("action_scale", 0, "three finite values > 0 rad per unit action")]):
+            if not (np.all(np.isfinite(numbers(name))) and np.all(numbers(name) > low)):
+                raise bad(name, why)
+        for name in ("kp", "kd", "initial_joint_noise"):
+            if not (np.all(np.isfinite(numbers(name))) and np.all(numbers(name) >= 0)):
+                raise bad(name, "finite and >= 0")
+        for name in (*WEIGHTS, "min_base_height"):
+            if not math.isfinite(getattr(self, name)):
+                raise bad(name, "finite")
+        if not 0 < self.max_tilt <= math.pi:
+            raise bad("max_tilt", "in (0, pi] rad from the vertical")
+        if self.solver_iterations < 1 or self.ls_iterations < 1:
+            raise ValueError(f"solver_iterations and ls_iterations must be >= 1, got {self.solver_iterations}, "
+                             f"{self.ls_iterations}")
 
     @property
     def delay_steps(self) -> int:
