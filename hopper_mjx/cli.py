@@ -39,7 +39,7 @@ from hopper_mjx.shell.checks import (  # noqa: F401  re-exported: the tools use 
     parser,
     warn_diverged,
 )
-from hopper_mjx.terrain.spec import check_terrain, terrain_help
+from hopper_mjx.terrain.spec import check_terrain, refuse_each, terrain_help  # noqa: F401 (refuse_each: the tools')
 
 
 def check_controller(text: str, height: float = 0.0, speed=(0.0, 0.0), physics: Physics | None = None) -> None:
@@ -164,12 +164,6 @@ def check_push(values) -> tuple[float, float] | None:
     check_range("--push interval", values[0], low=0, open_low=True)
     check_range("--push speed", values[1], low=0, high=MAX_PUSH_SPEED)
     return float(values[0]), float(values[1])
-
-
-def refuse_each(ground, tool: str) -> None:
-    """For a tool that puts every instance on the model's one ground: seed=each refused in one line."""
-    if ground.each:
-        raise ValueError(f"--terrain {ground}: {tool} puts every instance on one ground; give a fixed seed")
 
 
 def check_ground(text: str, n: int = 1):

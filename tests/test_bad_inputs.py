@@ -134,6 +134,11 @@ CASES = [
     ("view", ["--terrain", "crater:radius=0"], "--terrain: radius=0 must be > 0 m"),
     ("ros.record", ["--terrain", "steps:size=4xq", "--out", "r.bag"], "--terrain: size=q is not a number"),
     ("model", ["--export", "m.xml", "--terrain", "heightmap:a_file,size=4x4"], "--terrain: a_file is not a PNG image"),
+    # seed=each draws a ground per instance; the model held instance 0's and said seed=each
+    ("model", ["--export", "m.xml", "--terrain", "rough:amp=0.02,seed=each"],
+     "--terrain rough:amp=0.02,wavelength=0.4,seed=each,size=4x4,cell=0.04: model --export puts every instance on one "
+     "ground; give a fixed seed"),
+    ("model", ["--map", "m.png", "--terrain", "rough:seed=each"], "model --map puts every instance on one ground"),
     ("model", ["--export", "m.xml", "--terrain", "heightmap:corrupt.png"], "corrupt.png is not a readable PNG image"),
     ("model", ["--export", "m.xml", "--terrain", "heightmap:nothere.png"], "heightmap nothere.png: no such file"),
     ("model", ["--export-urdf", "-", "--terrain", "rough"], "--terrain goes with --export"),

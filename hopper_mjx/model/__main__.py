@@ -12,7 +12,7 @@ import sys
 from hopper_mjx.model.urdf_checks import check_urdf
 from hopper_mjx.shell import checks, process
 from hopper_mjx.shell.files import atomic_write_text
-from hopper_mjx.terrain.spec import check_terrain, terrain_help
+from hopper_mjx.terrain.spec import check_terrain, refuse_each, terrain_help
 
 
 def export_urdf(args) -> int:
@@ -50,6 +50,7 @@ def main(argv=None) -> int:
         if args.map is not None:
             checks.check_writable("--map", args.map, suffixes=(".png",))
             ground = check_terrain(args.terrain)
+            refuse_each(ground, "model --map")
             if ground.is_flat:
                 raise ValueError("--map draws a --terrain's heights; the flat plane has none: give --terrain")
             from hopper_mjx.terrain.plan import save_map
@@ -60,6 +61,7 @@ def main(argv=None) -> int:
         checks.check_writable("--export", args.export, suffixes=(".xml",))
         checks.check_range("--timestep", args.timestep, low=0, high=checks.MAX_TIMESTEP, open_low=True)
         ground = check_terrain(args.terrain)
+        refuse_each(ground, "model --export")
         check_urdf(args.urdf)
         from hopper_mjx.model.loader import build_spec
         from hopper_mjx.terrain import write_mjcf

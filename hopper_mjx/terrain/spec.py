@@ -344,6 +344,12 @@ def terrain_help(default: str = "flat") -> str:
             f"height=0.3 (keys: docs/terrain.md; default {default})")
 
 
+def refuse_each(ground: Ground, tool: str) -> None:
+    """For a tool that puts every instance on the model's one ground: seed=each refused in one line."""
+    if ground.each:
+        raise ValueError(f"--terrain {ground}: {tool} puts every instance on one ground; give a fixed seed")
+
+
 def check_terrain(text: str, n: int = 1) -> Ground:
     """--terrain parsed, and its grid checked to fit in memory for `n` instances (each may hold its own copy
     of the heights once terrain varies per instance); ValueError '--terrain: ...' in one line."""
