@@ -134,6 +134,13 @@ CASES = [
     ("view", ["--terrain", "crater:radius=0"], "--terrain: radius=0 must be > 0 m"),
     ("ros.record", ["--terrain", "steps:size=4xq", "--out", "r.bag"], "--terrain: size=q is not a number"),
     ("model", ["--export", "m.xml", "--terrain", "heightmap:a_file,size=4x4"], "--terrain: a_file is not a PNG image"),
+    # a feature wholly beyond the grid left the ground flat under its name
+    ("model", ["--export", "m.xml", "--terrain", "obstacle:height=0.1,x=5"],
+     "--terrain: obstacle: x=5 m puts it beyond the ground, which spans -2 to 2 m along x (size=4x4); give an x "
+     "within it or a larger size"),
+    ("sweep", ["obstacle", "--heights", "0.1", "--x", "-5", "--out", "s"],
+     "obstacle: x=-5 m puts it beyond the ground"),
+    ("simulate", ["--terrain", "crater:x=3"], "crater: x=3 m puts it beyond the ground"),
     # seed=each draws a ground per instance; the model held instance 0's and said seed=each
     ("model", ["--export", "m.xml", "--terrain", "rough:amp=0.02,seed=each"],
      "--terrain rough:amp=0.02,wavelength=0.4,seed=each,size=4x4,cell=0.04: model --export puts every instance on one "

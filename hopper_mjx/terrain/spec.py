@@ -168,6 +168,23 @@ def grid_keys(name: str) -> tuple[str, ...]:
     return ("cell",) if name == "course" else tuple(k.name for k in GRID_KEYS)
 
 
+def _check_on_grid(ground: Ground) -> None:
+    """A feature placed at x (a step, stairs, a block, trenches, a crater) lies at least partly on the grid, which
+    spans -size/2..size/2 along x: one wholly beyond it left the ground flat under a name that says otherwise."""
+    v = dict(ground.values)
+    if "x" not in v or ground.name == "course":
+        return
+    half = ground.size[0] / 2
+    if ground.name == "crater":
+        spans = [(v["x"] - v["radius"], v["x"] + v["radius"])]
+    else:
+        spans = [(start, end) for start, end, _ in ground.obstacles()]
+    if not any(start < half and end > -half for start, end in spans):
+        raise TerrainError(f"{ground.name}: x={v['x']:g} m puts it beyond the ground, which spans {-half:g} to "
+                           f"{half:g} m along x (size={ground.size[0]:g}x{ground.size[1]:g}); give an x within it "
+                           "or a larger size")
+
+
 def _check_course(values: dict, cell: float) -> None:
     """A course whose every kind of ground is there at every level: the tile holds its pad, a ring and its edge; the
     widest trench fits between the pad's ramp and the edge and stays apart from the next; the grid resolves the rough
@@ -282,6 +299,7 @@ def parse(text: str) -> Ground:
     if name == "gaps" and dict(filled)["width"] >= dict(filled)["spacing"]:
         raise TerrainError(f"gaps: width={dict(filled)['width']:g} must be less than spacing="
                            f"{dict(filled)['spacing']:g}")
+    _check_on_grid(ground)
     # Counted in floats first: size=1e308 would overflow the integer rounding of `shape`.
     nrow, ncol = png_header(path)[1::-1] if path else (size[1] / cell + 1, size[0] / cell + 1)
     if nrow * ncol > MAX_VERTICES:
