@@ -122,6 +122,11 @@ CASES = [
     ("simulate", ["--randomize", "sensor_delay=normal(0,5)"], "--randomize: sensor_delay drew a value of -"),
     ("sweep", ["gravity", "--randomize", "action_delay=5..900", "--duration", "0.5", "--out", "s"],
      "--randomize: action_delay drew"),
+    # a gain Raibert refuses: it was refused by the first chunk, a traceback under the progress bar
+    ("sweep", ["gains", "--param", "leg_length", "--values", "0.6,0", "--out", "s"],
+     "--values 0: leg_length must be > 0 m"),
+    ("sweep", ["param", "--param", "tilt_lead", "--values", "2", "--out", "s"],
+     "--values 2: tilt_lead must be in [0, 1]"),
     ("sweep", ["param", "--param", "bogus", "--values", "1", "--out", "s"], "unknown --param 'bogus'; choose a "
                                                                               "Raibert gain"),
     ("sweep", ["param", "--param", "kp_scale", "--values=-1,1", "--out", "s"], "--values: kp_scale=-1 sets a value "

@@ -193,6 +193,11 @@ def _batch(n: int, name: str, value, shape: tuple) -> np.ndarray:
     return out
 
 
+def check_gain(name: str, value: float) -> None:
+    """One gain's value, checked as `raibert_params` checks it (a sweep's values, before it runs)."""
+    _check_gains(dataclasses.replace(RaibertConfig(), **{name: value}))
+
+
 def _check_gains(gains: RaibertConfig) -> None:
     for name in ("leg_length", "sag"):
         if np.any(getattr(gains, name) <= 0):

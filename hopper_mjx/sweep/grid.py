@@ -112,6 +112,14 @@ class SweepSpec:
                 raise ValueError("--values must be one or more finite numbers")
             if len(set(self.values)) != len(self.values):  # as gravity: a grid point twice is counted twice
                 raise ValueError(f"--values must differ, got {list(self.values)}")
+            if self.param in GAINS:  # refused here, not by the chunk that would run it
+                from hopper_mjx.control.raibert import check_gain
+
+                for value in self.values:
+                    try:
+                        check_gain(self.param, value)
+                    except ValueError as err:
+                        raise ValueError(f"--values {value:g}: {err}") from None
         if self.kind in TERRAIN_KINDS:
             self._check_grounds()
         elif self.grounds:
