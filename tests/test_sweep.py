@@ -520,7 +520,7 @@ def test_a_duration_between_samples_runs_whole_samples_and_says_so(tmp_path):
                                     str(tmp_path / duration)])
         return check(args)[0][0]
 
-    assert [spec(d).duration for d in ("0.015", "1e-9", "3", "10")] == [0.02, 0.01, 3.0, 10.0]
+    assert [spec(d).duration for d in ("0.015", "1e-9", "3", "10", "0.7")] == [0.02, 0.01, 3.0, 10.0, 0.7]
     assert steps_for(spec("0.015").duration, 1e-3, runner.recorded(1e-3)) == 20 == steps_for(0.015, 1e-3,
                                                                                               runner.recorded(1e-3))
     assert budget.duration_note(0.015, 1e-3, 10) == ("note: --duration 0.015 s runs 0.02 s (20 steps of 1 ms): whole "
@@ -528,3 +528,4 @@ def test_a_duration_between_samples_runs_whole_samples_and_says_so(tmp_path):
     assert budget.duration_note(1e-9, 5e-4, 20) == ("note: --duration 1e-09 s runs 0.01 s (20 steps of 0.5 ms): "
                                                     "whole samples of every stream, one each 10 ms")
     assert budget.duration_note(10.0, 1e-3, 10) is None and budget.duration_note(3.0, 1e-3, 20) is None
+    assert budget.duration_note(0.7, 1e-3, 10) is None  # 700 steps of 1 ms: 0.7000000000000001 s in floats

@@ -50,14 +50,20 @@ def whole_steps(duration: float, timestep: float, whole: int) -> int:
     return max(1, int(round(duration / timestep / whole))) * whole
 
 
+def run_time(duration: float, timestep: float, whole: int) -> float:
+    """The s a run of `duration` s takes (`whole_steps`): `duration` itself where it is whole samples to within
+    rounding (700 steps of 1 ms are 0.7000000000000001 s), else those steps' time."""
+    ran = whole_steps(duration, timestep, whole) * timestep
+    return duration if abs(ran - duration) <= 1e-9 * max(duration, 1.0) else round(ran, 9)
+
+
 def duration_note(duration: float, timestep: float, whole: int) -> str | None:
-    """A line saying how long a run of `duration` s really runs (`whole_steps`), where that is not `duration`."""
-    steps = whole_steps(duration, timestep, whole)
-    ran = steps * timestep
-    if abs(ran - duration) <= 1e-9 * max(duration, 1.0):
+    """A line saying how long a run of `duration` s really runs (`run_time`), where that is not `duration`."""
+    ran = run_time(duration, timestep, whole)
+    if ran == duration:
         return None
-    return (f"note: --duration {duration:g} s runs {ran:g} s ({steps:,} steps of {timestep * 1e3:g} ms): whole "
-            f"samples of every stream, one each {whole * timestep * 1e3:g} ms")
+    return (f"note: --duration {duration:g} s runs {ran:g} s ({whole_steps(duration, timestep, whole):,} steps of "
+            f"{timestep * 1e3:g} ms): whole samples of every stream, one each {whole * timestep * 1e3:g} ms")
 
 
 def check_memory(flags: str, n: int, recorded_floats: float = 0.0, *, states: int = 1, held_floats: float = 0) -> None:

@@ -401,9 +401,10 @@ def main(argv=None) -> int:
         specs, out = check(args)
     except ValueError as err:
         return cli.fail(err)
-    if specs[0].duration != args.duration:  # the run is whole samples of its streams: say what it runs
-        timestep = specs[0].physics.timestep
-        print(budget.duration_note(args.duration, timestep, sample_steps(timestep)), flush=True)
+    timestep = specs[0].physics.timestep
+    note = budget.duration_note(args.duration, timestep, sample_steps(timestep))  # whole samples of its streams
+    if note:
+        print(note, flush=True)
     jaxsetup.configure()
     from hopper_mjx.sweep import report
     if args.coordinator:

@@ -66,7 +66,7 @@ class SweepSpec:
         steps it, so that its rows and report say the time run; `duration` itself where it cannot run at all."""
         if not (math.isfinite(duration) and duration > 0):
             return duration  # refused with the rest, below
-        return budget.whole_steps(duration, timestep, sample_steps(timestep)) * timestep
+        return budget.run_time(duration, timestep, sample_steps(timestep))
 
     def __post_init__(self):
         if self.kind not in KINDS:
