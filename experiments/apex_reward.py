@@ -43,6 +43,25 @@ def judged(qpos: np.ndarray, qvel: np.ndarray, contact: np.ndarray, g: float, st
     return predicted, np.asarray(flight)
 
 
+RECORDED = ("time", "gravity", "qpos", "qvel", "contact")
+
+
+def read_run(name: str) -> dict:
+    """The arrays of a `simulate --out` recording; ValueError naming the file for one that is not such a file."""
+    check_readable_file("run", name)
+    try:
+        with np.load(name, allow_pickle=False) as f:
+            run = {k: f[k] for k in RECORDED if k in f.files}
+    except (OSError, ValueError, EOFError):  # not an .npz, cut short, or objects NumPy will not unpickle
+        raise ValueError(f"run {name}: cannot be read as a simulate --out recording (.npz)") from None
+    missing = [k for k in RECORDED if k not in run]
+    if missing:
+        raise ValueError(f"run {name}: not a simulate --out recording: no {', '.join(missing)}")
+    if run["time"].size < 2:
+        raise ValueError(f"run {name}: holds {run['time'].size} sample(s); the apex term needs a run of at least two")
+    return run
+
+
 def main(argv=None) -> int:
     p = checks.parser("python experiments/apex_reward.py", __doc__)  # one-line refusals, as every command's
     p.add_argument("runs", nargs="+", help="simulate --out .npz files")
@@ -55,11 +74,8 @@ def main(argv=None) -> int:
             raise ValueError(f"--command and --scale must be > 0, got {args.command}, {args.scale}")
         if args.urdf is not None:
             check_readable_file("--urdf", args.urdf)
-        runs = []
-        for name in args.runs:
-            with np.load(name) as f:
-                runs.append((name, {k: f[k] for k in ("time", "gravity", "qpos", "qvel", "contact")}))
-    except (OSError, ValueError, KeyError) as err:
+        runs = [(name, read_run(name)) for name in args.runs]
+    except ValueError as err:
         print(f"error: {err}", file=sys.stderr)
         return 2
     from hopper_mjx import model

@@ -54,6 +54,7 @@ def world(old: str, new: str) -> str:
 
 # Files a case's folder holds besides test_bad_inputs' (name: text).
 FILES = {
+    "notes.npz": "a text file named as a recording\n",
     # URDF values
     "reduction_neg.urdf": urdf("<mechanicalReduction>1<", "<mechanicalReduction>-2<"),
     "reduction_inf.urdf": urdf("<mechanicalReduction>1<", "<mechanicalReduction>inf<"),
@@ -166,6 +167,7 @@ SIM = ["--out", "o.npz"]
 SWEEP = ["gravity", "--out", "s"]
 TRAIN = "experiments/train.py"
 RESULTS = "experiments/results.py"
+APEX = "experiments/apex_reward.py"
 
 # (command, arguments, what the one line must say)
 CASES = [
@@ -218,6 +220,9 @@ CASES = [
     ("sweep", ["gains", "--param", "speed_gain", "--values", "0.1,0.1", "--out", "s"], "--values must differ"),
     (TRAIN, ["--out", "run", "--timesteps", "1000"], "run/metrics.json is damaged"),
     (RESULTS, ["run", "--out", "r.md"], "run/metrics.json: cannot be read"),
+    # NumPy's own messages said nothing of the file (one asked to unpickle it)
+    (APEX, ["notes.npz"], "run notes.npz: cannot be read as a simulate --out recording (.npz)"),
+    (APEX, ["o.npz"], "run o.npz: no such file"),
     # results.py writes Markdown (and its .json and .png beside it): another suffix would hide it under that name
     (RESULTS, ["run", "--out", "r.txt"], "--out r.txt: this tool writes .md files; give a name ending in .md"),
     (RESULTS, ["run", "--out", "/dev/null"], "--out /dev/null: results.py writes its .json and .png beside the table"),
@@ -311,3 +316,24 @@ def test_a_chunk_larger_than_the_grid_runs_as_the_grid(tmp_path):
     specs, _ = check(args)
     assert [s.chunk for s in specs] == [6]
     assert not (tmp_path / "s").exists()
+
+
+def test_apex_reward_reads_only_a_recording_it_can_judge(tmp_path):
+    """experiments/apex_reward.py names the file and what it lacks: an .npz of other arrays raised a bare KeyError
+    ('time is not a file in the archive'), and one of a single sample an IndexError traceback."""
+    import importlib
+
+    import numpy as np
+
+    apex = importlib.import_module("apex_reward")  # experiments/ is on pytest's path
+    np.savez(tmp_path / "other.npz", a=np.zeros(3))
+    arrays = {k: np.zeros(s) for k, s in (("time", 1), ("gravity", (1, 3)), ("qpos", (1, 1, 7)), ("qvel", (1, 1, 6)),
+                                          ("contact", (1, 1)))}
+    np.savez(tmp_path / "one.npz", **arrays)
+    with pytest.raises(ValueError, match="other.npz: not a simulate --out recording: no time, gravity, qpos, qvel, "
+                                         "contact$"):
+        apex.read_run(str(tmp_path / "other.npz"))
+    with pytest.raises(ValueError, match="one.npz: holds 1 sample"):
+        apex.read_run(str(tmp_path / "one.npz"))
+    np.savez(tmp_path / "two.npz", **{**arrays, "time": np.arange(2) * 0.002})
+    assert apex.read_run(str(tmp_path / "two.npz"))["time"].size == 2
