@@ -256,6 +256,9 @@ CASES = [
     # a bag's metadata with a Python tag: refused (never obeyed) in one line
     ("ros.echo", ["tagged_bag", "/odom"], "could not determine a constructor for the tag"),
     ("ros.plots", ["tagged_bag"], "tagged_bag/metadata.yaml: could not determine a constructor"),
+    # a robot twice was plotted twice; 10^5 dpi asked for a terapixel image
+    ("ros.plots", ["tagged_bag", "--instances", "0,0"], "--instances lists a robot twice: [0, 0]"),
+    ("ros.plots", ["tagged_bag", "--dpi", "100000"], "--dpi must be in 1..1000, got 100000"),
     # terrain specs and heightmaps
     ("simulate", ["--terrain", "rough:size=1e308"], "--terrain: a >1e308 x >1e308 grid has >1e308 vertices"),
     ("simulate", ["--terrain", "rough:size=1e6"], "625,000,050,000,001 vertices, about 4547.5 TiB of heights; at most"),

@@ -108,6 +108,9 @@ def plot_bag(path: str | Path, out: str | Path, instances: list[int] | None = No
     return Path(out)
 
 
+MAX_DPI = 1000
+
+
 def parser() -> argparse.ArgumentParser:
     p = cli.parser("python -m hopper_mjx.ros.plots", __doc__)
     p.add_argument("bag", help="a bag written by python -m hopper_mjx.ros.record (.bag file or MCAP folder)")
@@ -124,8 +127,13 @@ def main(argv=None) -> int:
     args = parser().parse_args(argv)
     try:
         cli.check_writable("--out", args.out, suffixes=cli.PLOT_SUFFIXES)
-        if args.dpi < 1:
-            raise ValueError(f"--dpi must be >= 1, got {args.dpi}")
+        if not 1 <= args.dpi <= MAX_DPI:  # a column is 4.2 x 9 inches: 10^5 dpi asked for terapixels
+            raise ValueError(f"--dpi must be in 1..{MAX_DPI}, got {args.dpi}")
+        if args.instances is not None:
+            if not args.instances or min(args.instances) < 0:
+                raise ValueError(f"--instances: robots are numbered from 0, got {args.instances}")
+            if len(set(args.instances)) != len(args.instances):
+                raise ValueError(f"--instances lists a robot twice: {args.instances}")
         echo.bag_path(args.bag)  # exists and is a bag (folder), before anything is read
         path = plot_bag(args.bag, args.out, args.instances, args.dpi, args.labels)
     except ValueError as err:
