@@ -360,3 +360,14 @@ def test_simulate_options_reach_the_controller_unchanged():
         # record's own defaults (one robot, 50 Hz, a bag) and simulate's live run
         if name not in ("gravity", "default_gravity", "rate", "out", "scan", "foxglove", "speed_factor"):
             assert ours[name] == value, name
+
+
+def test_a_bag_of_several_robots_plotted_as_one_says_which_it_holds(recorded, tmp_path, capsys):
+    """Without --instances, plots reads the single robot's topics; on a bag of several it said only that
+    /monoped/imu/data was missing. It names the robots the bag holds and the option that picks them."""
+    assert plots.main([str(recorded["ros1"]), "--out", str(tmp_path / "p.png")]) == 2
+    assert capsys.readouterr().err == ("error: the bag holds 2 robots, /monoped_0 to /monoped_1: choose with "
+                                       "--instances, e.g. --instances 0,1\n")
+    assert not (tmp_path / "p.png").exists()
+    # a bag of one robot (its topics unnumbered) plots without --instances, as before
+    assert plots.main([str(recorded["single"]), "--out", str(tmp_path / "p.png")]) == 0

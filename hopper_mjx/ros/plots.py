@@ -10,6 +10,7 @@ published topics), read back with rosbags, one column per recorded robot.
 from __future__ import annotations
 
 import argparse
+import re
 import sys
 from pathlib import Path
 
@@ -31,12 +32,24 @@ def _stamp(msg) -> float:
     return msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
 
 
+def _check_one_robot(reader, topic: str) -> None:
+    """A bag of several robots read as one robot's: say which robots it holds and the option that picks them."""
+    topics = {c.topic for c in reader.connections}
+    robots = sorted({int(m.group(1)) for t in topics if (m := re.match(rf"/{messages.ROBOT}_(\d+)/", t))})
+    if topic in topics or not robots:
+        return
+    raise ValueError(f"the bag holds {len(robots)} robots, /{messages.ROBOT}_{robots[0]} to /{messages.ROBOT}_"
+                     f"{robots[-1]}: choose with --instances, e.g. --instances {','.join(map(str, robots[:2]))}")
+
+
 def read_signals(path: str | Path, instance: int | None = None) -> dict[str, np.ndarray]:
     """One robot's streams from a bag written by `record`, as arrays with their own stamps (s)."""
     topics = messages.topic_names(instance)
     out: dict[str, list] = {k: [] for k in ("imu_t", "gyro", "accel", "odom_t", "pos", "linvel",
                                             "contact_t", "contact", "force")}
     with echo.open_bag(path) as reader:
+        if instance is None:
+            _check_one_robot(reader, topics["imu"])
         for _, msg in echo.messages(reader, topics["imu"]):
             out["imu_t"].append(_stamp(msg))
             out["gyro"].append(_xyz(msg.angular_velocity))
