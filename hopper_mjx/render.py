@@ -156,9 +156,9 @@ def check_batch(args) -> Scenario:
     """The batch's options, checked even for a still alone (a bad --world is refused, not ignored)."""
     batch = cli.check_batch(args)
     cli.refuse_each(batch.physics.ground, "render (it draws the model's ground)")
+    cli.check_indices("--instance", [args.instance], len(batch.gravity))
     if args.video is None:
         return batch
-    cli.check_indices("--instance", [args.instance], len(batch.gravity))
     note = cli.check_rates("--fps", video_sensors(args), batch, args.duration)
     if note:
         print(note, flush=True)

@@ -78,6 +78,8 @@ CASES = [
     ("render", [], "nothing to do: give --still PATH and/or --video PATH"),
     ("render", ["--video", "h.gif", "--duration", "-1"], "--duration must be finite and > 0"),
     ("render", ["--video", "h.avi"], "--video must end in .mp4 or .gif, got h.avi"),
+    # a still drew the stance and let the bad index pass; the batch's options are checked for a still too
+    ("render", ["--still", "s.png", "--instance", "-1"], "--instance [-1] out of range: the batch has 1 instance(s)"),
     ("render", ["--still", "nodir/m.png"], "--still nodir/m.png: its folder nodir does not exist"),
     ("render", ["--video", "h.gif", "--gravity", "9.81,1.62", "--instance", "2"], "--instance [2] out of range"),
     ("sweep", ["gravity", "--out", "a_file"], "--out a_file is a file; give a folder"),
