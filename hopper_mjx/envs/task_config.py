@@ -132,16 +132,17 @@ class MonopedConfig:
         def bad(name: str, why: str):
             return ValueError(f"{name} must be {why}, got {getattr(self, name)}")
 
-        def numbers(name: str) -> np.ndarray:
-            return np.atleast_1d(np.asarray(getattr(self, name), dtype=float))
+        def holds(name: str, positive: bool) -> bool:  # every value of the field finite and > 0 (or >= 0)
+            v = np.atleast_1d(np.asarray(getattr(self, name), dtype=float))
+            return bool(np.all(np.isfinite(v)) and np.all(v > 0 if positive else v >= 0))
 
-        for name, low, why in ([(n, 0, "finite and > 0 (a kernel's width)") for n in SCALES]
-                               + [("timestep", 0, "finite and > 0 s"), ("policy_rate", 0, "finite and > 0 Hz"),
-                                  ("action_scale", 0, "three finite values > 0 rad per unit action")]):
-            if not (np.all(np.isfinite(numbers(name))) and np.all(numbers(name) > low)):
+        for name, why in ([(n, "finite and > 0 (a kernel's width)") for n in SCALES]
+                          + [("timestep", "finite and > 0 s"), ("policy_rate", "finite and > 0 Hz"),
+                             ("action_scale", "three finite values > 0 rad per unit action")]):
+            if not holds(name, positive=True):
                 raise bad(name, why)
         for name in ("kp", "kd", "initial_joint_noise"):
-            if not (np.all(np.isfinite(numbers(name))) and np.all(numbers(name) >= 0)):
+            if not holds(name, positive=False):
                 raise bad(name, "finite and >= 0")
         for name in (*WEIGHTS, "min_base_height"):
             if not math.isfinite(getattr(self, name)):

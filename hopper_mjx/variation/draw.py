@@ -99,6 +99,11 @@ def _field_values(par: registry.Parameter, dist, at: np.ndarray, raw: np.ndarray
     return at * raw if dist.kind == "scale" else np.broadcast_to(raw, (raw.shape[0], *at.shape))
 
 
+def _control_values(dist, nominal: np.ndarray, raw: np.ndarray) -> np.ndarray:
+    """The values `raw` draws of `dist` give a control parameter: a factor times its undrawn value, else the draw."""
+    return nominal * raw if dist.kind == "scale" else raw
+
+
 def _check_link(m: mujoco.MjModel, name: str, par: registry.Parameter) -> None:
     """A length parameter's body must be its own link, below the joint before it, at a distance from it."""
     kfe_body = int(m.joint(JOINTS[2]).bodyid[0])
@@ -165,9 +170,8 @@ def draw_controls(spec: Spec, mj_model: mujoco.MjModel, n: int, seed: int) -> di
         nominal = nominal_control(name, lay)
         ends = dist.ends(nominal.shape)
         if ends is not None:
-            _check_range(name, par, nominal * ends if dist.kind == "scale" else ends, dist)
-        drawn = dist.draw(spec.rng(seed, name), np.ones(nominal.shape), n)
-        drawn = nominal * drawn if dist.kind == "scale" else drawn
+            _check_range(name, par, _control_values(dist, nominal, ends), dist)
+        drawn = _control_values(dist, nominal, dist.draw(spec.rng(seed, name), np.ones(nominal.shape), n))
         _check_range(name, par, drawn)
         if par.unit == "ms":  # at the physics' resolution
             step = lay.timestep * 1e3
