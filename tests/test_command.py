@@ -13,7 +13,7 @@ import threading
 
 from test_bad_inputs import ENV
 
-from hopper_mjx.shell import process
+from hopper_mjx.shell import errfilter, process
 
 ALARM = re.compile(r"^[EWF]\d{4} |SIGILL", re.M)  # an XLA C++ log line of level warning and up, or the alarm
 FALSE = ("E1124 20:17:20.346371   10668 cpu_aot_loader.cc:220] Loading XLA:CPU AOT result. Target machine feature "
@@ -23,10 +23,10 @@ REAL = FALSE.replace("+prefer-no-gather", "+avx512f")  # compiled for an ISA thi
 
 
 def forwarded(text: bytes) -> bytes:
-    """What `process._forward` passes on of `text`, written in two pieces (a line split between reads)."""
+    """What `errfilter.forward` passes on of `text`, written in two pieces (a line split between reads)."""
     read, write = os.pipe()
     out_read, out_write = os.pipe()
-    thread = threading.Thread(target=process._forward, args=(read, out_write))
+    thread = threading.Thread(target=errfilter.forward, args=(read, out_write))
     thread.start()
     os.write(write, text[:50])
     os.write(write, text[50:])
@@ -41,6 +41,15 @@ def test_the_filter_drops_the_false_alarms_and_nothing_else():
     note = "W1124 20:17:20.152611   10660 pjrt_executable.cc:642] Assume version compatibility. PjRt-IFRT does not"
     lines = ["wrote o.npz", FALSE, FALSE.replace("gather", "scatter"), note, REAL, "error: a real one", "no newline"]
     assert forwarded("\n".join(lines).encode()) == "\n".join([lines[0], REAL, lines[5], lines[6]]).encode()
+
+
+def test_the_last_lines_of_a_command_xla_ends_still_reach_stderr(tmp_path):
+    """XLA ends the process from C++ on a flag it does not know, with a fatal log line that names it. The filter ran
+    as a thread of the command and went with it: the command exited 1 with stderr empty. It now runs as a process
+    of its own, which reads on until the command is gone."""
+    run = simulate(tmp_path, XLA_FLAGS="--xla_no_such_flag=true")
+    assert run.returncode != 0
+    assert "Unknown flag in XLA_FLAGS: --xla_no_such_flag=true" in run.stderr, run.stderr[-3000:]
 
 
 def simulate(cache, **env):
@@ -85,7 +94,7 @@ def test_every_command_runs_its_main_through_the_process_shell():
     programs from the cache, had called `main` bare and printed two alarms of 3 kB for each load."""
     root = process.PACKAGE_ROOT
     sources = [p for p in [*(root / "hopper_mjx").rglob("*.py"), *(root / "experiments").glob("*.py")]
-               if 'if __name__ == "__main__":' in p.read_text()]
+               if 'if __name__ == "__main__":' in p.read_text() and p.name != "errfilter.py"]  # the filter itself
     bare = [str(p.relative_to(root)) for p in sources
             if not re.search(r'if __name__ == "__main__":\n    sys\.exit\(process\.run\(main\)\)\n', p.read_text())]
     assert len(sources) >= 15 and bare == [], bare

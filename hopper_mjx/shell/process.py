@@ -20,8 +20,10 @@
   never pass, even on the CPU that compiled it, and logs an error-level line warning of
   "SIGILL" per feature (openxla/xla#44565). PjRt also warns at every load that it "assumes
   version compatibility". `run` passes the process's stderr (file descriptor 2, where XLA's
-  C++ logs) through a thread that drops exactly those lines; every other line, a real
-  missing ISA feature included, goes through. TF_CPP_MIN_LOG_LEVEL=0 turns the filter off.
+  C++ logs) through a small process of its own (`errfilter`) that drops exactly those lines;
+  every other line, a real missing ISA feature included, goes through, and so do the last
+  lines of a process that XLA ends (a fatal log line, an abort), which a thread would lose
+  with it. TF_CPP_MIN_LOG_LEVEL=0 turns the filter off.
 - **A full disk is one line.** A write refused for want of room (`files.NO_ROOM`: ENOSPC,
   EDQUOT, or EFBIG under a file-size limit) ends the command with `error: cannot write FILE:
   ...` and what was kept, exit code 1; the half-written file is gone (`files.atomic_write`).
@@ -30,24 +32,21 @@
 from __future__ import annotations
 
 import os
-import re
 import signal
+import subprocess
 import sys
 import threading
 from pathlib import Path
 
-from hopper_mjx.shell import files
+from hopper_mjx.shell import errfilter, files
 
 STOP_CODES = {signal.SIGINT: 130, signal.SIGTERM: 143}  # 128 + the signal's number, as a shell reports it
 PACKAGE_ROOT = Path(__file__).resolve().parents[2]  # the checkout: hopper_mjx/ and experiments/
-# An XLA log line that is not an alarm: a tuning preference taken for a missing CPU feature, and PjRt's note.
-FALSE_ALARMS = re.compile(r"cpu_aot_loader\.cc.*Target machine feature \+(prefer|tuning|fast|slow|false-deps)-"
-                          r"|pjrt_executable\.cc.*Assume version compatibility")
 
 _said = ["stopped before its results were written"]  # what the line says was kept
 _stopping = threading.Lock()
 _armed = threading.Event()
-_stderr: list = []  # (the real stderr's descriptor, the forwarding thread) while the filter runs
+_stderr: list = []  # (the real stderr's descriptor, the filter's process) while the filter runs
 _real_stderr: list = []  # a copy of descriptor 2 as the process began, taken when armed
 
 
@@ -116,33 +115,19 @@ def arm_if_command() -> None:
         arm()
 
 
-def _forward(read: int, real: int) -> None:
-    """Copies lines from `read` to `real`, but the false alarms."""
-    pending = b""
-    while True:
-        chunk = os.read(read, 65536)
-        if not chunk:
-            break
-        lines = (pending + chunk).split(b"\n")
-        pending = lines.pop()
-        kept = [line for line in lines if not FALSE_ALARMS.search(line.decode(errors="replace"))]
-        if kept:
-            os.write(real, b"\n".join(kept) + b"\n")
-    if pending:
-        os.write(real, pending)
-    os.close(read)
-
-
 def filter_stderr() -> None:
-    """Passes file descriptor 2 through `_forward` until `_end_filter` (both idempotent)."""
+    """Passes file descriptor 2 through `errfilter` until `_end_filter` (both idempotent)."""
     if _stderr or os.environ.get("TF_CPP_MIN_LOG_LEVEL") == "0":
         return
     sys.stderr.flush()
     real = os.dup(2)
     read, write = os.pipe()
-    thread = threading.Thread(target=_forward, args=(read, real), name="stderr-filter", daemon=True)
-    thread.start()  # before descriptor 2 moves: starting a thread can take a while on a busy machine
-    _stderr.extend([real, thread])
+    # -I -S: the standard library only, whatever the environment's paths; started before descriptor 2 moves, so
+    # that a failure to start it leaves stderr as it was.
+    child = subprocess.Popen([sys.executable, "-I", "-S", errfilter.__file__], stdin=read, stdout=real,
+                             stderr=real, close_fds=True)
+    os.close(read)
+    _stderr.extend([real, child])
     os.dup2(write, 2)
     os.close(write)
 
@@ -152,12 +137,15 @@ def _end_filter(quiet: bool = False) -> None:
     filter pass on what it holds."""
     if not _stderr:
         return
-    real, thread = _stderr
+    real, child = _stderr
     target = os.open(os.devnull, os.O_WRONLY) if quiet else real
-    os.dup2(target, 2)  # closes the pipe's last writer: the thread reads to its end and stops
+    os.dup2(target, 2)  # closes the pipe's last writer here: the filter reads to its end and stops
     if quiet:
         os.close(target)  # descriptor 2 holds /dev/null now
-    thread.join(timeout=0.3)
+    try:
+        child.wait(timeout=0.3)
+    except subprocess.TimeoutExpired:
+        pass  # a child process of the command still holds the pipe; the filter ends with it
     _stderr.clear()
 
 
