@@ -63,7 +63,8 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--observe-gravity", action="store_true", help="put the gravity magnitude in the observation")
     p.add_argument("--policy-rate", type=float, default=None, metavar="HZ",
                    help="policy steps per second (default: the task's, 50); must divide the training's physics rate "
-                        "(500 Hz). --episode-length counts policy steps at this rate")
+                        "(1000 Hz at the task's 1 ms step; --config timestep=... changes it). --episode-length "
+                        "counts policy steps at this rate")
     p.add_argument("--config", action="append", default=[], metavar="KEY=VALUE",
                    help="set a field of the task's config (envs.task_config.MonopedConfig: reward weights and "
                         "kernels, command ranges, ...; a pair as low,high), e.g. --config apex_reward=flight; "
