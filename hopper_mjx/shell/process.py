@@ -124,8 +124,7 @@ def filter_stderr() -> None:
     read, write = os.pipe()
     # -I -S: the standard library only, whatever the environment's paths; started before descriptor 2 moves, so
     # that a failure to start it leaves stderr as it was.
-    child = subprocess.Popen([sys.executable, "-I", "-S", errfilter.__file__], stdin=read, stdout=real,
-                             stderr=real, close_fds=True)
+    child = subprocess.Popen(errfilter.command(sys.executable), stdin=read, stdout=real, stderr=real, close_fds=True)
     os.close(read)
     _stderr.extend([real, child])
     os.dup2(write, 2)
