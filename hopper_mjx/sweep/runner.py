@@ -212,13 +212,16 @@ def run(spec: SweepSpec, out: Path, *, progress: bool = True) -> tuple[Instances
         if todo else None
 
     start, simulated = time.perf_counter(), 0
-    bar = tqdm(total=sum(len(chunks[k]) for k in todo) * spec.duration, unit="inst·s", disable=not progress,
-               desc=f"sweep {spec.kind}" + (f" [process {me}/{procs}]" if procs > 1 else ""), smoothing=0.3)
+    # Counted in instances, whole numbers: instance-seconds (instances x a duration such as 0.01 s) showed float sums
+    # such as 0.30000000000000004/0.3 on short runs.
+    bar = tqdm(total=sum(len(chunks[k]) for k in todo), unit="instance", disable=not progress,
+               desc=f"sweep {spec.kind}, {spec.duration:g} s each" + (f" [process {me}/{procs}]" if procs > 1 else ""),
+               smoothing=0.3)
     for k in todo:
         rows = saved[k] = runner(chunks[k])
         atomic_write(chunk_path(out, k), lambda f, rows=rows: np.save(f, rows))
         simulated += len(chunks[k]) * runner.steps
-        bar.update(len(chunks[k]) * spec.duration)
+        bar.update(len(chunks[k]))
         bar.set_postfix_str(f"{simulated / (time.perf_counter() - start):,.0f} steps/s")
     bar.close()
     wall = time.perf_counter() - start
