@@ -11,6 +11,7 @@ import subprocess
 import sys
 import threading
 
+import numpy as np
 from test_bad_inputs import ENV
 
 from hopper_mjx.shell import errfilter, process
@@ -52,10 +53,36 @@ def test_the_last_lines_of_a_command_xla_ends_still_reach_stderr(tmp_path):
     assert "Unknown flag in XLA_FLAGS: --xla_no_such_flag=true" in run.stderr, run.stderr[-3000:]
 
 
-def simulate(cache, **env):
+def test_a_jax_platform_without_the_cpu_is_refused_in_one_line(tmp_path):
+    """JAX_PLATFORMS=cuda on this CPU-only install failed at the first array with an AssertionError's traceback."""
+    out = tmp_path / "run.npz"
+    run = simulate(tmp_path / "cache", out=out, JAX_PLATFORMS="cuda")
+    assert run.returncode == 2 and not out.exists()
+    assert run.stderr == ("error: JAX_PLATFORMS=cuda: hopper_mjx runs on the CPU (one JAX device a core); unset "
+                          "JAX_PLATFORMS or set it to cpu\n"), run.stderr[-3000:]
+
+
+def test_float64_or_no_jit_from_the_shell_is_overridden_with_a_note_and_the_same_results(tmp_path):
+    """JAX_ENABLE_X64=1 failed the step's first trace (a conditional's branches typed float32 and float64), and
+    JAX_DISABLE_JIT=1 ran it eagerly for minutes; each now runs the same bytes as without it, saying so."""
+    runs = {}
+    for name, env in (("plain", {}), ("x64", {"JAX_ENABLE_X64": "1"}), ("nojit", {"JAX_DISABLE_JIT": "true"})):
+        runs[name] = simulate(tmp_path / "cache", out=tmp_path / f"{name}.npz", **env)
+        assert runs[name].returncode == 0, runs[name].stderr[-3000:]
+    assert "note: JAX_ENABLE_X64=1 is ignored: the commands run in float32\n" in runs["x64"].stderr
+    assert "note: JAX_DISABLE_JIT=true is ignored: the commands run compiled\n" in runs["nojit"].stderr
+    assert "note:" not in runs["plain"].stderr
+    plain = np.load(tmp_path / "plain.npz")
+    for name in ("x64", "nojit"):
+        other = np.load(tmp_path / f"{name}.npz")
+        assert plain.files == other.files
+        assert all(np.array_equal(plain[k], other[k]) and plain[k].dtype == other[k].dtype for k in plain.files)
+
+
+def simulate(cache, out=os.devnull, **env):
     """A tiny limp run (the smallest program to compile: no controller) on the compile cache `cache`."""
     command = [sys.executable, "-m", "hopper_mjx.simulate", "--num", "1", "--duration", "0.05", "--controller", "none",
-               "--out", os.devnull]
+               "--out", str(out)]
     return subprocess.run(command, env={**ENV, "HOPPER_MJX_CACHE": str(cache), **env}, capture_output=True, text=True,
                           timeout=600)
 

@@ -18,6 +18,9 @@
   (damaged, cut short) or write (a full disk) are compiled afresh, and JAX's own warning
   for them (two lines each, one per program) becomes one line per process. Entries are written whole
   (beside their place, then renamed into it), so that no reader, in this run or a later one, meets one cut short.
+- The shell's JAX settings that the commands cannot run with (`_shell_settings`): a JAX_PLATFORMS without `cpu`
+  is refused in one line; JAX_ENABLE_X64 and JAX_DISABLE_JIT, set for other work or to debug, are overridden with
+  a note (the step's conditionals are typed float32, and run eagerly a step takes minutes).
 """
 
 from __future__ import annotations
@@ -124,6 +127,7 @@ def configure(*, devices: int | None = None, cache_dir: Path | str | None = CACH
     if _configured:
         return
     _configured.append(True)
+    _refuse_platforms()
     # XLA's C++ log without its INFO lines; warnings and errors still print (a command's stderr
     # filter drops the known false alarms among them); TF_CPP_MIN_LOG_LEVEL=0 shows everything.
     os.environ.setdefault("TF_CPP_MIN_LOG_LEVEL", "1")
@@ -142,7 +146,33 @@ def configure(*, devices: int | None = None, cache_dir: Path | str | None = CACH
         _whole_cache_entries()
     # gloo lets jax.distributed run collectives between CPU processes.
     jax.config.update("jax_cpu_collectives_implementation", "gloo")
+    _shell_settings(jax)
     _collector_for_tracing()
+
+
+# JAX settings a shell may hold that the commands override, and why: the core and its controllers are float32 (with
+# float64 on, a `lax.cond`'s two branches disagree on their types and the first trace fails), and compiled (eagerly,
+# one 1 ms step of a batch takes minutes).
+OVERRIDDEN = {"jax_enable_x64": ("JAX_ENABLE_X64", "the commands run in float32"),
+              "jax_disable_jit": ("JAX_DISABLE_JIT", "the commands run compiled")}
+
+
+def _refuse_platforms() -> None:
+    """A JAX_PLATFORMS that leaves out the CPU (cuda, tpu, ...) is one line and exit code 2, before JAX starts:
+    JAX failed on it with an AssertionError's traceback, or a backend's, at the first array."""
+    platforms = [p.strip() for p in os.environ.get("JAX_PLATFORMS", "").split(",") if p.strip()]
+    if platforms and "cpu" not in platforms:
+        print(f"error: JAX_PLATFORMS={os.environ['JAX_PLATFORMS']}: hopper_mjx runs on the CPU (one JAX device a "
+              "core); unset JAX_PLATFORMS or set it to cpu", file=sys.stderr)
+        raise SystemExit(2)
+
+
+def _shell_settings(jax) -> None:
+    """Turns off the settings in OVERRIDDEN that the environment turned on, with a note for each."""
+    for flag, (variable, why) in OVERRIDDEN.items():
+        if getattr(jax.config, flag):
+            jax.config.update(flag, False)
+            print(f"note: {variable}={os.environ.get(variable, '')!s} is ignored: {why}", file=sys.stderr)
 
 
 def _collector_for_tracing() -> None:
