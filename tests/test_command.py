@@ -12,6 +12,7 @@ import sys
 import threading
 
 import numpy as np
+import pytest
 from test_bad_inputs import ENV
 
 from hopper_mjx.shell import errfilter, process
@@ -53,13 +54,19 @@ def test_the_last_lines_of_a_command_xla_ends_still_reach_stderr(tmp_path):
     assert "Unknown flag in XLA_FLAGS: --xla_no_such_flag=true" in run.stderr, run.stderr[-3000:]
 
 
-def test_a_jax_platform_without_the_cpu_is_refused_in_one_line(tmp_path):
-    """JAX_PLATFORMS=cuda on this CPU-only install failed at the first array with an AssertionError's traceback."""
+@pytest.mark.parametrize("variable, value, message", [
+    # On this CPU-only install JAX failed at the first array with an AssertionError's traceback.
+    ("JAX_PLATFORMS", "cuda", "JAX_PLATFORMS=cuda: hopper_mjx runs on the CPU (one JAX device a core); unset "
+                              "JAX_PLATFORMS or set it to cpu"),
+    # XLA failed on 0 with a traceback, and answered `abc` with the help of its every flag.
+    ("XLA_FLAGS", "--xla_force_host_platform_device_count=0",
+     "XLA_FLAGS --xla_force_host_platform_device_count=0: the JAX devices to run on must be a whole number >= 1 "
+     "(without it, one a core)")])
+def test_jax_settings_the_commands_cannot_run_with_are_refused_in_one_line(tmp_path, variable, value, message):
     out = tmp_path / "run.npz"
-    run = simulate(tmp_path / "cache", out=out, JAX_PLATFORMS="cuda")
+    run = simulate(tmp_path / "cache", out=out, **{variable: value})
     assert run.returncode == 2 and not out.exists()
-    assert run.stderr == ("error: JAX_PLATFORMS=cuda: hopper_mjx runs on the CPU (one JAX device a core); unset "
-                          "JAX_PLATFORMS or set it to cpu\n"), run.stderr[-3000:]
+    assert run.stderr == f"error: {message}\n", run.stderr[-3000:]
 
 
 def test_float64_or_no_jit_from_the_shell_is_overridden_with_a_note_and_the_same_results(tmp_path):

@@ -18,9 +18,10 @@
   (damaged, cut short) or write (a full disk) are compiled afresh, and JAX's own warning
   for them (two lines each, one per program) becomes one line per process. Entries are written whole
   (beside their place, then renamed into it), so that no reader, in this run or a later one, meets one cut short.
-- The shell's JAX settings that the commands cannot run with (`_shell_settings`): a JAX_PLATFORMS without `cpu`
-  is refused in one line; JAX_ENABLE_X64 and JAX_DISABLE_JIT, set for other work or to debug, are overridden with
-  a note (the step's conditionals are typed float32, and run eagerly a step takes minutes).
+- The shell's JAX settings that the commands cannot run with: a JAX_PLATFORMS without `cpu`, or an XLA_FLAGS device
+  count below 1, is refused in one line (`_refuse_environment`); JAX_ENABLE_X64 and JAX_DISABLE_JIT, set for other
+  work or to debug, are overridden with a note (the step's conditionals are typed float32, and run eagerly a step
+  takes minutes).
 """
 
 from __future__ import annotations
@@ -127,7 +128,7 @@ def configure(*, devices: int | None = None, cache_dir: Path | str | None = CACH
     if _configured:
         return
     _configured.append(True)
-    _refuse_platforms()
+    _refuse_environment()
     # XLA's C++ log without its INFO lines; warnings and errors still print (a command's stderr
     # filter drops the known false alarms among them); TF_CPP_MIN_LOG_LEVEL=0 shows everything.
     os.environ.setdefault("TF_CPP_MIN_LOG_LEVEL", "1")
@@ -157,13 +158,22 @@ OVERRIDDEN = {"jax_enable_x64": ("JAX_ENABLE_X64", "the commands run in float32"
               "jax_disable_jit": ("JAX_DISABLE_JIT", "the commands run compiled")}
 
 
-def _refuse_platforms() -> None:
-    """A JAX_PLATFORMS that leaves out the CPU (cuda, tpu, ...) is one line and exit code 2, before JAX starts:
-    JAX failed on it with an AssertionError's traceback, or a backend's, at the first array."""
+def _refuse_environment() -> None:
+    """A JAX_PLATFORMS that leaves out the CPU (cuda, tpu, ...), or an XLA_FLAGS device count that is not a whole
+    number >= 1, is one line and exit code 2, before JAX starts. JAX failed on the first with an AssertionError's
+    traceback, or a backend's, at the first array; XLA on a count of 0 with a traceback, on `abc` with the help of
+    its every flag."""
     platforms = [p.strip() for p in os.environ.get("JAX_PLATFORMS", "").split(",") if p.strip()]
+    problem = None
     if platforms and "cpu" not in platforms:
-        print(f"error: JAX_PLATFORMS={os.environ['JAX_PLATFORMS']}: hopper_mjx runs on the CPU (one JAX device a "
-              "core); unset JAX_PLATFORMS or set it to cpu", file=sys.stderr)
+        problem = (f"JAX_PLATFORMS={os.environ['JAX_PLATFORMS']}: hopper_mjx runs on the CPU (one JAX device a core); "
+                   "unset JAX_PLATFORMS or set it to cpu")
+    for count in re.findall(r"--xla_force_host_platform_device_count=(\S*)", os.environ.get("XLA_FLAGS", "")):
+        if not (count.isdigit() and int(count) >= 1):
+            problem = (f"XLA_FLAGS --xla_force_host_platform_device_count={count}: the JAX devices to run on must be a "
+                       "whole number >= 1 (without it, one a core)")
+    if problem:
+        print(f"error: {problem}", file=sys.stderr)
         raise SystemExit(2)
 
 
