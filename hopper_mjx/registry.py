@@ -1,5 +1,5 @@
-"""The names a user types, each defined once: controllers, engines, tasks, terrains, motors, varied parameters,
-the policy prefix.
+"""The names a user types, each defined once: commands, controllers, engines, tasks, terrains, motors, varied
+parameters, the policy prefix.
 
 The factories (`control.make`, `engine.make`, `envs.make`, `variation.draw.draw`) dispatch on
 these names, and every `--controller`, `--engine`, `--task` and `--randomize` choice, help text
@@ -10,6 +10,28 @@ so that a command can refuse a bad name before JAX or MuJoCo is loaded.
 from __future__ import annotations
 
 from typing import NamedTuple
+
+# The commands, as a user runs them (`python -m NAME`, or `python NAME` for a script), in the order a newcomer meets
+# them, each with what it is for; `python -m hopper_mjx` lists them, and tests/test_help.py holds this list to the
+# modules and scripts that run as commands.
+COMMANDS = {
+    "hopper_mjx.sweep": "sweeps over gravity (the main job), a gain, a parameter, a terrain, or controllers",
+    "hopper_mjx.simulate": "a batch of monopeds; their IMU, odometry and contact signals to .npz, or live",
+    "hopper_mjx.view": "MuJoCo's interactive viewer on a live batch",
+    "hopper_mjx.render": "pictures and videos, headless",
+    "hopper_mjx.model": "the simulated model as MJCF or URDF; a terrain's map",
+    "hopper_mjx.ros.record": "a batch's sensor streams as a ROS 1 bag or a ROS 2 MCAP",
+    "hopper_mjx.ros.plots": "plots of a recording's IMU, odometry and contact signals",
+    "hopper_mjx.ros.echo": "a recorded topic's messages, as rostopic echo prints them",
+    "hopper_mjx.perf.bench": "the batched core against native MuJoCo, side by side",
+    "hopper_mjx.perf.profile": "where the batched step spends its time",
+    "experiments/train.py": "Brax PPO or SAC on a monoped task",
+    "experiments/results.py": "the learning results table, from training runs",
+    "experiments/export_onnx.py": "a trained policy as ONNX, checked against the JAX policy",
+    "experiments/robustness.py": "the robustness table: Raibert and policies under pushes",
+    "experiments/leg_energy.py": "energy per hop against the leg's lengths",
+    "experiments/apex_reward.py": "what the hop task's apex term pays a hopper",
+}
 
 POLICY_PREFIX = "policy:"  # `policy:PATH`: a policy trained by experiments/train.py, run as a controller
 

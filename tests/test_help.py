@@ -3,6 +3,7 @@
 A `%` in a help string that argparse reads as a format, or an import that fails, crashes --help;
 no other test runs it. The commands are found from the source, so a new one is covered too."""
 
+import re
 import subprocess
 import sys
 from concurrent.futures import ThreadPoolExecutor
@@ -29,6 +30,20 @@ def test_every_command_is_found():
     for expected in ("-m hopper_mjx.simulate", "-m hopper_mjx.sweep", "-m hopper_mjx.model", "-m hopper_mjx.view",
                      "-m hopper_mjx.perf.bench", "-m hopper_mjx.ros.record", str(ROOT / "experiments/train.py")):
         assert expected in names
+
+
+def test_python_m_hopper_mjx_lists_every_command_and_only_those():
+    """`python -m hopper_mjx` lists registry.COMMANDS: a command added without its line there fails here."""
+    from hopper_mjx import registry
+
+    found = {c[1] if c[0] == "-m" else str(Path(c[0]).relative_to(ROOT)) for c in commands()} - {"hopper_mjx"}
+    assert found == set(registry.COMMANDS)
+    listed = subprocess.run([sys.executable, "-m", "hopper_mjx"], capture_output=True, text=True, timeout=120,
+                            cwd=ROOT)
+    assert listed.returncode == 0 and listed.stderr == "", listed.stderr[-2000:]
+    for name, what in registry.COMMANDS.items():
+        typed = f"python {name}" if name.endswith(".py") else f"python -m {name}"
+        assert re.search(rf"^  {re.escape(typed)} +{re.escape(what)}$", listed.stdout, re.M), (name, listed.stdout)
 
 
 def run_help(command: list[str]) -> subprocess.CompletedProcess:
