@@ -4,7 +4,9 @@ import pytest
 
 from hopper_mjx.shell import jaxsetup
 
-jaxsetup.configure()  # before any JAX computation: 2 host devices here, persistent compile cache
+# Before any JAX computation: 2 host devices here, persistent compile cache; stderr left to pytest's capture (the
+# commands' filtered stderr is tested on their own processes, tests/test_command.py).
+jaxsetup.configure(quiet=False)
 pytest_plugins = ("build_time",)  # the report of how long each test spent building programs
 
 # The files that take longest with an empty compile cache, longest first: each file's setup, call and teardown times

@@ -7,6 +7,7 @@ features, at every load from the cache, and logs an error warning of "SIGILL" fo
 
 import os
 import re
+import select
 import subprocess
 import sys
 import threading
@@ -84,6 +85,43 @@ def test_float64_or_no_jit_from_the_shell_is_overridden_with_a_note_and_the_same
         other = np.load(tmp_path / f"{name}.npz")
         assert plain.files == other.files
         assert all(np.array_equal(plain[k], other[k]) and plain[k].dtype == other[k].dtype for k in plain.files)
+
+
+def test_a_line_cut_short_passes_at_once_unless_it_may_start_a_log_line():
+    """An interactive Python writes its prompt to stderr with no newline: it must not wait for the next line. The
+    start of an XLA log line is held until its end, so that a false alarm written in two pieces is still dropped."""
+    read, write = os.pipe()
+    out_read, out_write = os.pipe()
+    thread = threading.Thread(target=errfilter.forward, args=(read, out_write), daemon=True)
+    thread.start()
+    os.write(write, b">>> ")
+    assert select.select([out_read], [], [], 10)[0] and os.read(out_read, 100) == b">>> "
+    os.write(write, FALSE[:40].encode())
+    assert not select.select([out_read], [], [], 0.5)[0]  # held: it may be, and is, a false alarm
+    os.write(write, FALSE[40:].encode() + b"\n>>> ")
+    assert select.select([out_read], [], [], 10)[0] and os.read(out_read, 100) == b">>> "
+    os.close(write)
+    thread.join()
+    os.close(out_write)
+    assert os.read(out_read, 100) == b""
+
+
+LIBRARY = """import sys
+import jax.numpy as jnp
+from hopper_mjx import configure
+configure(cache_dir=sys.argv[1], quiet=sys.argv[2] == "quiet")
+print(float(jax.jit(lambda x: jnp.sin(x) * 2)(1.0)))
+""".replace("import jax.numpy", "import jax\nimport jax.numpy")
+
+
+def test_a_script_that_configures_the_package_gets_its_stderr_filtered_too(tmp_path):
+    """README's Python example calls `configure()`: each program it loaded from the cache printed XLA's false alarms,
+    3 kB a program, as the commands did before their filter. The first run compiles; the second loads."""
+    runs = [subprocess.run([sys.executable, "-c", LIBRARY, str(tmp_path), mode], env=ENV, capture_output=True,
+                           text=True, timeout=300) for mode in ("quiet", "quiet", "loud")]
+    assert all(r.returncode == 0 and abs(float(r.stdout) - 1.6829419) < 1e-6 for r in runs), runs[-1].stderr[-3000:]
+    assert not ALARM.search(runs[1].stderr), runs[1].stderr[-3000:]
+    assert "Assume version compatibility" in runs[2].stderr  # unfiltered, the same load does print
 
 
 def simulate(cache, out=os.devnull, **env):

@@ -16,8 +16,15 @@ FALSE_ALARMS = re.compile(r"cpu_aot_loader\.cc.*Target machine feature \+(prefer
                           r"|pjrt_executable\.cc.*Assume version compatibility")
 
 
+# The start of a C++ log line of level warning or error (`E1205 22:58:02.337611 ...`), the only lines that can be
+# false alarms: a line cut between reads is held back only if it may be one.
+LOG_START = re.compile(rb"[EW]\d{0,4}(?: |$)")
+
+
 def forward(read: int, real: int) -> None:
-    """Copies lines from descriptor `read` to `real`, but the false alarms, until `read` ends; closes `read`."""
+    """Copies lines from descriptor `read` to `real`, but the false alarms, until `read` ends; closes `read`. The
+    rest of a line cut between reads passes at once, unless it may start a log line: an interactive Python's
+    prompt (`>>> `, on stderr, with no newline) must not wait for the next line."""
     pending = b""
     while True:
         chunk = os.read(read, 65536)
@@ -25,9 +32,12 @@ def forward(read: int, real: int) -> None:
             break
         lines = (pending + chunk).split(b"\n")
         pending = lines.pop()
-        kept = [line for line in lines if not FALSE_ALARMS.search(line.decode(errors="replace"))]
+        kept = [line + b"\n" for line in lines if not FALSE_ALARMS.search(line.decode(errors="replace"))]
+        if pending and not LOG_START.match(pending):
+            kept.append(pending)
+            pending = b""
         if kept:
-            os.write(real, b"\n".join(kept) + b"\n")
+            os.write(real, b"".join(kept))
     if pending:
         os.write(real, pending)
     os.close(read)

@@ -122,13 +122,18 @@ def _whole_cache_entries() -> None:
 _configured: list = []  # set by the first `configure`: JAX takes the device count only before its first computation
 
 
-def configure(*, devices: int | None = None, cache_dir: Path | str | None = CACHE_DIR) -> None:
+def configure(*, devices: int | None = None, cache_dir: Path | str | None = CACHE_DIR, quiet: bool = True) -> None:
     """Call before the first JAX computation of the process; later calls do nothing (a command's checks may
-    need JAX, e.g. to read a trained policy, before its run does)."""
+    need JAX, e.g. to read a trained policy, before its run does). `quiet`: this process's stderr without XLA's
+    false alarms, as a command's (`process.filter_stderr`; a script or notebook calling this gets the same)."""
     if _configured:
         return
     _configured.append(True)
     _refuse_environment()
+    if quiet:
+        from hopper_mjx.shell import process
+
+        process.filter_stderr()
     # XLA's C++ log without its INFO lines; warnings and errors still print (a command's stderr
     # filter drops the known false alarms among them); TF_CPP_MIN_LOG_LEVEL=0 shows everything.
     os.environ.setdefault("TF_CPP_MIN_LOG_LEVEL", "1")
