@@ -102,6 +102,15 @@ def _check_gravity(gravity) -> np.ndarray:
     return g
 
 
+def _check_params(params, n: int) -> None:
+    """Per-instance controller parameters have N = len(gravity) rows: vmap's own error for a mismatch named no
+    argument ("inconsistent sizes for array axes")."""
+    rows = {np.shape(leaf)[0] if np.ndim(leaf) else 0 for leaf in jax.tree_util.tree_leaves(params)}
+    if rows - {n}:
+        raise ValueError(f"controller params hold {', '.join(map(str, sorted(rows)))} instances (their leading axis) "
+                         f"where the gravity holds {n}: make them for {n} (e.g. control.make(name, robot, {n}))")
+
+
 class Sim:
     """A compiled monoped model batched over instances and local devices."""
 
@@ -167,6 +176,7 @@ class Sim:
         """
         g = _check_gravity(gravity)
         n = g.shape[0]
+        _check_params(params, n)
         own = None if qpos is not None or not variation else draw.stances(self.mj_model, variation)
         variation = self._check_variation(variation or {}, n)
         ground = () if ground is None else self._check_ground(ground, n)

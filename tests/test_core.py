@@ -9,7 +9,7 @@ import mujoco
 import numpy as np
 import pytest
 
-from hopper_mjx import simulate
+from hopper_mjx import control, simulate
 from hopper_mjx.control.base import HOLD_GAINS, hold, zero_torque
 from hopper_mjx.hardware import signals
 from hopper_mjx.sim import gravity_vectors, split_rollout_key
@@ -217,6 +217,13 @@ def test_the_next_rollout_key_was_never_used_for_noise(sim, limp):
 def test_bad_gravity_is_rejected(sim, gravity):
     with pytest.raises(ValueError, match="gravity|N=0"):
         sim.reset(gravity)
+
+
+def test_controller_params_for_another_batch_size_are_rejected_by_name(sim):
+    """Params made for 6 instances run on 4 gravities failed inside vmap ("inconsistent sizes for array axes")."""
+    ctrl, params = control.make("raibert", sim.robot, 6, height=0.1)
+    with pytest.raises(ValueError, match=r"controller params hold 6 instances .* where the gravity holds 4"):
+        sim.reset(gravity_vectors([9.81, 1.62] * 2), controller=ctrl, params=params)
 
 
 def test_bad_rates_are_rejected(sim, limp):
