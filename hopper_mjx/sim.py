@@ -92,7 +92,7 @@ def steps_for(duration: float, timestep: float, sensors: signals.SensorConfig) -
 def _check_gravity(gravity) -> np.ndarray:
     g = np.asarray(gravity, dtype=float)
     if g.ndim != 2 or g.shape[1] != 3:
-        raise ValueError(f"gravity must be (N, 3) vectors, got shape {g.shape}")
+        raise ValueError(f"gravity must be (N, 3) vectors, got shape {g.shape} (gravity_vectors makes them)")
     if g.shape[0] == 0:
         raise ValueError("N=0: need at least one instance")
     if not np.all(np.isfinite(g)):
@@ -100,6 +100,14 @@ def _check_gravity(gravity) -> np.ndarray:
     if np.any(g[:, 2] > 0):
         raise ValueError(f"gravity must not point up (g_z > 0): {g[g[:, 2] > 0][:3].tolist()}")
     return g
+
+
+def _per_instance(name: str, values, n: int, size: int) -> np.ndarray:
+    """`values` as (n, size) float32: one row for every instance, or one per instance."""
+    values = np.asarray(values, dtype=np.float32)
+    if values.shape not in ((size,), (n, size)):
+        raise ValueError(f"{name} must be ({size},) or (N, {size}) with N = {n} instances, got shape {values.shape}")
+    return np.broadcast_to(values, (n, size))
 
 
 def _check_params(params, n: int) -> None:
@@ -182,11 +190,12 @@ class Sim:
         ground = () if ground is None else self._check_ground(ground, n)
         qpos = (self.robot.stance_qpos if own is None else own) if qpos is None else qpos
         qvel = np.zeros(self.layout.nv) if qvel is None else qvel
-        qpos = np.broadcast_to(np.asarray(qpos, dtype=np.float32), (n, self.layout.nq))
-        qvel = np.broadcast_to(np.asarray(qvel, dtype=np.float32), (n, self.layout.nv))
+        qpos, qvel = _per_instance("qpos", qpos, n, self.layout.nq), _per_instance("qvel", qvel, n, self.layout.nv)
         if not (np.isfinite(qpos).all() and np.isfinite(qvel).all()):
             raise ValueError("initial qpos/qvel must be finite")
         if not isinstance(key, jax.Array):
+            if not isinstance(key, (int, np.integer)) or isinstance(key, bool):
+                raise ValueError(f"key must be an int seed or a JAX PRNG key, got {key!r}")
             key = jax.random.PRNGKey(key)
         controller = controller or self.limp
         data, obs, cstate = self._start(controller, params is None)(qpos, qvel, ground, params)

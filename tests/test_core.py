@@ -226,6 +226,17 @@ def test_controller_params_for_another_batch_size_are_rejected_by_name(sim):
         sim.reset(gravity_vectors([9.81, 1.62] * 2), controller=ctrl, params=params)
 
 
+@pytest.mark.parametrize("given, message", [
+    ({"qpos": np.zeros(5)}, r"qpos must be \(10,\) or \(N, 10\) with N = 2 instances, got shape \(5,\)"),
+    ({"qvel": np.zeros((3, 9))}, r"qvel must be \(9,\) or \(N, 9\) with N = 2 instances, got shape \(3, 9\)"),
+    ({"key": 1.5}, r"key must be an int seed or a JAX PRNG key, got 1.5")])
+def test_a_start_of_the_wrong_shape_or_key_is_rejected_by_name(sim, given, message):
+    """NumPy's broadcast error ("could not be broadcast together with remapped shapes"), and JAX's for a float seed,
+    named neither argument."""
+    with pytest.raises(ValueError, match=message):
+        sim.reset(gravity_vectors([9.81, 1.62]), **given)
+
+
 def test_bad_rates_are_rejected(sim, limp):
     state = sim.reset(gravity_vectors([9.81]), controller=limp)
     with pytest.raises(ValueError, match="must divide the physics rate"):
