@@ -3,6 +3,8 @@
 One compiled step (2 instances of `stand`, short episodes) shared by every test.
 """
 
+import re
+
 import gymnasium
 import numpy as np
 import pytest
@@ -70,3 +72,13 @@ def test_bad_sizes_are_rejected():
         MonopedVectorEnv("stand", num_envs=0)
     with pytest.raises(ValueError, match="unknown task"):
         MonopedVectorEnv("fly")
+
+
+def test_actions_of_another_shape_are_rejected(vec):
+    """A reshape took any array of num_envs x 3 values, so (3, 2) ran as (2, 3) with its values moved between
+    instances, and (3, 3) failed in NumPy's words."""
+    vec.reset(seed=0)
+    for shape in ((3, 2), (3, 3), (6,)):
+        expected = re.escape(f"actions must be (num_envs, actions) = (2, 3), got {shape}")
+        with pytest.raises(ValueError, match=expected):
+            vec.step(np.zeros(shape, np.float32))

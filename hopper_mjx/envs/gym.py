@@ -69,7 +69,9 @@ class MonopedVectorEnv(gymnasium.vector.VectorEnv):
     def step(self, actions):
         if self._state is None:
             raise RuntimeError("call reset() before step()")
-        actions = np.asarray(actions, np.float32).reshape(self.action_space.shape)
+        actions = np.asarray(actions, np.float32)
+        if actions.shape != self.action_space.shape:  # a reshape took any array of that size, in any layout
+            raise ValueError(f"actions must be (num_envs, actions) = {self.action_space.shape}, got {actions.shape}")
         self._state, reward, terminated = self._step(self._state, jnp.asarray(actions),
                                                      jnp.asarray(self._needs_reset), self._keys())
         terminated = np.array(terminated)
