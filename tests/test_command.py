@@ -70,21 +70,18 @@ def test_jax_settings_the_commands_cannot_run_with_are_refused_in_one_line(tmp_p
     assert run.stderr == f"error: {message}\n", run.stderr[-3000:]
 
 
-def test_float64_or_no_jit_from_the_shell_is_overridden_with_a_note_and_the_same_results(tmp_path):
+def test_float64_or_no_jit_from_the_shell_is_overridden_with_a_note_and_the_same_results(tiny, tmp_path):
     """JAX_ENABLE_X64=1 failed the step's first trace (a conditional's branches typed float32 and float64), and
-    JAX_DISABLE_JIT=1 ran it eagerly for minutes; each now runs the same bytes as without it, saying so."""
-    runs = {}
-    for name, env in (("plain", {}), ("x64", {"JAX_ENABLE_X64": "1"}), ("nojit", {"JAX_DISABLE_JIT": "true"})):
-        runs[name] = simulate(tmp_path / "cache", out=tmp_path / f"{name}.npz", **env)
-        assert runs[name].returncode == 0, runs[name].stderr[-3000:]
-    assert "note: JAX_ENABLE_X64=1 is ignored: the commands run in float32\n" in runs["x64"].stderr
-    assert "note: JAX_DISABLE_JIT=true is ignored: the commands run compiled\n" in runs["nojit"].stderr
-    assert "note:" not in runs["plain"].stderr
-    plain = np.load(tmp_path / "plain.npz")
-    for name in ("x64", "nojit"):
-        other = np.load(tmp_path / f"{name}.npz")
-        assert plain.files == other.files
-        assert all(np.array_equal(plain[k], other[k]) and plain[k].dtype == other[k].dtype for k in plain.files)
+    JAX_DISABLE_JIT=1 ran it eagerly for minutes; with both set the tiny run now gives the same bytes, saying so."""
+    cache, plain_run, plain_out = tiny
+    both = simulate(cache, out=tmp_path / "both.npz", JAX_ENABLE_X64="1", JAX_DISABLE_JIT="true")
+    assert both.returncode == 0, both.stderr[-3000:]
+    assert "note: JAX_ENABLE_X64=1 is ignored: the commands run in float32\n" in both.stderr
+    assert "note: JAX_DISABLE_JIT=true is ignored: the commands run compiled\n" in both.stderr
+    assert "note:" not in plain_run.stderr
+    plain, other = np.load(plain_out), np.load(tmp_path / "both.npz")
+    assert plain.files == other.files
+    assert all(np.array_equal(plain[k], other[k]) and plain[k].dtype == other[k].dtype for k in plain.files)
 
 
 def test_a_line_cut_short_passes_at_once_unless_it_may_start_a_log_line():
@@ -132,18 +129,27 @@ def simulate(cache, out=os.devnull, **env):
                           timeout=600)
 
 
-def test_a_run_from_a_warm_cache_prints_no_alarm(tmp_path):
-    """The same tiny run three times on a fresh cache: it compiles and fills the cache, then loads from
-    it without an alarm; with the filter off (TF_CPP_MIN_LOG_LEVEL=0) the load does print XLA's warnings,
-    so the run in between was a load, and the filter is what keeps its stderr clean. Which warnings depends on
-    the host: every load logs "Assume version compatibility"; the SIGILL alarm for +prefer-no-gather comes only
-    where LLVM tunes for that CPU (27 Nov's machine did, 28 Nov's AMD family 25 model 1 did not)."""
-    cold = simulate(tmp_path)
-    assert cold.returncode == 0 and not ALARM.search(cold.stderr), cold.stderr[-3000:]
-    assert any(p.is_file() for p in tmp_path.rglob("*"))  # the compiled program is in the cache
-    warm = simulate(tmp_path)
+@pytest.fixture(scope="module")
+def tiny(tmp_path_factory):
+    """The tiny run once on a fresh cache (it compiles and fills it): the cache, the run, and its output."""
+    folder = tmp_path_factory.mktemp("tiny")
+    run = simulate(folder / "cache", out=folder / "plain.npz")
+    assert run.returncode == 0, run.stderr[-3000:]
+    return folder / "cache", run, folder / "plain.npz"
+
+
+def test_a_run_from_a_warm_cache_prints_no_alarm(tiny):
+    """The same tiny run on the cache it filled: it loads from it without an alarm; with the filter off
+    (TF_CPP_MIN_LOG_LEVEL=0) the load does print XLA's warnings, so that run was a load, and the filter is what keeps
+    its stderr clean. Which warnings depends on the host: every load logs "Assume version compatibility"; the SIGILL
+    alarm for +prefer-no-gather comes only where LLVM tunes for that CPU (27 Nov's machine did, 28 Nov's AMD family
+    25 model 1 did not)."""
+    cache, cold, _ = tiny
+    assert not ALARM.search(cold.stderr), cold.stderr[-3000:]
+    assert any(p.is_file() for p in cache.rglob("*"))  # the compiled program is in the cache
+    warm = simulate(cache)
     assert warm.returncode == 0 and not ALARM.search(warm.stderr), warm.stderr[-3000:]
-    unfiltered = simulate(tmp_path, TF_CPP_MIN_LOG_LEVEL="0")
+    unfiltered = simulate(cache, TF_CPP_MIN_LOG_LEVEL="0")
     assert unfiltered.returncode == 0 and ALARM.search(unfiltered.stderr), unfiltered.stderr[-3000:]
 
 
