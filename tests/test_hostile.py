@@ -240,6 +240,10 @@ CASES = [
      "--out /proc/x.npz: cannot write in /proc"),
     ("model", ["--export", "/proc/m.xml"], "--export /proc/m.xml: cannot write in /proc"),
     ("ros.record", ["--out", "/sys/r.bag"], "--out /sys/r.bag: cannot write in /sys"),
+    # a name longer than the file system's 255 bytes: the existence check raised ENAMETOOLONG, a traceback
+    ("simulate", ["--num", "1", "--duration", "0.05", "--out", "a" * 300 + ".npz"], "a.npz: File name too long"),
+    ("sweep", ["gravity", "--out", "s" * 300], "ss: File name too long"),
+    (TRAIN, ["--out", "r" * 300], "rr: File name too long"),
     (TRAIN, ["--out", "new", "--seed", "-3"], "--seed must be in 0..4294967295"),
     (TRAIN, ["--out", "new", "--randomize", "kp_scale=0.8..1.2,sensor_delay=300..900", "--episode-length", "10"],
      "--randomize: sensor_delay drew"),

@@ -241,6 +241,14 @@ def check_writable(name: str, path: str | Path, *, folder: bool = False, may_exi
     folder (a folder output not a file); with `may_exist` False it must be new; with `suffixes`, a file's name
     ends in one of them (the formats the tool writes; a device such as /dev/null is taken as it is)."""
     path = Path(path)
+    try:
+        return _check_writable(name, path, folder, may_exist, make_parents, suffixes)
+    except OSError as err:  # a name the file system cannot hold (ENAMETOOLONG), a loop of links, ...
+        raise ValueError(f"{name} {path}: {err.strerror or err}") from None
+
+
+def _check_writable(name: str, path: Path, folder: bool, may_exist: bool, make_parents: bool,
+                    suffixes: tuple[str, ...]) -> Path:
     parent = path.parent
     while make_parents and not parent.exists() and parent != parent.parent:
         parent = parent.parent
