@@ -244,6 +244,10 @@ CASES = [
     ("simulate", ["--num", "1", "--duration", "0.05", "--out", "a" * 300 + ".npz"], "a.npz: File name too long"),
     ("sweep", ["gravity", "--out", "s" * 300], "ss: File name too long"),
     (TRAIN, ["--out", "r" * 300], "rr: File name too long"),
+    # an input of such a name: Path.is_file raised it too, wherever a command opened its inputs
+    ("simulate", ["--urdf", "u" * 300 + ".urdf", "--out", "o.npz"], "uu.urdf: File name too long"),
+    ("simulate", ["--controller", "policy:" + "p" * 300, "--out", "o.npz"], "pp: File name too long"),
+    ("ros.plots", ["b" * 300 + ".bag"], "bb.bag: File name too long"),
     (TRAIN, ["--out", "new", "--seed", "-3"], "--seed must be in 0..4294967295"),
     (TRAIN, ["--out", "new", "--randomize", "kp_scale=0.8..1.2,sensor_delay=300..900", "--episode-length", "10"],
      "--randomize: sensor_delay drew"),

@@ -31,6 +31,7 @@
 
 from __future__ import annotations
 
+import errno
 import os
 import signal
 import subprocess
@@ -40,6 +41,9 @@ from pathlib import Path
 
 from hopper_mjx.shell import errfilter, files
 
+# A path no file can have: a name longer than the file system takes, or a loop of symbolic links. Python's
+# `Path.exists` and `is_file` raise these rather than answer False, so an input file's checks ended in a traceback.
+UNNAMEABLE = (errno.ENAMETOOLONG, errno.ELOOP)
 STOP_CODES = {signal.SIGINT: 130, signal.SIGTERM: 143}  # 128 + the signal's number, as a shell reports it
 PACKAGE_ROOT = Path(__file__).resolve().parents[2]  # the checkout: hopper_mjx/ and experiments/
 
@@ -155,6 +159,10 @@ def run(main) -> int:
     try:
         return main()
     except OSError as err:
+        if err.errno in UNNAMEABLE:  # a path given that no file can have: the input's fault, wherever it is opened
+            files.remove_partial()
+            print(f"error: {err.filename}: {err.strerror}", file=sys.stderr)
+            return 2
         if err.errno not in files.NO_ROOM:
             raise
         files.remove_partial()
