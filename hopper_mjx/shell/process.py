@@ -128,7 +128,13 @@ def filter_stderr() -> None:
     read, write = os.pipe()
     # -I -S: the standard library only, whatever the environment's paths; started before descriptor 2 moves, so
     # that a failure to start it leaves stderr as it was.
-    child = subprocess.Popen(errfilter.command(sys.executable), stdin=read, stdout=real, stderr=real, close_fds=True)
+    try:
+        child = subprocess.Popen(errfilter.command(sys.executable), stdin=read, stdout=real, stderr=real,
+                                 close_fds=True)
+    except OSError:  # no Python to start (an embedding interpreter's sys.executable): stderr stays unfiltered
+        for fd in (read, write, real):
+            os.close(fd)
+        return
     os.close(read)
     _stderr.extend([real, child])
     os.dup2(write, 2)
