@@ -213,6 +213,11 @@ def test_gravity_figure_shows_energy_per_hop_in_place_and_cot_with_a_speed_comma
     assert "mean ± std over survivors" in in_place.axes[0].get_legend_handles_labels()[1]
     assert "± 1 standard deviation" in in_place.get_supxlabel()
     assert "ideal motors; no delay; no pushes; the URDF's robot; flat ground" in in_place.get_suptitle()
+    # A panel with no value (here no hop measured) says so, where it drew an empty axis of -0.04..0.04.
+    said = {i: [t.get_text() for t in ax.texts if t.get_text().startswith("no value")] for i, ax in
+            enumerate(in_place.axes)}
+    assert said == {0: ["no value: no replicate still up\nfinished a hop in 5 s"], 1: said[0], 2: said[0],
+                    3: said[0], 4: [], 5: []}
 
 
 def test_a_plots_title_carries_every_physics_option_the_run_changed():

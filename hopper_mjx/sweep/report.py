@@ -260,6 +260,11 @@ def gravity_figure(spec: SweepSpec, groups: list[dict], series: list | None = No
                         yerr=None if key in ("survival", "highest_tilt_median") else _column(rows_, f"{key}_std"))
         ax.set_xlabel("gravity g (m/s²)")
         ax.set_ylabel(label)
+        if not any(np.isfinite(_column(rows_, key)).any() for _, rows_ in series):
+            # A short run, or every robot down: say so, where an empty panel showed an axis of -0.04..0.04.
+            ax.text(0.5, 0.3, f"no value: no replicate still up\nfinished a hop in {spec.duration:g} s",
+                    transform=ax.transAxes, ha="center", va="center", fontsize=9, color="0.4")
+            ax.set_yticks([])
         for gp, name in PLANETS.items():
             ax.axvline(gp, color="0.8", lw=0.8, zorder=0)
             ax.text(gp, 1.0, name, transform=ax.get_xaxis_transform(), ha="center", va="bottom", fontsize=7)
