@@ -14,6 +14,7 @@ before MuJoCo is loaded, unless MUJOCO_GL is set (see `hopper_mjx.shell.startup`
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from pathlib import Path
 
@@ -152,6 +153,20 @@ def check_video(args) -> Scenario:
     return check_batch(args)
 
 
+def check_gl() -> None:
+    """The OpenGL settings `render` draws with, before anything is built: MUJOCO_GL=glfw needs a display, and EGL or
+    OSMesa a PYOPENGL_PLATFORM that agrees (MuJoCo ended in a FatalError's traceback, or without its Renderer)."""
+    backend = os.environ.get("MUJOCO_GL", "").lower().strip()
+    if backend == "glfw" and sys.platform.startswith("linux") and not (os.environ.get("DISPLAY")
+                                                                       or os.environ.get("WAYLAND_DISPLAY")):
+        raise ValueError("MUJOCO_GL=glfw needs a display, and DISPLAY is unset: unset MUJOCO_GL to render headless "
+                         "with EGL")
+    platform_ = os.environ.get("PYOPENGL_PLATFORM", "")
+    if backend in ("egl", "osmesa") and platform_ and platform_.lower() != backend:
+        raise ValueError(f"PYOPENGL_PLATFORM={platform_} disagrees with MUJOCO_GL={backend}: unset "
+                         f"PYOPENGL_PLATFORM, or set it to {backend}")
+
+
 def check_batch(args) -> Scenario:
     """The batch's options, checked even for a still alone (a bad --world is refused, not ignored)."""
     batch = cli.check_batch(args)
@@ -204,6 +219,7 @@ def main(argv=None) -> int:
         parser().error("nothing to do: give --still PATH and/or --video PATH")
     size = dict(zip(("width", "height"), args.size))
     try:
+        check_gl()
         _check_size(**size)
         if args.still is not None:
             cli.check_writable("--still", args.still, suffixes=(".png", ".jpg", ".jpeg"))

@@ -70,6 +70,25 @@ def test_jax_settings_the_commands_cannot_run_with_are_refused_in_one_line(tmp_p
     assert run.stderr == f"error: {message}\n", run.stderr[-3000:]
 
 
+@pytest.mark.parametrize("command, env, message", [
+    # `import mujoco` raised a RuntimeError's traceback in every command
+    (["hopper_mjx.simulate", "--num", "1"], {"MUJOCO_GL": "bogus"},
+     "MUJOCO_GL=bogus: MuJoCo's OpenGL backend here is one of egl, osmesa, glfw, glx; unset it to use egl"),
+    # MuJoCo's FatalError ("an OpenGL platform library has not been loaded"), a traceback
+    (["hopper_mjx.render", "--still", "s.png"], {"MUJOCO_GL": "glfw", "DISPLAY": "", "WAYLAND_DISPLAY": ""},
+     "MUJOCO_GL=glfw needs a display, and DISPLAY is unset: unset MUJOCO_GL to render headless with EGL"),
+    # mujoco without its Renderer: "module 'mujoco' has no attribute 'Renderer'"
+    (["hopper_mjx.render", "--still", "s.png"], {"PYOPENGL_PLATFORM": "bogus"},
+     "PYOPENGL_PLATFORM=bogus disagrees with MUJOCO_GL=egl: unset PYOPENGL_PLATFORM, or set it to egl")])
+def test_opengl_settings_the_commands_cannot_draw_with_are_refused_in_one_line(tmp_path, command, env, message):
+    if sys.platform != "linux":
+        pytest.skip("the backends named are Linux's")
+    run = subprocess.run([sys.executable, "-m", *command], env={**ENV, "MUJOCO_GL": "egl", **env}, cwd=tmp_path,
+                         capture_output=True, text=True, timeout=300)
+    assert run.returncode == 2 and run.stderr == f"error: {message}\n", run.stderr[-3000:]
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_float64_or_no_jit_from_the_shell_is_overridden_with_a_note_and_the_same_results(tiny, tmp_path):
     """JAX_ENABLE_X64=1 failed the step's first trace (a conditional's branches typed float32 and float64), and
     JAX_DISABLE_JIT=1 ran it eagerly for minutes; with both set the tiny run now gives the same bytes, saying so."""

@@ -37,11 +37,25 @@ WARP_MODULE = "mujoco.mjx.warp"  # prints the notices when it is executed
 WARP_ABSENT_PREFIXES = ("Failed to import warp:", "Failed to import mujoco_warp:")
 
 
+# MUJOCO_GL's values MuJoCo takes (mujoco/rendering/classic/gl_context.py): a backend of this system, or a word
+# that turns rendering on or off. Any other makes `import mujoco` raise, in every command.
+GL_BACKENDS = {"Linux": ("egl", "osmesa", "glfw", "glx"), "Windows": ("glfw", "wgl"), "Darwin": ("cgl", "glfw")}
+GL_SWITCHES = ("", "disable", "disabled", "off", "false", "0", "enable", "enabled", "on", "true", "1")
+
+
 def choose_gl_backend() -> str | None:
-    """Sets MUJOCO_GL=egl on Linux unless the user chose; returns the value in effect."""
+    """Sets MUJOCO_GL=egl on Linux unless the user chose; returns the value in effect. A command given a value
+    MuJoCo refuses is one line and exit code 2 (MuJoCo's import raised a RuntimeError's traceback)."""
     if platform.system() == "Linux":
         os.environ.setdefault("MUJOCO_GL", "egl")
-    return os.environ.get("MUJOCO_GL")
+    value = os.environ.get("MUJOCO_GL")
+    backends = GL_BACKENDS.get(platform.system(), ("glfw",))
+    if value is not None and value.lower().strip() not in backends + GL_SWITCHES and process.is_command():
+        default = "egl" if platform.system() == "Linux" else "MuJoCo's default"
+        print(f"error: MUJOCO_GL={value}: MuJoCo's OpenGL backend here is one of {', '.join(backends)}; unset it "
+              f"to use {default}", file=sys.stderr)
+        raise SystemExit(2)
+    return value
 
 
 def pass_on_unexpected(printed: str) -> None:
