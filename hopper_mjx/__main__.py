@@ -16,8 +16,9 @@ def listing() -> str:
 
 
 def main(argv=None) -> int:
-    cli.parser("python -m hopper_mjx", f"{__doc__}\n\n{listing()}").parse_args(argv)
-    print(f"{__doc__}\n\n{listing()}")
+    text = f"{__doc__}\n\n{listing()}"
+    cli.parser("python -m hopper_mjx", text).parse_args(argv)
+    print(text)
     return 0
 
 

@@ -168,18 +168,16 @@ def _refuse_environment() -> None:
     number >= 1, is one line and exit code 2, before JAX starts. JAX failed on the first with an AssertionError's
     traceback, or a backend's, at the first array; XLA on a count of 0 with a traceback, on `abc` with the help of
     its every flag."""
+    from hopper_mjx.shell import checks
+
     platforms = [p.strip() for p in os.environ.get("JAX_PLATFORMS", "").split(",") if p.strip()]
-    problem = None
     if platforms and "cpu" not in platforms:
-        problem = (f"JAX_PLATFORMS={os.environ['JAX_PLATFORMS']}: hopper_mjx runs on the CPU (one JAX device a core); "
-                   "unset JAX_PLATFORMS or set it to cpu")
+        raise SystemExit(checks.fail(f"JAX_PLATFORMS={os.environ['JAX_PLATFORMS']}: hopper_mjx runs on the CPU (one "
+                                     "JAX device a core); unset JAX_PLATFORMS or set it to cpu"))
     for count in re.findall(r"--xla_force_host_platform_device_count=(\S*)", os.environ.get("XLA_FLAGS", "")):
         if not (count.isdigit() and int(count) >= 1):
-            problem = (f"XLA_FLAGS --xla_force_host_platform_device_count={count}: the JAX devices to run on must be a "
-                       "whole number >= 1 (without it, one a core)")
-    if problem:
-        print(f"error: {problem}", file=sys.stderr)
-        raise SystemExit(2)
+            raise SystemExit(checks.fail(f"XLA_FLAGS --xla_force_host_platform_device_count={count}: the JAX devices "
+                                         "to run on must be a whole number >= 1 (without it, one a core)"))
 
 
 def _shell_settings(jax) -> None:
@@ -187,7 +185,7 @@ def _shell_settings(jax) -> None:
     for flag, (variable, why) in OVERRIDDEN.items():
         if getattr(jax.config, flag):
             jax.config.update(flag, False)
-            print(f"note: {variable}={os.environ.get(variable, '')!s} is ignored: {why}", file=sys.stderr)
+            print(f"note: {variable}={os.environ.get(variable, '')} is ignored: {why}", file=sys.stderr)
 
 
 def _collector_for_tracing() -> None:

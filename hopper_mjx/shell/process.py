@@ -166,9 +166,10 @@ def run(main) -> int:
         return main()
     except OSError as err:
         if err.errno in UNNAMEABLE:  # a path given that no file can have: the input's fault, wherever it is opened
+            from hopper_mjx.shell import checks
+
             files.remove_partial()
-            print(f"error: {err.filename}: {err.strerror}", file=sys.stderr)
-            return 2
+            return checks.fail(f"{err.filename}: {err.strerror}")
         if err.errno not in files.NO_ROOM:
             raise
         files.remove_partial()

@@ -51,10 +51,11 @@ def choose_gl_backend() -> str | None:
     value = os.environ.get("MUJOCO_GL")
     backends = GL_BACKENDS.get(platform.system(), ("glfw",))
     if value is not None and value.lower().strip() not in backends + GL_SWITCHES and process.is_command():
+        from hopper_mjx.shell import checks  # here: it imports NumPy, which a good value never needs yet
+
         default = "egl" if platform.system() == "Linux" else "MuJoCo's default"
-        print(f"error: MUJOCO_GL={value}: MuJoCo's OpenGL backend here is one of {', '.join(backends)}; unset it "
-              f"to use {default}", file=sys.stderr)
-        raise SystemExit(2)
+        raise SystemExit(checks.fail(f"MUJOCO_GL={value}: MuJoCo's OpenGL backend here is one of "
+                                     f"{', '.join(backends)}; unset it to use {default}"))
     return value
 
 
