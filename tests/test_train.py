@@ -143,11 +143,17 @@ def test_a_minutes_budget_stops_at_the_first_evaluation_past_it(tmp_path, capsys
     (["--algo", "a2c"], "--algo 'a2c' is unknown; choose from ppo, sac"),
     (["--engine", "warp"], "--engine: unknown engine 'warp'; choose from: auto, chain, mjx"),
     (["--algo", "sac", "--no-eval"], "--no-eval is for --algo ppo"),
-    (["--task", "hop_velocity", "--observe-gravity"], "holds a ppo policy of task 'hop' with 27 observations"),
-    (["--task", "hop", "--algo", "sac"], "holds a ppo policy of task 'hop'"),
+    (["--task", "hop_velocity", "--observe-gravity"],
+     "holds a ppo policy of task 'hop' with 27 observations; this run differs in its task (--task hop_velocity) and "
+     "its observations (28 here)"),
+    # Only what differs is named: hop_velocity observes 27 numbers too, which read "with 27 ... needs 27".
+    (["--task", "hop_velocity"], "holds a ppo policy of task 'hop' with 27 observations; this run differs in its task "
+                                 "(--task hop_velocity): use another --out"),
+    (["--task", "hop", "--algo", "sac"], "holds a ppo policy of task 'hop' with 27 observations; this run differs in "
+                                        "its algorithm (--algo sac): use"),
     # hop_terrain reads a height scan: its 25 points count in the folder's check.
-    (["--task", "hop_terrain"], "holds a ppo policy of task 'hop' with 27 observations; --task hop_terrain --algo ppo "
-                                "needs 52"),
+    (["--task", "hop_terrain"], "holds a ppo policy of task 'hop' with 27 observations; this run differs in its task "
+                                "(--task hop_terrain) and its observations (52 here)"),
     (["--terrain", "rough:amp=0.02,seed=each"], "--terrain rough:amp=0.02,wavelength=0.4,seed=each,size=4x4,cell=0.04:"
                                                 " training puts every instance on one ground; give a fixed seed"),
     (["--minutes", "0"], "--minutes must be finite and > 0, got 0"),

@@ -129,8 +129,10 @@ def test_a_ppo_policy_acts_alike_in_the_sac_networks_it_starts(tmp_path):
 
 @pytest.mark.parametrize("args, message", [
     (["--algo", "ppo"], "--start-from is for --algo sac (a PPO run resumes from its own checkpoints)"),
-    (["--task", "hop"], "is a policy of task 'stand' with 24 observations; --task hop here needs 27"),
-    (["--observe-gravity"], "is a policy of task 'stand' with 24 observations; --task stand here needs 25"),
+    (["--task", "hop"], "is a policy of task 'stand' with 24 observations; this run differs in its task (--task hop) "
+                        "and its observations (27 here)"),
+    (["--observe-gravity"], "is a policy of task 'stand' with 24 observations; this run differs in its observations "
+                            "(25 here)"),
     (["--policy-layers", "16"], "has 8-8 hidden layers where --policy-layers asks 16: pass --policy-layers 8,8"),
 ])
 def test_a_start_that_cannot_be_sacs_is_refused_before_the_run_folder_is_made(trained_sac, tmp_path, capsys, args,

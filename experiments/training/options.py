@@ -277,10 +277,11 @@ def check(args):
 
         _, algo, net, config = policy.read(resume[0])
         size = observations(args, physics)
-        if algo != args.algo or config.task != args.task or net["observation_size"] != size:
+        differs = _differences(args, algo, config.task, net["observation_size"], size)
+        if differs:
             raise ValueError(f"--out {args.out} holds a {algo} policy of task {config.task!r} with "
-                             f"{net['observation_size']} observations; --task {args.task} --algo {args.algo} "
-                             f"needs {size}: use another --out")
+                             f"{net['observation_size']} observations; this run differs in {differs}: "
+                             "use another --out")
         # Brax restores the checkpoint's parameters into networks of the asked sizes: they must be its sizes.
         kwargs = net["network_factory_kwargs"]
         for flag, key in LAYER_FLAGS[algo]:
@@ -357,6 +358,15 @@ def sac_policy_defaults() -> dict:
             **{k: defaults[k].default for k in ("distribution_type", "noise_std_type", "state_dependent_std")}}
 
 
+def _differences(args, algo: str, task: str, saved_size: int, size: int) -> str:
+    """What of a saved policy (its algorithm, task, observation count) this run asks otherwise, e.g. "its task
+    (--task hop_velocity)": only what differs, so that a task refused for itself does not read as a count."""
+    found = [f"its algorithm (--algo {args.algo})" if algo != args.algo else "",
+             f"its task (--task {args.task})" if task != args.task else "",
+             f"its observations ({size} here)" if saved_size != size else ""]
+    return " and ".join(x for x in found if x)
+
+
 def _check_start(args, physics) -> None:
     """--start-from: a readable policy of this task, with this run's observations and SAC's action distribution,
     whose policy layers are --policy-layers (Brax builds SAC's networks from the option). JSON reads only."""
@@ -368,9 +378,10 @@ def _check_start(args, physics) -> None:
 
     path, algo, net, config = _read_start(args)
     size = observations(args, physics)
-    if config.task != args.task or net["observation_size"] != size:
+    differs = _differences(args, args.algo, config.task, net["observation_size"], size)
+    if differs:
         raise ValueError(f"--start-from {path} is a policy of task {config.task!r} with {net['observation_size']} "
-                         f"observations; --task {args.task} here needs {size}")
+                         f"observations; this run differs in {differs}")
     kwargs = net["network_factory_kwargs"]
     for key, sac in sac_policy_defaults().items():  # how the network's outputs become actions: SAC's way
         if kwargs.get(key, sac) != sac:
