@@ -37,6 +37,7 @@ from hopper_mjx.shell.checks import (  # noqa: F401  re-exported: the tools use 
     parse_indices,
     parse_scan,
     parser,
+    say,
     warn_diverged,
 )
 from hopper_mjx.terrain.spec import check_terrain, refuse_each, terrain_help  # noqa: F401 (refuse_each: the tools')

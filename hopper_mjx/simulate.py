@@ -151,9 +151,7 @@ def main(argv=None) -> int:
         cli.check_range("--rate", args.rate, low=0, open_low=True)
         cli.check_writable("--out", args.out, suffixes=(".npz", ""))  # a bare name: NumPy's file as named
         batch = cli.check_batch(args)
-        for note in (cli.check_rates("--rate", sensor_config(args), batch, args.duration), apex_note(batch)):
-            if note:
-                print(note, flush=True)
+        cli.say(cli.check_rates("--rate", sensor_config(args), batch, args.duration), apex_note(batch))
         with foxglove.listening(args, live.spread(len(batch.gravity), live.SHOWN)) as stream:
             jaxsetup.configure()
             saved = run(args, batch) if stream is None else run_live(args, batch, stream)

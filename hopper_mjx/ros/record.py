@@ -196,9 +196,7 @@ def main(argv=None) -> int:
         batch = cli.check_batch(args)
         if args.instances is not None:
             cli.check_indices("--instances", args.instances, len(batch.gravity))
-        note = cli.check_rates(rate_flags(args), sensor_config(args), batch, args.duration)
-        if note:
-            print(note, flush=True)
+        cli.say(cli.check_rates(rate_flags(args), sensor_config(args), batch, args.duration))
         jaxsetup.configure()
         rec = simulate_batch(args, batch)
         path = write(rec, out, args.format, args.instances)

@@ -321,6 +321,13 @@ def fail(err: Exception | str) -> int:
     return 2
 
 
+def say(*notes: str | None) -> None:
+    """Prints each note a check returned (None: nothing to say), at once: the compile that follows takes seconds."""
+    for note in notes:
+        if note:
+            print(note, flush=True)
+
+
 def warn_diverged(diverged) -> None:
     bad = np.flatnonzero(diverged)
     if bad.size:

@@ -402,9 +402,7 @@ def main(argv=None) -> int:
     except ValueError as err:
         return cli.fail(err)
     timestep = specs[0].physics.timestep
-    note = budget.duration_note(args.duration, timestep, sample_steps(timestep))  # whole samples of its streams
-    if note:
-        print(note, flush=True)
+    cli.say(budget.duration_note(args.duration, timestep, sample_steps(timestep)))  # whole samples of its streams
     jaxsetup.configure()
     from hopper_mjx.sweep import report
     if args.coordinator:
