@@ -24,7 +24,7 @@ import numpy as np
 from hopper_mjx import cli
 from hopper_mjx.model import robot, scene
 from hopper_mjx.scenario import Physics, Scenario
-from hopper_mjx.shell import files, jaxsetup, process
+from hopper_mjx.shell import files, jaxsetup, process, startup
 
 VIDEO_SUFFIXES = (".mp4", ".gif")
 TRACK_HEIGHT = 0.45  # m: the camera looks at the leg's middle, not at the base
@@ -155,7 +155,8 @@ def check_video(args) -> Scenario:
 
 def check_gl() -> None:
     """The OpenGL settings `render` draws with, before anything is built: MUJOCO_GL=glfw needs a display, and EGL or
-    OSMesa a PYOPENGL_PLATFORM that agrees (MuJoCo ended in a FatalError's traceback, or without its Renderer)."""
+    OSMesa a PYOPENGL_PLATFORM that agrees (MuJoCo ended in a FatalError's traceback, or without its Renderer) and
+    its library installed."""
     backend = os.environ.get("MUJOCO_GL", "").lower().strip()
     if backend == "glfw" and sys.platform.startswith("linux") and not (os.environ.get("DISPLAY")
                                                                        or os.environ.get("WAYLAND_DISPLAY")):
@@ -165,6 +166,9 @@ def check_gl() -> None:
     if backend in ("egl", "osmesa") and platform_ and platform_.lower() != backend:
         raise ValueError(f"PYOPENGL_PLATFORM={platform_} disagrees with MUJOCO_GL={backend}: unset "
                          f"PYOPENGL_PLATFORM, or set it to {backend}")
+    missing = startup.missing_gl_library(backend)  # EGL's absence leaves mujoco without its Renderer
+    if missing:
+        raise ValueError(missing)
 
 
 def check_batch(args) -> Scenario:
@@ -174,9 +178,7 @@ def check_batch(args) -> Scenario:
     cli.check_indices("--instance", [args.instance], len(batch.gravity))
     if args.video is None:
         return batch
-    note = cli.check_rates("--fps", video_sensors(args), batch, args.duration)
-    if note:
-        print(note, flush=True)
+    cli.say(cli.check_rates("--fps", video_sensors(args), batch, args.duration))
     return batch
 
 

@@ -89,6 +89,37 @@ def test_opengl_settings_the_commands_cannot_draw_with_are_refused_in_one_line(t
     assert list(tmp_path.iterdir()) == []
 
 
+def test_a_headless_backend_without_its_library_is_refused_in_one_line(tmp_path, monkeypatch):
+    """MUJOCO_GL=osmesa without libOSMesa made `import mujoco` itself fail in every command ("'NoneType' object has
+    no attribute 'glGetError'", a traceback); render on EGL without libEGL would have no Renderer. Both are one
+    line naming the library and the package that has it. The libraries are hidden from the check here; where this
+    machine lacks OSMesa (Debian's Mesa packages do not pull it in), a command is refused end to end too."""
+    import ctypes.util
+
+    from hopper_mjx import render
+    from hopper_mjx.shell import startup
+
+    installed = ctypes.util.find_library("OSMesa") is not None
+    monkeypatch.setattr(ctypes.util, "find_library", lambda name: None)
+    assert startup.missing_gl_library("osmesa") == (
+        "MUJOCO_GL=osmesa needs the OSMesa library (libOSMesa.so), which is not installed: install it (Debian, Ubuntu: "
+        "sudo apt-get install libosmesa6), or unset MUJOCO_GL to render with EGL")
+    assert startup.missing_gl_library("glfw") is None
+    monkeypatch.setenv("MUJOCO_GL", "egl")
+    monkeypatch.delenv("PYOPENGL_PLATFORM", raising=False)
+    with pytest.raises(ValueError, match=r"^MUJOCO_GL=egl needs the EGL library \(libEGL.so\), which is not "
+                                         r"installed: install it \(Debian, Ubuntu: sudo apt-get install libegl1\)$"):
+        render.check_gl()
+    monkeypatch.undo()
+    render.check_gl()  # this machine renders with EGL (the suite's render tests)
+    if sys.platform != "linux" or installed:
+        return
+    out = tmp_path / "run.npz"
+    run = simulate(tmp_path / "cache", out=out, MUJOCO_GL="osmesa")
+    assert run.returncode == 2 and not out.exists()
+    assert run.stderr == f"error: {startup.missing_gl_library('osmesa')}\n", run.stderr[-3000:]
+
+
 def test_float64_or_no_jit_from_the_shell_is_overridden_with_a_note_and_the_same_results(tiny, tmp_path):
     """JAX_ENABLE_X64=1 failed the step's first trace (a conditional's branches typed float32 and float64), and
     JAX_DISABLE_JIT=1 ran it eagerly for minutes; with both set the tiny run now gives the same bytes, saying so."""

@@ -40,6 +40,8 @@ WARP_ABSENT_PREFIXES = ("Failed to import warp:", "Failed to import mujoco_warp:
 # MUJOCO_GL's values MuJoCo takes (mujoco/rendering/classic/gl_context.py): a backend of this system, or a word
 # that turns rendering on or off. Any other makes `import mujoco` raise, in every command.
 GL_BACKENDS = {"Linux": ("egl", "osmesa", "glfw", "glx"), "Windows": ("glfw", "wgl"), "Darwin": ("cgl", "glfw")}
+# The library PyOpenGL loads for each headless backend, and the Debian package that has it.
+GL_LIBRARIES = {"egl": ("EGL", "libegl1"), "osmesa": ("OSMesa", "libosmesa6")}
 GL_SWITCHES = ("", "disable", "disabled", "off", "false", "0", "enable", "enabled", "on", "true", "1")
 
 
@@ -56,7 +58,27 @@ def choose_gl_backend() -> str | None:
         default = "egl" if platform.system() == "Linux" else "MuJoCo's default"
         raise SystemExit(checks.fail(f"MUJOCO_GL={value}: MuJoCo's OpenGL backend here is one of "
                                      f"{', '.join(backends)}; unset it to use {default}"))
+    if value is not None and value.lower().strip() == "osmesa" and process.is_command():
+        missing = missing_gl_library("osmesa")  # then `import mujoco` itself fails, in every command
+        if missing:
+            from hopper_mjx.shell import checks
+
+            raise SystemExit(checks.fail(missing))
     return value
+
+
+def missing_gl_library(backend: str) -> str | None:
+    """Why MuJoCo's headless `backend` (egl or osmesa) cannot draw here: the library PyOpenGL loads for it is not
+    installed (PyOpenGL's import then ended in "'NoneType' object has no attribute 'glGetError'"); None if it is, or
+    for another backend."""
+    import ctypes.util  # here: it runs ldconfig, and only these backends need it
+
+    if backend not in GL_LIBRARIES or ctypes.util.find_library(GL_LIBRARIES[backend][0]):
+        return None
+    library, package = GL_LIBRARIES[backend]
+    other = "" if backend == "egl" else ", or unset MUJOCO_GL to render with EGL"
+    return (f"MUJOCO_GL={backend} needs the {library} library (lib{library}.so), which is not installed: install it "
+            f"(Debian, Ubuntu: sudo apt-get install {package}){other}")
 
 
 def pass_on_unexpected(printed: str) -> None:
