@@ -53,7 +53,7 @@ MIN_OBSERVATIONS = 1000
 
 
 def parser() -> argparse.ArgumentParser:
-    p = cli.parser("experiments/export_onnx.py", __doc__)
+    p = cli.parser("python experiments/export_onnx.py", __doc__)
     p.add_argument("policy", type=Path, help="a training run's folder (its policy/) or one of its checkpoints")
     p.add_argument("--out", type=Path, required=True, help="the ONNX file to write (FILE.onnx)")
     p.add_argument("--urdf", default=None, help="the robot the policy will run on (default: the shipped monoped); "

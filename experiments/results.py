@@ -56,7 +56,7 @@ LEARNER = {"updates_per_batch": "epochs per batch", "num_minibatches": "minibatc
 
 
 def parser() -> argparse.ArgumentParser:
-    p = cli.parser("experiments/results.py", __doc__)
+    p = cli.parser("python experiments/results.py", __doc__)
     p.add_argument("runs", nargs="+", type=Path, help="training run folders, or --seeds parents of seed-<s>/ runs")
     p.add_argument("--out", type=Path, required=True, help="the table's Markdown file (the plot: same name, .png)")
     p.add_argument("--sweep", action="store_true", help="run the missing gravity sweeps (policies and references)")

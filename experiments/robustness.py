@@ -28,7 +28,7 @@ SETTINGS = ("gravity", "num", "duration", "height", "push", "variation")  # what
 
 
 def parser():
-    p = cli.parser("experiments/robustness.py", __doc__)
+    p = cli.parser("python experiments/robustness.py", __doc__)
     p.add_argument("--policies", nargs="+", required=True, metavar="NAME=PATH",
                    help="row groups: a name and a training run or --seeds parent")
     p.add_argument("--out", type=Path, required=True, help="folder of the sweeps and robustness.md")

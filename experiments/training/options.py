@@ -17,7 +17,7 @@ ALGORITHMS = ("ppo", "sac")
 
 
 def parser() -> argparse.ArgumentParser:
-    p = cli.parser("experiments/train.py", __doc__)
+    p = cli.parser("python experiments/train.py", __doc__)
     p.add_argument("--task", default="hop", help=registry.listed(registry.TASKS))
     p.add_argument("--algo", default="ppo", help="ppo or sac (Brax's agents)")
     p.add_argument("--out", default="runs/ppo", help="output folder (resumes if it holds checkpoints)")
