@@ -88,7 +88,7 @@ def check(args):
     cli.check_range("--tolerance", args.tolerance, low=0, open_low=True)
     cli.check_seed(args.seed)
     if not args.policy.is_dir():
-        raise ValueError(f"{args.policy} is not a trained policy: no such folder")
+        raise ValueError(cli.no_policy_folder(args.policy))
     if args.task is not None:
         try:
             registry.check("task", registry.TASKS, args.task)

@@ -43,19 +43,20 @@ from hopper_mjx.shell.checks import (  # noqa: F401  re-exported: the tools use 
 from hopper_mjx.terrain.spec import check_terrain, refuse_each, terrain_help  # noqa: F401 (refuse_each: the tools')
 
 
-def check_controller(text: str, height: float = 0.0, speed=(0.0, 0.0), physics: Physics | None = None) -> None:
+def check_controller(text: str, height: float = 0.0, speed=(0.0, 0.0), physics: Physics | None = None,
+                     flag: str = "--controller") -> None:
     """A known controller; a `policy:PATH` must be a trained policy for `physics`' robot whose training
     range holds the command (`height`, `speed`). Reads the policy and the physics' model (compiled once,
-    kept for the build) only."""
+    kept for the build) only. `flag`: the option that named it, for the refusal."""
     if not registry.is_policy(text):
         try:
             registry.check("controller", registry.CONTROLLERS, text, extra=f"{registry.POLICY_PREFIX}PATH")
         except ValueError as err:
-            raise ValueError(f"--controller: {err}") from None
+            raise ValueError(f"{flag}: {err}") from None
         return
     path = Path(registry.policy_path(text))
     if not path.is_dir():
-        raise ValueError(f"--controller {text}: {path} is not a trained policy: no such folder")
+        raise ValueError(f"{flag} {text}: {no_policy_folder(path)}")
     from hopper_mjx.envs import policy
     from hopper_mjx.model.robot import standing_height
 
@@ -65,8 +66,16 @@ def check_controller(text: str, height: float = 0.0, speed=(0.0, 0.0), physics: 
         config = policy.load(path)[1]  # the parameters too: a damaged copy is refused before any compile
         same_robot(config.robot, physics.mj_model, f"the policy {path}")
     except ValueError as err:
-        raise ValueError(f"--controller: {err}") from None
+        raise ValueError(f"{flag}: {err}") from None
     policy.check_command(config, standing_height(physics.mj_model), height, speed)
+
+
+def no_policy_folder(path: Path) -> str:
+    """Why `path`, which is not a folder, is no policy; if nothing is there, how to make one there (the README's tour
+    names a policy folder before its training line)."""
+    if Path(path).exists():
+        return f"{path} is not a trained policy: a file, not a training run's folder"
+    return f"{path} is not a trained policy: no such folder (train one: python experiments/train.py --out {path})"
 
 
 def check_gains(args) -> dict | None:

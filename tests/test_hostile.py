@@ -258,7 +258,8 @@ CASES = [
     ("simulate", ["--controller", "policy:pol_net_list", *SIM], "ppo_network_config.json must hold a JSON object"),
     ("ros.record", ["--controller", "policy:pol_obs", "--out", "r.bag"], "the policy takes 7 observations"),
     ("simulate", ["--controller", "policy:pol_no_params", *SIM], "its parameters cannot be read"),
-    ("render", ["--video", "h.gif", "--controller", "policy:a_file"], "is not a trained policy"),
+    ("render", ["--video", "h.gif", "--controller", "policy:a_file"],
+     "a_file is not a trained policy: a file, not a training run's folder"),
     ("simulate", ["--controller", "policy:pol_cut_params", *SIM], "its parameters cannot be read (OUT_OF_RANGE"),
     ("sweep", ["gravity", "--controller", "policy:pol_cut_manifest", "--out", "s"], "its parameters cannot be read"),
     # a bag's metadata with a Python tag: refused (never obeyed) in one line

@@ -148,7 +148,10 @@ def test_two_processes_give_the_rows_of_one(tiny, tmp_path):
      (["gravity", "--num", "0"], "--num"),
      (["gravity", "--controller", "hold"], "a sweep runs raibert, jump, balance or policy:PATH"),
      (["compare", "--controllers", "raibert,raibert"], "lists one twice"),
-     (["compare", "--controllers", "raibert,policy:/nonexistent"], "is not a trained policy"),
+     # The flag as typed, and how to make the folder (the tour's compare line comes before its training line).
+     (["compare", "--controllers", "raibert,policy:/nonexistent"],
+      "--controllers policy:/nonexistent: /nonexistent is not a trained policy: no such folder (train one: python "
+      "experiments/train.py --out /nonexistent)"),
      (["gravity", "--values", "9.81,9.81"], "gravity values must differ, got [9.81, 9.81]"),
      (["gravity", "--seed", "-1"], "--seed must be in 0..4294967295, got -1")],
 )

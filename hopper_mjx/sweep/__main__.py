@@ -206,7 +206,7 @@ def check(args):
                          grounds=tuple(grounds))
         check_robots(spec, args.duration)
         specs.append(spec)
-        cli.check_controller(name, args.height, args.speed, physics)  # a policy: its folder and trained range
+        cli.check_controller(name, args.height, args.speed, physics, "--controllers")  # a policy: its folder, range
     out = args.out or Path("runs") / f"{args.kind}-{datetime.now(timezone.utc):%Y%m%d-%H%M%S}"
     cli.check_writable("--out", out, folder=True, make_parents=True)
     if args.kind == "compare" and out.exists() and not any(out.glob(f"*/{folder.MANIFEST}")):
