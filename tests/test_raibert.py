@@ -369,3 +369,25 @@ def test_a_long_and_a_short_shank_hop_on_the_commanded_apex_of_their_own_legs(tm
         assert r["fell"] == "0" and r["diverged"] == "0", shank
         assert int(r["hops"]) >= 6, shank
         assert abs(float(r["apex_height"]) - 0.10) < 0.015, (shank, r["apex_height"])
+
+
+def test_a_speed_the_gait_ramps_to_for_longer_than_the_run_is_noted():
+    """The gaits ramp their speed reference from rest by `speed_step` a hop: --speed 1,0 for 4 s moved at 0.17 m/s,
+    and nothing said why. The note names the hops and, at each gravity where they outlast the run, their flights'
+    ballistic time (a lower bound on the ramp); otherwise, and for controllers without the ramp, there is none."""
+    from hopper_mjx import control
+
+    step = raibert.RaibertConfig().speed_step
+    hops = math.ceil(1.0 / step)
+    flight = {g: hops * 2 * math.sqrt(2 * 0.1 / g) for g in (1.62, 9.81)}  # s: each hop's rise and fall of 0.1 m
+    assert 4.0 < flight[9.81] < 6.0 < flight[1.62]
+    note = control.ramp_note("raibert", (1.0, 0.0), 0.1, [9.81, 1.62], 4.0)
+    assert note.startswith(f"note: raibert ramps its speed from rest to --speed 1,0 m/s by {step:g} m/s a hop, "
+                           f"{hops} hops: their flights alone take {flight[1.62]:.1f} s at g = 1.62 m/s², "
+                           f"{flight[9.81]:.1f} s at g = 9.81 m/s², more than --duration 4 s")
+    only_moon = control.ramp_note("jump", (0.0, -1.0), 0.1, [9.81, 1.62], 6.0)  # either axis; Earth's flights fit
+    assert f"{flight[1.62]:.1f} s at g = 1.62 m/s², more than" in only_moon and "9.81" not in only_moon
+    assert control.ramp_note("raibert", (1.0, 0.0), 0.1, [9.81, 1.62], 20.0) is None  # long enough everywhere
+    assert control.ramp_note("raibert", (0.0, 0.0), 0.1, [9.81], 1.0) is None
+    assert control.ramp_note("hold", (1.0, 0.0), 0.1, [9.81], 1.0) is None
+    assert control.ramp_note("policy:runs/hop-ppo", (1.0, 0.0), 0.1, [9.81], 1.0) is None

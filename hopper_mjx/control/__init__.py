@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from typing import Sequence
 
 import numpy as np
@@ -63,6 +64,25 @@ def make(name: str, robot: Robot, n: int, *, height: float = raibert.DEFAULT_HEI
                                                             latency=predicted_latency(name, latency))
 
 
+def ramp_note(name: str, speed, height: float, gravities, duration: float) -> str | None:
+    """A line saying where a gait's speed reference, which ramps from rest to the command by `speed_step` a hop
+    (`raibert.speed_update`), needs longer than the run: its robots then move slower than commanded for all of it
+    (1 m/s for 4 s reached 0.17 m/s). The time is a lower bound: the hops' flights alone, each the ballistic
+    2 sqrt(2 h / g) of the commanded rise h; their stances add more. None for other controllers, no speed, or a
+    run long enough at every gravity."""
+    if name not in registry.GAIT_CONTROLLERS or height <= 0:
+        return None
+    step = raibert.RaibertConfig().speed_step
+    hops = math.ceil(max(abs(float(v)) for v in speed) / step - 1e-9)
+    flight = {g: hops * 2.0 * math.sqrt(2.0 * height / g) for g in sorted(gravities) if g > 0}
+    short = ", ".join(f"{t:.1f} s at g = {g:g} m/s²" for g, t in flight.items() if t > duration)
+    if not hops or not short:
+        return None
+    return (f"note: {name} ramps its speed from rest to --speed {','.join(f'{float(v):g}' for v in speed)} m/s by "
+            f"{step:g} m/s a hop, {hops} hops: their flights alone take {short}, more than --duration {duration:g} s; "
+            "its robots move slower than commanded until then")
+
+
 def predicted_latency(name: str, latency):
     """`latency` (s, scalar or (n,)) for the gait `name` to predict over, or None: it does not predict
     (`registry.PREDICTING_CONTROLLERS`), or there is no delay (no leaves: the gait's program without a prediction)."""
@@ -71,4 +91,4 @@ def predicted_latency(name: str, latency):
     return latency
 
 
-__all__ = ["GAITS", "NAMES", "Controller", "gait", "make", "predicted_latency"]
+__all__ = ["GAITS", "NAMES", "Controller", "gait", "make", "predicted_latency", "ramp_note"]

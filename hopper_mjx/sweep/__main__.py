@@ -395,6 +395,14 @@ def run_one(args, spec, out: Path):
     return label(spec.controller), report.group_summary(spec, instances, table, runner.columns(spec))
 
 
+def ramp_notes(specs) -> list[str | None]:
+    """`control.ramp_note` for each gait the sweep runs: one that needs longer than a run to reach --speed."""
+    from hopper_mjx import control
+
+    firsts = {spec.controller: spec for spec in specs}.values()
+    return [control.ramp_note(s.controller, s.speed, s.height, s.gravity, s.duration) for s in firsts]
+
+
 def main(argv=None) -> int:
     args = parser().parse_args(argv)
     try:
@@ -402,7 +410,8 @@ def main(argv=None) -> int:
     except ValueError as err:
         return cli.fail(err)
     timestep = specs[0].physics.timestep
-    cli.say(budget.duration_note(args.duration, timestep, sample_steps(timestep)))  # whole samples of its streams
+    cli.say(budget.duration_note(args.duration, timestep, sample_steps(timestep)),  # whole samples of its streams
+            *ramp_notes(specs))
     jaxsetup.configure()
     from hopper_mjx.sweep import report
     if args.coordinator:
