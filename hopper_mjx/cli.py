@@ -30,6 +30,7 @@ from hopper_mjx.shell.checks import (  # noqa: F401  re-exported: the tools use 
     check_readable_file,
     check_seed,
     check_writable,
+    counted,
     fail,
     floats,
     make_folder,
@@ -391,6 +392,18 @@ def check_rates(flags: str | dict, sensors, batch: Scenario, duration: float | N
         budget.check_memory("--num, --duration", batch.n, recorded)
         return budget.duration_note(duration, batch.timestep, sensors.whole(batch.timestep))
     return None
+
+
+def gravity_magnitudes(batch: Scenario) -> list[float]:
+    """The batch's distinct gravity magnitudes above 0, m/s²."""
+    return sorted({float(g) for g in np.round(np.linalg.norm(batch.gravity, axis=1), 9) if g > 0})
+
+
+def speed_note(batch: Scenario, duration: float) -> str | None:
+    """`control.ramp_note` for a batch run for `duration` s: its gait needs longer than that to reach --speed."""
+    from hopper_mjx import control
+
+    return control.ramp_note(batch.controller, batch.speed, batch.height, gravity_magnitudes(batch), duration)
 
 
 def check_whole_periods(option: str, steps: int, timestep: float) -> None:

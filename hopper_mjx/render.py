@@ -178,7 +178,7 @@ def check_batch(args) -> Scenario:
     cli.check_indices("--instance", [args.instance], len(batch.gravity))
     if args.video is None:
         return batch
-    cli.say(cli.check_rates("--fps", video_sensors(args), batch, args.duration))
+    cli.say(cli.check_rates("--fps", video_sensors(args), batch, args.duration), cli.speed_note(batch, args.duration))
     return batch
 
 

@@ -28,6 +28,7 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from hopper_mjx import registry
+from hopper_mjx.shell.checks import counted
 from hopper_mjx.terrain import FLAT, Ground
 from hopper_mjx.variation.spec import Spec
 
@@ -253,6 +254,6 @@ class Scenario:
         jax.block_until_ready(traj)
         wall = time.perf_counter() - start
         steps = len(traj.time["state"]) * sensors.periods(sim.layout.timestep)["state"]
-        print(f"{self.n} instances x {steps} steps on {len(sim.devices)} device(s): {wall:.1f} s "
+        print(f"{counted(self.n, 'instance')} x {steps} steps on {counted(len(sim.devices), 'device')}: {wall:.1f} s "
               f"incl. compile, {self.n * steps / wall:,.0f} steps/s", file=sys.stderr)
         return sim, final, jax.tree_util.tree_map(np.asarray, traj)

@@ -83,25 +83,13 @@ def run(args, batch: Scenario | None = None) -> dict[str, np.ndarray]:
                   batch.controls(sim.mj_model), sensors)
 
 
-def _gravities(batch: Scenario) -> list[float]:
-    """The batch's distinct gravity magnitudes above 0, m/s²."""
-    return sorted({float(g) for g in np.round(np.linalg.norm(batch.gravity, axis=1), 9) if g > 0})
-
-
-def speed_note(batch: Scenario, duration: float) -> str | None:
-    """`control.ramp_note` for the batch: its gait needs longer than the run to reach --speed."""
-    from hopper_mjx import control
-
-    return control.ramp_note(batch.controller, batch.speed, batch.height, _gravities(batch), duration)
-
-
 def apex_note(batch: Scenario) -> str | None:
     """A line saying at which gravities the gait's commanded rise (--height) is more than the motors can give
     (`hardware.bound`: the model's robot, the knee's best push), so its robots hop lower or fall; None where
     every gravity's bound holds it, or the controller hops to no height."""
     from hopper_mjx import registry
 
-    gravities = _gravities(batch)
+    gravities = cli.gravity_magnitudes(batch)
     if batch.controller not in registry.GAIT_CONTROLLERS or not gravities:
         return None
     from hopper_mjx.hardware import bound
@@ -164,7 +152,7 @@ def main(argv=None) -> int:
         cli.check_writable("--out", args.out, suffixes=(".npz", ""))  # a bare name: NumPy's file as named
         batch = cli.check_batch(args)
         cli.say(cli.check_rates("--rate", sensor_config(args), batch, args.duration), apex_note(batch),
-                speed_note(batch, args.duration))
+                cli.speed_note(batch, args.duration))
         with foxglove.listening(args, live.spread(len(batch.gravity), live.SHOWN)) as stream:
             jaxsetup.configure()
             saved = run(args, batch) if stream is None else run_live(args, batch, stream)
@@ -176,7 +164,7 @@ def main(argv=None) -> int:
     down = hops.fallen(saved["qpos"]).any(axis=1)  # the sweeps' fall test, at the saved rate
     fell = (f"{down.sum()} fell (base below {hops.FALL_HEIGHT:g} m or tilted past {hops.FALL_ROLL_PITCH:g} "
             f"rad): {np.flatnonzero(down)[:10].tolist()}")
-    print(f"wrote {args.out}: {saved['qpos'].shape[0]} instances x {saved['time'].size} samples; "
+    print(f"wrote {args.out}: {cli.counted(saved['qpos'].shape[0], 'instance')} x {saved['time'].size} samples; "
           f"{fell if down.any() else 'all up to the end'}")
     return 0
 

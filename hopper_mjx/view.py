@@ -378,7 +378,7 @@ def watch(args, physics, batch, shown: list[int], stream) -> int:
             start = time.perf_counter()
             show_frame(run, display, stats, requests)
             if run.chunk is not None and not announced:
-                print(f"view: running {batch.n} instances, {len(shown)} shown", flush=True)
+                print(f"view: running {cli.counted(batch.n, 'instance')}, {len(shown)} shown", flush=True)
                 announced = True
             time.sleep(max(FRAME_TIME - (time.perf_counter() - start), 0.0))
     viewer.close()

@@ -185,3 +185,11 @@ def test_a_mistyped_option_is_answered_with_the_closest_one_the_command_takes(pa
     with pytest.raises(SystemExit):
         parsers["-m hopper_mjx.simulate"].parse_args(["--zzzzzz"])
     assert capsys.readouterr().err.startswith("error: unrecognized arguments: --zzzzzz (see ")
+
+
+def test_a_count_takes_its_nouns_number():
+    """One robot's run said '1 instances x 500 steps on 2 device(s)', and a sweep of --num 1 '1 replicates per g'."""
+    from hopper_mjx import cli
+
+    assert cli.counted(1, "instance") == "1 instance"
+    assert cli.counted(2, "device") == "2 devices" and cli.counted(0, "replicate") == "0 replicates"

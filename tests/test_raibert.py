@@ -391,3 +391,9 @@ def test_a_speed_the_gait_ramps_to_for_longer_than_the_run_is_noted():
     assert control.ramp_note("raibert", (0.0, 0.0), 0.1, [9.81], 1.0) is None
     assert control.ramp_note("hold", (1.0, 0.0), 0.1, [9.81], 1.0) is None
     assert control.ramp_note("policy:runs/hop-ppo", (1.0, 0.0), 0.1, [9.81], 1.0) is None
+    # The commands' batch (simulate, ros.record, render --video) gives its gait, command and gravities.
+    from hopper_mjx import cli, simulate
+
+    batch = cli.check_batch(simulate.parser().parse_args(["--controller", "raibert", "--speed", "1,0", "--gravity",
+                                                          "9.81,1.62,9.81"]))
+    assert cli.speed_note(batch, 4.0) == note

@@ -196,7 +196,8 @@ def main(argv=None) -> int:
         batch = cli.check_batch(args)
         if args.instances is not None:
             cli.check_indices("--instances", args.instances, len(batch.gravity))
-        cli.say(cli.check_rates(rate_flags(args), sensor_config(args), batch, args.duration))
+        cli.say(cli.check_rates(rate_flags(args), sensor_config(args), batch, args.duration),
+                cli.speed_note(batch, args.duration))
         jaxsetup.configure()
         rec = simulate_batch(args, batch)
         path = write(rec, out, args.format, args.instances)

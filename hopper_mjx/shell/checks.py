@@ -321,6 +321,11 @@ def fail(err: Exception | str) -> int:
     return 2
 
 
+def counted(n: int, noun: str) -> str:
+    """'1 instance', '3 instances': a count and its noun in the number it takes."""
+    return f"{n} {noun}{'' if n == 1 else 's'}"
+
+
 def say(*notes: str | None) -> None:
     """Prints each note a check returned (None: nothing to say), at once: the compile that follows takes seconds."""
     for note in notes:

@@ -390,7 +390,7 @@ def run_one(args, spec, out: Path):
     for line in notes:  # why robots fell, or a figure that means less than it seems
         print(line)
     rate = f", {facts['steps_per_s']:,.0f} steps/s" if facts["steps_per_s"] else " (all chunks were already done)"
-    print(f"\n{len(instances)} instances x {spec.duration:g} s in {facts['total_wall_s']:.0f} s{rate}; "
+    print(f"\n{cli.counted(len(instances), 'instance')} x {spec.duration:g} s in {facts['total_wall_s']:.0f} s{rate}; "
           f"outputs in {out}/")
     return label(spec.controller), report.group_summary(spec, instances, table, runner.columns(spec))
 

@@ -7,6 +7,7 @@ import math
 
 import numpy as np
 
+from hopper_mjx.shell.checks import counted
 from hopper_mjx.sweep.grid import BAND_KINDS, PASSED, PLANETS, SweepSpec
 from hopper_mjx.sweep.plotting import physics_label, pyplot
 
@@ -188,6 +189,6 @@ def figure(spec: SweepSpec, groups: list[dict], bounds: dict):
         panel.set_xticks(g, [f"{v:g}" for v in g])
         panel.set_xlabel("gravity (m/s²)")
         panel.grid(alpha=0.3)
-    fig.suptitle(f"{spec.controller}, {spec.num} replicates per point\n{physics_label(spec)}", fontsize=9)
+    fig.suptitle(f"{spec.controller}, {counted(spec.num, 'replicate')} per point\n{physics_label(spec)}", fontsize=9)
     fig.tight_layout()
     return fig

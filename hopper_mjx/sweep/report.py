@@ -13,6 +13,7 @@ import numpy as np
 
 from hopper_mjx import registry
 from hopper_mjx.metrics.thresholds import SPEED_TOLERANCE
+from hopper_mjx.shell.checks import counted
 from hopper_mjx.shell.files import atomic_write_text
 from hopper_mjx.sweep import limits
 from hopper_mjx.sweep.grid import BAND_KINDS, PASSED, PLANETS, Instances, SweepSpec
@@ -298,7 +299,7 @@ def gravity_figure(spec: SweepSpec, groups: list[dict], series: list | None = No
         who = " vs ".join(name for name, _ in series)
     else:
         who = "Raibert" if spec.controller == "raibert" else spec.controller
-    fig.suptitle(f"{who} hopping vs gravity: {spec.num} replicates per g, {spec.duration:g} s each\n"
+    fig.suptitle(f"{who} hopping vs gravity: {counted(spec.num, 'replicate')} per g, {spec.duration:g} s each\n"
                  f"{physics_label(spec)}", fontsize=11)
     fig.supxlabel("points: the mean over the replicates still up at the end; bars: ± 1 standard deviation over them; "
                   "survival: the share of all replicates up at the end", fontsize=8, color="0.3")
@@ -338,8 +339,8 @@ def gains_figure(spec: SweepSpec, groups: list[dict], second=None, panels: int =
             ax.text(c, r, text, ha="center", va="center", fontsize=8,
                     color="k" if np.isnan(v) else _label_colour(im.cmap(im.norm(v))))
         fig.colorbar(im, ax=ax, label=label)
-    fig.suptitle(f"{spec.kind} sweep of {spec.controller}: {spec.param} x gravity, {spec.num} replicates per cell, "
-                 f"{spec.duration:g} s each\n{physics_label(spec)}", fontsize=11)
+    fig.suptitle(f"{spec.kind} sweep of {spec.controller}: {spec.param} x gravity, {counted(spec.num, 'replicate')} "
+                 f"per cell, {spec.duration:g} s each\n{physics_label(spec)}", fontsize=11)
     return fig
 
 
