@@ -82,6 +82,9 @@ CASES = [
     ("render", ["--still", "s.png", "--instance", "-1"], "--instance [-1] out of range: the batch has 1 instance(s)"),
     ("render", ["--still", "nodir/m.png"], "--still nodir/m.png: its folder nodir does not exist"),
     ("render", ["--video", "h.gif", "--gravity", "9.81,1.62", "--instance", "2"], "--instance [2] out of range"),
+    # argparse named only the missing subcommand's name, not what it may be
+    ("sweep", [], "the following arguments are required: kind; kind is one of gravity, gains, param, compare, "
+                  "obstacle, gaps, terrain"),
     ("sweep", ["gravity", "--out", "a_file"], "--out a_file is a file; give a folder"),
     ("sweep", ["gravity", "--values", "0,9.81", "--out", "s"], "gravity values must be finite and > 0"),
     ("sweep", ["gravity", "--world", LOW_GRAVITY, "--out", "s"], "is not a downward pull"),

@@ -45,6 +45,10 @@ class ArgumentParser(argparse.ArgumentParser):
             message = names + rest[len(named[0]):]
         if message.startswith("unrecognized arguments: "):
             message += self._suggestion(message.removeprefix("unrecognized arguments: ").split())
+        if message.startswith("the following arguments are required: "):  # a subcommand missing: name them
+            missing = message.removeprefix("the following arguments are required: ").split(", ")
+            message += "".join(f"; {a.dest} is one of {', '.join(a.choices)}" for a in self._actions
+                               if isinstance(a, argparse._SubParsersAction) and a.dest in missing)
         self.exit(2, f"error: {message} (see {self.prog} --help)\n")
 
     def _suggestion(self, unknown: list[str]) -> str:
