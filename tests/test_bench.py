@@ -158,6 +158,15 @@ def test_profile_cuts_feed_every_stage_to_the_next_steps_position_and_velocity(s
             assert outs[names.index(name)] not in ins, (depth, name)  # computed, not the input passed through
 
 
+def test_a_part_of_the_step_below_0_says_why():
+    """On the plane the cuts before the setup cost more than the step they stand for (they keep outputs the whole
+    step never computes), and the setup reads -0.12 µs: the table says so under it, and only then."""
+    from hopper_mjx.perf import profile
+
+    assert "below 0: the cuts before it keep" in profile._lines("head", [("a", 0.6), ("setup", -0.12)], 1.0)
+    assert "below 0" not in profile._lines("head", [("a", 0.6), ("setup", 0.12)], 1.0)
+
+
 def test_profile_solve_setup_cut_is_mujoco_c_with_no_newton_iteration(settling_chain):
     """perf.profile times the solve's setup as the step with the iteration cap at 0: from the same states its
     accelerations are MuJoCo C's with `opt.iterations = 0` (the better of the warm start and the smooth
