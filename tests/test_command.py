@@ -226,3 +226,15 @@ def test_every_command_runs_its_main_through_the_process_shell():
     bare = [str(p.relative_to(root)) for p in sources
             if not re.search(r'if __name__ == "__main__":\n    sys\.exit\(process\.run\(main\)\)\n', p.read_text())]
     assert len(sources) >= 15 and bare == [], bare
+
+
+def test_an_empty_cache_variable_is_the_default_cache_not_the_working_folder(tmp_path):
+    """HOPPER_MJX_CACHE= (set, empty) made the cache Path(""), the working folder: a run there wrote its compiled
+    programs into the checkout it ran in."""
+    from pathlib import Path
+
+    probe = "from hopper_mjx.shell import jaxsetup; print(jaxsetup.CACHE_DIR)"
+    run = subprocess.run([sys.executable, "-c", probe], env={**ENV, "HOPPER_MJX_CACHE": ""}, cwd=tmp_path,
+                         capture_output=True, text=True, timeout=120)
+    assert run.returncode == 0, run.stderr[-2000:]
+    assert run.stdout.strip() == str(Path.home() / ".cache" / "hopper_mjx" / "jax")

@@ -37,7 +37,9 @@ import threading
 import warnings
 from pathlib import Path
 
-CACHE_DIR = Path(os.environ.get("HOPPER_MJX_CACHE", Path.home() / ".cache" / "hopper_mjx" / "jax"))
+# An empty HOPPER_MJX_CACHE counts as unset: as Path("") it was the working folder, and a run there left its
+# compiled programs (a cpu-<hash>/ folder) in whatever checkout it ran in.
+CACHE_DIR = Path(os.environ.get("HOPPER_MJX_CACHE") or Path.home() / ".cache" / "hopper_mjx" / "jax")
 
 
 def cpu_features() -> str:
