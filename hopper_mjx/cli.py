@@ -394,16 +394,11 @@ def check_rates(flags: str | dict, sensors, batch: Scenario, duration: float | N
     return None
 
 
-def gravity_magnitudes(batch: Scenario) -> list[float]:
-    """The batch's distinct gravity magnitudes above 0, m/s²."""
-    return sorted({float(g) for g in np.round(np.linalg.norm(batch.gravity, axis=1), 9) if g > 0})
-
-
 def speed_note(batch: Scenario, duration: float) -> str | None:
     """`control.ramp_note` for a batch run for `duration` s: its gait needs longer than that to reach --speed."""
     from hopper_mjx import control
 
-    return control.ramp_note(batch.controller, batch.speed, batch.height, gravity_magnitudes(batch), duration)
+    return control.ramp_note(batch.controller, batch.speed, batch.height, batch.magnitudes(), duration)
 
 
 def check_whole_periods(option: str, steps: int, timestep: float) -> None:

@@ -182,6 +182,10 @@ class Scenario:
     def timestep(self) -> float:
         return self.physics.timestep
 
+    def magnitudes(self) -> list[float]:
+        """The batch's distinct gravity magnitudes above 0, m/s², ascending."""
+        return sorted({float(g) for g in np.round(np.linalg.norm(self.gravity, axis=1), 9) if g > 0})
+
     def build(self) -> Built:
         """The batched core on the physics' model (compiled once), and the controller (with each instance's
         PD factors, when drawn)."""

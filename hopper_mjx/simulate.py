@@ -89,7 +89,7 @@ def apex_note(batch: Scenario) -> str | None:
     every gravity's bound holds it, or the controller hops to no height."""
     from hopper_mjx import registry
 
-    gravities = cli.gravity_magnitudes(batch)
+    gravities = batch.magnitudes()
     if batch.controller not in registry.GAIT_CONTROLLERS or not gravities:
         return None
     from hopper_mjx.hardware import bound

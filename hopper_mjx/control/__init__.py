@@ -76,7 +76,7 @@ def ramp_note(name: str, speed, height: float, gravities, duration: float) -> st
     hops = math.ceil(max(abs(float(v)) for v in speed) / step - 1e-9)
     flight = {g: hops * 2.0 * math.sqrt(2.0 * height / g) for g in sorted(gravities) if g > 0}
     short = ", ".join(f"{t:.1f} s at g = {g:g} m/s²" for g, t in flight.items() if t > duration)
-    if not hops or not short:
+    if not short:  # no speed (0 hops), or a run long enough everywhere
         return None
     return (f"note: {name} ramps its speed from rest to --speed {','.join(f'{float(v):g}' for v in speed)} m/s by "
             f"{step:g} m/s a hop, {hops} hops: their flights alone take {short}, more than --duration {duration:g} s; "

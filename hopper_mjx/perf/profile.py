@@ -23,9 +23,9 @@ Each cut keeps every output of its stages alive, fed to the next step's position
 and velocities (so that no stage of the positions alone is hoisted out of the
 timed loop), so the differences are what each stage costs; a cut may cost more
 than the step it stands for, since the whole step computes only the outputs it
-uses (on the plane the setup then reads below 0). The setup is timed as the whole step with MuJoCo's
-iteration cap (`opt.iterations`) at 0: the warm start's choice, the first
-gradient and the integration, no Newton iteration. Then
+uses (on the plane the setup then reads below 0). The setup is timed as the
+whole step with MuJoCo's iteration cap (`opt.iterations`) at 0: the warm start's
+choice, the first gradient and the integration, no Newton iteration. Then
 the Newton iterations (MuJoCo's solver_niter) over the same steps: how many
 each instance needs, how many MuJoCo C runs from the same states (whether
 they are the physics' own), and how many its batch runs, since a vmapped loop

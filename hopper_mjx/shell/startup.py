@@ -51,19 +51,18 @@ def choose_gl_backend() -> str | None:
     if platform.system() == "Linux":
         os.environ.setdefault("MUJOCO_GL", "egl")
     value = os.environ.get("MUJOCO_GL")
-    backends = GL_BACKENDS.get(platform.system(), ("glfw",))
-    if value is not None and value.lower().strip() not in backends + GL_SWITCHES and process.is_command():
+    if value is None or not process.is_command():
+        return value
+    chosen, backends = value.lower().strip(), GL_BACKENDS.get(platform.system(), ("glfw",))
+    default = "egl" if platform.system() == "Linux" else "MuJoCo's default"
+    problem = (f"MUJOCO_GL={value}: MuJoCo's OpenGL backend here is one of {', '.join(backends)}; unset it to use "
+               f"{default}" if chosen not in backends + GL_SWITCHES
+               else missing_gl_library(chosen) if chosen == "osmesa"  # then `import mujoco` itself fails
+               else None)
+    if problem:
         from hopper_mjx.shell import checks  # here: it imports NumPy, which a good value never needs yet
 
-        default = "egl" if platform.system() == "Linux" else "MuJoCo's default"
-        raise SystemExit(checks.fail(f"MUJOCO_GL={value}: MuJoCo's OpenGL backend here is one of "
-                                     f"{', '.join(backends)}; unset it to use {default}"))
-    if value is not None and value.lower().strip() == "osmesa" and process.is_command():
-        missing = missing_gl_library("osmesa")  # then `import mujoco` itself fails, in every command
-        if missing:
-            from hopper_mjx.shell import checks
-
-            raise SystemExit(checks.fail(missing))
+        raise SystemExit(checks.fail(problem))
     return value
 
 

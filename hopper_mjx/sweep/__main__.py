@@ -399,8 +399,8 @@ def ramp_notes(specs) -> list[str | None]:
     """`control.ramp_note` for each gait the sweep runs: one that needs longer than a run to reach --speed."""
     from hopper_mjx import control
 
-    firsts = {spec.controller: spec for spec in specs}.values()
-    return [control.ramp_note(s.controller, s.speed, s.height, s.gravity, s.duration) for s in firsts]
+    one_each = {spec.controller: spec for spec in specs}.values()
+    return [control.ramp_note(s.controller, s.speed, s.height, s.gravity, s.duration) for s in one_each]
 
 
 def main(argv=None) -> int:
