@@ -42,8 +42,10 @@ def test_the_env_is_timed_over_the_physics_steps_it_stepped(record):
     assert record["env_physics_steps_per_s"] == pytest.approx(20 * record["env_steps_per_s"])
     assert record["env_to_core"] == pytest.approx(record["env_physics_steps_per_s"] / record["core_steps_per_s"])
     assert "env hop physics steps/s" in bench.format_table(record)
-    # a physics step with the env's work around it: within a few hundred kernels of the core's step with its controller
-    assert abs(record["env_kernels_per_pass"] - record["kernels_per_step"]) < 500
+    # A physics step with the env's work around it. Brax compiles the env with XLA's default (fusion) emitters, which
+    # write a stored stage's outputs a kernel each where the core's classic ones write a dozen a kernel
+    # (docs/performance.md, c31): more kernels than the core's step with its controller, not several steps' worth.
+    assert record["kernels_per_step"] < record["env_kernels_per_pass"] < 3 * record["kernels_per_step"]
 
 
 def test_mjx_and_native_step_the_same_physics(record):
@@ -237,11 +239,12 @@ def flat_step_kernels(settling_chain) -> int:
     return kernels.per_step(sim.engine, standing.data, standing.gravity)
 
 
-def test_the_flat_chain_step_launches_about_a_thousand_kernels(flat_step_kernels):
-    """perf.profile's kernel count of the core's flat step, watched: 1,102 at 8 instances (2 Dec). A change that
-    adds kernels to every step (each costs a launch, docs/performance.md) fails here first."""
+def test_the_flat_chain_step_launches_at_most_500_kernels(flat_step_kernels):
+    """perf.profile's kernel count of the core's flat step, watched: 1,102 at 8 instances (2 Dec), 479 since each
+    stored stage writes its outputs a dozen to a kernel (6 Dec, docs/performance.md's c31). A change that adds
+    kernels to every step (each costs a launch) fails here first."""
     print(f"\nkernels a flat chain step launches: {flat_step_kernels}")
-    assert 500 <= flat_step_kernels <= 1200
+    assert 250 <= flat_step_kernels <= 500
 
 
 def test_the_bench_counts_the_kernels_of_the_rollout_it_ran(record, flat_step_kernels):

@@ -4,9 +4,11 @@ XLA:CPU runs a compiled program as a sequence of kernels (its "thunks"): each fu
 custom call and un-fused operation of the program's top-level computations is one launch, with a
 fixed cost of its own (docs/performance.md). Parameters, constants, tuples and their elements, and
 bitcasts launch nothing; a fusion's inner operations are inside its one kernel. A conditional
-runs one branch: the count takes its larger one (a stored stage's, `chain.stage.stored`, not the
-zeros of the branch never taken). A while loop's body and condition are counted once: one pass
-through the step, where the Newton solve and the line search may run several.
+runs one branch: the count takes its larger one among those that compute, leaving out a branch
+that only copies or broadcasts (a stored stage's zeros, `chain.stage.stored`, which never run and
+take a copy per output, more than the stage's own few kernels; or a state held as it is) unless
+every branch does. A while loop's body and condition are counted once: one pass through the step,
+where the Newton solve and the line search may run several.
 
     kernels.count(jax.jit(step).lower(*args).compile().as_text())
 """
@@ -15,6 +17,7 @@ from __future__ import annotations
 
 import re
 
+ONLY_MOVES = frozenset({"copy", "broadcast"})  # a branch of these computes nothing (the docstring)
 NO_KERNEL = frozenset({"parameter", "constant", "get-tuple-element", "tuple", "bitcast", "after-all", "opt-barrier"})
 # A computation's header ("%name (params) -> type {", "ENTRY %name ... {") and an instruction
 # ("%x = type op(operands), attributes"; the type may be a tuple with spaces in it).
@@ -53,6 +56,9 @@ def count(hlo: str) -> int:
     computations, entry = _computations(hlo)
     memo: dict[str, int] = {}
 
+    def moves_only(name: str) -> bool:
+        return all(op in ONLY_MOVES or op in NO_KERNEL for op, _ in computations[name])
+
     def launches(name: str) -> int:
         if name not in memo:
             total = 0
@@ -64,7 +70,8 @@ def count(hlo: str) -> int:
                 elif op == "conditional":
                     branches = (_called("branch_computations", rest)
                                 or _called("true_computation", rest) + _called("false_computation", rest))
-                    total += 1 + max(launches(c) for c in branches)
+                    computing = [c for c in branches if not moves_only(c)] or branches
+                    total += 1 + max(launches(c) for c in computing)
                 elif op == "call":
                     total += sum(launches(c) for c in _called("to_apply", rest))
                 else:

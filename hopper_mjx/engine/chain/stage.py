@@ -1,10 +1,18 @@
-"""Store a stage's outputs once: `stored(gate, fn, *args)`.
+"""Store a stage's outputs once, in a few kernels: `stored(gate, fn, *args)`.
 
 XLA:CPU fusion recomputes a shared subexpression inside every fused consumer (the chain's
 sines and cosines were evaluated over a hundred times per step). A `lax.cond` whose
 predicate is only known at run time (`gate`, a boolean of the engine's model pytree, true
 in practice) is a boundary fusion cannot cross, so the stage's outputs are computed once
 and stored. `optimization_barrier` would say the same but XLA:CPU drops it before fusion.
+
+XLA:CPU then writes each output in a kernel of its own (it has no sibling multi-output
+fusion), and a step was over a thousand small kernels, each with a fixed cost. A variadic
+reduction is one kernel with many outputs: each output, given a trailing axis of 2 (itself,
+then the combiner's identity) and summed over it, comes back unchanged, and XLA fuses the
+outputs' computations into that one reduction, a shared subexpression computed once per
+element (`one_kernel`; docs/performance.md, lever c31). Up to PER_KERNEL outputs share a
+kernel: LLVM vectorises such a kernel over the instances, a larger one it leaves scalar.
 
 Constant leaves (Python floats: the model numbers the algebra folds) pass around the
 conditional untouched, so folding keeps working across stages.
@@ -16,6 +24,11 @@ import jax
 import jax.numpy as jnp
 
 from hopper_mjx.engine.chain.algebra import is_const
+
+# Outputs computed by one kernel. The flat step at 256 instances (one device), alternated with the code before:
+# 8 a kernel 522 kernels a step and 1.19-1.24 µs an instance-step, 12 482 and 1.10, 16 457 and 1.93 (its largest
+# kernels no longer vectorised), one each (as before) 1,120 and 1.61-1.78 (docs/performance.md, c31).
+PER_KERNEL = 12
 
 
 def stored(gate: jax.Array, fn, *args):
@@ -30,7 +43,7 @@ def stored(gate: jax.Array, fn, *args):
             leaves[i] = x
         out_leaves, box["tree"] = jax.tree_util.tree_flatten(fn(*jax.tree_util.tree_unflatten(arg_tree, leaves)))
         box["leaves"] = out_leaves
-        return [x for x in out_leaves if not is_const(x)]
+        return one_kernel([x for x in out_leaves if not is_const(x)])
 
     traced_in = [jnp.asarray(arg_leaves[i]) for i in traced_at]
     # Trace the Python once (for the outputs' shapes); the conditional's branch calls the same jit, whose trace
@@ -42,6 +55,42 @@ def stored(gate: jax.Array, fn, *args):
     outs = iter(jax.lax.cond(gate, stage, zeros, traced_in))
     leaves = [x if is_const(x) else next(outs) for x in box["leaves"]]
     return jax.tree_util.tree_unflatten(box["tree"], leaves)
+
+
+def _identity(dtype):
+    """The element a reduction's combiner leaves every value as it is: -0.0 for floats (-0.0 + x is x, -0.0
+    included), 0 for integers, False for booleans (with `or`)."""
+    if dtype == jnp.bool_:
+        return jnp.array(False)
+    return jnp.array(-0.0 if jnp.issubdtype(dtype, jnp.floating) else 0, dtype)
+
+
+def one_kernel(outputs: list) -> list:
+    """`outputs`, each unchanged, computed by one XLA:CPU kernel for each PER_KERNEL of a shape and float precision
+    (the module's docstring)."""
+    floats = tuple(jnp.result_type(x) for x in outputs if jnp.issubdtype(jnp.result_type(x), jnp.floating))
+    groups: dict = {}  # a reduction takes operands of one shape, and of one float precision (with any others)
+    for i, x in enumerate(outputs):
+        dtype = jnp.result_type(x)
+        groups.setdefault((jnp.shape(x), dtype if jnp.issubdtype(dtype, jnp.floating) else floats[:1]), []).append(i)
+    packed = list(outputs)
+    for (shape, _), members in groups.items():
+        for start in range(0, len(members), PER_KERNEL):
+            some = members[start:start + PER_KERNEL]
+            if len(some) > 1:
+                for i, y in zip(some, _through_one_reduction([outputs[i] for i in some], shape)):
+                    packed[i] = y
+    return packed
+
+
+def _through_one_reduction(xs: list, shape) -> list:
+    """xs (of `shape`), each summed with the identity of its type over a new trailing axis: the same values."""
+    xs = [jnp.asarray(x) for x in xs]
+    inits = [_identity(x.dtype) for x in xs]
+    operands = [jnp.stack([x, jnp.broadcast_to(init, shape)], -1) for x, init in zip(xs, inits)]
+    combine = lambda a, b: [u | v if u.dtype == jnp.bool_ else u + v for u, v in zip(a, b)]
+    return jax.lax.reduce(operands, inits, combine, (len(shape),))
+
 
 
 # The name the core gives its vmap over instances (`jax.vmap(..., axis_name=BATCH_AXIS)`).

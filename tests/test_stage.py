@@ -1,0 +1,49 @@
+"""The chain's stored stages (`engine.chain.stage`): computed once, written by a few kernels, values unchanged."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from hopper_mjx.engine.chain.stage import PER_KERNEL, one_kernel, stored
+from hopper_mjx.engine.xla import CPU_COMPILER_OPTIONS
+from hopper_mjx.perf import kernels
+
+
+def test_one_kernel_hands_back_every_value_bit_for_bit():
+    """The identity each output is summed with leaves every value as it was: signed zeros, infinities, NaN,
+    subnormals, the extremes of each type, integers and booleans."""
+    f32 = np.array([0.0, -0.0, np.inf, -np.inf, np.nan, 1e-45, -1e-45, 3.4e38, -3.4e38, 1.0, -2.5, 7e-39], np.float32)
+    f64 = np.array([-0.0, 0.0, np.nan, 5e-324, -1.7e308, np.inf, 1.0, -1.0, 0.1, 2.0, 3.0, 4.0])
+    i32 = np.array([0, -1, 1, 2**31 - 1, -2**31, 7, 8, 9, 10, 11, 12, 13], np.int32)
+    flags = np.array([True, False] * 6)
+    inputs = [f32, f32[::-1].copy(), i32, flags, f32 * 2, i32[::-1].copy(), flags[::-1].copy()]
+    with jax.enable_x64(True):
+        out = jax.jit(jax.vmap(lambda *xs: one_kernel(list(xs))))(*inputs, f64)
+        for x, y in zip([*inputs, f64], out, strict=True):
+            y = np.asarray(y)
+            assert y.dtype == x.dtype
+            assert x.tobytes() == y.tobytes()
+
+
+def _stage_kernels(outputs: int) -> tuple[int, np.ndarray]:
+    """Kernels of a vmapped stored stage of `outputs` outputs that share a sine and a cosine, and its values."""
+
+    def stage(x):
+        s, c = jnp.sin(x), jnp.cos(x)
+        return [s * (k + 1.0) - c for k in range(outputs)]
+
+    f = jax.jit(jax.vmap(lambda gate, x: stored(gate, stage, x), in_axes=(None, 0)),
+                compiler_options=CPU_COMPILER_OPTIONS)
+    x = jnp.linspace(-3.0, 3.0, 256)
+    x64 = np.asarray(x, np.float64)
+    want = np.array([np.sin(x64) * (k + 1.0) - np.cos(x64) for k in range(outputs)])
+    np.testing.assert_allclose(np.asarray(f(jnp.array(True), x)), want, rtol=0, atol=1e-5 * outputs)
+    return kernels.count(f.lower(jnp.array(True), x).compile().as_text())
+
+
+def test_a_stored_stage_is_a_kernel_for_each_per_kernel_outputs_and_is_counted_so():
+    """PER_KERNEL more outputs are one more kernel, where each output was a kernel of its own; the count leaves
+    out the zeros of the branch never taken (a copy for each output)."""
+    one, two, three = (_stage_kernels(k * PER_KERNEL) for k in (1, 2, 3))
+    assert two - one == three - two == 1
+    assert one <= 3  # the conditional, its predicate, the stage
