@@ -26,7 +26,8 @@ def test_one_kernel_hands_back_every_value_bit_for_bit():
 
 
 def _stage_kernels(outputs: int) -> tuple[int, np.ndarray]:
-    """Kernels of a vmapped stored stage of `outputs` outputs that share a sine and a cosine, and its values."""
+    """Kernels of a vmapped stored stage of `outputs` outputs that share a sine and a cosine, its values checked
+    against NumPy's."""
 
     def stage(x):
         s, c = jnp.sin(x), jnp.cos(x)

@@ -67,12 +67,11 @@ def _identity(dtype):
 
 def one_kernel(outputs: list) -> list:
     """`outputs`, each unchanged, computed by one XLA:CPU kernel for each PER_KERNEL of a shape and float precision
-    (the module's docstring)."""
-    floats = tuple(jnp.result_type(x) for x in outputs if jnp.issubdtype(jnp.result_type(x), jnp.floating))
-    groups: dict = {}  # a reduction takes operands of one shape, and of one float precision (with any others)
+    (the integers and booleans of a shape together; the module's docstring)."""
+    groups: dict = {}  # a reduction takes operands of one shape and one float precision: integers and booleans apart
     for i, x in enumerate(outputs):
         dtype = jnp.result_type(x)
-        groups.setdefault((jnp.shape(x), dtype if jnp.issubdtype(dtype, jnp.floating) else floats[:1]), []).append(i)
+        groups.setdefault((jnp.shape(x), dtype if jnp.issubdtype(dtype, jnp.floating) else None), []).append(i)
     packed = list(outputs)
     for (shape, _), members in groups.items():
         for start in range(0, len(members), PER_KERNEL):
@@ -90,7 +89,6 @@ def _through_one_reduction(xs: list, shape) -> list:
     operands = [jnp.stack([x, jnp.broadcast_to(init, shape)], -1) for x, init in zip(xs, inits)]
     combine = lambda a, b: [u | v if u.dtype == jnp.bool_ else u + v for u, v in zip(a, b)]
     return jax.lax.reduce(operands, inits, combine, (len(shape),))
-
 
 
 # The name the core gives its vmap over instances (`jax.vmap(..., axis_name=BATCH_AXIS)`).
