@@ -16,7 +16,8 @@ ROBOTS = "body_mass=scale(0.8,1.2),actuator_gear=scale(0.8,1.2),shank_length=sca
 @pytest.fixture(scope="module")
 def record(tmp_path_factory):
     path = tmp_path_factory.mktemp("bench") / "bench.json"
-    argv = ["--num", "4", "--steps", "200", "--repeat", "1", "--randomize", ROBOTS, "--env", "hop", "--json", str(path)]
+    argv = ["--num", "4", "--steps", "200", "--repeat", "1", "--randomize", ROBOTS, "--env", "hop",
+            "--env-actions", "random", "--json", str(path)]
     assert bench.main(argv) == 0
     return json.loads(path.read_text())
 
@@ -33,10 +34,11 @@ def test_json_has_finite_positive_rates(record):
 
 
 def test_the_env_is_timed_over_the_physics_steps_it_stepped(record):
-    """--env hop: the task's training env on the same robots, 200 physics steps of 1 ms at 50 Hz: every instance's
-    simulated time is 0.2 s (none fell in it, so no auto-reset started one again), its rates agree with each other,
-    and the comparison with the core's is the ratio of the two rates."""
+    """--env hop under random actions: the task's training env on the same robots, 200 physics steps of 1 ms at
+    50 Hz: every instance's simulated time is 0.2 s (none fell in it, so no auto-reset started one again), its
+    rates agree with each other, and the comparison with the core's is the ratio of the two rates."""
     assert record["env_task"] == "hop" and record["env_policy_rate_hz"] == pytest.approx(50.0)
+    assert record["env_actions"] == "random" and "random actions" in bench.format_table(record)
     np.testing.assert_allclose(record["env_final_time_s"], [0.2] * 4, atol=1e-5)
     assert math.isfinite(record["env_physics_steps_per_s"]) and record["env_physics_steps_per_s"] > 0
     assert record["env_physics_steps_per_s"] == pytest.approx(20 * record["env_steps_per_s"])
@@ -104,6 +106,8 @@ def test_bad_arguments_exit_with_a_message(capsys):
     assert "--env: unknown task 'jump'" in capsys.readouterr().err
     assert bench.main(["--num", "4", "--steps", "20", "--env", "hop", "--scaling", "4,8"]) == 2
     assert "--env times one N: give it without --scaling" in capsys.readouterr().err
+    assert bench.main(["--num", "4", "--steps", "20", "--env-actions", "random"]) == 2
+    assert "--env-actions is --env's: give --env TASK too" in capsys.readouterr().err
     assert bench.main(["--num", "4", "--steps", "20", "--randomize", "shank_length=0.05"]) == 2
     assert "--randomize: the leg of instance 0 (thigh 0.35 m, shank 0.05 m, foot radius 0.03 m) cannot reach the " \
            "floor" in capsys.readouterr().err

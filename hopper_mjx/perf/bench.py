@@ -20,9 +20,9 @@ steps from the same initial state, instance i under the same gravity:
   has no C twin: the core runs Raibert's hopping controller while native keeps the
   hold law, which flatters native (cheaper control, fewer contact changes).
 
-With `--env TASK`, the task's training env (train.py's wrapping, the stance held) is then timed for the same N
-and T, sharded as Brax's training pmaps it (`perf.env_pace`): its physics steps/s beside the core's. Its JSON keys
-start with `env_`.
+With `--env TASK`, the task's training env (train.py's wrapping, the stance held, or with `--env-actions random`
+flailing as an untrained policy makes it) is then timed for the same N and T, sharded as Brax's training pmaps it
+(`perf.env_pace`): its physics steps/s beside the core's. Its JSON keys start with `env_`.
 
     python -m hopper_mjx.perf.bench --num 256 --steps 1000 --env hop   # training's physics against the core's
 
@@ -49,6 +49,7 @@ import numpy as np
 
 from hopper_mjx import cli, registry
 from hopper_mjx.perf import kernels
+from hopper_mjx.perf.env_pace import ACTIONS as ENV_ACTIONS
 from hopper_mjx.scenario import Physics
 from hopper_mjx.shell import budget, jaxsetup, process
 from hopper_mjx.shell.files import atomic_write, atomic_write_text
@@ -298,11 +299,11 @@ def run(num: int, steps: int, *, controller: str = "hold", chunk: int = 256, rep
     return record
 
 
-def with_env(record: dict, task: str, physics: Physics, repeat: int) -> dict:
+def with_env(record: dict, task: str, physics: Physics, repeat: int, actions: str = "hold") -> dict:
     """`record` and `task`'s training env timed on the same physics, N and T (`perf.env_pace`), beside the core."""
     from hopper_mjx.perf import env_pace
 
-    env = env_pace.run(task, record["num"], record["steps"], physics, repeat)
+    env = env_pace.run(task, record["num"], record["steps"], physics, repeat, actions)
     return record | env | {"env_to_core": env["env_physics_steps_per_s"] / record["core_steps_per_s"]}
 
 
@@ -327,7 +328,7 @@ def format_table(record: dict) -> str:
     if "env_task" in record:
         rows += [(f"env {record['env_task']} physics steps/s",
                   f"{record['env_physics_steps_per_s']:,.0f}  ({record['env_to_core']:.2f} of the core's; train.py's "
-                  f"env wrapping, stance held)"),
+                  f"env wrapping, {ENV_ACTIONS[record['env_actions']]})"),
                  (f"env {record['env_task']} env steps/s",
                   f"{record['env_steps_per_s']:,.0f}  (policy steps at {record['env_policy_rate_hz']:g} Hz; "
                   f"first call {record['env_first_call_s']:.1f} s)"),
@@ -439,6 +440,10 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--plot", default=None, help="with --scaling: save the scaling plot (PNG) here")
     p.add_argument("--env", default=None, metavar="TASK",
                    help=f"then time this task's training env on the same physics: {registry.listed(registry.TASKS)}")
+    p.add_argument("--env-actions", default="hold", choices=tuple(ENV_ACTIONS),
+                   help="--env's actions: hold (zero, the stance held) or random (uniform in [-1, 1] each policy "
+                        "step, a fixed draw: robots that flail and fall as an untrained policy's do, with the "
+                        "auto-resets training makes)")
     return p
 
 
@@ -472,6 +477,9 @@ def check(args) -> tuple[list[int] | None, Physics]:
             raise ValueError(f"--env: {err}") from None
         if args.scaling:
             raise ValueError("--env times one N: give it without --scaling")
+    elif args.env_actions != "hold":
+        raise ValueError("--env-actions is --env's: give --env TASK too")
+    if args.env is not None:
         if args.num % (os.cpu_count() or 1):  # one device per core (jaxsetup), each a share of the envs, as Brax's
             raise ValueError(f"--num={args.num} must be a multiple of the {os.cpu_count()} devices for --env")
     if args.plot and not args.scaling:
@@ -502,7 +510,7 @@ def main(argv=None) -> int:
             result = run(args.num, args.steps, controller=args.controller, chunk=args.chunk,
                          repeat=args.repeat, threads=args.threads, physics=physics)
             if args.env is not None:
-                result = with_env(result, args.env, physics, args.repeat)
+                result = with_env(result, args.env, physics, args.repeat, args.env_actions)
             print(format_table(result))
     except (ValueError, argparse.ArgumentTypeError) as err:
         return cli.fail(err)
