@@ -48,3 +48,12 @@ def test_a_stored_stage_is_a_kernel_for_each_per_kernel_outputs_and_is_counted_s
     one, two, three = (_stage_kernels(k * PER_KERNEL) for k in (1, 2, 3))
     assert two - one == three - two == 1
     assert one <= 3  # the conditional, its predicate, the stage
+
+
+def test_jacfwd_passes_through_one_kernel():
+    """The packed outputs' derivatives are those of the values packed (JAX's own rule for a variadic reduction
+    failed where a tangent is a symbolic zero: an integer output, or one that does not depend on the input)."""
+    f = lambda x: one_kernel([jnp.sin(x), 2.0 * x, jnp.zeros_like(x) + 3.0, (x > 0).astype(jnp.int32)])[:3]
+    jac = jax.jacfwd(lambda x: jnp.stack(f(x)))(jnp.float32(0.5))
+    np.testing.assert_allclose(np.asarray(jac), [np.cos(0.5), 2.0, 0.0], rtol=1e-6)
+

@@ -20,6 +20,8 @@ conditional untouched, so folding keeps working across stages.
 
 from __future__ import annotations
 
+import functools
+
 import jax
 import jax.numpy as jnp
 
@@ -82,6 +84,7 @@ def one_kernel(outputs: list) -> list:
     return packed
 
 
+@functools.partial(jax.custom_jvp, nondiff_argnums=(1,))
 def _through_one_reduction(xs: list, shape) -> list:
     """xs (of `shape`), each summed with the identity of its type over a new trailing axis: the same values."""
     xs = [jnp.asarray(x) for x in xs]
@@ -89,6 +92,12 @@ def _through_one_reduction(xs: list, shape) -> list:
     operands = [jnp.stack([x, jnp.broadcast_to(init, shape)], -1) for x, init in zip(xs, inits)]
     combine = lambda a, b: [u | v if u.dtype == jnp.bool_ else u + v for u, v in zip(a, b)]
     return jax.lax.reduce(operands, inits, combine, (len(shape),))
+
+
+# The values pass through unchanged, so do their tangents (JAX's own rule for a variadic reduction fails on an
+# operand whose tangent is a symbolic zero, and `jax.jacfwd` of a step on a heightfield has such operands).
+_through_one_reduction.defjvp(lambda shape, primals, tangents: (_through_one_reduction(*primals, shape),
+                                                               tangents[0]))
 
 
 # The name the core gives its vmap over instances (`jax.vmap(..., axis_name=BATCH_AXIS)`).
@@ -102,3 +111,4 @@ def batch_any(flag: jax.Array) -> jax.Array:
         return jax.lax.pmax(flag.astype(jnp.int32), BATCH_AXIS) > 0
     except NameError:  # not under the core's vmap: per instance (a select under another vmap)
         return flag
+
