@@ -217,9 +217,17 @@ def falls():
         batches[1, -1] = box_poses(models["rough"], 1, seed=5)[0]
         rough_params = engine.with_heights(np.stack([from_model(models["rough"]).heights] * n))
         zeros = jnp.zeros((n, 9))
-        beside = [jax.tree_util.tree_map(np.asarray, step(rough_params, jnp.asarray(q), zeros, jnp.zeros((n, 3)),
-                                                          jnp.asarray(gravity), zeros)) for q in batches]
-    return cases, np.array(ours), np.array(theirs), np.array(box_down), beside
+        args = lambda q: (jnp.asarray(q), zeros, jnp.zeros((n, 3)), jnp.asarray(gravity), zeros)
+        beside = [jax.tree_util.tree_map(np.asarray, step(rough_params, *args(q))) for q in batches]
+        # The batch with the fallen instance once more, its box collided for the instances in need alone (at most
+        # 2 of the chunk gathered), where the chunk of 9 is otherwise collided whole.
+        with pytest.MonkeyPatch.context() as patch:
+            patch.setattr(chain_constraint, "BOX_GATHER", 2)
+            gathered_engine = chain.make_for_tools(models["rough"])
+            step = _step_fn(gathered_engine, chain.BATCH_AXIS)
+            gathered = jax.tree_util.tree_map(np.asarray, step(gathered_engine.with_heights(
+                np.stack([from_model(models["rough"]).heights] * n)), *args(batches[1])))
+    return cases, np.array(ours), np.array(theirs), np.array(box_down), (*beside, gathered)
 
 
 def test_drops_onto_the_base_box_follow_c_until_it_lands(falls):
@@ -264,10 +272,19 @@ def test_the_fallen_box_rests_on_the_ground(falls):
 
 
 def test_a_fallen_instance_does_not_change_the_others(falls):
-    """The box's prisms are collided for a whole chunk when any box in it nears the ground (`batch_any`
-    under the core's vmap): standing instances step bit for bit the same beside a fallen one."""
-    alone, beside = falls[-1]
+    """The box's prisms are collided for the instances of a chunk whose box nears the ground (`only_where` under
+    the core's vmap): standing instances step bit for bit the same beside a fallen one."""
+    alone, beside, _ = falls[-1]
     for a, b in zip(alone, beside):
         np.testing.assert_array_equal(a[:-1], b[:-1])
     assert np.abs(beside[4][-1]).max() > 1.0, "the fallen instance's box meets the ground"
     assert np.abs(alone[4][-1] - beside[4][-1]).max() > 1.0
+
+
+def test_the_instances_in_need_collided_alone_step_as_in_the_whole_chunk(falls):
+    """The fallen instance's box collided alone (gathered from the chunk, `chain_stage.only_where`) and with the
+    whole chunk: every instance's next state, accelerations and constraint forces bit for bit the same."""
+    _, whole, alone = falls[-1]
+    assert np.abs(whole[4][-1]).max() > 1.0, "the fallen instance's box meets the ground"
+    for a, b in zip(whole, alone):
+        np.testing.assert_array_equal(a, b)

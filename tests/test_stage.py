@@ -4,7 +4,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from hopper_mjx.engine.chain.stage import PER_KERNEL, one_kernel, stored
+from hopper_mjx.engine.chain.stage import BATCH_AXIS, PER_KERNEL, one_kernel, only_where, stored
 from hopper_mjx.engine.xla import CPU_COMPILER_OPTIONS
 from hopper_mjx.perf import kernels
 
@@ -57,3 +57,33 @@ def test_jacfwd_passes_through_one_kernel():
     jac = jax.jacfwd(lambda x: jnp.stack(f(x)))(jnp.float32(0.5))
     np.testing.assert_allclose(np.asarray(jac), [np.cos(0.5), 2.0, 0.0], rtol=1e-6)
 
+
+def _needy(x, scale):
+    """A per-instance stage with reductions and shared terms, whose `absent` value is what it gives an instance
+    with x <= 0 (as a box far from the ground has no contact)."""
+    s = jnp.sin(x * scale)
+    out = jnp.where(x > 0, jnp.cumsum(s * jnp.arange(1.0, 6.0)) / (1.0 + x * x), 0.0)
+    return out, jnp.sum(out) > 0.5
+
+
+def test_only_where_gives_each_instance_its_own_values_however_many_need_the_stage():
+    """Under the core's vmap, none, a few (gathered) or most instances of the chunk in need: each instance gets
+    bit for bit what the stage computed for every instance gives it, with an unbatched argument beside a batched
+    one."""
+    absent = lambda x, scale: (jnp.zeros(5), jnp.array(False))
+    most = 4
+
+    def chunk(need, x, scale):
+        return jax.vmap(lambda n, v: only_where(n, _needy, absent, (v, scale), most), axis_name=BATCH_AXIS)(need, x)
+
+    whole = jax.jit(jax.vmap(_needy, in_axes=(0, None)))
+    gathered = jax.jit(chunk)
+    rng = np.random.default_rng(0)
+    for count in (0, 1, most, most + 1, 16):
+        x = rng.uniform(-1.0, 1.0, 16).astype(np.float32)
+        need = np.zeros(16, bool)
+        need[rng.permutation(16)[:count]] = True
+        x = np.where(need, np.abs(x) + 0.1, -np.abs(x)).astype(np.float32)
+        want, got = whole(x, jnp.float32(1.3)), gathered(need, x, jnp.float32(1.3))
+        for w, g in zip(want, got):
+            assert np.asarray(w).tobytes() == np.asarray(g).tobytes(), f"{count} in need"

@@ -20,8 +20,9 @@ Every engine has, per instance and pure (the core vmaps them):
   touching, (3,) N floor-on-foot force and (3,) m contact point, world frame.
 
 The core vmaps over instances with `axis_name=BATCH_AXIS`, so that an engine (or a controller) may skip a
-stage no instance of the chunk needs (`batch_any`: the chain engine's base box against a heightfield, a
-policy's network between its decisions).
+stage no instance of the chunk needs (`batch_any`: a policy's network between its decisions, the chain's line
+search once every instance's has ended), or run it for the few that do (`chain.stage.only_where`: the chain
+engine's boxes against a heightfield).
 `data` is a pytree with `qpos`, `qvel`, `qacc`, `ctrl`, `time` and `.replace(**fields)`.
 "mjx" (MuJoCo MJX, any model) is the reference and the fallback; "chain" is MuJoCo's step
 specialised to the monoped's topology (free base, serial chain of hinges, sphere foot and base

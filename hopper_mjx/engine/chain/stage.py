@@ -112,3 +112,38 @@ def batch_any(flag: jax.Array) -> jax.Array:
     except NameError:  # not under the core's vmap: per instance (a select under another vmap)
         return flag
 
+
+def only_where(need, fn, absent, args: tuple, most: int):
+    """fn(*args) where the instance's `need` holds, absent(*args) elsewhere (which must be what fn gives an
+    instance that does not need it). Under the core's vmap the chunk's instances in need, when there are at most
+    `most` of them, are gathered and only they run fn: a stage few instances need (a leg's box against the
+    ground while a few robots of the chunk flail) costs a few instances' work, not the chunk's. With none in need
+    the chunk runs `absent` alone; with more than `most`, fn for the whole chunk. Each instance's values are
+    what it would get on its own."""
+
+    @jax.custom_batching.custom_vmap
+    def one(need, args):
+        return jax.lax.cond(need, fn, absent, *args)
+
+    @one.def_vmap
+    def _chunk(size, batched, need, args):
+        need_batched, args_batched = batched
+        need = need if need_batched else jnp.broadcast_to(need, (size,))
+        axes = jax.tree_util.tree_map(lambda b: 0 if b else None, args_batched)
+        over = lambda f: (lambda a: jax.vmap(lambda x: f(*x), in_axes=(axes,))(a))
+        nobody = lambda: over(absent)(args)
+
+        def few():
+            (picked,) = jnp.nonzero(need, size=most, fill_value=size)  # `size`: no instance, dropped below
+            at = jnp.minimum(picked, size - 1)
+            gathered = jax.tree_util.tree_map(lambda x, b: x[at] if b else x, args, args_batched)
+            return jax.tree_util.tree_map(lambda o, g: o.at[picked].set(g, mode="drop"), nobody(),
+                                          over(fn)(gathered))
+
+        count = jnp.sum(need.astype(jnp.int32))
+        branches = [nobody, lambda: over(fn)(args)] if size <= most else [nobody, few, lambda: over(fn)(args)]
+        which = jnp.minimum(count, 1) if size <= most else jnp.where(count == 0, 0, jnp.where(count <= most, 1, 2))
+        out = jax.lax.switch(which, branches)
+        return out, jax.tree_util.tree_map(lambda _: True, out)
+
+    return one(need, args)
