@@ -470,6 +470,8 @@ def check(args) -> tuple[list[int] | None, Physics]:
     physics = cli.check_physics(argparse.Namespace(**vars(args) | {"engine": engines[0]}),
                                 {"timestep": args.timestep}, engines=engines, n=2 * max(sizes))  # both sides' heights
     cli.refuse_each(physics.ground, "perf.bench")
+    if args.env is None and args.env_actions != "hold":
+        raise ValueError("--env-actions is --env's: give --env TASK too")
     if args.env is not None:
         try:
             registry.check("task", registry.TASKS, args.env)
@@ -477,9 +479,6 @@ def check(args) -> tuple[list[int] | None, Physics]:
             raise ValueError(f"--env: {err}") from None
         if args.scaling:
             raise ValueError("--env times one N: give it without --scaling")
-    elif args.env_actions != "hold":
-        raise ValueError("--env-actions is --env's: give --env TASK too")
-    if args.env is not None:
         if args.num % (os.cpu_count() or 1):  # one device per core (jaxsetup), each a share of the envs, as Brax's
             raise ValueError(f"--num={args.num} must be a multiple of the {os.cpu_count()} devices for --env")
     if args.plot and not args.scaling:

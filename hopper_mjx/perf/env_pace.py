@@ -4,10 +4,9 @@ Brax's PPO and SAC step the env for `--num-envs` instances split over the local 
 decision every `n_frames` physics steps, inside its training step. This times that unroll alone: the env as
 train.py wraps it (auto-reset, episode counter), sharded the same way, the stance held (zero actions) or under
 random actions (`ACTIONS`): an untrained policy's robots flail and fall, and their legs and bases meet the ground
-as a standing robot's never do. Its
-physics steps/s beside the core's at the same N say whether training's physics keeps the core's pace; train.py's
-env steps/s beside this one's say how much of a training step is the learner's (its gradient steps, the policy,
-Brax's evaluations).
+as a standing robot's never do. Its physics steps/s beside the core's at the same N say whether training's physics
+keeps the core's pace; train.py's env steps/s beside this one's say how much of a training step is the learner's
+(its gradient steps, the policy, Brax's evaluations).
 """
 
 from __future__ import annotations
