@@ -217,13 +217,16 @@ def test_an_instances_own_ground_goes_into_mjxs_height_field_as_mujoco_reads_it(
 
 def test_the_course_lays_out_its_levels_and_kinds_as_tiles():
     """The training course: a tile per level (row) and kind (column), each with a flat pad at its centre and flat
-    ground at its edge; each kind's ground grows with the level as (level + 1) / levels of the hardest."""
+    ground at its edge, in a flat border a tile wide; each kind's ground grows with the level as level / (levels - 1)
+    of the hardest, from flat at level 0."""
     from hopper_mjx.terrain import spec
 
     ground = terrain.parse("course:levels=4,tile=4,amp=0.04,step=0.08,gap=0.3,block=0.15,seed=2")
-    assert ground.size == (16.0, 16.0) and terrain.parse(str(ground)) == ground
+    assert ground.size == (24.0, 24.0) and terrain.parse(str(ground)) == ground
     t = ground.terrain()
     xs, ys = t.axes()
+    border = (np.abs(xs)[None, :] > 8.0) | (np.abs(ys)[:, None] > 8.0)
+    assert border.mean() > 0.5 and np.abs(t.heights[border]).max() == 0.0
     centres = spec.tile_centres(ground)
     assert centres.shape == (4, 4, 2) and tuple(centres[0, 0]) == (-6.0, -6.0)
 
@@ -234,9 +237,12 @@ def test_the_course_lays_out_its_levels_and_kinds_as_tiles():
         return t.heights[np.ix_(inside_y, inside_x)], ring
 
     for level in range(4):
-        share = (level + 1) / 4
+        share = level / 3
         for kind, name in enumerate(generators.COURSE_KINDS):
             h, ring = tile(level, kind)
+            if level == 0:
+                assert np.abs(h).max() == 0.0, name
+                continue
             assert np.abs(h[ring < generators.COURSE_PAD - 1e-9]).max() == 0.0, (level, name)  # the pad
             assert np.abs(h[ring > 2.0 - generators.COURSE_EDGE + 0.01]).max() == 0.0, (level, name)  # the edge
             hardest = {"rough": 0.04 * share, "steps": 0.08 * share * 2, "gaps": -0.2, "blocks": 0.15 * share}[name]

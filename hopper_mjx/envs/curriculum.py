@@ -61,8 +61,9 @@ class Curriculum(NamedTuple):
 
 
 # A policy trained on the course is judged in the core, every robot from the origin, on each of these: the rough
-# ground hop_terrain's policies trained on until the course (its amplitude about the middle level's, 0.024 m), and a
-# 0.10 m block ahead (the course's blocks at level 2 are 0.09 m). The first is the one its threshold is judged on.
+# ground hop_terrain's policies trained on until the course (its amplitude the middle level's, 0.02 m), and a 0.10 m
+# block ahead (the course's blocks at levels 2 and 3 are 0.075 and 0.1125 m). The first is the one its threshold is
+# judged on.
 JUDGE_GROUNDS = ("rough:amp=0.02,wavelength=0.4,seed=1,size=24x24", "obstacle:height=0.1,x=0.6,size=24x24")
 
 

@@ -186,9 +186,9 @@ def _check_on_grid(ground: Ground) -> None:
 
 
 def _check_course(values: dict, cell: float) -> None:
-    """A course whose every kind of ground is there at every level: the tile holds its pad, a ring and its edge; the
-    widest trench fits between the pad's ramp and the edge and stays apart from the next; the grid resolves the rough
-    ground's waves."""
+    """A course whose every kind of ground is there at every level above the flat level 0: the tile holds its pad, a
+    ring and its edge; the widest trench fits between the pad's ramp and the edge and stays apart from the next; the
+    grid resolves the rough ground's waves."""
     g = generators
     tile, gap = values["tile"], values["gap"]
     if tile < MIN_TILE:
@@ -205,8 +205,9 @@ def _check_course(values: dict, cell: float) -> None:
 
 
 def course_size(values: dict) -> tuple[float, float]:
-    """m, full extents of a course: a column of tiles per kind of ground, a row per level."""
-    return (len(generators.COURSE_KINDS) * values["tile"], values["levels"] * values["tile"])
+    """m, full extents of a course: a column of tiles per kind of ground, a row per level, and the border a tile wide
+    on every side."""
+    return ((len(generators.COURSE_KINDS) + 2) * values["tile"], (values["levels"] + 2) * values["tile"])
 
 
 def tile_centres(ground: Ground) -> np.ndarray:
