@@ -413,7 +413,7 @@ def test_on_the_course_each_episode_starts_on_a_tile_of_its_level_and_the_level_
     first = jax.jit(jax.vmap(env.reset))(keys)
     level, xy = np.asarray(first.info["level"]), np.asarray(first.pipeline_state.qpos[:, :2])
     assert set(level) == {0, 1, 2}  # the lower half, the middle level with it
-    # Brax's training log reports it: a `_per_step` metric's episode sum over the episode's length, the level.
+    # Brax's training log sums it over each episode: the level times the length (`training.loop` divides).
     np.testing.assert_array_equal(np.asarray(first.metrics[LEVEL_METRIC]), level)
     centres = spec.tile_centres(env.config.ground)[level]  # (n, kinds, 2): each episode's level's tiles
     off = np.abs(xy[:, None, :] - centres).max(axis=2)

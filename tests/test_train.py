@@ -446,15 +446,31 @@ def test_the_results_table_gives_the_gap_between_training_physics_and_the_core(t
     assert results.gap(sweep_core, run / results.TRAINED, 0.10) == {"survival_gap": 0.0, "apex_gap": 0.0}
 
 def test_a_course_runs_curriculum_level_is_filed_with_the_next_evaluation():
-    """Brax's log of finished training episodes comes between evaluations; its mean curriculum level is kept for
-    the next evaluation's history row, and an evaluation's own metrics pass on to the row, but for its own level."""
+    """Brax's log of finished training episodes comes between evaluations; the mean curriculum level of their
+    steps is kept for the next evaluation's history row, and an evaluation's own metrics pass on to the row, but for
+    its own level."""
     from training import loop
 
     carried = {}
-    assert loop.training_log({loop.TRAINING_LEVEL: 1.75, "episode/length": 500.0, "episode/sps": 2e3}, carried)
-    assert loop.training_log({loop.TRAINING_LEVEL: 2.25}, carried) and carried == {loop.LEVEL: 2.25}
+    assert loop.training_log({loop.TRAINING_LEVEL: 875.0, loop.TRAINING_LENGTH: 500.0, "episode/sps": 2e3}, carried)
+    assert carried == {loop.LEVEL: 1.75}
+    # Episodes of levels 1 and 3, 400 and 100 steps long: Brax's means of their summed level and of their length are
+    # 350 and 250, and 1.4 is the level of their steps (the mean of their levels, 2, would count the fall as much).
+    assert loop.training_log({loop.TRAINING_LEVEL: (400 + 300) / 2, loop.TRAINING_LENGTH: 250.0}, carried)
+    assert carried == {loop.LEVEL: 1.4}
+    # The same two episodes through Brax's own training log, as the env's metric and EpisodeWrapper's sums give it.
+    from brax.training.logger import EpisodeMetricsLogger
+
+    from hopper_mjx.envs.monoped import LEVEL_METRIC
+
+    logged = []
+    brax_log = EpisodeMetricsLogger(steps_between_logging=1, progress_fn=lambda step, m: logged.append(m))
+    brax_log.update_episode_metrics({LEVEL_METRIC: np.array([400.0, 300.0]), "length": np.array([400.0, 100.0]),
+                                     "sum_reward": np.zeros(2)}, np.array([1.0, 1.0]), {})
+    brax_carried = {}
+    assert loop.training_log(logged[-1], brax_carried) and brax_carried[loop.LEVEL] == pytest.approx(1.4)
     assert not loop.training_log({"eval/episode_reward": 12.0, "training/sps": 2e3}, carried)
-    assert carried == {loop.LEVEL: 2.25}
+    assert carried == {loop.LEVEL: 1.4}
     # The evaluation's own level is its first episodes' draw, the same at every evaluation: not filed.
     evaluation = {"eval/episode_reward": 12.0, loop.EVAL_LEVEL: 0.0, loop.EVAL_LEVEL + "_std": 0.0,
                   "training/sps": 2e3, "training/walltime": 9.0}

@@ -17,21 +17,22 @@ from hopper_mjx.shell.files import atomic_write_text
 from training.learners import learner_settings, networks, run_ppo, run_sac, task_config
 from training.options import HISTORY, check, latest_checkpoint, read_history, start_of
 
-# A course's curriculum: Brax's name for the mean level of the finished training episodes it logged
-# (`envs.monoped.LEVEL_METRIC`), and the history's.
-TRAINING_LEVEL = "episode/level_per_step"
+# A course's curriculum: Brax's names for the means over the last finished training episodes (its buffer of 100) of
+# their summed level (`envs.monoped.LEVEL_METRIC`, the level times the length) and of their length; the history's
+# name for the one over the other, the mean level of those episodes' env steps.
+TRAINING_LEVEL, TRAINING_LENGTH = "episode/level", "episode/length"
 LEVEL = "training/level"
 # Brax's evaluation reports the same metric for its episodes, each a first episode drawn afresh (no curriculum
 # carries over between them): the level a course starts at, not progress. Not filed.
-EVAL_LEVEL = "eval/episode_level_per_step"
+EVAL_LEVEL = "eval/episode_level"
 
 
 def training_log(metrics: dict, carried: dict) -> bool:
     """Whether `metrics` is Brax's log of finished training episodes, which comes between evaluations; if so, the
-    mean curriculum level it reports goes into `carried`, to be filed with the next evaluation's row."""
+    mean curriculum level of its episodes' steps goes into `carried`, to be filed with the next evaluation's row."""
     if TRAINING_LEVEL not in metrics:
         return False
-    carried[LEVEL] = float(metrics[TRAINING_LEVEL])
+    carried[LEVEL] = float(metrics[TRAINING_LEVEL]) / float(metrics[TRAINING_LENGTH])
     return True
 
 
@@ -163,7 +164,7 @@ def reward_figure(history: list[dict], title: str, physics, policy_rate: float, 
     if levels:  # a course: the curriculum's level beside the reward
         twin = ax.twinx()
         twin.plot([r["step"] for r in levels], [r[LEVEL] for r in levels], "s--", color="tab:green", ms=3,
-                  label="mean curriculum level of finished training episodes")
+                  label="mean curriculum level of training steps (last 100 episodes)")
         twin.set_ylabel("curriculum level (0 the easiest)")
         twin.set_ylim(bottom=0)
         handles = [a + b for a, b in zip(handles, twin.get_legend_handles_labels())]

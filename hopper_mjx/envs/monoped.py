@@ -88,7 +88,7 @@ TASK_INFO = ("command", "gravity", "last_action", "rng")
 # state (`sensing.SensorState`: figures and delay line; drawn sensor delay or noise), and the physics steps
 # since the episode's start (pushes, sensor noise).
 EPISODE_INFO = ("robot", "drive", "sense", "physics_steps")
-LEVEL_METRIC = "level_per_step"  # on a course: the episode's curriculum level (`MonopedEnv._course_metrics`)
+LEVEL_METRIC = "level"  # on a course: the episode's curriculum level (`MonopedEnv._course_metrics`)
 ROBOT_POOL = 256  # robots a randomised task draws once; an episode runs one of them
 EPISODE_STREAM = 2  # folded into an episode's key: the pushes' directions and the sensor noise
 
@@ -273,8 +273,10 @@ class MonopedEnv(Env):
         return State(data, obs, zero, zero, {k: zero for k in terms} | self._course_metrics(info), info)
 
     def _course_metrics(self, info: dict) -> dict:
-        """On a course, the episode's curriculum level as a metric: Brax's training log divides a `_per_step`
-        metric's episode sum by the episode's length, so it reports the mean level of finished episodes."""
+        """On a course, the episode's curriculum level as a metric. Brax's training log keeps each metric's sum
+        over a finished episode (here its level times its length) beside the episode's length; the loop divides
+        one by the other, so that its level is the mean over env steps, not over episodes, where short falls would
+        count as much as whole episodes (a `_per_step` name would have Brax divide each episode's alone)."""
         return {} if self.curriculum is None else {LEVEL_METRIC: info["level"].astype(jnp.float32)}
 
     def _start_episode(self, rng: jax.Array, first: Observation) -> dict:
