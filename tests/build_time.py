@@ -5,7 +5,14 @@ or wait on other processes.
 Building is JAX tracing a function, lowering it and compiling it (or reading the compiled code back from the
 persistent cache): the wall time covered by JAX's own compile events, overlaps counted once (a jit traced inside
 another's trace). Only this process's: a test's subprocesses count as its other time.
+
+A third table names the programs: each function JAX built, by the name JAX gives it, with how many times it was
+traced and compiled (or read back) across the suite and the seconds of each stage, so that a program built again and
+again by different tests shows as one row.
 """
+
+import re
+from collections import defaultdict
 
 import jax.monitoring
 import pytest
@@ -13,16 +20,27 @@ import pytest
 # The events JAX's dispatch records around each stage of making a program (jax/_src/dispatch.py).
 BUILD_EVENTS = frozenset({"/jax/core/compile/jaxpr_trace_duration", "/jax/core/compile/jaxpr_to_mlir_module_duration",
                           "/jax/core/compile/backend_compile_duration"})
-PROPERTY = "jax_build_s"
-SHOWN = 12  # rows of each of the two tables
+STAGES = {"/jax/core/compile/jaxpr_trace_duration": "trace", "/jax/core/compile/jaxpr_to_mlir_module_duration": "lower",
+          "/jax/core/compile/backend_compile_duration": "compile"}
+PROPERTY, PROGRAMS = "jax_build_s", "jax_programs"
+SHOWN = 12  # rows of each table
 
 _spans: list[tuple[float, float]] = []  # (start, end) wall times of this phase's building
 _phases: list[tuple[str, float, float]] = []  # (test and phase, seconds, building seconds), every worker's
+_built: list[tuple[str, str, float]] = []  # (program, stage, seconds) of this phase's building
+_programs: defaultdict = defaultdict(lambda: defaultdict(lambda: [0, 0.0]))  # program -> stage -> [times, s], all
 
 
-def _record(event, start_time, end_time, **_):
+def program(name: str) -> str:
+    """A function's name as JAX's stages give it (its trace `f`, its compile `jit(f)`, a module `jit_f`): `f`."""
+    found = re.fullmatch(r"(?:jit|pmap)(?:\((.*)\)|_(.*))", name or "?")
+    return next(n for n in found.groups() if n is not None) if found else (name or "?")
+
+
+def _record(event, start_time, end_time, fun_name="", **_):
     if event in BUILD_EVENTS:
         _spans.append((start_time, end_time))
+        _built.append((program(fun_name), STAGES[event], end_time - start_time))
 
 
 jax.monitoring.register_event_time_span_listener(_record)
@@ -41,15 +59,21 @@ def covered(spans) -> float:
 @pytest.hookimpl(tryfirst=True)  # before pytest makes the report from the item
 def pytest_runtest_makereport(item, call):
     # Each phase (setup, call, teardown) carries its own building: a worker's reports reach the main process.
-    item.user_properties[:] = [p for p in item.user_properties if p[0] != PROPERTY]
+    item.user_properties[:] = [p for p in item.user_properties if p[0] not in (PROPERTY, PROGRAMS)]
     item.user_properties.append((PROPERTY, covered(_spans)))
+    item.user_properties.append((PROGRAMS, list(_built)))
     _spans.clear()
+    _built.clear()
 
 
 def pytest_runtest_logreport(report):
-    built = dict(report.user_properties).get(PROPERTY)
+    properties = dict(report.user_properties)
+    built = properties.get(PROPERTY)
     if built is not None:
         _phases.append((f"{report.nodeid} ({report.when})", report.duration, built))
+    for name, stage, seconds in properties.get(PROGRAMS, ()):
+        _programs[name][stage][0] += 1
+        _programs[name][stage][1] += seconds
 
 
 def pytest_terminal_summary(terminalreporter):
@@ -65,3 +89,8 @@ def pytest_terminal_summary(terminalreporter):
         write(f"{title}:   building s   total s")
         for name, seconds, building in sorted(_phases, key=key, reverse=True)[:SHOWN]:
             write(f"  {building:8.1f} {seconds:9.1f}   {name}")
+    write("the programs built the most (a nested jit's seconds are its caller's too):   traced  compiled   "
+          "trace s  lower s  compile s")
+    for name, stages in sorted(_programs.items(), key=lambda p: -sum(s for _, s in p[1].values()))[:SHOWN]:
+        write(f"  {stages['trace'][0]:6d} {stages['compile'][0]:9d} {stages['trace'][1]:9.1f} "
+              f"{stages['lower'][1]:8.1f} {stages['compile'][1]:10.1f}   {name}")
