@@ -17,9 +17,7 @@ from collections import defaultdict
 import jax.monitoring
 import pytest
 
-# The events JAX's dispatch records around each stage of making a program (jax/_src/dispatch.py).
-BUILD_EVENTS = frozenset({"/jax/core/compile/jaxpr_trace_duration", "/jax/core/compile/jaxpr_to_mlir_module_duration",
-                          "/jax/core/compile/backend_compile_duration"})
+# The events JAX's dispatch records around each stage of making a program (jax/_src/dispatch.py), by stage.
 STAGES = {"/jax/core/compile/jaxpr_trace_duration": "trace", "/jax/core/compile/jaxpr_to_mlir_module_duration": "lower",
           "/jax/core/compile/backend_compile_duration": "compile"}
 PROPERTY, PROGRAMS = "jax_build_s", "jax_programs"
@@ -38,7 +36,7 @@ def program(name: str) -> str:
 
 
 def _record(event, start_time, end_time, fun_name="", **_):
-    if event in BUILD_EVENTS:
+    if event in STAGES:
         _spans.append((start_time, end_time))
         _built.append((program(fun_name), STAGES[event], end_time - start_time))
 
