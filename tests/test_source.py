@@ -70,3 +70,15 @@ def test_every_link_to_a_section_of_the_docs_finds_its_heading():
             if linked in anchors and anchor not in anchors[linked]:
                 broken.append(f"{page.relative_to(ROOT)}: {target}#{anchor}")
     assert not broken, "links to no heading:\n" + "\n".join(broken)
+
+
+def test_the_readmes_speed_line_gives_the_performance_pages_figures():
+    """README's "Where it stands" speed line quotes the ratios of docs/performance.md's summary table (N = 4096, N =
+    64, rough ground), so that a new measurement on that page cannot leave the README behind (it once said 7.35x and
+    1.90x beside the page's 8.20x and 1.56x)."""
+    summary = (ROOT / "docs" / "performance.md").read_text().split("## The levers", 1)[0]
+    rows = re.findall(r"^\| `(--num \d+)[^`]*` \|(?:[^|]*\|){2} ([\d.]+) \|", summary, re.M)
+    assert [flag for flag, _ in rows] == ["--num 4096", "--num 64", "--num 4096"], rows  # flat, small, rough
+    speed = re.search(r"^- \*\*Speed\.\*\* (.*?)(?=^- )", (ROOT / "README.md").read_text(), re.M | re.S).group(1)
+    quoted = re.findall(r"([\d.]+)× ", speed)
+    assert quoted == [ratio for _, ratio in rows], (quoted, rows)
