@@ -15,7 +15,8 @@ part of the training physics alone (`--as-trained=timestep` and `=solver`, the o
 RUN/sweep-trained-timestep/, RUN/sweep-trained-solver/), and the row names the part whose gap stays over. The row
 names the step and solver cap its policies were trained on, so runs on other training physics are rows of their own,
 and so are runs whose learner's settings differ (epochs per batch, minibatches, learning rate...: `LEARNER`) or
-whose task config does (`--config`, e.g. the scan ablation's observe_scan=false), named by what they differ in.
+whose task config does (`--config`, e.g. the scan ablation's observe_scan=false), named by what they differ in;
+a run trained with --config, or on a --terrain other than its task's own, is named by it even alone.
 Each task's reference controller
 (`registry.TASK_REFERENCES`: Raibert at the runs' command for the hopping tasks, Raibert at a 5 cm apex for stand)
 is swept the same way (OUT's folder, reference-<task>/). Every sweep runs on the run's own ground (`--terrain`;
@@ -189,8 +190,19 @@ def run_record(run: Path, record: dict, do_sweep: bool, num: int, duration: floa
             **sweep_measures(run / SWEEP, height), **trained, **gaps, "parts": parts,
             "training": training_physics(run), "learner": {k: args.get(k) for k in LEARNER},
             "config": sorted(args.get("config") or []),  # --config's task fields (the scan ablation's switch)
+            "course": trained_ground(args),
             "height": height, "speed": list(speed),
             "physics": list(physics_of(args).described().values())}
+
+
+def trained_ground(args: dict) -> str:
+    """The --terrain a run trained on where it is not its task's own ground ("" where it is)."""
+    from hopper_mjx.envs import tasks
+    from hopper_mjx.terrain import spec
+
+    ground = lambda text: str(spec.parse(text or "flat"))
+    own = ground(tasks.default_config(args["task"]).terrain)
+    return "" if ground(args.get("terrain")) == own else ground(args.get("terrain"))
 
 
 def training_physics(run: Path) -> str:
@@ -246,7 +258,8 @@ def rows_of(records: list[dict]) -> list[tuple[str, list[dict]]]:
     other rows of the same task, algorithm and physics."""
     physics = lambda r: (r["task"], r["algo"], r.get("training", ""))
     config = lambda r: " ".join(r.get("config", []))
-    settings = lambda r: (tuple(sorted((k, str(v)) for k, v in r.get("learner", {}).items())), config(r))
+    settings = lambda r: (tuple(sorted((k, str(v)) for k, v in r.get("learner", {}).items())), config(r),
+                          r.get("course", ""))
     grounds = lambda rs: list(dict.fromkeys(r.get("ground", "flat") for r in rs))  # in the runs' judging order
     rows = []
     for group in sorted({physics(r) for r in records}):
@@ -259,8 +272,12 @@ def rows_of(records: list[dict]) -> list[tuple[str, list[dict]]]:
             said = "".join(_setting(k, learner.get(k)) for k in varied if k != "start_from")
             if "start_from" in varied or learner.get("start_from"):  # said always: another's start
                 said += _setting("start_from", learner.get("start_from"))
-            if configs:
-                said += f", --config {config(mine[0])}" if config(mine[0]) else ", the task's own config"
+            if mine[0].get("course"):  # said always: not the ground the task trains on
+                said += f", on {mine[0]['course']}"
+            if config(mine[0]):  # said always: not the task's own config
+                said += f", --config {config(mine[0])}"
+            elif configs:
+                said += ", the task's own config"
             on = f", trained on a {group[2]}" if group[2] else ""
             several = len(grounds(mine)) > 1  # judged on several grounds (a course's): a row for each
             for ground in grounds(mine):

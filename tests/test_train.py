@@ -637,6 +637,31 @@ def test_runs_whose_task_config_differs_are_rows_of_their_own(tmp_path):
     assert rows[f"hop_terrain × PPO, the task's own config, judged on {JUDGE_GROUNDS[0]}"][3] == "30.0"
 
 
+def test_a_run_off_its_tasks_own_config_or_ground_says_so_alone(tmp_path):
+    """A row whose runs changed the task's config or trained on another course names both, with no other row to
+    differ from; a run on the task's own course (its spec written another way) names neither."""
+    import json
+
+    from hopper_mjx.envs.curriculum import JUDGE_GROUNDS
+    from hopper_mjx.terrain import spec
+
+    results = importlib.import_module("results")
+    tile3 = str(spec.parse("course:seed=1,tile=3"))
+    for name, terrain, config, said in (("wide", "course:tile=3,seed=1", ["apex_range=0.93,1.13"],
+                                         f", on {tile3}, --config apex_range=0.93,1.13"),
+                                        ("own", str(spec.parse("course:seed=1")), [], "")):
+        run = tmp_path / name
+        run.mkdir()
+        args = {"task": "hop_terrain", "algo": "ppo", "seed": 0, "eval_height": 0.10, "eval_speed": [0.5, 0.0],
+                "terrain": terrain, "config": config}
+        (run / "metrics.json").write_text(json.dumps({"args": args, "history": []}))
+        out = tmp_path / f"{name}.md"
+        assert results.main([str(run), "--out", str(out)]) == 0
+        rows = {line.split("|")[1].strip() for line in out.read_text().splitlines()
+                if line.startswith("| hop_terrain × PPO")}
+        assert rows == {f"hop_terrain × PPO{said}, judged on {g}" for g in JUDGE_GROUNDS}
+
+
 def test_train_rejects_an_out_it_cannot_make_in_one_line(tmp_path, capsys):
     """Under a file: one line, nothing made. A missing parent (runs/ on a fresh clone, as the docs' commands
     write) is made with the run, so the check passes and still makes nothing."""
