@@ -63,15 +63,20 @@ def stop(signum: int) -> None:
     """Ends the process for `signum`: removes partial outputs, says so in one line, exits 128 + signum."""
     if not _stopping.acquire(blocking=False):
         return  # a second signal while the first is handled
-    files.remove_partial()
     for stream in (sys.stdout, sys.stderr):
         try:
             stream.flush()
         except (OSError, ValueError):
             pass
-    # Descriptor 2 to nowhere, not back to the terminal: the main thread may still be inside XLA (a cache load at
-    # start-up), whose log lines would then reach the user unfiltered beside the one line below.
+    # Descriptor 2 to nowhere, not back to the terminal, before the partial outputs go: the main thread runs on
+    # meanwhile, inside XLA (a cache load at start-up) or writing into a folder removed under it, and its log lines
+    # or traceback would otherwise reach the user beside the one line below.
     _end_filter(quiet=True)
+    if _real_stderr:
+        null = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(null, 2)
+        os.close(null)
+    files.remove_partial()
     name = signal.Signals(signum).name
     # The copy taken when armed, not descriptor 2: a signal in the instant the filter takes descriptor 2
     # over, before it is on record in `_stderr`, would send the line into a pipe nobody drains.
