@@ -190,19 +190,18 @@ def run_record(run: Path, record: dict, do_sweep: bool, num: int, duration: floa
             **sweep_measures(run / SWEEP, height), **trained, **gaps, "parts": parts,
             "training": training_physics(run), "learner": {k: args.get(k) for k in LEARNER},
             "config": sorted(args.get("config") or []),  # --config's task fields (the scan ablation's switch)
-            "course": trained_ground(args),
+            "trained_ground": trained_ground(args),
             "height": height, "speed": list(speed),
             "physics": list(physics_of(args).described().values())}
 
 
 def trained_ground(args: dict) -> str:
     """The --terrain a run trained on where it is not its task's own ground ("" where it is)."""
+    from hopper_mjx import terrain
     from hopper_mjx.envs import tasks
-    from hopper_mjx.terrain import spec
 
-    ground = lambda text: str(spec.parse(text or "flat"))
-    own = ground(tasks.default_config(args["task"]).terrain)
-    return "" if ground(args.get("terrain")) == own else ground(args.get("terrain"))
+    trained = str(physics_of(args).ground)
+    return "" if trained == str(terrain.parse(tasks.default_config(args["task"]).terrain or "flat")) else trained
 
 
 def training_physics(run: Path) -> str:
@@ -259,7 +258,7 @@ def rows_of(records: list[dict]) -> list[tuple[str, list[dict]]]:
     physics = lambda r: (r["task"], r["algo"], r.get("training", ""))
     config = lambda r: " ".join(r.get("config", []))
     settings = lambda r: (tuple(sorted((k, str(v)) for k, v in r.get("learner", {}).items())), config(r),
-                          r.get("course", ""))
+                          r.get("trained_ground", ""))
     grounds = lambda rs: list(dict.fromkeys(r.get("ground", "flat") for r in rs))  # in the runs' judging order
     rows = []
     for group in sorted({physics(r) for r in records}):
@@ -272,8 +271,8 @@ def rows_of(records: list[dict]) -> list[tuple[str, list[dict]]]:
             said = "".join(_setting(k, learner.get(k)) for k in varied if k != "start_from")
             if "start_from" in varied or learner.get("start_from"):  # said always: another's start
                 said += _setting("start_from", learner.get("start_from"))
-            if mine[0].get("course"):  # said always: not the ground the task trains on
-                said += f", on {mine[0]['course']}"
+            if mine[0].get("trained_ground"):  # said always: not the ground the task trains on
+                said += f", on {mine[0]['trained_ground']}"
             if config(mine[0]):  # said always: not the task's own config
                 said += f", --config {config(mine[0])}"
             elif configs:
