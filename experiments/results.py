@@ -10,7 +10,8 @@ and on the kicked gravity sweep of the run's policy (RUN/sweep/: `python -m hopp
 policy:RUN`, nine default gravities, the default kick) the worst gravity's survival, apex error |rise/command - 1|
 and speed error, each twice: on the physics the policy was trained on (RUN/sweep-trained/: the same sweep with
 `--as-trained`, its config's timestep and solver caps) and in the core; then the gap between the two at Earth, Mars
-and the Moon, held to 5 points of survival and 5 % of the commanded apex; where it is over, the sweep again on each
+and the Moon, held to 5 points of survival and 5 % of the commanded apex (and, the last column, the core's survival
+at each of the three); where it is over, the sweep again on each
 part of the training physics alone (`--as-trained=timestep` and `=solver`, the other part the core's:
 RUN/sweep-trained-timestep/, RUN/sweep-trained-solver/), and the row names the part whose gap stays over. The row
 names the step and solver cap its policies were trained on, so runs on other training physics are rows of their own,
@@ -96,10 +97,12 @@ def command(args: dict) -> tuple[float, tuple[float, float]]:
 
 def sweep_measures(folder: Path, height: float) -> dict:
     """The worst gravity's survival, apex error (None without a commanded rise) and speed error of a finished
-    sweep (None: no sweep)."""
+    sweep, and the survival at each of `COMPARED_GRAVITIES` (None: no sweep, or not that gravity)."""
     if not (folder / "summary.json").is_file():
-        return {"survival": None, "apex_error": None, "speed_error": None}
+        return {"survival": None, "apex_error": None, "speed_error": None,
+                "compared_survival": [None] * len(COMPARED_GRAVITIES)}
     groups = _json(folder / "summary.json")["groups"]
+    by_g = {g["gravity"]: g["survival"] for g in groups}
     apex = [g.get("apex_height") for g in groups]
     speed = [g.get("tracking_error") for g in groups]
     return {
@@ -107,6 +110,7 @@ def sweep_measures(folder: Path, height: float) -> dict:
         "apex_error": None if not height > 0 else (max(abs(a / height - 1) for a in apex)
                                                    if all(a is not None for a in apex) else float("inf")),
         "speed_error": max(speed) if all(s is not None for s in speed) else float("inf"),
+        "compared_survival": [by_g.get(g) for g in COMPARED_GRAVITIES],
     }
 
 
@@ -231,7 +235,8 @@ def spread(values, fmt: str) -> str:
 
 HEADER = ("| task × algorithm | seeds | at threshold | min to threshold | M steps to threshold | env steps/s "
           "| worst survival: training / core | worst apex error: training / core | worst speed error m/s "
-          "| training → core gap at Earth, Mars, Moon: survival, apex |\n|---|---|---|---|---|---|---|---|---|---|")
+          "| training → core gap at Earth, Mars, Moon: survival, apex | core survival at Earth / Mars / Moon "
+          "|\n|---|---|---|---|---|---|---|---|---|---|---|")
 
 
 def _millions(steps):
@@ -300,12 +305,20 @@ def table(records: list[dict], references: dict) -> str:
                      f"{spread([r['survival'] for r in rows], '.0%')} "
                      f"| {spread([r['trained_apex_error'] for r in rows], '.0%')} / "
                      f"{spread([r['apex_error'] for r in rows], '.0%')} "
-                     f"| {spread([r['speed_error'] for r in rows], '.3f')} | {gap_cell(rows)} |")
+                     f"| {spread([r['speed_error'] for r in rows], '.3f')} | {gap_cell(rows)} "
+                     f"| {compared_cell(rows)} |")
     for task, ref in sorted(references.items()):
         lines.append(f"| {task} × {ref['controller']} (reference) | — | — | — | — | — "
                      f"| {spread([ref['survival']], '.0%')} | {spread([ref['apex_error']], '.0%')} "
-                     f"| {spread([ref['speed_error']], '.3f')} | — |")
+                     f"| {spread([ref['speed_error']], '.3f')} | — | {compared_cell([ref])} |")
     return "\n".join(lines)
+
+
+def compared_cell(rows: list[dict]) -> str:
+    """The core's survival at Earth, Mars and the Moon, each over the row's seeds (a judged ground's survival per
+    gravity: the honest threshold asks for every robot up at each)."""
+    return " / ".join(spread([r.get("compared_survival", [None] * len(COMPARED_GRAVITIES))[i] for r in rows], ".0%")
+                      for i in range(len(COMPARED_GRAVITIES)))
 
 
 def _worst(gaps: list[dict]) -> dict:

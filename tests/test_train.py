@@ -401,7 +401,8 @@ def test_the_results_table_is_read_from_the_run_folders(seeded, tmp_path):
     cells = [c.strip() for c in row.split("|")[1:-1]]
     assert cells[1] == "2" and cells[2] == "0 of 0 scanned" and cells[3:5] == ["n/a"] * 2
     assert cells[5] == f"{statistics.median(rates):,.0f} [{min(rates):,.0f}–{max(rates):,.0f}]"
-    assert cells[6:] == ["n/a / n/a", "n/a / n/a", "n/a", "n/a"]  # no sweep: neither the core's nor training's
+    # No sweep: neither the core's nor training's.
+    assert cells[6:] == ["n/a / n/a", "n/a / n/a", "n/a", "n/a", "n/a / n/a / n/a"]
     assert out.with_suffix(".png").stat().st_size > 10_000
 
 
@@ -433,6 +434,7 @@ def test_the_results_table_gives_the_gap_between_training_physics_and_the_core(t
     cells = [c.strip() for c in row.split("|")[1:-1]]
     assert cells[6] == "100% / 0%"  # the worst gravity's survival: 0.5 m/s² in the core
     assert cells[9] == "12%, 12%: **over**: the training physics differs"
+    assert cells[10] == "100% / 88% / 100%"  # the core's survival at Earth, Mars and the Moon, not the worst gravity's
     # The sweeps on each part alone (`sweep --as-trained=timestep`, `=solver`) say which part makes the gap.
     for part, like in (("timestep", results.TRAINED), ("solver", results.SWEEP)):
         (run / f"{results.TRAINED}-{part}").mkdir()
