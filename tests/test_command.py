@@ -238,3 +238,31 @@ def test_an_empty_cache_variable_is_the_default_cache_not_the_working_folder(tmp
                          capture_output=True, text=True, timeout=120)
     assert run.returncode == 0, run.stderr[-2000:]
     assert run.stdout.strip() == str(Path.home() / ".cache" / "hopper_mjx" / "jax")
+
+
+# A command whose main fails while a signal's stop removes its partial outputs (slowly here, as a big folder's
+# removal is): the folder it writes into went under it.
+FAILING_UNDER_A_STOP = """
+import os, signal, sys, time
+from hopper_mjx.shell import files, process
+
+remove = files.remove_partial
+files.remove_partial = lambda: (time.sleep(1.0), remove())
+
+
+def main():
+    os.kill(os.getpid(), signal.SIGINT)
+    time.sleep(0.2)  # the stop has begun
+    raise FileNotFoundError("the run's folder was removed under it")
+
+
+sys.exit(process.run(main))
+"""
+
+
+def test_a_main_failing_while_a_stop_runs_waits_for_its_one_line_and_code():
+    """The main thread, meeting the error a stop's removal causes, left `run` with its own exit code before the stop
+    printed its line: the user saw no "interrupted" line, and code 1."""
+    run = subprocess.run([sys.executable, "-c", FAILING_UNDER_A_STOP], env=ENV, capture_output=True, text=True,
+                         timeout=60)
+    assert (run.returncode, run.stderr) == (130, "interrupted (SIGINT): stopped before its results were written\n")

@@ -182,6 +182,14 @@ def run(main) -> int:
               f"file-size limit is met); {_said[0]}", file=sys.stderr)
         return 1
     finally:
+        _await_stop()
         for stream in (sys.stdout, sys.stderr):
             stream.flush()
         _end_filter()
+
+
+def _await_stop(longest: float = 30.0) -> None:
+    """While a signal's `stop` is under way, the main thread waits for it to end the process: leaving `run` (with
+    `main`'s own code, or its traceback as the partial outputs vanish under it) would race the one line and 130."""
+    if _stopping.locked():
+        threading.Event().wait(longest)  # `stop` ends in os._exit; the bound only guards against a stop that hangs
