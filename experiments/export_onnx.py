@@ -124,13 +124,13 @@ def check(args):
 def observation_layout(config) -> list[tuple[str, int]]:
     """The observation's parts in order, (name, size), as `terms.observe` concatenates them."""
     from hopper_mjx.envs import tasks
-    from hopper_mjx.envs.terms import ROBOT_SIGNALS, SCAN
+    from hopper_mjx.envs.terms import ROBOT_SIGNALS
 
     parts = [*ROBOT_SIGNALS, ("command", tasks.task_class(config.task).command_size), ("last action", 3)]
     if config.observe_gravity:
         parts.append(("gravity / 9.81", 1))
     if config.terrain:
-        parts.append(("base height over the scan points", len(SCAN)))
+        parts.append(("base height over the scan points", len(config.scan)))
     return [(name, size) for name, size in parts if size]
 
 

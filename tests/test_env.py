@@ -16,7 +16,7 @@ import pytest
 
 from hopper_mjx import envs, registry
 from hopper_mjx.envs import MonopedConfig, monoped, tasks
-from hopper_mjx.envs.terms import DROPPING, SCAN, fallen, flight_apex, observe, tilt_from_vertical
+from hopper_mjx.envs.terms import DROPPING, fallen, flight_apex, observe, tilt_from_vertical
 from hopper_mjx.envs.wrappers import wrap_for_training
 
 N = 4  # environments, a multiple of the 2 host devices
@@ -39,16 +39,21 @@ def test_registry_names_defaults_and_overrides(mj_model):
 
 
 def test_hop_terrain_observes_the_base_height_over_the_ground_mujoco_c_casts(tmp_path):
-    """hop_terrain's observation ends with the height scan: at each point of `terms.SCAN` (turned with the
-    base's yaw), the base's height over the ground. MuJoCo C's ray cast down onto the same model's height field
-    gives the ground; they agree to float32 rounding at reset poses spread over the ground."""
+    """hop_terrain's observation ends with the height scan: at each point of the config's `scan` (turned with
+    the base's yaw), the base's height over the ground. MuJoCo C's ray cast down onto the same model's height field
+    gives the ground; they agree to float32 rounding at reset poses spread over the ground. A config's own scan
+    (here 9 x 5 points reaching 0.6 m ahead) is read the same way, and sizes the observation."""
+    import dataclasses
+
     import mujoco
 
     from hopper_mjx import model as hopper_model
     from hopper_mjx.terrain import scan as terrain_scan
 
     env = envs.make("hop_terrain", observe_gravity=True)
-    assert env.config.terrain == tasks.HOP_TERRAIN and env.observation_size == 28 + len(SCAN) == 53
+    assert env.config.terrain == tasks.HOP_TERRAIN and env.observation_size == 28 + 25 == 53
+    far = dataclasses.replace(env.config, scan_counts=(9, 5), scan_spacing=(0.15, 0.1))
+    assert tasks.observation_size(far) == 28 + 45 and float(far.scan[:, 0].max()) == pytest.approx(0.6)
     m, rng = hopper_model.load(terrain=env.config.ground.terrain()), np.random.default_rng(0)
     d = mujoco.MjData(m)
     d.qpos[:2] = 100.0  # the robot far off the ground, out of the rays' way
@@ -61,12 +66,12 @@ def test_hop_terrain_observes_the_base_height_over_the_ground_mujoco_c_casts(tmp
         qpos = state.pipeline_state.qpos.at[:2].set(xy).at[3:7].set(
             jnp.array([np.cos(psi / 2), 0, 0, np.sin(psi / 2)]))
         obs = env.observe_signals(env.engine.model, state.pipeline_state.replace(qpos=qpos))
-        features = observe(env.layout, env.config, obs, state.info["gravity"], state.info["command"],
-                                   jnp.zeros(3))
-        scan = np.asarray(features[-len(SCAN):])
+        config = (env.config, far)[k % 2]
+        features = observe(env.layout, config, obs, state.info["gravity"], state.info["command"], jnp.zeros(3))
+        scan = np.asarray(features[-len(config.scan):])
         assert float(terrain_scan.yaw(qpos[3:7])) == pytest.approx(psi, abs=1e-5)
         c, s = np.cos(psi), np.sin(psi)
-        for (px, py), height_over in zip(SCAN, scan):
+        for (px, py), height_over in zip(config.scan, scan):
             start = np.array([xy[0] + c * px - s * py, xy[1] + s * px + c * py, 5.0])
             geomid = np.array([-1], np.int32)
             distance = mujoco.mj_ray(m, d, start, np.array([0.0, 0.0, -1.0]), None, 1, -1, geomid)
@@ -425,9 +430,9 @@ def test_on_the_course_each_episode_starts_on_a_tile_of_its_level_and_the_level_
     # The scan zeroed (`observe_scan=False`, the ablation): the same observation but for the scan.
     blind = envs.make("hop_terrain", terrain="course:levels=5,tile=2,gap=0.15,seed=3,cell=0.1", observe_scan=False)
     seen, unseen = (jax.jit(e.reset)(keys[0]).obs for e in (env, blind))
-    assert blind.observation_size == env.observation_size and np.asarray(seen[-len(SCAN):]).min() > 0.8
-    np.testing.assert_array_equal(np.asarray(unseen[:-len(SCAN)]), np.asarray(seen[:-len(SCAN)]))
-    assert not np.asarray(unseen[-len(SCAN):]).any()
+    assert blind.observation_size == env.observation_size and np.asarray(seen[-len(env.config.scan):]).min() > 0.8
+    np.testing.assert_array_equal(np.asarray(unseen[:-len(env.config.scan)]), np.asarray(seen[:-len(env.config.scan)]))
+    assert not np.asarray(unseen[-len(env.config.scan):]).any()
     placed = jax.jit(jax.vmap(env.reset_at))(keys, jnp.full(400, 4, jnp.int32))
     np.testing.assert_array_less(np.abs(np.asarray(placed.pipeline_state.qpos[:, 1]) - 4.0), JITTER + 1e-6)
 

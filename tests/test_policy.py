@@ -173,7 +173,6 @@ def test_a_policy_trained_on_terrain_is_refused_on_the_flat_plane(trained, mj_mo
     import json
 
     from hopper_mjx.envs import policy, tasks
-    from hopper_mjx.envs.terms import SCAN
 
     folder = tmp_path / "terrain-policy"
     shutil.copytree(trained[0] / "policy", folder)
@@ -182,7 +181,7 @@ def test_a_policy_trained_on_terrain_is_refused_on_the_flat_plane(trained, mj_mo
     (folder / policy.ENV_CONFIG).write_text(json.dumps(config))
     net_file = folder / policy.NETWORK_CONFIGS["ppo"]
     net = json.loads(net_file.read_text())
-    net_file.write_text(json.dumps({**net, "observation_size": net["observation_size"] + len(SCAN)}))
+    net_file.write_text(json.dumps({**net, "observation_size": net["observation_size"] + 25}))  # a 5 x 5 scan
     assert policy.read(folder)[3].terrain == tasks.HOP_TERRAIN  # a consistent folder: sizes agree
     with pytest.raises(ValueError, match="reads a height scan .*run it on a --terrain"):
         policy.policy_controller(mj_model, folder)

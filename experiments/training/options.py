@@ -320,10 +320,8 @@ def start_params(args):
 def observations(args, physics) -> int:
     """The observation count of the run's task as its options set it."""
     from hopper_mjx import envs
-    from hopper_mjx.envs.terms import observation_size
 
-    return observation_size(envs.tasks.task_class(args.task).command_size, args.observe_gravity,
-                            not physics.ground.is_flat)
+    return envs.tasks.observation_size(run_config(args, physics))
 
 
 def _read_start(args):

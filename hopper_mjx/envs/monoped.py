@@ -17,7 +17,7 @@ A task (`hopper_mjx.envs.tasks`) is a `MonopedEnv` that says what it commands
 - **Observations** (`observe`) are what a real robot reads: the IMU, the odometry's height
   and velocity, the foot contact, the joints, the task's command and the previous action;
   gravity only when `observe_gravity` is set; on a `terrain`, the base's height over the ground at
-  the height scan's points (`SCAN`, legged_gym's measured_heights).
+  the height scan's points (the config's `scan`, legged_gym's measured_heights).
 - **Terrain** (`terrain`, a --terrain spec; "" the flat plane): one fixed ground every episode
   starts on, at the origin, as the core's instances start (train.py's --terrain check keeps it below the foot there);
   on a `course`, each episode starts on a tile of its curriculum level instead (`envs.curriculum`).
@@ -61,7 +61,6 @@ from hopper_mjx.envs.task_config import MonopedConfig, decimation, training_mode
 from hopper_mjx.envs.terms import (
     DROPPING,
     FLIGHT_INFO,
-    SCAN,
     fallen,
     flight_apex,
     joint_targets,
@@ -193,7 +192,7 @@ class MonopedEnv(Env):
 
     def observe_signals(self, model, data) -> Observation:
         """What a controller reads of the state (`signals.observe`), with the ground on a terrain."""
-        sensed = () if self.terrain is None else (*self.terrain, jnp.asarray(SCAN, jnp.float32))
+        sensed = () if self.terrain is None else (*self.terrain, jnp.asarray(self.config.scan, jnp.float32))
         return signals.observe(self.engine, model, data, sensed)
 
     @property
@@ -214,7 +213,8 @@ class MonopedEnv(Env):
     # Brax reads these.
     @property
     def observation_size(self) -> int:
-        return observation_size(self.command_size, self.config.observe_gravity, self.terrain is not None)
+        return observation_size(self.command_size, self.config.observe_gravity,
+                                len(self.config.scan) if self.terrain is not None else 0)
 
     @property
     def action_size(self) -> int:

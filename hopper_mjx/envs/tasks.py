@@ -112,7 +112,7 @@ HOP_TERRAIN = "course:seed=1"
 
 class HopTerrain(HopVelocity):
     """`hop_velocity` over the training course, reading the ground's height around the base (the height scan,
-    `terms.SCAN`), each episode on a tile of its curriculum level (`envs.curriculum`). The apex is the base's
+    the config's `scan`), each episode on a tile of its curriculum level (`envs.curriculum`). The apex is the base's
     height in the world, as the evaluation measures it."""
 
     @classmethod
@@ -135,7 +135,8 @@ def task_class(name: str) -> type[MonopedEnv]:
 
 def observation_size(config: MonopedConfig) -> int:
     """The observations a policy of `config` takes (`terms.observation_size`)."""
-    return monoped_observation_size(task_class(config.task).command_size, config.observe_gravity, bool(config.terrain))
+    return monoped_observation_size(task_class(config.task).command_size, config.observe_gravity,
+                                    len(config.scan) if config.terrain else 0)
 
 
 def default_config(name: str) -> MonopedConfig:

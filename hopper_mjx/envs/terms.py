@@ -40,15 +40,12 @@ def pd_torque(layout: Layout, cfg: MonopedConfig, target: jax.Array, obs, scale:
 ROBOT_SIGNALS = (("orientation", 4), ("angular rate", 3), ("height", 1), ("linear velocity", 3), ("foot contact", 1),
                  ("contact force", 3), ("joint angles", 3), ("joint rates", 3))
 MIN_GRAVITY = 0.1  # m/s², a floor under g where it divides (no task draws less than 0.5)
-# The policy's height scan on a terrain, (K, 2) m in the base's yaw frame: the core's default scan (5 x 5 points
-# 0.1 m apart), fixed here so that a policy reads the points it was trained on whatever scan a run records.
-SCAN = terrain_scan.scan_points()
 
 
-def observation_size(command_size: int, observe_gravity: bool, on_terrain: bool = False) -> int:
-    """The robot's signals + the command + 3 of the previous action (+ gravity) (+ the height scan)."""
-    return (sum(size for _, size in ROBOT_SIGNALS) + command_size + 3 + int(observe_gravity)
-            + len(SCAN) * int(on_terrain))
+def observation_size(command_size: int, observe_gravity: bool, scan_points: int = 0) -> int:
+    """The robot's signals + the command + 3 of the previous action (+ gravity) (+ the height scan's points, on a
+    terrain)."""
+    return sum(size for _, size in ROBOT_SIGNALS) + command_size + 3 + int(observe_gravity) + scan_points
 
 
 def observe(layout: Layout, cfg: MonopedConfig, obs: Observation, gravity: jax.Array,
@@ -71,9 +68,9 @@ def observe(layout: Layout, cfg: MonopedConfig, obs: Observation, gravity: jax.A
     parts = [*robot, command, last_action]
     if cfg.observe_gravity:
         parts.append(-gravity[2:3] / EARTH_GRAVITY)
-    if cfg.terrain:  # the base's height over the ground at each scan point, from where the odometry puts it
+    if cfg.terrain:  # the base's height over the ground at each scan point (the config's: those it trained on)
         ground = terrain_scan.measured_heights(obs.ground.heights, obs.ground.size, obs.qpos[:3], obs.qpos[3:7],
-                                               jnp.asarray(SCAN, obs.qpos.dtype))
+                                               jnp.asarray(cfg.scan, obs.qpos.dtype))
         over = obs.qpos[2] - ground
         parts.append(over if cfg.observe_scan else jnp.zeros_like(over))
     return jnp.nan_to_num(jnp.concatenate(parts), posinf=0.0, neginf=0.0)

@@ -197,10 +197,7 @@ class SensorConfig:
                     f"{name}_rate={rate} Hz must divide the physics rate {1 / timestep:g} Hz"
                 )
             out[name] = int(round(steps))
-        if not (len(self.scan_counts) == 2 and all(int(c) == c and 1 <= c <= 64 for c in self.scan_counts)):
-            raise ValueError(f"scan_counts must be two whole numbers in 1..64, got {self.scan_counts}")
-        if not (len(self.scan_spacing) == 2 and all(s > 0 for s in self.scan_spacing)):
-            raise ValueError(f"scan_spacing must be two lengths > 0 m, got {self.scan_spacing}")
+        terrain_scan.check_grid(self.scan_counts, self.scan_spacing)
         for field in dataclasses.fields(self):
             if field.name.endswith("noise") and not getattr(self, field.name) >= 0:
                 raise ValueError(f"{field.name} must be a non-negative standard deviation")

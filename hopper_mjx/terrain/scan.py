@@ -47,6 +47,14 @@ def normal_at(heights: jnp.ndarray, size: tuple[float, float], x, y):
     return n / jnp.linalg.norm(n, axis=-1, keepdims=True)
 
 
+def check_grid(counts, spacing) -> None:
+    """Raises ValueError unless `counts` are two whole numbers in 1..64 and `spacing` two finite lengths > 0 m."""
+    if not (len(counts) == 2 and all(int(c) == c and 1 <= c <= 64 for c in counts)):
+        raise ValueError(f"scan_counts must be two whole numbers in 1..64, got {tuple(counts)}")
+    if not (len(spacing) == 2 and all(np.isfinite(s) and s > 0 for s in spacing)):
+        raise ValueError(f"scan_spacing must be two finite lengths > 0 m, got {tuple(spacing)}")
+
+
 def scan_points(counts: tuple[int, int] = (5, 5), spacing: tuple[float, float] = (0.1, 0.1)) -> np.ndarray:
     """(K, 2) points of a scan in the base's yaw frame: a grid of counts (along x ahead, along y left)
     at `spacing` m, centred under the base (legged_gym's measured_heights pattern)."""
