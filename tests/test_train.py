@@ -232,6 +232,8 @@ def test_train_rejects_bad_input_in_one_line_before_anything_runs(trained, capsy
     (["--task", "hop_terrain", "--terrain", "flat", "--config", "observe_scan=false"],
      "observe_scan=false zeros the height scan, which a policy reads only on a terrain; this one trains on the flat "
      "plane"),
+    (["--config", "scan_counts=9,5"], "--config: scan_counts shapes the height scan, which a policy reads only on a "
+                                      "terrain; this one trains on the flat plane"),
     (["--task", "hop_terrain", "--terrain", "course:tile=2"],
      "--terrain: course: gap=0.3 m must be less than 0.2 m, the trenches' spacing or the room for one on a 2 m tile "
      "(without it the gaps tiles would be flat or one pit); lower gap or raise tile"),

@@ -127,6 +127,11 @@ class MonopedConfig:
         if not self.observe_scan and not self.terrain:
             raise ValueError("observe_scan=false zeros the height scan, which a policy reads only on a terrain; "
                              "this one trains on the flat plane")
+        shaped = [f for f in ("scan_counts", "scan_spacing") if getattr(self, f) != getattr(MonopedConfig, f)]
+        if shaped and not self.terrain:
+            raise ValueError(f"{' and '.join(shaped)} shape{'s' * (len(shaped) == 1)} the height scan, which a policy "
+                             "reads only on a terrain; "
+                             "this one trains on the flat plane")
         dc_only = [name for name in self.variation.controls if registry.CONTROL_PARAMETERS[name].needs == "dc"]
         if dc_only and self.motor != "dc":
             raise ValueError(f"randomize: {', '.join(dc_only)} are a dc motor's figures; set motor='dc'")
