@@ -317,8 +317,7 @@ def table(records: list[dict], references: dict) -> str:
 def compared_cell(rows: list[dict]) -> str:
     """The core's survival at Earth, Mars and the Moon, each over the row's seeds (a judged ground's survival per
     gravity: the honest threshold asks for every robot up at each)."""
-    return " / ".join(spread([r.get("compared_survival", [None] * len(COMPARED_GRAVITIES))[i] for r in rows], ".0%")
-                      for i in range(len(COMPARED_GRAVITIES)))
+    return " / ".join(spread([r["compared_survival"][i] for r in rows], ".0%") for i in range(len(COMPARED_GRAVITIES)))
 
 
 def _worst(gaps: list[dict]) -> dict:

@@ -130,8 +130,7 @@ class MonopedConfig:
         shaped = [f for f in ("scan_counts", "scan_spacing") if getattr(self, f) != getattr(MonopedConfig, f)]
         if shaped and not self.terrain:
             raise ValueError(f"{' and '.join(shaped)} shape{'s' * (len(shaped) == 1)} the height scan, which a policy "
-                             "reads only on a terrain; "
-                             "this one trains on the flat plane")
+                             "reads only on a terrain; this one trains on the flat plane")
         dc_only = [name for name in self.variation.controls if registry.CONTROL_PARAMETERS[name].needs == "dc"]
         if dc_only and self.motor != "dc":
             raise ValueError(f"randomize: {', '.join(dc_only)} are a dc motor's figures; set motor='dc'")
@@ -172,7 +171,7 @@ class MonopedConfig:
     @property
     def scan(self) -> np.ndarray:
         """(K, 2) m: the height scan's points in the base's yaw frame (`terrain.scan.scan_points`)."""
-        return terrain_scan.scan_points(tuple(int(c) for c in self.scan_counts), tuple(self.scan_spacing))
+        return terrain_scan.scan_points(self.scan_counts, self.scan_spacing)
 
     @property
     def variation(self) -> Spec:
@@ -217,8 +216,7 @@ class MonopedConfig:
                 elif isinstance(default, str):
                     value = text
                 else:  # a tuple, or a pair whose default is None: comma-separated numbers (whole for a count)
-                    whole = default is not None and isinstance(default[0], int)
-                    value = tuple((int if whole else float)(v) for v in text.split(","))
+                    value = tuple((int if _whole(default) else float)(v) for v in text.split(","))
                     if len(value) != (2 if default is None else len(default)):
                         raise ValueError
             except ValueError:
@@ -241,8 +239,12 @@ def _kind(default) -> str:
         return "true or false"
     if isinstance(default, (int, float, str)):
         return f"a {type(default).__name__}"
-    whole = default is not None and isinstance(default[0], int)
-    return f"{2 if default is None else len(default)} comma-separated {'whole ' if whole else ''}numbers"
+    return f"{2 if default is None else len(default)} comma-separated {'whole ' if _whole(default) else ''}numbers"
+
+
+def _whole(default) -> bool:
+    """A tuple field of whole numbers (a count), by its default."""
+    return default is not None and isinstance(default[0], int)
 
 
 def steps_per_action(rate: float, timestep: float) -> int | None:

@@ -176,7 +176,7 @@ class SensorConfig:
 
     def scan_points(self):
         """(K, 2) m, the scan's points in the base's yaw frame (x ahead, y left)."""
-        return terrain_scan.scan_points(tuple(int(c) for c in self.scan_counts), self.scan_spacing)
+        return terrain_scan.scan_points(self.scan_counts, self.scan_spacing)
 
     @classmethod
     def uniform(cls, rate: float, **noise) -> "SensorConfig":

@@ -57,7 +57,9 @@ def check_grid(counts, spacing) -> None:
 
 def scan_points(counts: tuple[int, int] = (5, 5), spacing: tuple[float, float] = (0.1, 0.1)) -> np.ndarray:
     """(K, 2) points of a scan in the base's yaw frame: a grid of counts (along x ahead, along y left)
-    at `spacing` m, centred under the base (legged_gym's measured_heights pattern)."""
+    at `spacing` m, centred under the base (legged_gym's measured_heights pattern). Counts may come as whole floats
+    (a parsed option, a JSON file)."""
+    counts = [int(c) for c in counts]
     xs = (np.arange(counts[0]) - (counts[0] - 1) / 2) * spacing[0]
     ys = (np.arange(counts[1]) - (counts[1] - 1) / 2) * spacing[1]
     return np.stack(np.meshgrid(xs, ys, indexing="ij"), -1).reshape(-1, 2)
