@@ -6,6 +6,7 @@ a capture of Brax's step-0 params, so that run's compiled program is the one alr
 """
 
 import importlib
+import json
 import os
 import subprocess
 import sys
@@ -378,6 +379,27 @@ def test_seeds_train_one_folder_each_and_a_seed_reruns_bit_for_bit(seeded):
     again = checkpoint.load(seeded / "again" / "policy")
     for a, b in zip(_leaves(three), _leaves(again), strict=True):
         np.testing.assert_array_equal(a, b)
+
+
+def test_a_run_builds_its_evaluation_program_once(tmp_path):
+    """Brax's evaluator starts its episodes from states on no particular device and is handed the policy's
+    parameters on the first device, with PPO's normaliser epsilon a weakly typed Python float until the first
+    update: left so, the first of a run's evaluations built one program and every later one another
+    (`learners.one_evaluation_program`). A run with three evaluations (steps 0, 40 and 80) builds it once."""
+    built = []
+
+    def record(event, start_time, end_time, fun_name="", **_):
+        if event == "/jax/core/compile/backend_compile_duration":
+            built.append(fun_name)
+
+    jax.monitoring.register_event_time_span_listener(record)
+    try:
+        assert train_script.main([*SEEDED, "--out", str(tmp_path / "run")]) == 0
+    finally:
+        jax.monitoring.unregister_event_time_span_listener(record)
+    history = json.loads((tmp_path / "run" / "metrics.json").read_text())["history"]
+    assert [r["step"] for r in history if "eval/episode_reward" in r] == [0, 40, 80]
+    assert built.count("jit(generate_eval_unroll)") == 1, built
 
 
 def test_the_results_table_is_read_from_the_run_folders(seeded, tmp_path):

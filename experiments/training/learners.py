@@ -7,6 +7,8 @@ import functools
 import math
 from pathlib import Path
 
+import numpy as np
+
 from hopper_mjx.metrics.thresholds import APEX_TOLERANCE, MIN_HOPS, SPEED_TOLERANCE  # noqa: F401 (one definition)
 from training.options import parse_layers, run_config, start_network, start_params
 
@@ -60,23 +62,29 @@ def run_ppo(args, env, factory, remaining: int, start_step: int, resume, progres
     from brax.training.agents.ppo import train as ppo
 
     per_train_step = args.batch_size * args.num_minibatches * args.unroll_length
-    ppo.train(
-        **_shared(args, env, factory, remaining, start_step, resume, per_train_step),
-        unroll_length=args.unroll_length,
-        num_minibatches=args.num_minibatches,
-        num_updates_per_batch=args.updates_per_batch,
-        entropy_cost=args.entropy_cost,
-        gae_lambda=0.95,
-        clipping_epsilon=0.2,
-        max_grad_norm=learner_settings(args)["max_grad_norm"] or None,
-        **({} if args.desired_kl is None else {"learning_rate_schedule": "ADAPTIVE_KL", "desired_kl": args.desired_kl}),
-        progress_fn=progress,
-        # On a course, Brax's log of finished training episodes carries their curriculum level (the loop files it).
-        log_training_metrics=getattr(env, "curriculum", None) is not None,
-        training_metrics_steps=args.eval_every,
-        run_evals=not args.no_eval,
-        policy_params_fn=lambda step, make_policy, params: save_checkpoint(step, params),
-    )
+    with one_evaluation_program(ppo):
+        ppo.train(
+            **_shared(args, env, factory, remaining, start_step, resume, per_train_step),
+            unroll_length=args.unroll_length,
+            num_minibatches=args.num_minibatches,
+            num_updates_per_batch=args.updates_per_batch,
+            entropy_cost=args.entropy_cost,
+            # A float32, not Brax's default Python 0.0: that is weakly typed until the first update makes it an
+            # array, so the first evaluation's program and the update's were each traced twice.
+            normalize_observations_std_eps=np.float32(0.0),
+            gae_lambda=0.95,
+            clipping_epsilon=0.2,
+            max_grad_norm=learner_settings(args)["max_grad_norm"] or None,
+            **({} if args.desired_kl is None else
+               {"learning_rate_schedule": "ADAPTIVE_KL", "desired_kl": args.desired_kl}),
+            progress_fn=progress,
+            # On a course, Brax's log of finished training episodes carries their curriculum level (the loop files
+            # it).
+            log_training_metrics=getattr(env, "curriculum", None) is not None,
+            training_metrics_steps=args.eval_every,
+            run_evals=not args.no_eval,
+            policy_params_fn=lambda step, make_policy, params: save_checkpoint(step, params),
+        )
 
 
 def run_sac(args, env, factory, remaining: int, start_step: int, resume, progress, save_checkpoint) -> None:
@@ -97,7 +105,7 @@ def run_sac(args, env, factory, remaining: int, start_step: int, resume, progres
     # The ring replay: Brax's own copies the whole replay on every insert once full (hopper_mjx.envs.replay).
     with (tempfile.TemporaryDirectory(dir=Path(args.out).resolve()) as scratch, ring_replay_in_sac(),
           losses_in_sac(args.sac_target_entropy, start_anchor(args)), replicated_restore_in_sac(),
-          policy_update_in_sac(held_policy_updates(args), args.sac_policy_lr)):
+          policy_update_in_sac(held_policy_updates(args), args.sac_policy_lr), one_evaluation_program(sac)):
         def progress_and_file(step, metrics):
             if step > 0:
                 save_checkpoint(step, brax_checkpoint.load(Path(scratch) / f"{int(step):012d}"))
@@ -111,6 +119,25 @@ def run_sac(args, env, factory, remaining: int, start_step: int, resume, progres
             checkpoint_logdir=scratch,
             progress_fn=progress_and_file,
         )
+
+
+def one_evaluation_program(train):
+    """Brax's evaluator as `train` (PPO's or SAC's module) builds it, with its episodes' first states on the device
+    the policy's parameters reach it on. Brax leaves those states uncommitted to a device, and its first evaluation
+    hands back committed ones, so the evaluation's program was compiled twice: 6-8 s more at every run's start from
+    an empty compile cache."""
+    import jax
+    from brax.training import acting
+
+    from hopper_mjx.envs.replay import in_brax
+
+    class Evaluator(acting.Evaluator):
+        def __init__(self, *args, **kwargs):
+            super().__init__(*args, **kwargs)
+            # Brax's `_unpmap` hands the evaluation the first device's copy of the parameters.
+            self._eval_state_to_donate = jax.device_put(self._eval_state_to_donate, jax.local_devices()[0])
+
+    return in_brax(train, "acting", Evaluator=Evaluator)
 
 
 def start_anchor(args) -> tuple | None:

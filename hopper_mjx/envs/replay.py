@@ -43,17 +43,21 @@ class RingReplay(replay_buffers.UniformSamplingQueue):
 
 
 @contextlib.contextmanager
-def _in_sac(module: str, **replaced):
-    """Within this context Brax's SAC `train` sees its imported module `module` with the attributes `replaced`;
-    the module itself, and every other user of it, is left as it is."""
-    from brax.training.agents.sac import train as sac
-
-    original = getattr(sac, module)
-    setattr(sac, module, types.SimpleNamespace(**{**vars(original), **replaced}))
+def in_brax(train, module: str, **replaced):
+    """Within this context the Brax `train` module `train` (PPO's or SAC's) sees its imported module `module` with
+    the attributes `replaced`; the module itself, and every other user of it, is left as it is."""
+    original = getattr(train, module)
+    setattr(train, module, types.SimpleNamespace(**{**vars(original), **replaced}))
     try:
         yield
     finally:
-        setattr(sac, module, original)
+        setattr(train, module, original)
+
+
+def _in_sac(module: str, **replaced):
+    from brax.training.agents.sac import train as sac
+
+    return in_brax(sac, module, **replaced)
 
 
 def ring_replay_in_sac():
