@@ -289,6 +289,28 @@ def test_a_parameter_sweep_gives_each_value_its_own_robots_and_keeps_the_others_
                   height=0.1, speed=(0.0, 0.0), seed=0, physics=physics)
 
 
+def test_a_terrain_sweep_runs_end_to_end_and_raibert_hops_on_its_rough_ground(tmp_path):
+    """The help's `sweep terrain`, scaled down: flat and 2 cm rough ground at three gravities. Its report asked
+    every sweep with ground of its own how many replicates reached a block, and a rough ground has none: the
+    command ended in a traceback after its run. Raibert, which reads no ground, keeps every robot up on both and
+    hops at every gravity: on the flat ground near its 0.10 m apex rise, on the rough one at that rise in the
+    median (a bump under the foot moves a single hop by more than its 2 cm)."""
+    out = tmp_path / "terrain"
+    assert main(["terrain", "--amps", "0,0.02", "--num", "2", "--duration", "1.5", "--no-progress",
+                 "--out", str(out)]) == 0
+    groups = json.loads((out / "summary.json").read_text())["groups"]
+    assert sorted((g["roughness"], g["gravity"]) for g in groups) == [
+        (a, g) for a in (0.0, 0.02) for g in (1.62, 3.71, 9.81)]
+    assert all(g["survival"] == 1.0 and "reached" not in g for g in groups), groups
+    rows = _read(out)
+    assert len(rows) == 12 and all(int(r["hops"]) >= 1 for r in rows), rows
+    flat = [float(r["apex_height"]) for r in rows if float(r["roughness"]) == 0]
+    rough = [float(r["apex_height"]) for r in rows if float(r["roughness"]) == 0.02]
+    assert flat == pytest.approx([0.10] * 6, rel=0.2) and np.median(rough) == pytest.approx(0.10, abs=0.02), rows
+    assert "made good m" in (out / "table.txt").read_text()
+    assert (out / "terrain.png").stat().st_size > 10_000
+
+
 def test_an_obstacle_sweeps_figure_shows_the_share_cleared_and_each_ground():
     from hopper_mjx import terrain
     from hopper_mjx.scenario import Physics

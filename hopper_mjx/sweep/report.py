@@ -84,6 +84,7 @@ def group_summary(spec: SweepSpec, inst: Instances, table: np.ndarray, columns: 
                           diverged=int(table[sel, columns.index("diverged")].sum()))
             if "obstacles_cleared" in columns:  # over every replicate, as survival: a fall before it is a miss
                 record["cleared"] = float((table[sel, columns.index("obstacles_cleared")] > 0).mean())
+            if spec.kind in BAND_KINDS:  # a block or a gap to reach; a terrain sweep's rough ground has neither
                 record["reached"] = float(reached(spec, table[sel], columns).mean())
             highest = table[sel, columns.index("highest_apex")]  # over every replicate: a fall ends the count
             highest = highest[np.isfinite(highest)]
