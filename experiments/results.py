@@ -123,10 +123,12 @@ def gap(core: Path, trained: Path, height: float) -> dict:
     by_g = [{g["gravity"]: g for g in _json(folder / "summary.json")["groups"]} for folder in (core, trained)]
     rows = [(by_g[0].get(g), by_g[1].get(g)) for g in COMPARED_GRAVITIES]
     rows = [(a, b) for a, b in rows if a is not None and b is not None]
-    apex = lambda a, b: (float("inf") if a.get("apex_height") is None or b.get("apex_height") is None
-                         else abs(a["apex_height"] - b["apex_height"]) / height)
+    apexes = [(a.get("apex_height"), b.get("apex_height")) for a, b in rows]
+    # A gravity with a hop to measure on one side only is an unbounded gap; on neither (all down in both), none.
+    apex = [float("inf") if a is None or b is None else abs(a - b) / height
+            for a, b in apexes if a is not None or b is not None]
     return {"survival_gap": max((abs(a["survival"] - b["survival"]) for a, b in rows), default=None),
-            "apex_gap": None if not height > 0 else max((apex(a, b) for a, b in rows), default=None)}
+            "apex_gap": None if not height > 0 else max(apex, default=None)}
 
 
 def run_sweep(controller: str, folder: Path, height: float, speed, num: int, duration: float,

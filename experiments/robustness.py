@@ -21,7 +21,7 @@ import sys
 from pathlib import Path
 
 from hopper_mjx import cli
-from hopper_mjx.shell import process
+from hopper_mjx.shell import checks, process
 
 COLUMNS = ("urdf", "randomized")  # the URDF's robot, and --randomize's robots
 SETTINGS = ("gravity", "num", "duration", "height", "push", "variation")  # what a reused sweep must share
@@ -104,7 +104,8 @@ def run_sweeps(args, found: dict[str, list[str]]) -> dict[tuple[str, str], dict]
         for name, controllers in found.items():
             folder = args.out / column / name
             if recorded(folder) is None:
-                print(f"{column} / {name}: {len(controllers)} controller(s)", file=sys.stderr, flush=True)
+                print(f"{column} / {name}: {checks.counted(len(controllers), 'controller')}", file=sys.stderr,
+                      flush=True)
                 command = [sys.executable, "-m", "hopper_mjx.sweep", *sweep_args(args, controllers, column, folder)]
                 code = subprocess.run(command).returncode
                 if code == 2:  # refused: the sweep said why on its one line

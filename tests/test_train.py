@@ -470,6 +470,11 @@ def test_the_results_table_gives_the_gap_between_training_physics_and_the_core(t
     sweep_core = run / results.SWEEP
     (sweep_core / "summary.json").write_text((run / results.TRAINED / "summary.json").read_text())
     assert results.gap(sweep_core, run / results.TRAINED, 0.10) == {"survival_gap": 0.0, "apex_gap": 0.0}
+    # Every robot down in both: no apex to compare, so no apex gap (it read inf%); down in one only, an unbounded one.
+    sweep(tmp_path / "down", [(9.81, 0.0, None), (3.71, 0.0, None), (1.62, 0.0, None)])
+    sweep(tmp_path / "down-too", [(9.81, 0.0, None), (3.71, 0.0, None), (1.62, 0.0, None)])
+    assert results.gap(tmp_path / "down", tmp_path / "down-too", 0.10) == {"survival_gap": 0.0, "apex_gap": None}
+    assert results.gap(tmp_path / "down", sweep_core, 0.10) == {"survival_gap": 1.0, "apex_gap": float("inf")}
 
 def test_a_course_runs_curriculum_level_is_filed_with_the_next_evaluation():
     """Brax's log of finished training episodes comes between evaluations; the mean curriculum level of their
@@ -773,7 +778,7 @@ def test_robustness_passes_a_refused_sweeps_one_line_on(tmp_path, monkeypatch, c
         robustness.run_sweeps(args, {"raibert": ["raibert"]})
     assert len(calls) == 1 and calls[0][1:3] == ["-m", "hopper_mjx.sweep"]
     err = capsys.readouterr().err.splitlines()
-    assert err == ["urdf / raibert: 1 controller(s)"]  # its progress line only
+    assert err == ["urdf / raibert: 1 controller"]  # its progress line only
     if code == 2:
         assert exit_.value.code == 2
     else:
