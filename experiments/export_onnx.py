@@ -129,8 +129,7 @@ def observation_layout(config) -> list[tuple[str, int]]:
     parts = [*ROBOT_SIGNALS, ("command", tasks.task_class(config.task).command_size), ("last action", 3)]
     if config.observe_gravity:
         parts.append(("gravity / 9.81", 1))
-    if config.terrain:
-        parts.append(("base height over the scan points", len(config.scan)))
+    parts.append(("base height over the scan points", config.scan_size))
     return [(name, size) for name, size in parts if size]
 
 

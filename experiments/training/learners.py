@@ -78,8 +78,7 @@ def run_ppo(args, env, factory, remaining: int, start_step: int, resume, progres
             **({} if args.desired_kl is None else
                {"learning_rate_schedule": "ADAPTIVE_KL", "desired_kl": args.desired_kl}),
             progress_fn=progress,
-            # On a course, Brax's log of finished training episodes carries their curriculum level (the loop files
-            # it).
+            # On a course, Brax's log of finished training episodes carries their curriculum level (filed by the loop).
             log_training_metrics=getattr(env, "curriculum", None) is not None,
             training_metrics_steps=args.eval_every,
             run_evals=not args.no_eval,

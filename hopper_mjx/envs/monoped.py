@@ -213,8 +213,7 @@ class MonopedEnv(Env):
     # Brax reads these.
     @property
     def observation_size(self) -> int:
-        return observation_size(self.command_size, self.config.observe_gravity,
-                                len(self.config.scan) if self.terrain is not None else 0)
+        return observation_size(self.command_size, self.config.observe_gravity, self.config.scan_size)
 
     @property
     def action_size(self) -> int:

@@ -174,6 +174,11 @@ class MonopedConfig:
         return terrain_scan.scan_points(self.scan_counts, self.scan_spacing)
 
     @property
+    def scan_size(self) -> int:
+        """The height scan's points a policy of this config reads: none on the flat plane."""
+        return len(self.scan) if self.terrain else 0
+
+    @property
     def variation(self) -> Spec:
         """The robots' spec (empty: the URDF's robot); raises ValueError for a bad one."""
         return Spec.parse(self.randomize) if self.randomize else Spec()

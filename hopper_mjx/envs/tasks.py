@@ -135,8 +135,7 @@ def task_class(name: str) -> type[MonopedEnv]:
 
 def observation_size(config: MonopedConfig) -> int:
     """The observations a policy of `config` takes (`terms.observation_size`)."""
-    return monoped_observation_size(task_class(config.task).command_size, config.observe_gravity,
-                                    len(config.scan) if config.terrain else 0)
+    return monoped_observation_size(task_class(config.task).command_size, config.observe_gravity, config.scan_size)
 
 
 def default_config(name: str) -> MonopedConfig:
