@@ -385,6 +385,12 @@ def test_config_rejects_bad_ranges(mj_model):
             dataclasses.replace(cfg, **bad)
 
 
+def test_a_config_on_the_flat_spec_is_the_plane_s_config():
+    # "flat" is a --terrain spec like any other; read as a terrain, the env's reset looked for heights there were none.
+    assert MonopedConfig(terrain="flat") == MonopedConfig()
+    assert MonopedConfig(terrain="flat").scan_size == 0 < MonopedConfig(terrain="rough:amp=0.02,seed=1").scan_size
+
+
 def test_env_and_metrics_falls_are_different_measures(mj_model):
     """The env ends an episode on the angle of the base z axis from vertical; the metrics call a fall
     on |roll| or |pitch| each. A base rolled and pitched 0.7 rad each (1.0 rad from vertical) is

@@ -122,6 +122,8 @@ class MonopedConfig:
         if self.push is not None:
             Pushes.of(*self.push, self.timestep)  # raises for an interval of no whole step, a negative speed
         ground = self.ground  # raises TerrainError (a ValueError) for a bad spec
+        if ground.is_flat and self.terrain:  # "flat" is the plane: the one spelling the env and its policy test
+            object.__setattr__(self, "terrain", "")
         if ground.each:
             raise ValueError(f"terrain {self.terrain!r}: training puts every episode on one ground; give a fixed seed")
         if not self.observe_scan and not self.terrain:
