@@ -476,6 +476,7 @@ def test_the_results_table_gives_the_gap_between_training_physics_and_the_core(t
     assert results.gap(tmp_path / "down", tmp_path / "down-too", 0.10) == {"survival_gap": 0.0, "apex_gap": None}
     assert results.gap(tmp_path / "down", sweep_core, 0.10) == {"survival_gap": 1.0, "apex_gap": float("inf")}
 
+
 def test_a_course_runs_curriculum_level_is_filed_with_the_next_evaluation():
     """Brax's log of finished training episodes comes between evaluations; the mean curriculum level of their
     steps is kept for the next evaluation's history row, and an evaluation's own metrics pass on to the row, but for

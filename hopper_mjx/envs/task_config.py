@@ -122,7 +122,7 @@ class MonopedConfig:
         if self.push is not None:
             Pushes.of(*self.push, self.timestep)  # raises for an interval of no whole step, a negative speed
         ground = self.ground  # raises TerrainError (a ValueError) for a bad spec
-        if ground.is_flat and self.terrain:  # "flat" is the plane: the one spelling the env and its policy test
+        if ground.is_flat and self.terrain:  # "flat" is the plane, which the env and its users know as ""
             object.__setattr__(self, "terrain", "")
         if ground.each:
             raise ValueError(f"terrain {self.terrain!r}: training puts every episode on one ground; give a fixed seed")
