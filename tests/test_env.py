@@ -80,6 +80,51 @@ def test_hop_terrain_observes_the_base_height_over_the_ground_mujoco_c_casts(tmp
     assert worst < 2e-5, worst
 
 
+def test_the_clearance_term_pays_the_foots_height_over_the_ground_under_it_in_flight_as_mujoco_c_measures_it():
+    """`w_clearance`: in flight, the foot's bottom over the ground under its centre, a share of `clearance_target`
+    capped at 1. The env measures it from the joint angles and the base's pose; MuJoCo C's foot geom (its world
+    position from `mj_kinematics`, less its radius) over C's ray cast down onto the same height field agree to
+    float32 rounding, at tilted poses with random joints over the course. A foot on the ground earns nothing."""
+    import mujoco
+
+    from hopper_mjx import model as hopper_model
+    from hopper_mjx.envs.terms import clearance_term
+    from hopper_mjx.model.layout import Layout
+
+    env = envs.make("hop_terrain", observe_gravity=True, w_clearance=0.5)
+    plain = envs.make("hop_terrain", observe_gravity=True)
+    assert "clearance" in jax.eval_shape(env.reset, jax.random.PRNGKey(0)).metrics
+    assert "clearance" not in jax.eval_shape(plain.reset, jax.random.PRNGKey(0)).metrics
+    m = hopper_model.load(terrain=env.config.ground.terrain())
+    d, rng, foot = mujoco.MjData(m), np.random.default_rng(1), Layout.of(m).foot_geom
+    clearance = jax.jit(env.foot_clearance)
+    seen = []
+    for _ in range(24):
+        d.qpos[:] = env.standing_qpos
+        d.qpos[:2] = rng.uniform(-5, 5, 2)
+        d.qpos[2] = rng.uniform(0.8, 1.3)
+        tilt = rng.normal(0, 0.2, 3)
+        d.qpos[3:7] = np.concatenate([[1.0], 0.5 * tilt]) / np.linalg.norm(np.concatenate([[1.0], 0.5 * tilt]))
+        d.qpos[list(env.layout.joint_qpos)] += rng.uniform(-0.5, 0.5, 3)
+        mujoco.mj_kinematics(m, d)
+        centre = d.geom_xpos[foot].copy()
+        d.qpos[2] += 50.0  # the robot out of the ray's way
+        mujoco.mj_kinematics(m, d)
+        geomid = np.array([-1], np.int32)
+        down = mujoco.mj_ray(m, d, centre + [0, 0, 10.0], np.array([0.0, 0.0, -1.0]), None, 1, -1, geomid)
+        assert m.geom_type[geomid[0]] == mujoco.mjtGeom.mjGEOM_HFIELD
+        expected = centre[2] - m.geom_size[foot][0] - (centre[2] + 10.0 - down)
+        d.qpos[2] -= 50.0
+        got = float(clearance(env.engine.make_data(jnp.asarray(d.qpos, jnp.float32), jnp.zeros(env.layout.nv))))
+        assert got == pytest.approx(expected, abs=3e-5), (got, expected)
+        seen.append(expected)
+    assert min(seen) < 0.05 and max(seen) > 0.3  # near the ground and well above it
+    cfg = env.config
+    pay = lambda c, flying: float(clearance_term(cfg, jnp.float32(c), jnp.bool_(flying)))
+    assert pay(0.06, True) == pytest.approx(0.5 * 0.06 / cfg.clearance_target)
+    assert pay(1.0, True) == pytest.approx(0.5) and pay(-0.01, True) == 0.0 and pay(0.06, False) == 0.0
+
+
 # What `MonopedEnv.physics` reads of the config: tasks that agree on these share its program.
 PHYSICS_FIELDS = ("kp", "kd", "timestep", "solver_iterations", "ls_iterations", "policy_rate", "engine")
 

@@ -55,12 +55,14 @@ from brax.envs.base import Env, State
 
 from hopper_mjx import engine as engines
 from hopper_mjx import model as hopper_model
+from hopper_mjx.control import kinematics
 from hopper_mjx.control.base import PDScale, Servo
 from hopper_mjx.envs.curriculum import Curriculum
 from hopper_mjx.envs.task_config import MonopedConfig, decimation, training_model
 from hopper_mjx.envs.terms import (
     DROPPING,
     FLIGHT_INFO,
+    clearance_term,
     fallen,
     flight_apex,
     joint_targets,
@@ -70,7 +72,7 @@ from hopper_mjx.envs.terms import (
     posture_terms,
     predicted_apex,
 )
-from hopper_mjx.hardware import signals
+from hopper_mjx.hardware import rotation, signals
 from hopper_mjx.hardware.actuators import Actuation, Drive, Motor
 from hopper_mjx.hardware.pushes import Pushes
 from hopper_mjx.hardware.sensor_noise import FIGURES, Sensing, SensorState, reading
@@ -79,6 +81,7 @@ from hopper_mjx.model import robot
 from hopper_mjx.model.layout import Layout
 from hopper_mjx.sim import per_instance
 from hopper_mjx.step import Plant, actuate, advance
+from hopper_mjx.terrain import scan as terrain_scan
 
 # State.info keys a task owns; the resampling auto-reset replaces exactly these (wrappers.py).
 TASK_INFO = ("command", "gravity", "last_action", "rng")
@@ -168,6 +171,7 @@ class MonopedEnv(Env):
         self.standing_qpos = robot.standing_qpos(mj_model).astype(np.float32)  # as the policy controller
         self.stance = self.standing_qpos[list(self.layout.joint_qpos)]
         self.standing_height = float(self.standing_qpos[2])
+        self.leg = robot.LegGeometry.of(mj_model) if config.w_clearance else None  # the foot's clearance
 
     def _robot_io(self, controls: dict) -> tuple[Motor | None, SensorState | None]:
         """Sets the static motors (`self.actuation`) and sensors (`self.sensing`) the config asks for, and
@@ -235,11 +239,23 @@ class MonopedEnv(Env):
         course = () if self.curriculum is None else ("level", "start")
         return TASK_INFO + flight + course + tuple(k for k, used in zip(EPISODE_INFO, on) if used)
 
-    def reward_terms(self, d, g, command, action, last_action, effort, fell, apex=None) -> dict[str, jax.Array]:
+    def reward_terms(self, d, g, command, action, last_action, effort, fell, apex=None,
+                     clearance=None) -> dict[str, jax.Array]:
         """Per-step reward terms (already weighted); their sum is the reward. `apex`: the apex the task judges
-        (m; None: `predicted_apex` of `d`)."""
-        return {**self.task_terms(d, g, command, apex),
-                **posture_terms(self.config, d, action, last_action, effort, fell)}
+        (m; None: `predicted_apex` of `d`); `clearance`: (the foot's clearance m, flying), None at reset."""
+        terms = {**self.task_terms(d, g, command, apex),
+                 **posture_terms(self.config, d, action, last_action, effort, fell)}
+        if self.config.w_clearance:
+            terms["clearance"] = jnp.zeros(()) if clearance is None else clearance_term(self.config, *clearance)
+        return terms
+
+    def foot_clearance(self, d) -> jax.Array:
+        """The foot's bottom over the ground under its centre (m), from the joint angles and the base's pose."""
+        leg, q = self.leg, d.qpos[jnp.asarray(self.layout.joint_qpos)]
+        foot = kinematics.foot_position(leg, q) - jnp.array([0.0, 0.0, leg.haa_below_base])
+        foot = d.qpos[:3] + rotation.rotate(foot, d.qpos[3:7])
+        ground = 0.0 if self.terrain is None else terrain_scan.height_at(*self.terrain, foot[0], foot[1])
+        return foot[2] - leg.foot_radius - ground
 
     def reset(self, rng: jax.Array) -> State:
         return self.reset_at(rng)
@@ -387,12 +403,15 @@ class MonopedEnv(Env):
         cfg, lay, gravity = self.config, self.layout, state.info["gravity"]
         fell = fallen(cfg, data)
         command, last_action, info = state.info["command"], state.info["last_action"], state.info
-        apex = None
-        if cfg.apex_reward == "flight":  # the true contact, as the reward reads the true state
+        apex = clearance = None
+        if cfg.apex_reward == "flight" or cfg.w_clearance:  # the true contact, as the reward reads the true state
             flying = ~signals.contact(self.engine, model, data).flag
+        if cfg.apex_reward == "flight":
             apex, carried = flight_apex(predicted_apex(data, -gravity[2]), flying, info)
             info = {**info, **carried}
-        terms = self.reward_terms(data, -gravity[2], command, action, last_action, effort, fell, apex)
+        if cfg.w_clearance:
+            clearance = (self.foot_clearance(data), flying)
+        terms = self.reward_terms(data, -gravity[2], command, action, last_action, effort, fell, apex, clearance)
         reward = jnp.nan_to_num(sum(terms.values()), nan=-cfg.fall_penalty)
         # The sensors' reading, or the state with the contact of the last forward, as the core's controllers see it.
         sensed = self.observe_signals(model, data) if self.sensors is None else reading(state.info["sense"])

@@ -27,9 +27,9 @@ RANGES = ("gravity_range", "apex_range", "speed_range", "lateral_speed_range", "
 # them still loads (they only shaped the reward it was trained on).
 RETIRED = ("w_support", "support_scale")
 # A kernel exp(-error / scale) with a scale of 0 or below pays more the larger the error.
-SCALES = ("height_scale", "apex_scale", "speed_scale", "upright_scale")
+SCALES = ("height_scale", "apex_scale", "speed_scale", "upright_scale", "clearance_target")
 WEIGHTS = ("w_alive", "w_height", "w_apex", "w_speed", "w_upright", "w_effort", "w_action_rate", "w_spin",
-           "fall_penalty")
+           "w_clearance", "fall_penalty")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -68,6 +68,10 @@ class MonopedConfig:
     w_effort: float = 0.05  # times the mean of (torque / limit)²
     w_action_rate: float = 0.02
     w_spin: float = 0.01  # times |angular rate|², rad²/s²
+    # In flight, the foot's bottom over the ground under it, as a share of clearance_target (capped at 1): a leg
+    # drawn up in flight, which a block's face or a step's riser ahead asks for (0: no such term).
+    w_clearance: float = 0.0
+    clearance_target: float = 0.12  # m
     fall_penalty: float = 10.0
     # A fall: the base's z axis this far from vertical (rad; not the metrics' per-axis roll/pitch
     # bound, see docs/learning.md), or its origin this low (m).

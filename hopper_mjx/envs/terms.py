@@ -129,6 +129,11 @@ def posture_terms(cfg: MonopedConfig, d, action: jax.Array, last_action: jax.Arr
     }
 
 
+def clearance_term(cfg: MonopedConfig, clearance: jax.Array, flying: jax.Array) -> jax.Array:
+    """In flight, the foot's bottom over the ground under it (m) as a share of `clearance_target`, capped at 1."""
+    return cfg.w_clearance * flying * jnp.clip(clearance / cfg.clearance_target, 0.0, 1.0)
+
+
 def speed_term(cfg: MonopedConfig, d, command_speed: jax.Array) -> jax.Array:
     """Horizontal velocity against the commanded (vx, vy), a Gaussian kernel of width speed_scale."""
     return cfg.w_speed * jnp.exp(-jnp.sum((d.qvel[0:2] - command_speed) ** 2) / cfg.speed_scale**2)
