@@ -84,7 +84,9 @@ def test_the_clearance_term_pays_the_foots_height_over_the_ground_under_it_in_fl
     """`w_clearance`: in flight, the foot's bottom over the ground under its centre, a share of `clearance_target`
     capped at 1. The env measures it from the joint angles and the base's pose; MuJoCo C's foot geom (its world
     position from `mj_kinematics`, less its radius) over C's ray cast down onto the same height field agree to
-    float32 rounding, at tilted poses with random joints over the course. A foot on the ground earns nothing."""
+    float32 rounding, at tilted poses with random joints over the course. With `clearance_lookahead` the ground is
+    the highest of C's ray casts along the foot's path at the base's horizontal velocity, every 10 ms. A foot on
+    the ground earns nothing."""
     import mujoco
 
     from hopper_mjx import model as hopper_model
@@ -92,14 +94,23 @@ def test_the_clearance_term_pays_the_foots_height_over_the_ground_under_it_in_fl
     from hopper_mjx.model.layout import Layout
 
     env = envs.make("hop_terrain", observe_gravity=True, w_clearance=0.5)
+    ahead = envs.make("hop_terrain", observe_gravity=True, w_clearance=0.5, clearance_lookahead=0.15)
     plain = envs.make("hop_terrain", observe_gravity=True)
     assert "clearance" in jax.eval_shape(env.reset, jax.random.PRNGKey(0)).metrics
     assert "clearance" not in jax.eval_shape(plain.reset, jax.random.PRNGKey(0)).metrics
     m = hopper_model.load(terrain=env.config.ground.terrain())
     d, rng, foot = mujoco.MjData(m), np.random.default_rng(1), Layout.of(m).foot_geom
-    clearance = jax.jit(env.foot_clearance)
-    seen = []
-    for _ in range(24):
+    clearance, clearance_ahead = jax.jit(env.foot_clearance), jax.jit(ahead.foot_clearance)
+    times = np.arange(16) * 0.01  # 0.15 s in 10 ms samples
+
+    def ground_under(xy) -> float:  # C's ray cast down onto the height field (the robot 50 m up, out of its way)
+        geomid = np.array([-1], np.int32)
+        down = mujoco.mj_ray(m, d, np.array([*xy, 10.0]), np.array([0.0, 0.0, -1.0]), None, 1, -1, geomid)
+        assert m.geom_type[geomid[0]] == mujoco.mjtGeom.mjGEOM_HFIELD
+        return 10.0 - down
+
+    seen, rises = [], []
+    for _ in range(48):
         d.qpos[:] = env.standing_qpos
         d.qpos[:2] = rng.uniform(-5, 5, 2)
         d.qpos[2] = rng.uniform(0.8, 1.3)
@@ -108,17 +119,23 @@ def test_the_clearance_term_pays_the_foots_height_over_the_ground_under_it_in_fl
         d.qpos[list(env.layout.joint_qpos)] += rng.uniform(-0.5, 0.5, 3)
         mujoco.mj_kinematics(m, d)
         centre = d.geom_xpos[foot].copy()
-        d.qpos[2] += 50.0  # the robot out of the ray's way
+        velocity = rng.uniform(-1.5, 1.5, 2)
+        d.qpos[2] += 50.0
         mujoco.mj_kinematics(m, d)
-        geomid = np.array([-1], np.int32)
-        down = mujoco.mj_ray(m, d, centre + [0, 0, 10.0], np.array([0.0, 0.0, -1.0]), None, 1, -1, geomid)
-        assert m.geom_type[geomid[0]] == mujoco.mjtGeom.mjGEOM_HFIELD
-        expected = centre[2] - m.geom_size[foot][0] - (centre[2] + 10.0 - down)
+        under = ground_under(centre[:2])
+        highest = max(ground_under(centre[:2] + t * velocity) for t in times)
+        expected, expected_ahead = (centre[2] - m.geom_size[foot][0] - g for g in (under, highest))
         d.qpos[2] -= 50.0
-        got = float(clearance(env.engine.make_data(jnp.asarray(d.qpos, jnp.float32), jnp.zeros(env.layout.nv))))
+        qvel = np.zeros(env.layout.nv, np.float32)
+        qvel[:2] = velocity
+        data = env.engine.make_data(jnp.asarray(d.qpos, jnp.float32), jnp.asarray(qvel))
+        got, got_ahead = float(clearance(data)), float(clearance_ahead(data))
         assert got == pytest.approx(expected, abs=3e-5), (got, expected)
+        assert got_ahead == pytest.approx(expected_ahead, abs=3e-5), (got_ahead, expected_ahead)
         seen.append(expected)
+        rises.append(highest - under)
     assert min(seen) < 0.05 and max(seen) > 0.3  # near the ground and well above it
+    assert max(rises) > 0.05  # a face, not only the gentle rise of rough ground, ahead of some feet
     cfg = env.config
     pay = lambda c, flying: float(clearance_term(cfg, jnp.float32(c), jnp.bool_(flying)))
     assert pay(0.06, True) == pytest.approx(0.5 * 0.06 / cfg.clearance_target)

@@ -250,11 +250,18 @@ class MonopedEnv(Env):
         return terms
 
     def foot_clearance(self, d) -> jax.Array:
-        """The foot's bottom over the ground under its centre (m), from the joint angles and the base's pose."""
+        """The foot's bottom over the ground under its centre (m), from the joint angles and the base's pose: the
+        highest ground the centre passes over within `clearance_lookahead` s at the base's horizontal velocity."""
         leg, q = self.leg, d.qpos[jnp.asarray(self.layout.joint_qpos)]
         foot = kinematics.foot_position(leg, q) - jnp.array([0.0, 0.0, leg.haa_below_base])
         foot = d.qpos[:3] + rotation.rotate(foot, d.qpos[3:7])
-        ground = 0.0 if self.terrain is None else terrain_scan.height_at(*self.terrain, foot[0], foot[1])
+        if self.terrain is None:
+            return foot[2] - leg.foot_radius
+        ahead = self.config.clearance_lookahead
+        # the foot's path at the base's velocity, every 10 ms: a face 1 m/s brings on is sampled every cm
+        times = jnp.linspace(0.0, ahead, 1 + math.ceil(ahead / 0.01))[:, None]
+        path = foot[:2] + times * d.qvel[:2]
+        ground = jnp.max(terrain_scan.height_at(*self.terrain, path[:, 0], path[:, 1]))
         return foot[2] - leg.foot_radius - ground
 
     def reset(self, rng: jax.Array) -> State:

@@ -72,6 +72,9 @@ class MonopedConfig:
     # drawn up in flight, which a block's face or a step's riser ahead asks for (0: no such term).
     w_clearance: float = 0.0
     clearance_target: float = 0.12  # m
+    # s: the ground the term measures from is the highest the foot will pass over in this time at the base's
+    # horizontal velocity (0: the ground under it), so a foot rising towards a face ahead earns only once above it.
+    clearance_lookahead: float = 0.0
     fall_penalty: float = 10.0
     # A fall: the base's z axis this far from vertical (rad; not the metrics' per-axis roll/pitch
     # bound, see docs/learning.md), or its origin this low (m).
@@ -156,7 +159,7 @@ class MonopedConfig:
                              ("action_scale", "three finite values > 0 rad per unit action")]):
             if not holds(name, positive=True):
                 raise bad(name, why)
-        for name in ("kp", "kd", "initial_joint_noise"):
+        for name in ("kp", "kd", "initial_joint_noise", "clearance_lookahead"):
             if not holds(name, positive=False):
                 raise bad(name, "finite and >= 0")
         for name in (*WEIGHTS, "min_base_height"):

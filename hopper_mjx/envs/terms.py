@@ -130,7 +130,8 @@ def posture_terms(cfg: MonopedConfig, d, action: jax.Array, last_action: jax.Arr
 
 
 def clearance_term(cfg: MonopedConfig, clearance: jax.Array, flying: jax.Array) -> jax.Array:
-    """In flight, the foot's bottom over the ground under it (m) as a share of `clearance_target`, capped at 1."""
+    """In flight, the foot's bottom over the ground under it (m; with `clearance_lookahead`, the highest ground on
+    its way) as a share of `clearance_target`, capped at 1."""
     return cfg.w_clearance * flying * jnp.clip(clearance / cfg.clearance_target, 0.0, 1.0)
 
 
