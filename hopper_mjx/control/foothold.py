@@ -38,9 +38,14 @@ def fall_time(zdot, drop, g):
     return (zdot + sink_speed(zdot, drop, g)) / g
 
 
+def world_com_xy(leg: LegGeometry, body, base_xy) -> jax.Array:
+    """World (x, y) of the robot's centre of mass, the base origin at `base_xy`."""
+    return base_xy + (body.rot @ kinematics.from_base(leg, body.com))[:2]
+
+
 def foothold(leg: LegGeometry, body, base_xy, placement) -> tuple[jax.Array, jax.Array]:
     """World (x, y) where the foot lands if placed `placement` (heading frame, m) from the COM."""
-    com = base_xy + (body.rot @ (body.com - jnp.array([0.0, 0.0, leg.haa_below_base])))[:2]
+    com = world_com_xy(leg, body, base_xy)
     there = com + body.unturn[:2, :2].T @ placement
     return there[0], there[1]
 
@@ -86,7 +91,7 @@ def landing_floor(leg: LegGeometry, body, ground, base_xy, speed, height, g):
     """m: the ground the next hop is aimed above: the higher of the ground under the foot now and where
     the foot lands a hop ahead (the COM travels about v·(T_s + T_f) by then, T_f the commanded flight),
     so that a hop up a step is given the energy to climb it."""
-    foot = base_xy + (body.rot @ (body.foot - jnp.array([0.0, 0.0, leg.haa_below_base])))[:2]
+    foot = base_xy + (body.rot @ kinematics.from_base(leg, body.foot))[:2]
     flight = 2.0 * jnp.sqrt(2.0 * jnp.maximum(height, 0.0) / g)
     ahead = foothold(leg, body, base_xy, body.unturn[:2, :2] @ (body.v * (speed.stance_time + flight)))
     return jnp.maximum(ground.height(foot[0], foot[1]), ground.height(*ahead))

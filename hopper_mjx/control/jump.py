@@ -48,8 +48,8 @@ import jax.numpy as jnp
 from hopper_mjx import registry
 from hopper_mjx.control import raibert, stroke
 from hopper_mjx.control.base import Controller
-from hopper_mjx.control.foothold import fall_time, placement_angles, sink_speed, within_tilt_budget
-from hopper_mjx.control.kinematics import leg_length
+from hopper_mjx.control.foothold import fall_time, placement_angles, sink_speed, within_tilt_budget, world_com_xy
+from hopper_mjx.control.kinematics import from_base, leg_length
 from hopper_mjx.hardware.actuators import nominal_no_load
 from hopper_mjx.model.robot import Robot
 
@@ -113,11 +113,7 @@ def _along(s) -> jax.Array:
 
 def _foot(leg, body) -> jax.Array:
     """(3,) the foot's centre from the base origin, world axes."""
-    return body.rot @ (body.foot - jnp.array([0.0, 0.0, leg.haa_below_base]))
-
-
-def _com_xy(leg, body, base_xy) -> jax.Array:
-    return base_xy + (body.rot @ (body.com - jnp.array([0.0, 0.0, leg.haa_below_base])))[:2]
+    return body.rot @ from_base(leg, body.foot)
 
 
 def obstacle(ground, foot_xy, along, radius) -> tuple[jax.Array, ...]:
@@ -184,7 +180,7 @@ class Leap:
         along = _along(s)
         v = jnp.maximum(jnp.dot(body.v, along), 0.0)  # m/s the way it goes
         bottom = body.z + _foot(leg, body)[2] - leg.foot_radius
-        com_xy = _com_xy(leg, body, base_xy)
+        com_xy = world_com_xy(leg, body, base_xy)
         here = ground.height(*(base_xy + _foot(leg, body)[:2]))
         sink = sink_speed(body.zdot, bottom - here, g)  # m/s down at touchdown
         time_left = (body.zdot + sink) / g
@@ -289,7 +285,7 @@ class Leap:
         """A leap's flight: the leg drawn up until the foot is past the obstacle, then set down beyond it."""
         foot = _foot(leg, body)
         at = jnp.dot(base_xy + foot[:2], plan.along)
-        com = jnp.dot(_com_xy(leg, body, base_xy), plan.along)
+        com = jnp.dot(world_com_xy(leg, body, base_xy), plan.along)
         bottom = body.z + foot[2] - leg.foot_radius
         passed = at - leg.foot_radius > plan.far
         above = bottom > plan.top + 0.5 * CLEARANCE

@@ -64,6 +64,11 @@ def _chain(leg: LegGeometry, q: jax.Array, thigh_point: jax.Array, shank_point: 
     return thigh, shank
 
 
+def from_base(leg: LegGeometry, point: jax.Array) -> jax.Array:
+    """A point (3,) given from the haa axis point, from the base origin instead (base frame)."""
+    return point - jnp.array([0.0, 0.0, leg.haa_below_base])
+
+
 def foot_position(leg: LegGeometry, q: jax.Array) -> jax.Array:
     """Foot centre (3,) relative to the haa axis point, base frame; q = (haa, hfe, kfe)."""
     return _chain(leg, q, jnp.zeros(3), jnp.array([0.0, 0.0, -leg.shank]))[1]

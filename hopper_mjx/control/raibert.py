@@ -274,7 +274,7 @@ def sense(robot: Robot, obs: Observation, leg: LegGeometry | None = None) -> Bod
     leg = robot.leg if leg is None else leg
     gyro = obs.qvel[3:6]
     com, com_rate = jax.jvp(lambda a: kinematics.com_position(leg, a), (q,), (qd,))
-    from_base = com + jnp.array([0.0, 0.0, -leg.haa_below_base])
+    from_base = kinematics.from_base(leg, com)
     rot = rotation.matrix(obs.qpos[3:7])  # body -> world ([w, x, y, z] quaternion)
     unturn = _unturn(rot)
     # Horizontal velocity of the COM (constant through a flight, unlike the base's).

@@ -253,8 +253,7 @@ class MonopedEnv(Env):
         """The foot's bottom over the ground under its centre (m), from the joint angles and the base's pose: the
         highest ground the centre passes over within `clearance_lookahead` s at the base's horizontal velocity."""
         leg, q = self.leg, d.qpos[jnp.asarray(self.layout.joint_qpos)]
-        foot = kinematics.foot_position(leg, q) - jnp.array([0.0, 0.0, leg.haa_below_base])
-        foot = d.qpos[:3] + rotation.rotate(foot, d.qpos[3:7])
+        foot = d.qpos[:3] + rotation.rotate(kinematics.from_base(leg, kinematics.foot_position(leg, q)), d.qpos[3:7])
         if self.terrain is None:
             return foot[2] - leg.foot_radius
         ahead = self.config.clearance_lookahead
