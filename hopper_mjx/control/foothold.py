@@ -38,6 +38,11 @@ def fall_time(zdot, drop, g):
     return (zdot + sink_speed(zdot, drop, g)) / g
 
 
+def foot_offset(leg: LegGeometry, body) -> jax.Array:
+    """(3,) the foot's centre from the base origin, world axes."""
+    return body.rot @ kinematics.from_base(leg, body.foot)
+
+
 def world_com_xy(leg: LegGeometry, body, base_xy) -> jax.Array:
     """World (x, y) of the robot's centre of mass, the base origin at `base_xy`."""
     return base_xy + (body.rot @ kinematics.from_base(leg, body.com))[:2]
@@ -91,7 +96,7 @@ def landing_floor(leg: LegGeometry, body, ground, base_xy, speed, height, g):
     """m: the ground the next hop is aimed above: the higher of the ground under the foot now and where
     the foot lands a hop ahead (the COM travels about v·(T_s + T_f) by then, T_f the commanded flight),
     so that a hop up a step is given the energy to climb it."""
-    foot = base_xy + (body.rot @ kinematics.from_base(leg, body.foot))[:2]
+    foot = base_xy + foot_offset(leg, body)[:2]
     flight = 2.0 * jnp.sqrt(2.0 * jnp.maximum(height, 0.0) / g)
     ahead = foothold(leg, body, base_xy, body.unturn[:2, :2] @ (body.v * (speed.stance_time + flight)))
     return jnp.maximum(ground.height(foot[0], foot[1]), ground.height(*ahead))

@@ -48,8 +48,15 @@ import jax.numpy as jnp
 from hopper_mjx import registry
 from hopper_mjx.control import raibert, stroke
 from hopper_mjx.control.base import Controller
-from hopper_mjx.control.foothold import fall_time, placement_angles, sink_speed, within_tilt_budget, world_com_xy
-from hopper_mjx.control.kinematics import from_base, leg_length
+from hopper_mjx.control.foothold import (
+    fall_time,
+    foot_offset,
+    placement_angles,
+    sink_speed,
+    within_tilt_budget,
+    world_com_xy,
+)
+from hopper_mjx.control.kinematics import leg_length
 from hopper_mjx.hardware.actuators import nominal_no_load
 from hopper_mjx.model.robot import Robot
 
@@ -109,11 +116,6 @@ def _along(s) -> jax.Array:
     command = s.params.speed
     size = jnp.linalg.norm(command)
     return jnp.where(size > 0.05, command / jnp.maximum(size, 1e-6), 0.0)
-
-
-def _foot(leg, body) -> jax.Array:
-    """(3,) the foot's centre from the base origin, world axes."""
-    return body.rot @ from_base(leg, body.foot)
 
 
 def obstacle(ground, foot_xy, along, radius) -> tuple[jax.Array, ...]:
@@ -179,9 +181,9 @@ class Leap:
         Raibert's neutral point so that the leap carries the COM past the obstacle, the leap's rise m)."""
         along = _along(s)
         v = jnp.maximum(jnp.dot(body.v, along), 0.0)  # m/s the way it goes
-        bottom = body.z + _foot(leg, body)[2] - leg.foot_radius
+        bottom = body.z + foot_offset(leg, body)[2] - leg.foot_radius
         com_xy = world_com_xy(leg, body, base_xy)
-        here = ground.height(*(base_xy + _foot(leg, body)[:2]))
+        here = ground.height(*(base_xy + foot_offset(leg, body)[:2]))
         sink = sink_speed(body.zdot, bottom - here, g)  # m/s down at touchdown
         time_left = (body.zdot + sink) / g
         touch = com_xy + body.v * time_left + along * v * speed.stance_time / 2  # where the foot comes down
@@ -221,7 +223,7 @@ class Leap:
         plan = s.plan._replace(launch=jnp.where(deciding, launch, s.plan.launch & ~s.plan.leap),
                                boost=jnp.where(deciding, boost, s.plan.boost),
                                rise=jnp.where(deciding, rise, s.plan.rise))
-        along, foot = _along(s), base_xy + _foot(leg, body)[:2]
+        along, foot = _along(s), base_xy + foot_offset(leg, body)[:2]
         _, face, far, top = obstacle(ground, foot, along, leg.foot_radius)
         at = jnp.dot(foot, along)
         # A foot that bounces off the floor in the launching stance lands again short of the obstacle: still that
@@ -283,7 +285,7 @@ class Leap:
 
     def flight(self, leg, body, ground, base_xy, speed, s, plan, torque, g, scale, spin, inertia):
         """A leap's flight: the leg drawn up until the foot is past the obstacle, then set down beyond it."""
-        foot = _foot(leg, body)
+        foot = foot_offset(leg, body)
         at = jnp.dot(base_xy + foot[:2], plan.along)
         com = jnp.dot(world_com_xy(leg, body, base_xy), plan.along)
         bottom = body.z + foot[2] - leg.foot_radius
