@@ -51,7 +51,8 @@ SWEEP_CONTROLLERS = ("raibert", "jump", "balance")
 GAIT_CONTROLLERS = ("raibert", "jump")
 # The gaits that know their action delay: they act on the state predicted over it (`control.latency`).
 PREDICTING_CONTROLLERS = ("jump",)
-# A terrain sweep's (obstacle, gaps) controllers, its default first: what jumps as the ground ahead needs.
+# A terrain sweep's (obstacle, gaps) gaits, its default first: what jumps as the ground ahead needs. A trained
+# policy (policy:PATH) runs there too.
 TERRAIN_SWEEP_CONTROLLERS = ("jump", "raibert")
 ENGINES = {
     "auto": "chain when the model qualifies, else mjx",

@@ -167,6 +167,10 @@ CASES = [
     ("sweep", ["gravity", "--terrain", "rough:seed=each", "--out", "s"], "a gravity sweep puts every instance on one "
      "ground; give a fixed seed"),
     ("sweep", ["obstacle", "--heights", "0.1,-0.05", "--out", "s"], "--terrain: height=-0.05 must be >= 0 m"),
+    ("sweep", ["obstacle", "--controller", "balance", "--out", "s"], "--controller balance: obstacle sweeps measure a "
+     "hopping gait on terrain: use jump, raibert or policy:PATH"),
+    ("sweep", ["gaps", "--controller", "balance", "--out", "s"], "--controller balance: gaps sweeps measure a hopping "
+     "gait on terrain"),
     ("sweep", ["obstacle", "--heights", "0.3", "--x", "0", "--out", "s"], "the ground within 0.1 m of the start "
      "rises to 0.300 m"),
     ("sweep", ["obstacle", "--heights", "0.2,2.5", "--motor", "dc", "--gravity", "1.62,9.81", "--out", "s"],

@@ -244,6 +244,39 @@ def test_sweep_compare_judges_the_policy_and_raibert_alike(trained, tmp_path, ca
     assert "is not a trained policy" in capsys.readouterr().err and not (tmp_path / "x").exists()
 
 
+def test_an_obstacle_sweep_runs_a_policy_as_a_gravity_sweep_on_its_block_does(trained, tmp_path):
+    """`sweep obstacle --controller policy:PATH`: each robot meets its block as the same policy does in a gravity
+    sweep on that ground alone (the same kicks, commands and ground), whose rows it gives; a level ground (height 0)
+    in the same sweep gives other falls, so each robot ran on its own ground."""
+    import csv
+    import json
+
+    from hopper_mjx.sweep import __main__ as sweep
+
+    out, _ = trained
+    common = ["--controller", f"policy:{out}", "--gravity", "9.81,1.62", "--num", "2", "--duration", "2",
+              "--chunk", "4", "--speed", "0,0", "--no-progress"]
+    assert sweep.main(["obstacle", "--heights", "0,0.1", "--x", "0.15", *common,
+                       "--out", str(tmp_path / "o")]) == 0
+    block = json.loads((tmp_path / "o" / "manifest.json").read_text())["grounds"][1]
+    assert sweep.main(["gravity", "--terrain", block, *common, "--out", str(tmp_path / "g")]) == 0
+    read = lambda name: sorted(csv.DictReader(open(tmp_path / name / "results.csv")),
+                               key=lambda r: (float(r.get("obstacle_height", 0.1)), float(r["gravity"]),
+                                              int(r["replicate"])))
+    rows, alone = read("o"), read("g")
+    level, on_block = rows[:4], rows[4:]
+    assert {float(r["obstacle_height"]) for r in on_block} == {0.1}
+    assert [(r["gravity"], r["replicate"]) for r in on_block] == [(r["gravity"], r["replicate"]) for r in alone]
+    shared = [k for k in alone[0] if k not in ("gravity", "replicate", "label")]
+    assert {"hops", "fell", "apex_height", "mean_speed", "max_pitch"} <= set(shared), shared
+    for name in shared:
+        np.testing.assert_allclose([float(r[name]) for r in on_block], [float(r[name]) for r in alone],
+                                   rtol=1e-5, atol=1e-6, equal_nan=True, err_msg=name)
+    # The untrained policy's robots fall within 2 s; the block 0.15 m ahead changes how.
+    falls = lambda rows: np.array([float(r["fall_x"]) for r in rows])
+    assert not np.allclose(falls(on_block), falls(level), atol=0.01, equal_nan=True), (falls(on_block), falls(level))
+
+
 def _damage_env(folder):
     (folder / "hopper_env.json").write_text("[1, 2]")
     return f"{folder / 'hopper_env.json'} must hold a JSON object, not a list"

@@ -105,9 +105,9 @@ def parser() -> argparse.ArgumentParser:
                                 "balance (an LQR stance) or policy:PATH")
         if kind in BAND_KINDS:
             s.add_argument("--controller", default=registry.TERRAIN_SWEEP_CONTROLLERS[0],
-                           choices=registry.TERRAIN_SWEEP_CONTROLLERS,
-                           help="jump (each hop sized to the ground ahead, the leg drawn up over it; default) or "
-                                "raibert (hops to --height above the ground it lands on)")
+                           help="jump (each hop sized to the ground ahead, the leg drawn up over it; default), "
+                                "raibert (hops to --height above the ground it lands on) or policy:PATH (a policy "
+                                "trained by experiments/train.py, hop_terrain's reading its height scan)")
         if kind == "compare":
             s.add_argument("--controllers", required=True,
                            help="comma-separated: raibert, jump, balance and/or policy:PATH, each swept with the "

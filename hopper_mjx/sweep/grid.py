@@ -129,9 +129,9 @@ class SweepSpec:
     def _check_grounds(self) -> None:
         from hopper_mjx.terrain import TerrainError, parse
 
-        if self.controller not in registry.TERRAIN_SWEEP_CONTROLLERS:
-            raise ValueError(f"a {self.kind} sweep measures a hopping gait on terrain: use --controller "
-                             f"{' or '.join(registry.TERRAIN_SWEEP_CONTROLLERS)}")
+        if self.controller not in registry.TERRAIN_SWEEP_CONTROLLERS and not registry.is_policy(self.controller):
+            raise ValueError(f"--controller {self.controller}: {self.kind} sweeps measure a hopping gait on terrain: "
+                             f"use {', '.join(registry.TERRAIN_SWEEP_CONTROLLERS)} or policy:PATH")
         if not self.values or len(self.grounds) != len(self.values) or len(set(self.values)) != len(self.values):
             raise ValueError(f"a {self.kind} sweep needs one ground per value, the values all different")
         try:
