@@ -269,3 +269,16 @@ def test_the_map_draws_a_terrain_from_above_and_refuses_the_plane(tmp_path, caps
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 2 and "the flat plane has none" in err[0] and ".png" in err[1]
     assert not (tmp_path / "flat.png").exists() and not (tmp_path / "x.txt").exists()
+
+
+@pytest.mark.parametrize("size", ["4x4", "12x4", "24x24", "7.2x3.6"])
+def test_a_features_edges_take_the_same_vertices_on_every_ground_size(size):
+    """A block from x = 0.6 m, 0.1 m long, on 4 cm cells holds the vertices at 0.60, 0.64 and 0.68 m whatever the
+    ground's extent: where the grid lines were left a rounding off their decimal values, a 24 m ground's vertex at
+    0.6 m fell outside the block, whose top was then half as long as on a 12 m one."""
+    t = terrain.parse(f"obstacle:height=0.1,x=0.6,length=0.1,size={size}").terrain()
+    xs, _ = t.axes()
+    row = t.heights[t.heights.shape[0] // 2]
+    np.testing.assert_allclose(xs[row > 0], [0.6, 0.64, 0.68], atol=1e-12)
+    steps = terrain.parse(f"steps:height=0.05,depth=0.5,x=0.6,size={size}").terrain()
+    assert steps.axes()[0][steps.heights[0] > 0].min() == pytest.approx(0.6, abs=1e-12)  # its riser, likewise

@@ -30,7 +30,7 @@ class Terrain(NamedTuple):
     def axes(self) -> tuple[np.ndarray, np.ndarray]:
         """(x of each column (ncol,), y of each row (nrow,)), m."""
         nrow, ncol = self.heights.shape
-        return (np.linspace(-self.size[0], self.size[0], ncol), np.linspace(-self.size[1], self.size[1], nrow))
+        return grid_line(self.size[0], ncol), grid_line(self.size[1], nrow)
 
 
 def triangles(terrain: Terrain) -> np.ndarray:
@@ -44,10 +44,17 @@ def triangles(terrain: Terrain) -> np.ndarray:
     return np.stack([np.stack([a, b, c], -2), np.stack([a, c, d], -2)], -3).reshape(-1, 3)
 
 
+def grid_line(half: float, n: int) -> np.ndarray:
+    """(n,) m: the coordinates of n grid lines from -half to half, to the nanometre. `linspace` leaves them a
+    rounding off their decimal values (a 24 m ground's vertex at x = 0.6 m is 0.5999999999999996), and a feature's
+    edge at such a value (a block from x = 0.6) then took the vertex on one ground size and not on another."""
+    return np.round(np.linspace(-half, half, n), 9)
+
+
 def vertices(size: tuple[float, float], shape: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
     """(x, y) of every vertex of a (nrow, ncol) grid of half-extents `size`, each (nrow, ncol)."""
     nrow, ncol = shape
-    return np.meshgrid(np.linspace(-size[0], size[0], ncol), np.linspace(-size[1], size[1], nrow))
+    return np.meshgrid(grid_line(size[0], ncol), grid_line(size[1], nrow))
 
 
 class HField(NamedTuple):
