@@ -152,6 +152,8 @@ def test_two_processes_give_the_rows_of_one(tiny, tmp_path):
      (["compare", "--controllers", "raibert,policy:/nonexistent"],
       "--controllers policy:/nonexistent: /nonexistent is not a trained policy: no such folder (train one: python "
       "experiments/train.py --out /nonexistent)"),
+     (["obstacle", "--controller", "policy:/nonexistent"], "--controller policy:/nonexistent: /nonexistent is not a "
+      "trained policy"),
      (["gravity", "--values", "9.81,9.81"], "gravity values must differ, got [9.81, 9.81]"),
      (["gravity", "--seed", "-1"], "--seed must be in 0..4294967295, got -1")],
 )

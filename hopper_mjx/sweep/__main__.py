@@ -191,7 +191,6 @@ def check(args):
         knee_motor(physics.mj_model, physics.motor)
         if args.kind == "obstacle":
             check_blocks(physics, gravity, swept_values(args))
-    names = args.controllers.split(",") if args.kind == "compare" else [getattr(args, "controller", "raibert")]
     if len(set(names)) != len(names):
         raise ValueError(f"--controllers lists one twice: {args.controllers}")
     chunk = check_size(args, len(gravity))
@@ -206,7 +205,8 @@ def check(args):
                          grounds=tuple(grounds))
         check_robots(spec, args.duration)
         specs.append(spec)
-        cli.check_controller(name, args.height, args.speed, physics, "--controllers")  # a policy: its folder, range
+        flag = "--controllers" if args.kind == "compare" else "--controller"
+        cli.check_controller(name, args.height, args.speed, physics, flag)  # a policy: its folder, its range
     out = args.out or Path("runs") / f"{args.kind}-{datetime.now(timezone.utc):%Y%m%d-%H%M%S}"
     cli.check_writable("--out", out, folder=True, make_parents=True)
     if args.kind == "compare" and out.exists() and not any(out.glob(f"*/{folder.MANIFEST}")):
