@@ -260,10 +260,11 @@ def test_an_obstacle_sweep_runs_a_policy_as_a_gravity_sweep_on_its_block_does(tr
                        "--out", str(tmp_path / "o")]) == 0
     block = json.loads((tmp_path / "o" / "manifest.json").read_text())["grounds"][1]
     assert sweep.main(["gravity", "--terrain", block, *common, "--out", str(tmp_path / "g")]) == 0
-    read = lambda name: sorted(csv.DictReader(open(tmp_path / name / "results.csv")),
-                               key=lambda r: (float(r.get("obstacle_height", 0.1)), float(r["gravity"]),
-                                              int(r["replicate"])))
-    rows, alone = read("o"), read("g")
+    def read(name, key=lambda r: ()):
+        with open(tmp_path / name / "results.csv") as f:
+            return sorted(csv.DictReader(f), key=lambda r: (*key(r), float(r["gravity"]), int(r["replicate"])))
+
+    rows, alone = read("o", lambda r: (float(r["obstacle_height"]),)), read("g")
     level, on_block = rows[:4], rows[4:]
     assert {float(r["obstacle_height"]) for r in on_block} == {0.1}
     assert [(r["gravity"], r["replicate"]) for r in on_block] == [(r["gravity"], r["replicate"]) for r in alone]
