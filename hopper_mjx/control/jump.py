@@ -181,9 +181,10 @@ class Leap:
         Raibert's neutral point so that the leap carries the COM past the obstacle, the leap's rise m)."""
         along = _along(s)
         v = jnp.maximum(jnp.dot(body.v, along), 0.0)  # m/s the way it goes
-        bottom = body.z + foot_offset(leg, body)[2] - leg.foot_radius
+        foot = foot_offset(leg, body)
+        bottom = body.z + foot[2] - leg.foot_radius
         com_xy = world_com_xy(leg, body, base_xy)
-        here = ground.height(*(base_xy + foot_offset(leg, body)[:2]))
+        here = ground.height(*(base_xy + foot[:2]))
         sink = sink_speed(body.zdot, bottom - here, g)  # m/s down at touchdown
         time_left = (body.zdot + sink) / g
         touch = com_xy + body.v * time_left + along * v * speed.stance_time / 2  # where the foot comes down

@@ -79,6 +79,7 @@ from hopper_mjx.control.base import Commands, Controller, PDScale, joint_state, 
 from hopper_mjx.control.foothold import (
     clear_of_edges,
     fall_time,
+    foot_offset,
     foothold,
     landing_floor,
     placement_angles,
@@ -460,7 +461,7 @@ def flight_torque(leg: LegGeometry, gains: RaibertConfig, body: Body, spin, spee
     terrain (`ground`, `signals.SensedGround`; `base_xy` the base's world position) the time left to
     touchdown is the foot's fall to the ground where it will land."""
     placement = speed_placement(body, speed)
-    foot = body.rot @ (body.foot - jnp.array([0.0, 0.0, leg.haa_below_base]))  # from the base, world axes
+    foot = foot_offset(leg, body)
     foot_height = body.z + foot[2] - leg.foot_radius
     retract, hold = gains.retract, False
     if ground is not None:  # static: the plane's foot height is above z = 0
