@@ -179,6 +179,12 @@ def leap_run():
     return sim, physics.mj_model, grids, jax.tree_util.tree_map(np.asarray, traj)
 
 
+def leap_bands() -> np.ndarray:
+    """(cells, 1, 3) each `LEAP_CELLS` cell's obstacle as the sweeps' metrics take it: (near, far, height), a gap's
+    height -1."""
+    return np.array([[[0.6, 0.7, size] if spec == BLOCK else [0.6, 0.6 + size, -1.0]] for spec, size, _ in LEAP_CELLS])
+
+
 def test_the_jump_leaps_the_sweeps_blocks_and_gaps(jump_leaps):
     """Each robot's foot comes down beyond the block's far edge (the sweep's `cleared`), and the base rose at
     least as high as the drawn-up foot needs to pass over the top; each gap's robot lands beyond a 0.45 m gap, which
@@ -188,14 +194,25 @@ def test_the_jump_leaps_the_sweeps_blocks_and_gaps(jump_leaps):
     from hopper_mjx.metrics import hops
 
     sim, _, _, traj = jump_leaps
-    bands = np.array([[[0.6, 0.7, size] if spec == BLOCK else [0.6, 0.6 + size, -1.0]]
-                      for spec, size, _ in LEAP_CELLS])
-    cleared = hops.terrain_metrics(traj, command_speed=LEAP_SPEED, obstacles=bands)["obstacles_cleared"]
+    cleared = hops.terrain_metrics(traj, command_speed=LEAP_SPEED, obstacles=leap_bands())["obstacles_cleared"]
     assert list(cleared) == [1] * len(LEAP_CELLS)
     drop = float(jump.tuck_drop(sim.robot, sim.robot.leg))
     for (spec, h, _), z in zip(LEAP_CELLS, traj.qpos[:, :, 2]):
         if spec == BLOCK:
             assert z.max() >= h + drop
+
+
+def test_a_boosted_leap_over_a_block_lands_near_level(jump_leaps):
+    """Mars's 0.3 m and Earth's 0.2 m blocks are leapt with a boost (the launching foot set behind the neutral point):
+    the launching stance steers the spin that lands the body level (`jump.landing_spin`), so the first landing beyond
+    each is tilted under 17°. With Raibert's servo in that stance (damping the spin to zero, levelling the body)
+    Earth's landed 23° off upright, at the 0.4 rad tilt budget."""
+    from hopper_mjx.metrics import hops
+
+    _, _, _, traj = jump_leaps
+    tilt = hops.landing_metrics(traj, leap_bands())["past_tilt"]  # deg from upright, at the first touchdown beyond
+    boosted = [LEAP_CELLS.index(cell) for cell in ((BLOCK, 0.3, 3.71), (BLOCK, 0.2, 9.81))]
+    assert np.all(tilt[boosted] < 17.0), tilt[boosted]
 
 
 def test_a_block_or_gaps_sweep_runs_the_jump_unless_told_raibert():

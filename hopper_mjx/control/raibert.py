@@ -435,7 +435,7 @@ def stance_torque(leg: LegGeometry, gains: RaibertConfig, phase, body: Body, spi
         roll_kp, roll_kd = scaled(roll_kp, roll_kd, PDScale(scale.kp[0], scale.kd[0]))
         pitch_kp, pitch_kd = scaled(pitch_kp, pitch_kd, PDScale(scale.kp[1], scale.kd[1]))
     if own is not None:
-        lean, spin = lean * own.stiffness, spin * own.damping
+        lean, spin = lean * own.stiffness, spin * own.damping - own.spin
     attitude = jnp.stack([lean * roll_kp * (body.roll - lean_ref[0]) + roll_kd * spin[0],
                           lean * pitch_kp * (body.pitch - lean_ref[1]) + pitch_kd * spin[1], 0.0])
     # A hip torque τ pushes the foot sideways with τ/L: beyond the floor's grip the foot slides.
@@ -566,7 +566,7 @@ def gait(robot: Robot, config: RaibertConfig | None = None, name: str = "raibert
         own = None
         if plan is not None:  # static
             own, thrust_force, planned = plan.push(leg, body, s, ev, phase, planned, height_bias, thrust_force,
-                                                   standing, g)
+                                                   standing, g, inertia)
         stance = stance_torque(leg, gains, phase, body, spin, speed, thrust_force, g, stiffness, mass,
                                inertia.swing_tilt, scale, own)
         placed = speed if plan is None else speed._replace(offset=speed.offset + plan.shift(s, planned, g))
