@@ -371,8 +371,8 @@ def slow_lift(s, g) -> jax.Array:
 
 def leap_rise(plan: JumpState, robot: Robot, leg, standing) -> jax.Array:
     """m over standing on the launching floor the leap is aimed at: its rise over the obstacle (`plan_apex`) or across
-    it, `LEAP_GAIN` higher. What the leg's jerk off the floor takes from a hop Raibert's bias learns over hops, and a
-    leap is one hop."""
+    it, `LEAP_GAIN` higher (`BLOCK_LEAP_GAIN` where its stance steers the spin). What the leg's jerk off the floor
+    takes from a hop Raibert's bias learns over hops, and a leap is one hop."""
     gain = jnp.where(steers_spin(plan), BLOCK_LEAP_GAIN, LEAP_GAIN)
     return gain * jnp.maximum(plan_apex(plan, robot, leg) - (standing + plan.base), plan.rise)
 
