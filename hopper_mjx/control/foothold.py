@@ -112,11 +112,19 @@ def within_tilt_budget(wanted: jax.Array, now: jax.Array, drift: jax.Array, swin
     momentum H is), so sending the foot Δ further tilts the body by swing_tilt·Δ/L
     more. Past the budget the leg is sent short, taking up part of H itself.
     """
-    # +x placement turns the leg by -x/L about y (pitch +), +y by +y/L about x (roll -).
-    sign = jnp.array([-1.0, 1.0])  # (roll, pitch) per unit of (y, x)
-    landing = drift + sign * swing_tilt * (wanted[::-1] - now[::-1]) / length
-    allowed = jnp.clip(landing, -budget, budget)
-    return (now[::-1] + sign * (allowed - drift) * length / swing_tilt)[::-1]
+    allowed = jnp.clip(landing_tilt(wanted, now, drift, swing_tilt, length), -budget, budget)
+    return (now[::-1] + jnp.array(SWING_SIGN) * (allowed - drift) * length / swing_tilt)[::-1]
+
+
+# +x placement turns the leg by -x/L about y (pitch +), +y by +y/L about x (roll -): (roll, pitch) per unit of (y, x).
+SWING_SIGN = (-1.0, 1.0)
+
+
+def landing_tilt(wanted: jax.Array, now: jax.Array, drift: jax.Array, swing_tilt: jax.Array,
+                 length: jax.Array) -> jax.Array:
+    """(roll, pitch) rad the body lands with when the foot is sent from `now` to `wanted` (heading frame, from the
+    COM), `drift` the tilt it would land with if the leg were held where it is: swing_tilt·Δ/L more per Δ m."""
+    return drift + jnp.array(SWING_SIGN) * swing_tilt * (wanted[::-1] - now[::-1]) / length
 
 
 def placement_angles(leg: LegGeometry, level: jax.Array, placement: jax.Array, length: jax.Array,

@@ -52,6 +52,7 @@ from hopper_mjx.control.base import Controller
 from hopper_mjx.control.foothold import (
     fall_time,
     foot_offset,
+    landing_tilt,
     placement_angles,
     sink_speed,
     within_tilt_budget,
@@ -281,12 +282,11 @@ class Leap:
                                 lay.timestep, spent)
         # A leap's launching stance starts the body tilted by the flight's boost, a shape the leap's flight undoes:
         # its servo only damps the spin, so that the leap leaves the floor without one.
-        own = own._replace(stiffness=jnp.where(plan.leap & is_gap(plan.top, plan.base), 0.0, own.stiffness))
-        # A block's leap: the servo leaves the tilt alone and steers the spin to what lands the body level.
+        # A boosted block leap's servo also leaves the tilt alone, and steers the spin to what lands the body level.
         block = plan.leap & steers_spin(plan)
         target = landing_spin(self.robot, leg, body, plan, standing, s.params.gains.leg_length, s.stance_time, g,
                               inertia)
-        own = own._replace(stiffness=jnp.where(block, 0.0, own.stiffness),
+        own = own._replace(stiffness=jnp.where((plan.leap & is_gap(plan.top, plan.base)) | block, 0.0, own.stiffness),
                            spin=jnp.where(block, jnp.append(target, 0.0), jnp.zeros(3, jnp.float32)))
         return own, thrust_force, plan._replace(full=full, spin=spin, spent=spent)
 
@@ -352,8 +352,7 @@ def landing_spin(robot: Robot, leg, body, plan: JumpState, standing, length, sta
     pitched forward at the tilt budget, the foot behind the COM, and most fell."""
     now = (body.level @ (body.foot - body.com))[:2]
     ahead = body.unturn[:2, :2] @ (body.v * stance_time / 2)
-    sign = jnp.array([-1.0, 1.0])  # (roll, pitch) per unit of (y, x)
-    tilt = jnp.stack([body.roll, body.pitch]) + sign * inertia.swing_tilt * (ahead[::-1] - now[::-1]) / length
+    tilt = landing_tilt(ahead, now, jnp.stack([body.roll, body.pitch]), inertia.swing_tilt, length)
     flight = 2.0 * jnp.sqrt(2.0 * jnp.maximum(leap_rise(plan, robot, leg, standing), 0.01) / g)
     return -(1.0 - inertia.alpha) * tilt / flight
 
