@@ -153,10 +153,12 @@ def test_asked_for_more_the_jump_takes_the_full_stroke_to_most_of_the_bound(sim,
 # The sweeps' cells the jump must get past (block or gap spec, its size m, gravity m/s²): the blocks beyond what half
 # of Raibert's robots clear there (docs/sweeps.md), the gaps none of Raibert's crossed at Mars and Earth, a block
 # at Ceres, where a slow lift-off's leap is launched and pushed as `jump`'s "slow hops" say, and a gap at 0.5 m/s²,
-# leapt by height (`gap_lift`); then the two Moon blocks
-# whose leaps tests/test_leap_against_c.py replays on C (their leaps land on the foot alone).
+# leapt by height (`gap_lift`); a 0.15 m block at Earth, Mars and the Moon, low enough that its leap takes the most
+# boost (`FIFTEEN`); then the two Moon blocks whose leaps tests/test_leap_against_c.py replays on C (their leaps land
+# on the foot alone).
+FIFTEEN = ((BLOCK, 0.15, 9.81), (BLOCK, 0.15, 3.71), (BLOCK, 0.15, 1.62))
 SWEEP_CELLS = ((BLOCK, 0.8, 1.62), (BLOCK, 0.3, 3.71), (BLOCK, 0.2, 9.81),
-               (GAP, 0.45, 1.62), (GAP, 0.45, 3.71), (GAP, 0.45, 9.81), (BLOCK, 0.3, 0.28), (GAP, 0.6, 0.5))
+               (GAP, 0.45, 1.62), (GAP, 0.45, 3.71), (GAP, 0.45, 9.81), (BLOCK, 0.3, 0.28), (GAP, 0.6, 0.5)) + FIFTEEN
 REPLAYED_CELLS = ((BLOCK, 0.6, 1.62), (BLOCK, 0.7, 1.62))
 LEAP_CELLS = SWEEP_CELLS + REPLAYED_CELLS
 LEAP_SPEED = (0.3, 0.0)  # m/s, the sweeps'
@@ -213,6 +215,45 @@ def test_a_boosted_leap_over_a_block_lands_near_level(jump_leaps):
     tilt = hops.landing_metrics(traj, leap_bands())["past_tilt"]  # deg from upright, at the first touchdown beyond
     boosted = [LEAP_CELLS.index(cell) for cell in ((BLOCK, 0.3, 3.71), (BLOCK, 0.2, 9.81))]
     assert np.all(tilt[boosted] < 17.0), tilt[boosted]
+
+
+def test_a_boosted_block_leaps_push_speeds_the_com_on_by_its_lean_and_its_robot_hops_on(jump_leaps):
+    """`jump.forward_work` sizes a boosted block leap's extra thrust on this: from the launching stance's bottom, the
+    COM tanφ ahead of the foot, the push that lifts the COM at `up` speeds it on by about up·tanφ. On the chain engine
+    each boosted leap's COM gains 1-2× that from the bottom to lift-off (the lean grows as the COM moves over the
+    foot, so the sizing is the least of it); a leap with no lean gains nothing. And the 0.15 m blocks' robots are up at
+    the end: with the thrust sized for the rise alone (4412baa), Earth's fell after its landing."""
+    sim, mj_model, _, traj = jump_leaps
+    data = mujoco.MjData(mj_model)
+
+    def com(q, v):  # the whole robot's COM and its velocity, MuJoCo C
+        data.qpos[:], data.qvel[:] = q, v
+        mujoco.mj_forward(mj_model, data)
+        mujoco.mj_subtreeVel(mj_model, data)
+        return data.subtree_com[1].copy(), data.subtree_linvel[1].copy()
+
+    gains = {}
+    for i, (spec, h, g) in enumerate(LEAP_CELLS):
+        if spec != BLOCK:
+            continue
+        q, v, touching = traj.qpos[i], traj.qvel[i], traj.contact.flag[i]
+        liftoffs = np.flatnonzero(~touching[1:] & touching[:-1]) + 1
+        touchdowns = np.flatnonzero(touching[1:] & ~touching[:-1]) + 1
+        # The leap: the flight in which the base passes the face (the Moon's 0.8 m leap comes down on the top's edge).
+        leap = next((t for t in liftoffs if q[t, 0] < 0.6 < q[touchdowns[touchdowns > t][0], 0]), None)
+        if leap is None:
+            continue
+        start = touchdowns[touchdowns < leap][-1]
+        bottom = start + int(np.argmin(q[start:leap, 2]))
+        (c, v_bottom), (_, v_off) = com(q[bottom], v[bottom]), com(q[leap], v[leap])
+        foot = traj.contact.pos[i, bottom]
+        lean = (c[0] - foot[0]) / (c[2] - foot[2])
+        gains[(h, g)] = (lean, (v_off[0] - v_bottom[0]) / (v_off[2] * lean))
+    boosted = [cell for cell, (lean, _) in gains.items() if lean > 0.05]
+    assert {(h, g) for _, h, g in FIFTEEN + ((BLOCK, 0.3, 3.71), (BLOCK, 0.2, 9.81))} <= set(boosted), gains
+    assert all(1.0 < gains[cell][1] < 2.0 for cell in boosted), gains
+    up = traj.qpos[[LEAP_CELLS.index(cell) for cell in FIFTEEN], -1, 2]
+    assert np.all(up > 0.5 * sim.robot.standing_height), up
 
 
 def test_a_block_or_gaps_sweep_runs_the_jump_unless_told_raibert():
