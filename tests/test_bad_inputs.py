@@ -171,6 +171,10 @@ CASES = [
      "hopping gait on terrain: use jump, raibert or policy:PATH"),
     ("sweep", ["gaps", "--controller", "balance", "--out", "s"], "--controller balance: gaps sweeps measure a hopping "
      "gait on terrain"),
+    ("sweep", ["obstacle", "--controller", "jump,raibert,jump", "--out", "s"],
+     "--controller lists one twice: jump,raibert,jump"),
+    ("sweep", ["gaps", "--controller", "jump,balance", "--out", "s"], "--controller balance: gaps sweeps measure a "
+     "hopping gait on terrain"),
     ("sweep", ["obstacle", "--heights", "0.3", "--x", "0", "--out", "s"], "the ground within 0.1 m of the start "
      "rises to 0.300 m"),
     ("sweep", ["obstacle", "--heights", "0.2,2.5", "--motor", "dc", "--gravity", "1.62,9.81", "--out", "s"],

@@ -370,6 +370,44 @@ def test_a_sweep_says_why_its_robots_fell_past_the_delay_raibert_takes():
     assert said == [f"note: 6 of 6 robots fell; {report.BALANCE_FIGURE}"] and "docs/control.md" in said[0]
 
 
+def test_a_block_sweep_of_several_controllers_runs_each_in_its_folder_and_draws_them_side_by_side(tmp_path):
+    """`sweep obstacle --controller jump,raibert`: a folder each in --out, then one table whose answer names each
+    controller's highest block at every gravity, and one plot with a panel per gravity, a colour per controller."""
+    from hopper_mjx import terrain
+    from hopper_mjx.scenario import Physics
+    from hopper_mjx.sweep import __main__ as sweep
+    from hopper_mjx.sweep import limits, plotting
+
+    args = sweep.parser().parse_args(["obstacle", "--controller", "jump,raibert", "--out", str(tmp_path)])
+    assert sweep.controller_names(args) == ["jump", "raibert"] and sweep.several(args)
+    single = sweep.parser().parse_args(["obstacle", "--out", str(tmp_path)])
+    assert sweep.controller_names(single) == ["jump"] and not sweep.several(single)
+    grounds = tuple(str(terrain.parse(f"obstacle:height={h},x=0.6,size=4x2")) for h in (0.1, 0.3))
+    spec = _spec(kind="obstacle", param="obstacle_height", values=(0.1, 0.3), speed=(0.3, 0.0), grounds=grounds,
+                 physics=Physics(ground=terrain.parse(grounds[0])), controller="jump")
+    assert sweep.folder_of(args, tmp_path, spec) == tmp_path / "jump"
+    assert sweep.folder_of(single, tmp_path, spec) == tmp_path
+
+    def groups(passed):  # {(height, g): share past the block}; half of those that got past stay up
+        return [{"obstacle_height": h, "gravity": g, "cleared": passed.get((h, g), 0.0),
+                 "survival": passed.get((h, g), 0.0) / 2} for h in spec.values for g in spec.gravity]
+
+    results = [("jump", groups({(0.1, 1.62): 1.0, (0.3, 1.62): 0.75, (0.1, 9.81): 0.5, (0.3, 9.81): 0.25})),
+               ("raibert", groups({(0.1, 1.62): 0.5}))]
+    lines = limits.comparison_lines(spec, results, {})
+    assert lines[1:] == ["  Moon  g 1.62 m/s²: jump 0.3 m, raibert 0.1 m",
+                         "  Mars  g 3.71 m/s²: jump none, raibert none",
+                         "  Earth g 9.81 m/s²: jump 0.1 m, raibert none"]
+    fig = limits.comparison_figure(spec, results)
+    moon = fig.axes[0]
+    assert len(fig.axes) == 3 and moon.get_title() == "Moon g = 1.62 m/s²" and moon.get_xlabel() == "block height (m)"
+    assert fig.axes[2].get_legend_handles_labels()[1] == ["jump: cleared the block", "jump: up at the end",
+                                                          "raibert: cleared the block", "raibert: up at the end"]
+    np.testing.assert_allclose(moon.lines[0].get_ydata(), [100.0, 75.0])  # jump's share past, in %
+    np.testing.assert_allclose(moon.lines[3].get_ydata(), [25.0, 0.0])  # raibert's share up
+    plotting.save(fig, "/dev/null")
+
+
 def test_an_obstacle_no_robot_reached_is_a_warning_with_the_duration_that_would():
     """The issue's run: 4 s at 0.3 m/s commanded, 0.23 m made good at 0.06 m/s, the block at 0.6-0.7 m."""
     from hopper_mjx import terrain

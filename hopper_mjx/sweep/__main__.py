@@ -7,6 +7,7 @@
     python -m hopper_mjx.sweep gains --param speed_gain --values 0.1,0.3,0.6 --gravity 1.62,3.71,9.81
     python -m hopper_mjx.sweep param --param action_delay --values 0,5,10,20 --gravity 1.62,3.71,9.81
     python -m hopper_mjx.sweep obstacle --heights 0.05,0.1,0.15 --x 0.6 --speed 0.3,0    # the highest block cleared
+    python -m hopper_mjx.sweep obstacle --controller jump,raibert --motor dc     # two gaits' highest blocks, one plot
     python -m hopper_mjx.sweep gaps --widths 0.1,0.2,0.4 --motor dc              # the widest gap, beside the bound
     python -m hopper_mjx.sweep terrain --amps 0,0.01,0.02,0.03                   # survival and speed vs roughness
 
@@ -107,7 +108,9 @@ def parser() -> argparse.ArgumentParser:
             s.add_argument("--controller", default=registry.TERRAIN_SWEEP_CONTROLLERS[0],
                            help="jump (each hop sized to the ground ahead, the leg drawn up over it; default), "
                                 "raibert (hops to --height above the ground it lands on) or policy:PATH (a policy "
-                                "trained by experiments/train.py, hop_terrain's reading its height scan)")
+                                "trained by experiments/train.py, hop_terrain's reading its height scan); "
+                                "comma-separated, several side by side on the same grounds and kicks (a folder "
+                                "each in --out, and one table and plot)")
         if kind == "compare":
             s.add_argument("--controllers", required=True,
                            help="comma-separated: raibert, jump, balance and/or policy:PATH, each swept with the "
@@ -178,7 +181,7 @@ def check(args):
         grounds = [str(cli.check_ground(g, n=n)) for g in grounds]  # as the manifest keeps them
         args.terrain = grounds[0]
     physics = cli.check_physics(args, n=args.num, seed=args.seed)  # one robot per replicate, drawn now
-    names = args.controllers.split(",") if args.kind == "compare" else [getattr(args, "controller", "raibert")]
+    names = controller_names(args)
     if getattr(args, "as_trained", None):
         physics = as_trained(physics, names, args.as_trained)
     if not grounds:  # every instance on the one ground --terrain gives (the parser refuses it where it cannot)
@@ -192,7 +195,7 @@ def check(args):
         if args.kind == "obstacle":
             check_blocks(physics, gravity, swept_values(args))
     if len(set(names)) != len(names):
-        raise ValueError(f"--controllers lists one twice: {args.controllers}")
+        raise ValueError(f"{controller_flag(args)} lists one twice: {','.join(names)}")
     chunk = check_size(args, len(gravity))
     duration = SweepSpec.whole_duration(args.duration, physics.timestep)
     specs = []
@@ -205,11 +208,11 @@ def check(args):
                          grounds=tuple(grounds))
         check_robots(spec, args.duration)
         specs.append(spec)
-        flag = "--controllers" if args.kind == "compare" else "--controller"
-        cli.check_controller(name, args.height, args.speed, physics, flag)  # a policy: its folder, its range
+        # a policy: its folder, its range
+        cli.check_controller(name, args.height, args.speed, physics, controller_flag(args))
     out = args.out or Path("runs") / f"{args.kind}-{datetime.now(timezone.utc):%Y%m%d-%H%M%S}"
     cli.check_writable("--out", out, folder=True, make_parents=True)
-    if args.kind == "compare" and out.exists() and not any(out.glob(f"*/{folder.MANIFEST}")):
+    if several(args) and out.exists() and not any(out.glob(f"*/{folder.MANIFEST}")):
         raise ValueError(f"--out {out} exists and is not a comparison's folder; a sweep writes only into a "
                          "folder it made: use another --out")
     for spec in specs:  # a folder of another sweep, or of no sweep, is refused before anything is built
@@ -357,8 +360,26 @@ def terrain_grounds(args) -> list[str]:
     return [f"rough:amp={a!r},wavelength={args.wavelength!r},seed=each,size={size}" for a in values]
 
 
+def controller_names(args) -> list[str]:
+    """The controllers a sweep runs: a compare's --controllers, or a sweep's --controller (a block or gaps sweep's may
+    list several)."""
+    if args.kind == "compare":
+        return args.controllers.split(",")
+    text = getattr(args, "controller", "raibert")
+    return text.split(",") if args.kind in BAND_KINDS else [text]
+
+
+def controller_flag(args) -> str:
+    return "--controllers" if args.kind == "compare" else "--controller"
+
+
+def several(args) -> bool:
+    """Does this sweep run several controllers side by side: a folder each in --out, and a comparison."""
+    return len(controller_names(args)) > 1 or args.kind == "compare"
+
+
 def folder_of(args, out: Path, spec) -> Path:
-    return out / label(spec.controller) if args.kind == "compare" else out
+    return out / label(spec.controller) if several(args) else out
 
 
 def _host_port(text: str) -> bool:
@@ -386,7 +407,7 @@ def run_one(args, spec, out: Path):
         if facts["processes"] > 1 and args.process_id != 0:
             return None
         text, notes = report.write(out, spec, instances, table, runner.columns(spec), facts)
-    print(text if args.kind != "compare" else f"{label(spec.controller)}: outputs in {out}/")
+    print(f"{label(spec.controller)}: outputs in {out}/" if several(args) else text)
     for line in notes:  # why robots fell, or a figure that means less than it seems
         print(line)
     rate = f", {facts['steps_per_s']:,.0f} steps/s" if facts["steps_per_s"] else " (all chunks were already done)"
@@ -425,7 +446,7 @@ def main(argv=None) -> int:
             results += [result] if result else []
     except OutputError as err:  # the folder refused after the checks passed (a pseudo-filesystem), or in use
         return cli.fail(err)
-    if args.kind == "compare" and results:
+    if several(args) and results:
         print(report.write_comparison(out, specs[0], results))
     return 0
 

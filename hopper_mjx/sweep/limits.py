@@ -192,3 +192,47 @@ def figure(spec: SweepSpec, groups: list[dict], bounds: dict):
     fig.suptitle(f"{spec.controller}, {counted(spec.num, 'replicate')} per point\n{physics_label(spec)}", fontsize=9)
     fig.tight_layout()
     return fig
+
+
+def comparison_lines(spec: SweepSpec, results: list[tuple[str, list[dict]]], bounds: dict) -> list[str]:
+    """Several controllers' block or gaps sweeps on the same grid: each gravity's highest block (widest gap) at least
+    half the replicates got past, controller by controller, beside the motors' bound."""
+    name, what, _ = ANSWER[spec.kind]
+    best = {label: best_passed(spec, groups) for label, groups in results}
+    out = [f"the {what} at least half the replicates {PASSED[spec.kind]}, by controller, beside the bound the "
+           f"{spec.physics.motor} motors put on it (docs/sweeps.md):"]
+    for g in sorted(spec.gravity):
+        got = ", ".join(f"{label} {best[label][g]:g} m" if np.isfinite(best[label][g]) else f"{label} none"
+                        for label, _ in results)
+        bound = f"; bound {bounds[name][g]:.2f} m" if bounds else ""
+        out.append(f"  {PLANETS.get(g, ''):5} g {g:g} m/s²: {got}{bound}")
+    return out
+
+
+def comparison_figure(spec: SweepSpec, results: list[tuple[str, list[dict]]]):
+    """OUT/obstacle.png (gaps.png) of several controllers' block or gaps sweeps: a panel per gravity, the share of
+    replicates that got past the band (solid) and the share up at the end (dashed) against its size, a colour per
+    controller; the dotted line is the answer's half of the replicates."""
+    plt = pyplot()
+    _, answer, what = ANSWER[spec.kind]
+    gravity = sorted(spec.gravity)
+    fig, axes = plt.subplots(1, len(gravity), figsize=(1.0 + 4.0 * len(gravity), 4.4), sharey=True, squeeze=False,
+                             constrained_layout=True)
+    for ax, g in zip(axes[0], gravity):
+        for k, (label, groups) in enumerate(results):
+            rows = sorted((r for r in groups if r["gravity"] == g), key=lambda r: r[spec.param])
+            size = [r[spec.param] for r in rows]
+            ax.plot(size, [100.0 * r["cleared"] for r in rows], "o-", color=f"C{k}",
+                    label=f"{label}: {PASSED[spec.kind]} the {BAND_KINDS[spec.kind]}")
+            ax.plot(size, [100.0 * r["survival"] for r in rows], "s--", color=f"C{k}", alpha=0.6, ms=4,
+                    label=f"{label}: up at the end")
+        ax.axhline(50.0, color="0.5", ls=":", lw=1.0)
+        ax.set_title(f"{PLANETS.get(g, '')} g = {g:g} m/s²".strip(), fontsize=10)
+        ax.set_xlabel(f"{what} (m)")
+        ax.set_ylim(-3.0, 103.0)
+        ax.grid(alpha=0.3)
+    axes[0, 0].set_ylabel("% of replicates")
+    axes[0, -1].legend(fontsize=7, loc="best")
+    fig.suptitle(f"the {answer} by controller: {spec.kind} sweep, {counted(spec.num, 'replicate')} per point, "
+                 f"{spec.duration:g} s each\n{physics_label(spec)}", fontsize=10)
+    return fig

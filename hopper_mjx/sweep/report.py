@@ -416,11 +416,16 @@ def write(out: Path, spec: SweepSpec, inst: Instances, table: np.ndarray, column
 
 
 def write_comparison(out: Path, spec: SweepSpec, results: list[tuple[str, list[dict]]]) -> str:
-    """One table (table.txt, comparison.json) and one plot (gravity.png) of several controllers'
-    gravity sweeps: same gravities, kicks, commands and metrics."""
+    """One table (table.txt, comparison.json) and one plot of several controllers' sweeps on the same grid, kicks,
+    commands and metrics: gravity.png for gravity sweeps; a block or gaps sweep's obstacle.png or gaps.png, with
+    each gravity's highest block (widest gap) controller by controller below the table."""
     rows_ = [{"controller": name, **g} for name, groups in results for g in groups]
     atomic_write_text(out / "comparison.json", json.dumps({"groups": rows_, "arguments": spec.to_json()}, indent=1))
-    save(gravity_figure(spec, results[0][1], series=results), out / "gravity.png")
     text = table_text(spec, rows_, label="controller")
+    if spec.kind in BAND_KINDS:
+        save(limits.comparison_figure(spec, results), out / f"{spec.kind}.png")
+        text = "\n".join([text, *limits.comparison_lines(spec, results, limits.bound_columns(spec))])
+    else:
+        save(gravity_figure(spec, results[0][1], series=results), out / "gravity.png")
     atomic_write_text(out / "table.txt", text + "\n")
     return text
