@@ -388,9 +388,10 @@ def test_a_block_sweep_of_several_controllers_runs_each_in_its_folder_and_draws_
     assert sweep.folder_of(args, tmp_path, spec) == tmp_path / "jump"
     assert sweep.folder_of(single, tmp_path, spec) == tmp_path
 
-    def groups(passed):  # {(height, g): share past the block}; half of those that got past stay up
-        return [{"obstacle_height": h, "gravity": g, "cleared": passed.get((h, g), 0.0),
-                 "survival": passed.get((h, g), 0.0) / 2} for h in spec.values for g in spec.gravity]
+    def groups(passed):  # {(height, g): share past the block}; half of those that got past stay up; Mars's robots
+        return [{"obstacle_height": h, "gravity": g, "cleared": passed.get((h, g), 0.0),  # never reach the block
+                 "survival": passed.get((h, g), 0.0) / 2, "reached": float(g != 3.71)}
+                for h in spec.values for g in spec.gravity]
 
     results = [("jump", groups({(0.1, 1.62): 1.0, (0.3, 1.62): 0.75, (0.1, 9.81): 0.5, (0.3, 9.81): 0.25})),
                ("raibert", groups({(0.1, 1.62): 0.5}))]
@@ -401,10 +402,13 @@ def test_a_block_sweep_of_several_controllers_runs_each_in_its_folder_and_draws_
     fig = limits.comparison_figure(spec, results)
     moon = fig.axes[0]
     assert len(fig.axes) == 3 and moon.get_title() == "Moon g = 1.62 m/s²" and moon.get_xlabel() == "block height (m)"
-    assert fig.axes[2].get_legend_handles_labels()[1] == ["jump: cleared the block", "jump: up at the end",
-                                                          "raibert: cleared the block", "raibert: up at the end"]
+    assert [t.get_text() for t in fig.axes[2].get_legend().get_texts()] == [
+        "jump: cleared the block", "jump: up at the end", "raibert: cleared the block", "raibert: up at the end",
+        "jump: no replicate reached the block", "raibert: no replicate reached the block"]
     np.testing.assert_allclose(moon.lines[0].get_ydata(), [100.0, 75.0])  # jump's share past, in %
     np.testing.assert_allclose(moon.lines[3].get_ydata(), [25.0, 0.0])  # raibert's share up
+    mars = fig.axes[1]  # no robot reached the block: no line of its 0 % past, a cross at each height
+    assert np.isnan(mars.lines[0].get_ydata()).all() and mars.lines[1].get_marker() == "x"
     plotting.save(fig, "/dev/null")
 
 

@@ -211,8 +211,8 @@ def comparison_lines(spec: SweepSpec, results: list[tuple[str, list[dict]]], bou
 
 def comparison_figure(spec: SweepSpec, results: list[tuple[str, list[dict]]]):
     """OUT/obstacle.png (gaps.png) of several controllers' block or gaps sweeps: a panel per gravity, the share of
-    replicates that got past the band (solid) and the share up at the end (dashed) against its size, a colour per
-    controller; the dotted line is the answer's half of the replicates."""
+    replicates that got past the band (solid; a cross where none reached it) and the share up at the end (dashed)
+    against its size, a colour per controller; the dotted line is the answer's half of the replicates."""
     plt = pyplot()
     _, answer, what = ANSWER[spec.kind]
     gravity = sorted(spec.gravity)
@@ -221,9 +221,14 @@ def comparison_figure(spec: SweepSpec, results: list[tuple[str, list[dict]]]):
     for ax, g in zip(axes[0], gravity):
         for k, (label, groups) in enumerate(results):
             rows = sorted((r for r in groups if r["gravity"] == g), key=lambda r: r[spec.param])
-            size = [r[spec.param] for r in rows]
-            ax.plot(size, [100.0 * r["cleared"] for r in rows], "o-", color=f"C{k}",
+            size = np.array([r[spec.param] for r in rows])
+            unreached = np.array([r.get("reached") == 0 for r in rows], bool)  # its 0 % past measures nothing
+            past = np.array([100.0 * r["cleared"] for r in rows])
+            ax.plot(size, np.where(unreached, np.nan, past), "o-", color=f"C{k}",
                     label=f"{label}: {PASSED[spec.kind]} the {BAND_KINDS[spec.kind]}")
+            if unreached.any():
+                ax.plot(size[unreached], past[unreached], "x", color=f"C{k}", ms=8,
+                        label=f"{label}: no replicate reached the {BAND_KINDS[spec.kind]}")
             ax.plot(size, [100.0 * r["survival"] for r in rows], "s--", color=f"C{k}", alpha=0.6, ms=4,
                     label=f"{label}: up at the end")
         ax.axhline(50.0, color="0.5", ls=":", lw=1.0)
@@ -232,7 +237,10 @@ def comparison_figure(spec: SweepSpec, results: list[tuple[str, list[dict]]]):
         ax.set_ylim(-3.0, 103.0)
         ax.grid(alpha=0.3)
     axes[0, 0].set_ylabel("% of replicates")
-    axes[0, -1].legend(fontsize=7, loc="best")
+    seen = {}  # every panel's lines, each label once: a cross may be in one panel only
+    for ax in axes[0]:
+        seen.update({label: handle for handle, label in zip(*ax.get_legend_handles_labels()) if label not in seen})
+    axes[0, -1].legend(seen.values(), seen.keys(), fontsize=7, loc="best")
     fig.suptitle(f"the {answer} by controller: {spec.kind} sweep, {counted(spec.num, 'replicate')} per point, "
                  f"{spec.duration:g} s each\n{physics_label(spec)}", fontsize=10)
     return fig
