@@ -110,6 +110,30 @@ def test_the_drawn_up_leg_drops_the_foot_as_much_as_tuck_drop_says_in_mujoco_c(m
     assert float(jump.tuck_drop(robot, leg)) < robot.standing_height - 0.1
 
 
+def test_a_tall_blocks_leap_lands_its_knee_past_the_far_edge_in_mujoco_c(mj_model):
+    """`jump.knee_room`: in the landing pose (the virtual leg at Raibert's length, the hip over the foot, the foot on
+    the ground past a block's far edge), MuJoCo C puts the knee `KNEE_CLEAR` past the edge and its height where
+    knee_room says; a block below the knee gets no room, one above it the room that carries the knee past."""
+    robot = Robot.of(mj_model)
+    leg, lay = robot.leg, Layout.of(mj_model)
+    length = raibert.RaibertConfig().leg_length
+    angles = np.asarray(kinematics.inverse(leg, jnp.array([0.0, 0.0, -(leg.hfe_below_haa + length)])))
+    d = mujoco.MjData(mj_model)
+    d.qpos[:] = mj_model.qpos0
+    d.qpos[list(lay.joint_qpos)] = angles
+    mujoco.mj_kinematics(mj_model, d)
+    foot = d.geom_xpos[lay.foot_geom]
+    knee = d.xanchor[mj_model.joint("kfe_joint").id]
+    behind, up = foot[0] - knee[0], knee[2] - (foot[2] - leg.foot_radius)  # the knee from the foot on the ground
+    assert 0.1 < behind < 0.2 and up == pytest.approx(0.35, abs=0.01)
+    far = 0.7
+    for top in (up + 0.05, up + 0.3):  # above the knee: the foot set far + radius + LAND_BEYOND + room past it
+        room = float(jump.knee_room(leg, top, 0.0, length))
+        centre = far + leg.foot_radius + jump.LAND_BEYOND + room
+        assert centre - behind == pytest.approx(far + jump.KNEE_CLEAR, abs=1e-5)
+    assert float(jump.knee_room(leg, up - 0.05, 0.0, length)) == 0.0  # below it: the landing as before
+
+
 FLAT_GRAVITY = (1.62, 3.71, 9.81)
 FLAT_DURATION = 4.5  # s: the Moon's full-stroke hop is at its top (both tests run one compiled rollout of the jump)
 
