@@ -296,7 +296,8 @@ class Leap:
         thrust_force = jnp.where(shallow, energy / spread, thrust_force)
         # A boosted block leap's thrust also gives the forward speed its push makes (`forward_work`).
         block = plan.leap & steers_spin(plan)
-        extra = forward_work(self.robot, leg, body, plan, standing, mass, g) / spread
+        rise = leap_rise(plan, self.robot, leg, standing)
+        extra = forward_work(body, plan, rise, standing, mass, g) / spread
         thrust_force = jnp.where(block & ev.bottom, thrust_force + extra, thrust_force)
         thrust_force = jnp.where(full & ev.bottom, stroke.thrust(leg, body, target, g, mass, lowest, effort),
                                  thrust_force)
@@ -307,8 +308,7 @@ class Leap:
         # A leap's launching stance starts the body tilted by the flight's boost, a shape the leap's flight undoes:
         # its servo only damps the spin, so that the leap leaves the floor without one.
         # A boosted block leap's servo also leaves the tilt alone, and steers the spin to what lands the body level.
-        target = landing_spin(self.robot, leg, body, plan, standing, s.params.gains.leg_length, s.stance_time, g,
-                              inertia)
+        target = landing_spin(body, rise, s.params.gains.leg_length, s.stance_time, g, inertia)
         own = own._replace(stiffness=jnp.where((plan.leap & is_gap(plan.top, plan.base)) | block, 0.0, own.stiffness),
                            spin=jnp.where(block, jnp.append(target, 0.0), jnp.zeros(3, jnp.float32)))
         return own, thrust_force, plan._replace(full=full, spin=spin, spent=spent)
@@ -367,29 +367,30 @@ class Leap:
         return jnp.where(plan.full, stroke.flight(leg, body, speed, scale), torque)
 
 
-def landing_spin(robot: Robot, leg, body, plan: JumpState, standing, length, stance_time, g, inertia) -> jax.Array:
-    """(2,) rad/s, roll and pitch: the whole robot's spin (H/I) a block's leap should leave the floor with to land
-    level. Without it the body lands tilted by its tilt now plus the flight's swing of the foot, from where it is
-    (behind the COM, by the boost) to Raibert's neutral placement ahead (`swing_tilt` per radian of leg, as
-    `foothold.within_tilt_budget` models it); a spin turns the body by H/I·T/(1-α) more in the leap's flight T.
+def landing_spin(body, rise, length, stance_time, g, inertia) -> jax.Array:
+    """(2,) rad/s, roll and pitch: the whole robot's spin (H/I) a block's leap of `rise` (`leap_rise`) should leave
+    the floor with to land level. Without it the body lands tilted by its tilt now plus the flight's swing of the
+    foot, from where it is (behind the COM, by the boost) to Raibert's neutral placement ahead (`swing_tilt` per
+    radian of leg, as `foothold.within_tilt_budget` models it); a spin turns the body by H/I·T/(1-α) more in the
+    leap's flight T.
     Raibert's servo, which damps the spin to zero and levels the body, landed Mars's leaps over a 0.1-0.2 m block
     pitched forward at the tilt budget, the foot behind the COM, and most fell."""
     now = (body.level @ (body.foot - body.com))[:2]
     ahead = body.unturn[:2, :2] @ (body.v * stance_time / 2)
     tilt = landing_tilt(ahead, now, jnp.stack([body.roll, body.pitch]), inertia.swing_tilt, length)
-    flight = 2.0 * jnp.sqrt(2.0 * jnp.maximum(leap_rise(plan, robot, leg, standing), 0.01) / g)
+    flight = 2.0 * jnp.sqrt(2.0 * jnp.maximum(rise, 0.01) / g)
     return -(1.0 - inertia.alpha) * tilt / flight
 
 
-def forward_work(robot: Robot, leg, body, plan: JumpState, standing, mass, g) -> jax.Array:
-    """J: the kinetic energy a block leap's push gives the COM along the way, beyond the rise that Raibert's thrust is
-    sized for. The floor pushes from the foot at the COM: from the stance's bottom, the COM tanφ ahead of the foot (φ
-    the leg's lean from upright along the way), a push that lifts the COM at `up` to the leap's apex speeds it on by
-    about up·tanφ. Sized for the rise alone, the leaps over a 0.15 m block at the Moon and Earth rose 4-15 cm short of
-    their aim, and half of them came down on the block's near edge."""
+def forward_work(body, plan: JumpState, rise, standing, mass, g) -> jax.Array:
+    """J: the kinetic energy a block leap's push gives the COM along the way, beyond the rise (`leap_rise`) that
+    Raibert's thrust is sized for. The floor pushes from the foot at the COM: from the stance's bottom, the COM tanφ
+    ahead of the foot (φ the leg's lean from upright along the way), a push that lifts the COM at `up` to the leap's
+    apex speeds it on by about up·tanφ. Sized for the rise alone, the leaps over a 0.15 m block at the Moon and Earth
+    rose 4-15 cm short of their aim, and half of them came down on the block's near edge."""
     rel = body.level @ (body.com - body.foot)  # the COM from the foot, level frame
     lean = jnp.clip(jnp.dot(rel[:2], body.unturn[:2, :2] @ plan.along) / jnp.maximum(rel[2], 0.1), 0.0, 1.0)
-    apex = standing + plan.base + leap_rise(plan, robot, leg, standing)
+    apex = standing + plan.base + rise
     on = jnp.sqrt(2.0 * g * jnp.maximum(apex - body.z, 0.0)) * lean
     return mass * jnp.maximum(jnp.dot(body.v, plan.along) * on + 0.5 * on**2, 0.0)
 
