@@ -164,7 +164,9 @@ class Client:
     def __init__(self, port: int, topics: list[str]):
         from websockets.sync.client import connect
 
-        self.ws = connect(f"ws://127.0.0.1:{port}", subprotocols=["foxglove.sdk.v1"], open_timeout=30,
+        # close_timeout: the server does not always answer a client's close frame, and websockets waits 10 s for it
+        # by default (the second client of the client-leaving test spent that long in close()); a leaver need not wait.
+        self.ws = connect(f"ws://127.0.0.1:{port}", subprotocols=["foxglove.sdk.v1"], open_timeout=30, close_timeout=1,
                           legacy=True)  # closed by close(), not by a with-block
         self.topics, self.channels, self.types = topics, {}, {}
         self.messages = {t: [] for t in topics}
