@@ -391,6 +391,10 @@ def test_a_speed_the_gait_ramps_to_for_longer_than_the_run_is_noted():
     assert control.ramp_note("raibert", (0.0, 0.0), 0.1, [9.81], 1.0) is None
     assert control.ramp_note("hold", (1.0, 0.0), 0.1, [9.81], 1.0) is None
     assert control.ramp_note("policy:runs/hop-ppo", (1.0, 0.0), 0.1, [9.81], 1.0) is None
+    # Gaits run side by side on one command (a sweep of several controllers) share one line; a policy is left out.
+    both = control.ramp_note(["jump", "policy:runs/hop-ppo", "raibert"], (1.0, 0.0), 0.1, [9.81, 1.62], 4.0)
+    assert both == note.replace("raibert ramps its speed", "jump and raibert ramp their speed").replace(
+        "; its robots", "; their robots")
     # The commands' batch (simulate, ros.record, render --video) gives its gait, command and gravities.
     from hopper_mjx import cli, simulate
 

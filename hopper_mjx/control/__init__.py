@@ -64,13 +64,15 @@ def make(name: str, robot: Robot, n: int, *, height: float = raibert.DEFAULT_HEI
                                                             latency=predicted_latency(name, latency))
 
 
-def ramp_note(name: str, speed, height: float, gravities, duration: float) -> str | None:
+def ramp_note(names, speed, height: float, gravities, duration: float) -> str | None:
     """A line saying where a gait's speed reference, which ramps from rest to the command by `speed_step` a hop
     (`raibert.speed_update`), needs longer than the run: its robots then move slower than commanded for all of it
     (1 m/s for 4 s reached 0.17 m/s). The time is a lower bound: the hops' flights alone, each the ballistic
-    2 sqrt(2 h / g) of the commanded rise h; their stances add more. None for other controllers, no speed, or a
-    run long enough at every gravity."""
-    if name not in registry.GAIT_CONTROLLERS or height <= 0:
+    2 sqrt(2 h / g) of the commanded rise h; their stances add more. `names`: a controller's, or several run side
+    by side, whose gaits ramp alike and share the line. None for other controllers, no speed, or a run long enough
+    at every gravity."""
+    gaits = [n for n in ([names] if isinstance(names, str) else names) if n in registry.GAIT_CONTROLLERS]
+    if not gaits or height <= 0:
         return None
     step = raibert.RaibertConfig().speed_step
     hops = math.ceil(max(abs(float(v)) for v in speed) / step - 1e-9)
@@ -78,9 +80,11 @@ def ramp_note(name: str, speed, height: float, gravities, duration: float) -> st
     short = ", ".join(f"{t:.1f} s at g = {g:g} m/s²" for g, t in flight.items() if t > duration)
     if not short:  # no speed (0 hops), or a run long enough everywhere
         return None
-    return (f"note: {name} ramps its speed from rest to --speed {','.join(f'{float(v):g}' for v in speed)} m/s by "
-            f"{step:g} m/s a hop, {hops} hops: their flights alone take {short}, more than --duration {duration:g} s; "
-            "its robots move slower than commanded until then")
+    one = len(gaits) == 1
+    its = "its" if one else "their"
+    return (f"note: {' and '.join(gaits)} ramp{'s' if one else ''} {its} speed from rest to --speed "
+            f"{','.join(f'{float(v):g}' for v in speed)} m/s by {step:g} m/s a hop, {hops} hops: their flights alone "
+            f"take {short}, more than --duration {duration:g} s; {its} robots move slower than commanded until then")
 
 
 def predicted_latency(name: str, latency):

@@ -417,11 +417,15 @@ def run_one(args, spec, out: Path):
 
 
 def ramp_notes(specs) -> list[str | None]:
-    """`control.ramp_note` for each gait the sweep runs: one that needs longer than a run to reach --speed."""
+    """`control.ramp_note` for the gaits the sweep runs that need longer than a run to reach --speed: one line for
+    those run on the same command, which ramp alike."""
     from hopper_mjx import control
 
-    one_each = {spec.controller: spec for spec in specs}.values()
-    return [control.ramp_note(s.controller, s.speed, s.height, s.gravity, s.duration) for s in one_each]
+    alike: dict = {}
+    for s in specs:
+        names = alike.setdefault((tuple(s.speed), s.height, tuple(s.gravity), s.duration), [])
+        names += [] if s.controller in names else [s.controller]
+    return [control.ramp_note(names, *command) for command, names in alike.items()]
 
 
 def main(argv=None) -> int:
