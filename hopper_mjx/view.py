@@ -188,7 +188,8 @@ def status_texts(run, n: int, shown: int, frame_rate: float) -> tuple[str, str]:
 
 
 def status_line(run, display: Display) -> str:
-    """One JSON line: what the window shows, for scripts and tests."""
+    """One JSON line: what the window shows, for scripts and tests, and the Enter presses queued while paused
+    (`steps_pending`: a press shows there at once, before its instant plays)."""
     chunk = run.chunk
     instances = []
     if chunk is not None:
@@ -202,7 +203,8 @@ def status_line(run, display: Display) -> str:
             })
     factor, steps = run.pacer.reached()
     return json.dumps({
-        "time": round(run.time, 6), "paused": run.paused, "speed_factor": run.pacer.factor,
+        "time": round(run.time, 6), "paused": run.paused, "steps_pending": run.steps_pending,
+        "speed_factor": run.pacer.factor,
         "reached_factor": None if math.isnan(factor) else round(factor, 3),
         "steps_per_s": None if math.isnan(steps) else round(steps),
         "command": None if chunk is None else chunk.command,
