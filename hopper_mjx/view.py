@@ -371,6 +371,7 @@ def watch(args, physics, batch, shown: list[int], stream) -> int:
     requests: set = set()
     run = LiveRun(batch, factor=args.speed_factor, sinks=[stream] if stream else [], paused=args.paused)
     holder = {}
+    before = set(threading.enumerate())
     viewer = launch_viewer(m, key_callback=lambda key: holder["on_key"](key) if holder else None)
     display = Display(viewer, m, qpos_adr, first_body, bodies, shown, batch.gravity, spacing(physics))
     holder["on_key"] = key_handler(run, display, requests)
@@ -384,8 +385,9 @@ def watch(args, physics, batch, shown: list[int], stream) -> int:
                 announced = True
             time.sleep(max(FRAME_TIME - (time.perf_counter() - start), 0.0))
     viewer.close()
-    # The window's thread tears down its GL context after the close; exiting under it aborts the process.
-    for thread in threading.enumerate():
+    # The window's thread tears down its GL context after the close; exiting under it aborts the process. Only the
+    # threads the window started: the process's signal watcher never ends, and waiting on it held every exit 10 s.
+    for thread in set(threading.enumerate()) - before:
         if thread.daemon and thread is not threading.current_thread():
             thread.join(timeout=10)
     print(stats.summary(run), flush=True)
