@@ -387,8 +387,8 @@ def watch(args, physics, batch, shown: list[int], stream) -> int:
     viewer.close()
     # The window's thread tears down its GL context after the close; exiting under it aborts the process. Only the
     # threads the window started: the process's signal watcher never ends, and waiting on it held every exit 10 s.
-    for thread in set(threading.enumerate()) - before:
-        if thread.daemon and thread is not threading.current_thread():
+    for thread in set(threading.enumerate()) - before:  # this thread is among those before
+        if thread.daemon:
             thread.join(timeout=10)
     print(stats.summary(run), flush=True)
     return 0

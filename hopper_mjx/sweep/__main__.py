@@ -424,7 +424,8 @@ def ramp_notes(specs) -> list[str | None]:
     alike: dict = {}
     for s in specs:
         names = alike.setdefault((tuple(s.speed), s.height, tuple(s.gravity), s.duration), [])
-        names += [] if s.controller in names else [s.controller]
+        if s.controller not in names:
+            names.append(s.controller)
     return [control.ramp_note(names, *command) for command, names in alike.items()]
 
 
